@@ -1,0 +1,3 @@
+//! Protocol dialects: codecs between each protocol's JSON and the core's types.
+
+pub mod rtk;

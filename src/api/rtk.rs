@@ -1,0 +1,230 @@
+//! Dialect `rtk` (rtk-mqtt-protocol.md): the `base_status` report.
+//!
+//! Every key of the protocol's example is always present, in the protocol's units:
+//! degrees for `rtk.angle` (0 = north, clockwise) and `rtk.latitude/longitude`, metres and
+//! radians (ENU) for `pose`, m/s and rad/s for `robot`. Devices chassisd does not drive yet
+//! (BMS, motor drives, IMU, lidar) report zeros and a `false` sensor flag, so a consumer can
+//! tell "absent" from "zero". `sensor.gnss` is an addition to the protocol.
+
+use serde::Serialize;
+
+use crate::core::{Localization, Navigation, VehicleStatus};
+
+/// The `base_status` object.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BaseStatus {
+    /// Battery.
+    pub bms: Bms,
+    /// Navigation.
+    pub nav: Nav,
+    /// Local pose.
+    pub pose: Pose,
+    /// Chassis.
+    pub robot: Robot,
+    /// GNSS.
+    pub rtk: Rtk,
+    /// Sensor health flags.
+    pub sensor: Sensor,
+}
+
+/// `bms`: battery management system.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bms {
+    /// Current, A (positive = charging).
+    pub current: f64,
+    /// Error bit set.
+    pub error: u32,
+    /// Remaining capacity, Ah.
+    pub remaining_capacity: f64,
+    /// State of charge, %.
+    pub soc: f64,
+    /// Status code.
+    pub status: u32,
+    /// Temperature, °C.
+    pub tem: f64,
+    /// Pack voltage, V.
+    pub voltage: f64,
+}
+
+/// `nav`: localisation and navigation state.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Nav {
+    /// `LOCATE_UNINIT`, `LOCATE_TRUE` or `LOCATE_FALSE`.
+    pub locate: &'static str,
+    /// Stopped for an obstacle.
+    pub obstacle: bool,
+    /// `NAV_FREE`, `NAV_RUN`, `NAV_SUCCESS` or `NAV_ERROR`.
+    pub status: &'static str,
+}
+
+/// `pose`: local ENU pose.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Pose {
+    /// East, m.
+    pub x: f64,
+    /// North, m.
+    pub y: f64,
+    /// Yaw, rad, counter-clockwise from east.
+    pub yaw: f64,
+}
+
+/// `robot`: chassis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Robot {
+    /// Battery charge, %.
+    pub power: f64,
+    /// Chassis status bit set.
+    pub robot_status: u32,
+    /// Forward speed, m/s.
+    pub vx: f64,
+    /// Lateral speed, m/s.
+    pub vy: f64,
+    /// Yaw rate, rad/s.
+    pub vz: f64,
+}
+
+/// `rtk`: GNSS fix.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Rtk {
+    /// Heading, degrees (0 = north, clockwise).
+    pub angle: f64,
+    /// Latitude, degrees.
+    pub latitude: f64,
+    /// Longitude, degrees.
+    pub longitude: f64,
+    /// 0 none, 1 single, 2 DGPS, 4 RTK fixed, 5 RTK float.
+    pub status: u8,
+}
+
+/// `sensor`: health flags (`true` = working).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Sensor {
+    /// GNSS link up with a fresh valid fix (chassisd addition).
+    pub gnss: bool,
+    /// IMU.
+    pub imu: bool,
+    /// Lidar.
+    pub laser: bool,
+    /// Chassis (motor drives).
+    pub robot: bool,
+}
+
+impl BaseStatus {
+    /// The report for a core status snapshot.
+    pub fn from_status(status: &VehicleStatus) -> Self {
+        let gnss = &status.gnss;
+        Self {
+            bms: Bms {
+                current: 0.0,
+                error: 0,
+                remaining_capacity: 0.0,
+                soc: 0.0,
+                status: 0,
+                tem: 0.0,
+                voltage: 0.0,
+            },
+            nav: Nav {
+                locate: match status.localization {
+                    Localization::Uninitialized => "LOCATE_UNINIT",
+                    Localization::Good => "LOCATE_TRUE",
+                    Localization::Lost => "LOCATE_FALSE",
+                },
+                obstacle: status.obstacle_stop,
+                status: match status.navigation {
+                    Navigation::Idle => "NAV_FREE",
+                    Navigation::Running => "NAV_RUN",
+                    Navigation::Succeeded => "NAV_SUCCESS",
+                    Navigation::Failed => "NAV_ERROR",
+                },
+            },
+            pose: Pose {
+                x: status.pose.x,
+                y: status.pose.y,
+                yaw: status.pose.yaw,
+            },
+            robot: Robot {
+                power: 0.0,
+                robot_status: 0,
+                vx: 0.0,
+                vy: 0.0,
+                vz: 0.0,
+            },
+            rtk: Rtk {
+                angle: gnss.heading_deg,
+                latitude: gnss.latitude_deg,
+                longitude: gnss.longitude_deg,
+                status: gnss.quality.rtk_status(),
+            },
+            sensor: Sensor {
+                gnss: gnss.ok,
+                imu: false,
+                laser: false,
+                robot: false,
+            },
+        }
+    }
+
+    /// One line of JSON (no trailing newline).
+    pub fn to_json(&self) -> String {
+        // Serialising plain structs of numbers, bools and static strings cannot fail.
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::{CoreConfig, Input, Output, Vehicle};
+    use crate::time::Timestamp;
+
+    /// The key tree of the protocol's example, plus `sensor.gnss`.
+    const SPEC_KEYS: &[&str] = &[
+        "bms.current",
+        "bms.error",
+        "bms.remaining_capacity",
+        "bms.soc",
+        "bms.status",
+        "bms.tem",
+        "bms.voltage",
+        "nav.locate",
+        "nav.obstacle",
+        "nav.status",
+        "pose.x",
+        "pose.y",
+        "pose.yaw",
+        "robot.power",
+        "robot.robot_status",
+        "robot.vx",
+        "robot.vy",
+        "robot.vz",
+        "rtk.angle",
+        "rtk.latitude",
+        "rtk.longitude",
+        "rtk.status",
+        "sensor.gnss",
+        "sensor.imu",
+        "sensor.laser",
+        "sensor.robot",
+    ];
+
+    #[test]
+    fn has_every_key_of_the_protocol() {
+        let mut v = Vehicle::new(CoreConfig::default());
+        let Some(Output::Status(s)) = v.handle(Timestamp::from_micros(0), Input::Tick).pop() else {
+            panic!("no status");
+        };
+        let json: serde_json::Value =
+            serde_json::from_str(&BaseStatus::from_status(&s).to_json()).expect("valid JSON");
+        let mut keys = Vec::new();
+        for (group, inner) in json.as_object().expect("object") {
+            for (key, value) in inner.as_object().expect("nested object") {
+                assert!(!value.is_object() && !value.is_null(), "{group}.{key}");
+                keys.push(format!("{group}.{key}"));
+            }
+        }
+        assert_eq!(keys, SPEC_KEYS);
+        assert_eq!(json["nav"]["locate"], "LOCATE_UNINIT");
+        assert_eq!(json["nav"]["status"], "NAV_FREE");
+        assert_eq!(json["rtk"]["status"], 0);
+    }
+}

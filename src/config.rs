@@ -1,0 +1,310 @@
+//! Vehicle configuration: loaded from TOML, validated on load, errors that name the key.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+
+/// A configuration that failed to load or validate.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not match the schema.
+    #[error("{file}: {message}")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// The TOML parser's message, which names the key and line.
+        message: String,
+    },
+    /// A value is out of range or inconsistent.
+    #[error("{file}: key `{key}`: {problem}; fix: {fix}")]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// Dotted key path.
+        key: String,
+        /// What is wrong.
+        problem: String,
+        /// How to fix it.
+        fix: String,
+    },
+}
+
+/// The whole vehicle configuration.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleConfig {
+    /// Identity of the vehicle.
+    #[serde(default)]
+    pub vehicle: VehicleSection,
+    /// The GNSS receiver; absent on vehicles without one.
+    pub gnss: Option<GnssConfig>,
+}
+
+/// `[vehicle]`
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleSection {
+    /// A name for logs and recordings.
+    #[serde(default = "default_vehicle_name")]
+    pub name: String,
+}
+
+impl Default for VehicleSection {
+    fn default() -> Self {
+        Self {
+            name: default_vehicle_name(),
+        }
+    }
+}
+
+fn default_vehicle_name() -> String {
+    "chassisd".to_owned()
+}
+
+/// Wire protocol of a GNSS receiver.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum GnssProtocol {
+    /// NMEA 0183 sentences.
+    #[default]
+    Nmea0183,
+}
+
+/// `[gnss]`
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnssConfig {
+    /// Serial device path, e.g. `/dev/ttyUSB0` or a udev symlink.
+    pub port: String,
+    /// Baud rate.
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+    /// Wire protocol.
+    #[serde(default)]
+    pub protocol: GnssProtocol,
+    /// A fix older than this is stale, seconds.
+    #[serde(default = "default_fix_timeout_s")]
+    pub fix_timeout_s: f64,
+    /// Course over ground stands in for heading only above this speed, m/s.
+    #[serde(default = "default_cog_min_speed_mps")]
+    pub cog_min_speed_mps: f64,
+    /// Longest wait between reconnect attempts, seconds.
+    #[serde(default = "default_reconnect_max_s")]
+    pub reconnect_max_s: f64,
+    /// Antenna phase centre in the vehicle frame (x forward, y left, z up), metres.
+    #[serde(default)]
+    pub antenna: Vector3,
+}
+
+/// A position in the vehicle frame, metres.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Vector3 {
+    /// Forward, metres.
+    #[serde(default)]
+    pub x: f64,
+    /// Left, metres.
+    #[serde(default)]
+    pub y: f64,
+    /// Up, metres.
+    #[serde(default)]
+    pub z: f64,
+}
+
+fn default_baud() -> u32 {
+    115_200
+}
+fn default_fix_timeout_s() -> f64 {
+    2.0
+}
+fn default_cog_min_speed_mps() -> f64 {
+    0.3
+}
+fn default_reconnect_max_s() -> f64 {
+    5.0
+}
+
+/// Baud rates a serial GNSS receiver can use.
+const STANDARD_BAUDS: [u32; 10] = [
+    4_800, 9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600, 1_000_000,
+];
+
+impl GnssConfig {
+    /// The stale-fix timeout.
+    pub fn fix_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.fix_timeout_s)
+    }
+
+    /// The longest reconnect back-off.
+    pub fn reconnect_max(&self) -> Duration {
+        Duration::from_secs_f64(self.reconnect_max_s)
+    }
+}
+
+impl VehicleConfig {
+    /// Reads and validates a TOML file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Parses and validates TOML text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
+            message: e.to_string(),
+        })?;
+        config.validate(file)?;
+        Ok(config)
+    }
+
+    /// Checks ranges and consistency.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
+            file: file.to_owned(),
+            key: key.to_owned(),
+            problem,
+            fix: fix.to_owned(),
+        };
+        if self.vehicle.name.trim().is_empty() {
+            return Err(invalid(
+                "vehicle.name",
+                "is empty".into(),
+                "give the vehicle a name",
+            ));
+        }
+        let Some(gnss) = &self.gnss else {
+            return Ok(());
+        };
+        if gnss.port.trim().is_empty() {
+            return Err(invalid(
+                "gnss.port",
+                "is empty".into(),
+                "set the serial device, e.g. \"/dev/ttyUSB0\"",
+            ));
+        }
+        if !STANDARD_BAUDS.contains(&gnss.baud) {
+            return Err(invalid(
+                "gnss.baud",
+                format!("{} is not a standard rate", gnss.baud),
+                "use one of 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 921600",
+            ));
+        }
+        check_range(
+            file,
+            "gnss.fix_timeout_s",
+            gnss.fix_timeout_s,
+            0.1..=60.0,
+            "seconds",
+        )?;
+        check_range(
+            file,
+            "gnss.cog_min_speed_mps",
+            gnss.cog_min_speed_mps,
+            0.0..=10.0,
+            "m/s",
+        )?;
+        check_range(
+            file,
+            "gnss.reconnect_max_s",
+            gnss.reconnect_max_s,
+            0.05..=300.0,
+            "seconds",
+        )?;
+        for (key, v) in [
+            ("gnss.antenna.x", gnss.antenna.x),
+            ("gnss.antenna.y", gnss.antenna.y),
+            ("gnss.antenna.z", gnss.antenna.z),
+        ] {
+            check_range(file, key, v, -10.0..=10.0, "metres")?;
+        }
+        Ok(())
+    }
+}
+
+fn check_range(
+    file: &Path,
+    key: &str,
+    value: f64,
+    range: std::ops::RangeInclusive<f64>,
+    unit: &str,
+) -> Result<(), ConfigError> {
+    if range.contains(&value) {
+        return Ok(());
+    }
+    Err(ConfigError::Invalid {
+        file: file.to_owned(),
+        key: key.to_owned(),
+        problem: format!(
+            "{value} is outside {}..={} {unit}",
+            range.start(),
+            range.end()
+        ),
+        fix: format!(
+            "set a value between {} and {} {unit}",
+            range.start(),
+            range.end()
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(text: &str) -> Result<VehicleConfig, ConfigError> {
+        VehicleConfig::from_toml(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn defaults_fill_optional_keys() {
+        let c = load("[gnss]\nport = \"/dev/ttyUSB0\"\n").unwrap();
+        let g = c.gnss.unwrap();
+        assert_eq!(g.baud, 115_200);
+        assert_eq!(g.fix_timeout(), Duration::from_secs(2));
+        assert_eq!(g.protocol, GnssProtocol::Nmea0183);
+    }
+
+    #[test]
+    fn shipped_example_is_valid() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let c = VehicleConfig::load(&path).unwrap();
+        assert!(c.gnss.is_some());
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let e = load("[gnss]\nport = \"/dev/x\"\nbaud = 12345\n").unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("test.toml") && msg.contains("`gnss.baud`"),
+            "{msg}"
+        );
+        let e = load("[gnss]\nport = \"/dev/x\"\nfix_timeout_s = -1\n").unwrap_err();
+        assert!(e.to_string().contains("`gnss.fix_timeout_s`"));
+        let e = load("[gnss]\nport = \"/dev/x\"\n[gnss.antenna]\nz = 40.0\n").unwrap_err();
+        assert!(e.to_string().contains("`gnss.antenna.z`"));
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_are_rejected_with_the_key() {
+        let e = load("[gnss]\nport = \"/dev/x\"\nbaudrate = 9600\n").unwrap_err();
+        assert!(e.to_string().contains("baudrate"), "{e}");
+        let e = load("[gnss]\nport = \"/dev/x\"\nbaud = \"fast\"\n").unwrap_err();
+        assert!(e.to_string().contains("baud"), "{e}");
+        let e = load("[gnss]\nport = \"/dev/x\"\nprotocol = \"ubx\"\n").unwrap_err();
+        assert!(e.to_string().contains("protocol"), "{e}");
+    }
+}

@@ -1,0 +1,250 @@
+//! The sans-IO vehicle core: owns the vehicle state and is driven only by
+//! [`Vehicle::handle`], which takes the time as an argument and never reads a clock.
+
+pub mod status;
+
+use std::time::Duration;
+
+use crate::config::VehicleConfig;
+use crate::devices::gnss::{FixQuality, GnssFix};
+use crate::time::Timestamp;
+pub use status::{GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
+
+/// Core settings, taken from the vehicle configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoreConfig {
+    /// A fix (or heading, or velocity) older than this is stale.
+    pub gnss_fix_timeout: Duration,
+    /// Course over ground stands in for heading only above this speed, m/s.
+    pub cog_min_speed_mps: f64,
+}
+
+impl Default for CoreConfig {
+    fn default() -> Self {
+        Self {
+            gnss_fix_timeout: Duration::from_secs(2),
+            cog_min_speed_mps: 0.3,
+        }
+    }
+}
+
+impl CoreConfig {
+    /// The core settings of a vehicle configuration.
+    pub fn from_vehicle(config: &VehicleConfig) -> Self {
+        match &config.gnss {
+            Some(g) => Self {
+                gnss_fix_timeout: g.fix_timeout(),
+                cog_min_speed_mps: g.cog_min_speed_mps,
+            },
+            None => Self::default(),
+        }
+    }
+}
+
+/// A device whose link state the drivers report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Device {
+    /// The GNSS receiver.
+    Gnss,
+}
+
+/// Whether a device's port or bus is usable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkState {
+    /// Open and readable.
+    Up,
+    /// Closed, missing or failing; the driver is reconnecting.
+    Down,
+}
+
+/// One input to the core.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Input<'a> {
+    /// The GNSS receiver's fix changed.
+    Gnss(&'a GnssFix),
+    /// A driver reports its link state.
+    Link(Device, LinkState),
+    /// The status period elapsed.
+    Tick,
+}
+
+/// One output of the core.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    /// A status snapshot, produced on every tick.
+    Status(VehicleStatus),
+}
+
+/// The vehicle core.
+#[derive(Debug, Clone)]
+pub struct Vehicle {
+    config: CoreConfig,
+    gnss_fix: Option<GnssFix>,
+    gnss_link_down: bool,
+    /// The heading last published, held while no fresh source exists.
+    held_heading_deg: f64,
+}
+
+impl Vehicle {
+    /// A core with nothing known yet.
+    pub fn new(config: CoreConfig) -> Self {
+        Self {
+            config,
+            gnss_fix: None,
+            gnss_link_down: false,
+            held_heading_deg: 0.0,
+        }
+    }
+
+    /// Handles one input at time `t` and returns what it produced.
+    pub fn handle(&mut self, t: Timestamp, input: Input<'_>) -> Vec<Output> {
+        match input {
+            Input::Gnss(fix) => {
+                self.gnss_fix = Some(*fix);
+                Vec::new()
+            }
+            Input::Link(Device::Gnss, state) => {
+                self.gnss_link_down = state == LinkState::Down;
+                Vec::new()
+            }
+            Input::Tick => vec![Output::Status(self.status(t))],
+        }
+    }
+
+    fn status(&mut self, t: Timestamp) -> VehicleStatus {
+        VehicleStatus {
+            time: t,
+            gnss: self.gnss_status(t),
+            pose: Pose2D::default(),
+            localization: Localization::Uninitialized,
+            navigation: Navigation::Idle,
+            obstacle_stop: false,
+        }
+    }
+
+    fn gnss_status(&mut self, t: Timestamp) -> GnssStatus {
+        let Some(fix) = &self.gnss_fix else {
+            return GnssStatus::default();
+        };
+        let timeout = self.config.gnss_fix_timeout;
+        let fresh = |rx: Timestamp| t.saturating_since(rx) <= timeout;
+        let position_fresh = fix.position.is_some_and(|p| fresh(p.rx));
+        let ok = !self.gnss_link_down && fix.quality.is_valid() && position_fresh;
+
+        let dual_antenna = fix
+            .heading_deg
+            .filter(|h| !self.gnss_link_down && fresh(h.rx))
+            .map(|h| h.value);
+        let course = fix
+            .velocity
+            .filter(|v| !self.gnss_link_down && fresh(v.rx))
+            .filter(|v| v.value.speed_mps >= self.config.cog_min_speed_mps)
+            .and_then(|v| v.value.course_deg);
+        if let Some(heading) = dual_antenna.or(course) {
+            self.held_heading_deg = heading;
+        }
+
+        let (latitude_deg, longitude_deg) = fix
+            .position
+            .map(|p| (p.value.latitude_deg, p.value.longitude_deg))
+            .unwrap_or((0.0, 0.0));
+        GnssStatus {
+            ok,
+            quality: if ok { fix.quality } else { FixQuality::Invalid },
+            latitude_deg,
+            longitude_deg,
+            heading_deg: self.held_heading_deg,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::devices::gnss::decode::GroundVelocity;
+    use crate::devices::gnss::{GeoPosition, Timed};
+
+    fn at(ms: u64) -> Timestamp {
+        Timestamp::from_micros(ms * 1_000)
+    }
+
+    fn fixed_at(ms: u64) -> GnssFix {
+        GnssFix {
+            quality: FixQuality::RtkFixed,
+            position: Some(Timed {
+                value: GeoPosition {
+                    latitude_deg: 23.1,
+                    longitude_deg: 113.0,
+                    altitude_msl_m: None,
+                    geoid_separation_m: None,
+                },
+                rx: at(ms),
+            }),
+            ..GnssFix::default()
+        }
+    }
+
+    fn tick(v: &mut Vehicle, ms: u64) -> VehicleStatus {
+        match v.handle(at(ms), Input::Tick).pop() {
+            Some(Output::Status(s)) => s,
+            None => panic!("a tick must produce a status"),
+        }
+    }
+
+    #[test]
+    fn fix_goes_stale_after_the_timeout() {
+        let mut v = Vehicle::new(CoreConfig::default());
+        assert!(!tick(&mut v, 0).gnss.ok);
+        v.handle(at(1_000), Input::Gnss(&fixed_at(1_000)));
+        let s = tick(&mut v, 3_000);
+        assert!(s.gnss.ok);
+        assert_eq!(s.gnss.quality, FixQuality::RtkFixed);
+        let s = tick(&mut v, 3_001);
+        assert!(!s.gnss.ok);
+        assert_eq!(s.gnss.quality, FixQuality::Invalid);
+        assert_eq!(s.gnss.latitude_deg, 23.1);
+    }
+
+    #[test]
+    fn link_down_is_immediately_not_ok() {
+        let mut v = Vehicle::new(CoreConfig::default());
+        v.handle(at(0), Input::Gnss(&fixed_at(0)));
+        v.handle(at(10), Input::Link(Device::Gnss, LinkState::Down));
+        assert!(!tick(&mut v, 100).gnss.ok);
+        v.handle(at(150), Input::Link(Device::Gnss, LinkState::Up));
+        v.handle(at(200), Input::Gnss(&fixed_at(200)));
+        assert!(tick(&mut v, 300).gnss.ok);
+    }
+
+    #[test]
+    fn heading_prefers_dual_antenna_then_course_while_moving() {
+        let mut v = Vehicle::new(CoreConfig::default());
+        let mut fix = fixed_at(0);
+        fix.velocity = Some(Timed {
+            value: GroundVelocity {
+                speed_mps: 1.0,
+                course_deg: Some(90.0),
+            },
+            rx: at(0),
+        });
+        fix.heading_deg = Some(Timed {
+            value: 45.0,
+            rx: at(0),
+        });
+        v.handle(at(0), Input::Gnss(&fix));
+        assert_eq!(tick(&mut v, 100).gnss.heading_deg, 45.0);
+        fix.heading_deg = None;
+        v.handle(at(200), Input::Gnss(&fix));
+        assert_eq!(tick(&mut v, 300).gnss.heading_deg, 90.0);
+        // Slow: the course is noise, the last heading is held.
+        fix.velocity = Some(Timed {
+            value: GroundVelocity {
+                speed_mps: 0.1,
+                course_deg: Some(270.0),
+            },
+            rx: at(400),
+        });
+        v.handle(at(400), Input::Gnss(&fix));
+        assert_eq!(tick(&mut v, 500).gnss.heading_deg, 90.0);
+    }
+}

@@ -1,0 +1,74 @@
+//! The vehicle status snapshot the core hands to the dialects, in SI units.
+
+use crate::devices::gnss::FixQuality;
+use crate::time::Timestamp;
+
+/// Everything a status report needs, taken at one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleStatus {
+    /// Tick time.
+    pub time: Timestamp,
+    /// GNSS receiver state.
+    pub gnss: GnssStatus,
+    /// Pose in the local ENU frame. Zero until fusion provides it.
+    pub pose: Pose2D,
+    /// Localisation state.
+    pub localization: Localization,
+    /// Navigation task state.
+    pub navigation: Navigation,
+    /// Whether an obstacle has stopped the vehicle.
+    pub obstacle_stop: bool,
+}
+
+/// GNSS state at a tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GnssStatus {
+    /// Link up and a valid fix younger than the fix timeout.
+    pub ok: bool,
+    /// Fix quality; `Invalid` whenever `ok` is false.
+    pub quality: FixQuality,
+    /// Last valid latitude, degrees north (0 before the first fix).
+    pub latitude_deg: f64,
+    /// Last valid longitude, degrees east (0 before the first fix).
+    pub longitude_deg: f64,
+    /// Heading, degrees true (0 = north, clockwise): dual-antenna heading when fresh, else
+    /// course over ground while moving, else the last value.
+    pub heading_deg: f64,
+}
+
+/// Planar pose in the local ENU frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose2D {
+    /// East, metres.
+    pub x: f64,
+    /// North, metres.
+    pub y: f64,
+    /// Yaw, radians counter-clockwise from east.
+    pub yaw: f64,
+}
+
+/// Localisation state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Localization {
+    /// Not initialised yet.
+    #[default]
+    Uninitialized,
+    /// Localised within bounds.
+    Good,
+    /// Lost.
+    Lost,
+}
+
+/// Navigation task state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Navigation {
+    /// No task.
+    #[default]
+    Idle,
+    /// A task is running.
+    Running,
+    /// The last task succeeded.
+    Succeeded,
+    /// The last task failed.
+    Failed,
+}

@@ -1,0 +1,515 @@
+//! Typed decoding of the NMEA sentences chassisd uses.
+//!
+//! RMC, VTG, GST, HDT, ZDA and the core of GGA go through the `nmea` crate's field parsers.
+//! The crate's gaps are filled here rather than losing data (DESIGN.md §4):
+//! - its sentence-level entry point rejects sentences over 102 bytes, so sentences come from
+//!   our framer and are handed to the per-type parsers directly, whatever their length;
+//! - its GGA drops the differential age and station, parsed here from fields 13 and 14;
+//! - it rejects GNS mode fields longer than two characters (one per constellation), so GNS is
+//!   decoded here;
+//! - it has no THS (true heading and status), decoded here;
+//! - it keeps several values as `f32`; they are widened through their shortest decimal form,
+//!   so `244.28` stays `244.28` rather than `244.27999877929688`.
+
+use chrono::{NaiveDate, NaiveTime};
+use nmea::SentenceType;
+use nmea::sentences::rmc::RmcStatusOfFix;
+use nmea::sentences::{FaaMode, FixType};
+
+use super::sentence::{FieldError, Sentence};
+
+/// Metres per second in one knot.
+const MPS_PER_KNOT: f64 = 1852.0 / 3600.0;
+
+/// GNSS fix quality, as GGA reports it (and as RMC/GNS mode letters map onto it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FixQuality {
+    /// No fix (GGA 0, RMC `V`, mode `N`).
+    #[default]
+    Invalid,
+    /// Autonomous single-point fix (GGA 1, mode `A`).
+    Single,
+    /// Differential: SBAS or DGPS (GGA 2, modes `D` and `P`).
+    Dgps,
+    /// Precise Positioning Service (GGA 3).
+    Pps,
+    /// RTK with fixed integer ambiguities (GGA 4, mode `R`).
+    RtkFixed,
+    /// RTK float (GGA 5, mode `F`).
+    RtkFloat,
+    /// Dead reckoning (GGA 6, mode `E`).
+    DeadReckoning,
+    /// Position entered by hand (GGA 7, mode `M`).
+    Manual,
+    /// Simulator output (GGA 8, mode `S`).
+    Simulation,
+}
+
+impl FixQuality {
+    /// Whether the receiver computed this position from satellites.
+    pub fn is_valid(self) -> bool {
+        matches!(
+            self,
+            Self::Single | Self::Dgps | Self::Pps | Self::RtkFixed | Self::RtkFloat
+        )
+    }
+
+    /// The `rtk.status` code of rtk-mqtt-protocol.md: 0 none, 1 single, 2 DGPS, 4 RTK fixed,
+    /// 5 RTK float. PPS counts as single (it is not differential); dead reckoning, manual and
+    /// simulated positions are not GNSS fixes and count as none.
+    pub fn rtk_status(self) -> u8 {
+        match self {
+            Self::Single | Self::Pps => 1,
+            Self::Dgps => 2,
+            Self::RtkFixed => 4,
+            Self::RtkFloat => 5,
+            Self::Invalid | Self::DeadReckoning | Self::Manual | Self::Simulation => 0,
+        }
+    }
+
+    /// Preference order when several constellations report different modes (GNS).
+    fn rank(self) -> u8 {
+        match self {
+            Self::RtkFixed => 8,
+            Self::RtkFloat => 7,
+            Self::Dgps => 6,
+            Self::Pps => 5,
+            Self::Single => 4,
+            Self::DeadReckoning => 3,
+            Self::Manual => 2,
+            Self::Simulation => 1,
+            Self::Invalid => 0,
+        }
+    }
+
+    /// The quality a NMEA mode indicator letter stands for.
+    pub fn from_mode_letter(c: char) -> Option<Self> {
+        Some(match c {
+            'A' | 'C' | 'U' => Self::Single, // C and U: Quectel's caution/unsafe variants of A
+            'D' | 'P' => Self::Dgps,
+            'R' => Self::RtkFixed,
+            'F' => Self::RtkFloat,
+            'E' => Self::DeadReckoning,
+            'M' => Self::Manual,
+            'S' => Self::Simulation,
+            'N' | 'V' => Self::Invalid,
+            _ => return None,
+        })
+    }
+}
+
+impl From<FixType> for FixQuality {
+    fn from(fix: FixType) -> Self {
+        match fix {
+            FixType::Invalid => Self::Invalid,
+            FixType::Gps => Self::Single,
+            FixType::DGps => Self::Dgps,
+            FixType::Pps => Self::Pps,
+            FixType::Rtk => Self::RtkFixed,
+            FixType::FloatRtk => Self::RtkFloat,
+            FixType::Estimated => Self::DeadReckoning,
+            FixType::Manual => Self::Manual,
+            FixType::Simulation => Self::Simulation,
+        }
+    }
+}
+
+fn quality_from_faa(mode: FaaMode) -> FixQuality {
+    match mode {
+        FaaMode::Autonomous | FaaMode::Caution | FaaMode::Unsafe => FixQuality::Single,
+        FaaMode::Differential | FaaMode::Precise => FixQuality::Dgps,
+        FaaMode::FixedRtk => FixQuality::RtkFixed,
+        FaaMode::FloatRtk => FixQuality::RtkFloat,
+        FaaMode::Estimated => FixQuality::DeadReckoning,
+        FaaMode::Manual => FixQuality::Manual,
+        FaaMode::Simulator => FixQuality::Simulation,
+        FaaMode::DataNotValid => FixQuality::Invalid,
+    }
+}
+
+/// A position fix from GGA or GNS.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PositionReport {
+    /// UTC time of the fix.
+    pub time: Option<NaiveTime>,
+    /// Fix quality.
+    pub quality: FixQuality,
+    /// Latitude, degrees north (WGS84).
+    pub latitude: Option<f64>,
+    /// Longitude, degrees east (WGS84).
+    pub longitude: Option<f64>,
+    /// Altitude above mean sea level, metres.
+    pub altitude_msl: Option<f64>,
+    /// Geoid separation (ellipsoid minus MSL), metres.
+    pub geoid_separation: Option<f64>,
+    /// Satellites used.
+    pub satellites: Option<u16>,
+    /// Horizontal dilution of precision.
+    pub hdop: Option<f64>,
+    /// Age of the differential corrections, seconds.
+    pub diff_age_s: Option<f64>,
+    /// Differential reference station id.
+    pub diff_station: Option<u16>,
+}
+
+/// Speed and course over ground.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroundVelocity {
+    /// Speed over ground, m/s.
+    pub speed_mps: f64,
+    /// Course over ground, degrees true (0 = north, clockwise); absent when not moving.
+    pub course_deg: Option<f64>,
+}
+
+/// RMC: recommended minimum data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rmc {
+    /// UTC time.
+    pub time: Option<NaiveTime>,
+    /// UTC date.
+    pub date: Option<NaiveDate>,
+    /// Quality from the status (`A`/`D`/`V`) and the mode indicator.
+    pub quality: FixQuality,
+    /// Latitude, degrees north.
+    pub latitude: Option<f64>,
+    /// Longitude, degrees east.
+    pub longitude: Option<f64>,
+    /// Speed and course, when present.
+    pub velocity: Option<GroundVelocity>,
+}
+
+/// GST: pseudorange error statistics, all in metres (orientation in degrees from true north).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GstAccuracy {
+    /// UTC time of the associated fix.
+    pub time: Option<NaiveTime>,
+    /// RMS of the pseudorange residuals, metres.
+    pub rms_m: Option<f64>,
+    /// Error ellipse semi-major axis, 1σ, metres.
+    pub semi_major_m: Option<f64>,
+    /// Error ellipse semi-minor axis, 1σ, metres.
+    pub semi_minor_m: Option<f64>,
+    /// Orientation of the semi-major axis, degrees from true north.
+    pub orientation_deg: Option<f64>,
+    /// Latitude error, 1σ, metres.
+    pub latitude_sd_m: Option<f64>,
+    /// Longitude error, 1σ, metres.
+    pub longitude_sd_m: Option<f64>,
+    /// Altitude error, 1σ, metres.
+    pub altitude_sd_m: Option<f64>,
+}
+
+/// True heading from a dual-antenna receiver (HDT, THS).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrueHeading {
+    /// Heading, degrees true (0 = north, clockwise); `None` when the receiver marks it invalid.
+    pub heading_deg: Option<f64>,
+}
+
+/// ZDA: UTC date and time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ZdaDate {
+    /// UTC time.
+    pub time: Option<NaiveTime>,
+    /// UTC date.
+    pub date: Option<NaiveDate>,
+}
+
+/// A decoded sentence of a type chassisd uses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GnssSentence {
+    /// GGA position fix.
+    Gga(PositionReport),
+    /// GNS multi-constellation position fix.
+    Gns(PositionReport),
+    /// RMC minimum data.
+    Rmc(Rmc),
+    /// VTG course and speed.
+    Vtg(GroundVelocity),
+    /// GST accuracy.
+    Gst(GstAccuracy),
+    /// HDT true heading.
+    Hdt(TrueHeading),
+    /// THS true heading and status.
+    Ths(TrueHeading),
+    /// ZDA date.
+    Zda(ZdaDate),
+}
+
+/// A sentence of a known type whose fields could not be decoded.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("malformed {kind}: {reason}")]
+pub struct DecodeError {
+    /// Sentence type.
+    pub kind: String,
+    /// What was wrong.
+    pub reason: String,
+}
+
+impl From<FieldError> for DecodeError {
+    fn from(e: FieldError) -> Self {
+        Self {
+            reason: format!("field {} ({}): {}", e.field, e.what, e.reason),
+            kind: e.kind,
+        }
+    }
+}
+
+/// Decodes `sentence` if its type is one chassisd uses; other types are `Ok(None)`.
+pub fn decode(sentence: &Sentence<'_>) -> Result<Option<GnssSentence>, DecodeError> {
+    if sentence.talker == "P" {
+        return Ok(None);
+    }
+    let decoded = match sentence.kind {
+        "GGA" => GnssSentence::Gga(decode_gga(sentence)?),
+        "GNS" => GnssSentence::Gns(decode_gns(sentence)?),
+        "RMC" => GnssSentence::Rmc(decode_rmc(sentence)?),
+        "VTG" => GnssSentence::Vtg(decode_vtg(sentence)?),
+        "GST" => GnssSentence::Gst(decode_gst(sentence)?),
+        "HDT" => GnssSentence::Hdt(decode_hdt(sentence)?),
+        "THS" => GnssSentence::Ths(decode_ths(sentence)?),
+        "ZDA" => GnssSentence::Zda(decode_zda(sentence)?),
+        _ => return Ok(None),
+    };
+    Ok(Some(decoded))
+}
+
+/// The sentence in the form the `nmea` crate's per-type parsers take. They do not look at
+/// the checksum (the framer verified it) or the length.
+fn crate_sentence<'a>(sentence: &Sentence<'a>, message_id: SentenceType) -> nmea::NmeaSentence<'a> {
+    nmea::NmeaSentence {
+        talker_id: sentence.talker,
+        message_id,
+        data: sentence.data,
+        checksum: 0,
+    }
+}
+
+fn crate_error(kind: &str, e: nmea::Error<'_>) -> DecodeError {
+    DecodeError {
+        kind: kind.to_owned(),
+        reason: e.to_string(),
+    }
+}
+
+/// Widens an `f32` from the `nmea` crate through its shortest round-trip decimal, which is
+/// the decimal the receiver sent whenever it had at most seven significant digits.
+fn widen(v: f32) -> Option<f64> {
+    if !v.is_finite() {
+        return None;
+    }
+    v.to_string().parse().ok()
+}
+
+fn decode_gga(sentence: &Sentence<'_>) -> Result<PositionReport, DecodeError> {
+    let gga = nmea::sentences::parse_gga(crate_sentence(sentence, SentenceType::GGA))
+        .map_err(|e| crate_error("GGA", e))?;
+    // Fields 13 and 14 (age of corrections, station id) that the crate drops.
+    let mut fields = sentence.fields();
+    for _ in 0..12 {
+        fields.next_raw();
+    }
+    let diff_age_s = fields.next_f64("differential age")?;
+    let diff_station = fields.next_u16("differential station")?;
+    Ok(PositionReport {
+        time: gga.fix_time,
+        quality: gga.fix_type.map(FixQuality::from).unwrap_or_default(),
+        latitude: gga.latitude,
+        longitude: gga.longitude,
+        altitude_msl: gga.altitude.and_then(widen),
+        geoid_separation: gga.geoid_separation.and_then(widen),
+        satellites: gga.fix_satellites.and_then(|n| u16::try_from(n).ok()),
+        hdop: gga.hdop.and_then(widen),
+        diff_age_s,
+        diff_station,
+    })
+}
+
+/// `$--GNS,hhmmss.ss,llll.ll,a,yyyyy.yy,a,c--c,xx,x.x,x.x,x.x,x.x,x.x,a`: the mode field has
+/// one letter per constellation (GPS, GLONASS, Galileo, BeiDou, ...); the best one counts.
+fn decode_gns(sentence: &Sentence<'_>) -> Result<PositionReport, DecodeError> {
+    let mut f = sentence.fields();
+    let time = f.next_time()?;
+    let latitude = f.next_angle("latitude")?;
+    let longitude = f.next_angle("longitude")?;
+    let modes = f.next_raw();
+    let mut quality = FixQuality::Invalid;
+    for c in modes.chars() {
+        let q = FixQuality::from_mode_letter(c)
+            .ok_or_else(|| f.error("mode indicator", format!("unknown mode letter {c:?}")))?;
+        if q.rank() > quality.rank() {
+            quality = q;
+        }
+    }
+    let satellites = f.next_u16("satellites")?;
+    let hdop = f.next_f64("HDOP")?;
+    let altitude_msl = f.next_f64("altitude")?;
+    let geoid_separation = f.next_f64("geoid separation")?;
+    let diff_age_s = f.next_f64("differential age")?;
+    let diff_station = f.next_u16("differential station")?;
+    Ok(PositionReport {
+        time,
+        quality,
+        latitude,
+        longitude,
+        altitude_msl,
+        geoid_separation,
+        satellites,
+        hdop,
+        diff_age_s,
+        diff_station,
+    })
+}
+
+fn decode_rmc(sentence: &Sentence<'_>) -> Result<Rmc, DecodeError> {
+    let rmc = nmea::sentences::parse_rmc(crate_sentence(sentence, SentenceType::RMC))
+        .map_err(|e| crate_error("RMC", e))?;
+    let quality = match (rmc.status_of_fix, rmc.faa_mode) {
+        (RmcStatusOfFix::Invalid, _) => FixQuality::Invalid,
+        (_, Some(mode)) => quality_from_faa(mode),
+        (RmcStatusOfFix::Differential, None) => FixQuality::Dgps,
+        (RmcStatusOfFix::Autonomous, None) => FixQuality::Single,
+    };
+    let velocity = rmc
+        .speed_over_ground
+        .and_then(widen)
+        .map(|knots| GroundVelocity {
+            speed_mps: knots * MPS_PER_KNOT,
+            course_deg: rmc.true_course.and_then(widen),
+        });
+    Ok(Rmc {
+        time: rmc.fix_time,
+        date: rmc.fix_date,
+        quality,
+        latitude: rmc.lat,
+        longitude: rmc.lon,
+        velocity,
+    })
+}
+
+fn decode_vtg(sentence: &Sentence<'_>) -> Result<GroundVelocity, DecodeError> {
+    let vtg = nmea::sentences::parse_vtg(crate_sentence(sentence, SentenceType::VTG))
+        .map_err(|e| crate_error("VTG", e))?;
+    let knots = vtg
+        .speed_over_ground
+        .and_then(widen)
+        .ok_or_else(|| DecodeError {
+            kind: "VTG".into(),
+            reason: "no speed over ground".into(),
+        })?;
+    Ok(GroundVelocity {
+        speed_mps: knots * MPS_PER_KNOT,
+        course_deg: vtg.true_course.and_then(widen),
+    })
+}
+
+fn decode_gst(sentence: &Sentence<'_>) -> Result<GstAccuracy, DecodeError> {
+    let gst = nmea::sentences::parse_gst(crate_sentence(sentence, SentenceType::GST))
+        .map_err(|e| crate_error("GST", e))?;
+    Ok(GstAccuracy {
+        time: gst.time,
+        rms_m: gst.rms_sd.and_then(widen),
+        semi_major_m: gst.ellipse_semi_major_sd.and_then(widen),
+        semi_minor_m: gst.ellipse_semi_minor_sd.and_then(widen),
+        orientation_deg: gst.err_ellipse_orientation.and_then(widen),
+        latitude_sd_m: gst.lat_sd.and_then(widen),
+        longitude_sd_m: gst.long_sd.and_then(widen),
+        altitude_sd_m: gst.alt_sd.and_then(widen),
+    })
+}
+
+fn decode_hdt(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let hdt = nmea::sentences::parse_hdt(crate_sentence(sentence, SentenceType::HDT))
+        .map_err(|e| crate_error("HDT", e))?;
+    let heading_deg = hdt.heading.and_then(widen);
+    check_heading("HDT", heading_deg)?;
+    Ok(TrueHeading { heading_deg })
+}
+
+/// `$--THS,x.x,a`: heading and mode (A autonomous, E estimated, M manual, S simulator,
+/// V not valid). Only autonomous headings are used.
+fn decode_ths(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let mut f = sentence.fields();
+    let heading = f.next_f64("heading")?;
+    let mode = f.next_raw();
+    let valid = match mode {
+        "A" => true,
+        "E" | "M" | "S" | "V" | "" => false,
+        other => {
+            return Err(f
+                .error("mode indicator", format!("unknown mode {other:?}"))
+                .into());
+        }
+    };
+    check_heading("THS", heading)?;
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| valid),
+    })
+}
+
+fn check_heading(kind: &str, heading: Option<f64>) -> Result<(), DecodeError> {
+    match heading {
+        Some(h) if !(0.0..=360.0).contains(&h) => Err(DecodeError {
+            kind: kind.to_owned(),
+            reason: format!("heading {h} outside 0..360"),
+        }),
+        _ => Ok(()),
+    }
+}
+
+fn decode_zda(sentence: &Sentence<'_>) -> Result<ZdaDate, DecodeError> {
+    let zda = nmea::sentences::parse_zda(crate_sentence(sentence, SentenceType::ZDA))
+        .map_err(|e| crate_error("ZDA", e))?;
+    let date = match (zda.year, zda.month, zda.day) {
+        (Some(y), Some(m), Some(d)) => Some(
+            NaiveDate::from_ymd_opt(i32::from(y), u32::from(m), u32::from(d)).ok_or_else(|| {
+                DecodeError {
+                    kind: "ZDA".into(),
+                    reason: format!("invalid date {y:04}-{m:02}-{d:02}"),
+                }
+            })?,
+        ),
+        _ => None,
+    };
+    Ok(ZdaDate {
+        time: zda.utc_time,
+        date,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode_body(body: &str) -> Result<Option<GnssSentence>, DecodeError> {
+        decode(&Sentence::parse(body))
+    }
+
+    #[test]
+    fn widen_keeps_the_sent_decimal() {
+        assert_eq!(widen(244.28), Some(244.28));
+        assert_eq!(widen(0.049), Some(0.049));
+        assert_eq!(widen(f32::NAN), None);
+    }
+
+    #[test]
+    fn rank_prefers_rtk() {
+        assert!(FixQuality::RtkFixed.rank() > FixQuality::RtkFloat.rank());
+        assert!(FixQuality::RtkFloat.rank() > FixQuality::Dgps.rank());
+        assert!(FixQuality::Single.rank() > FixQuality::Invalid.rank());
+    }
+
+    #[test]
+    fn unknown_and_proprietary_types_are_not_errors() {
+        assert_eq!(decode_body("GPGSV,1,1,00"), Ok(None));
+        assert_eq!(decode_body("PSTI,030,1"), Ok(None));
+    }
+
+    #[test]
+    fn malformed_known_type_is_an_error() {
+        let err = decode_body("GPGGA,123519,4807.038,N,01131.000,E,x,08").unwrap_err();
+        assert_eq!(err.kind, "GGA");
+        assert!(decode_body("GNTHS,400.0,A").is_err());
+        assert!(decode_body("GNTHS,100.0,Q").is_err());
+    }
+}

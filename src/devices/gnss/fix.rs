@@ -1,0 +1,279 @@
+//! Merges decoded sentences into one current GNSS fix.
+//!
+//! A receiver spreads an epoch over several sentences (GGA, RMC, VTG, GST, HDT, ...), in an
+//! order that varies by vendor, and some carry no time. Position and quality come from GGA or
+//! GNS when the epoch has one, else from RMC; speed, course, heading and accuracy each keep
+//! their own receive time so the core can judge their freshness separately.
+
+use chrono::{NaiveDateTime, NaiveTime};
+
+use super::decode::{
+    FixQuality, GnssSentence, GroundVelocity, GstAccuracy, PositionReport, TrueHeading,
+};
+use super::utc::UtcTracker;
+use crate::time::Timestamp;
+
+/// A value with the host time at which it was received.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timed<T> {
+    /// The value.
+    pub value: T,
+    /// Host receive time.
+    pub rx: Timestamp,
+}
+
+/// A WGS84 position.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GeoPosition {
+    /// Latitude, degrees north.
+    pub latitude_deg: f64,
+    /// Longitude, degrees east.
+    pub longitude_deg: f64,
+    /// Altitude above mean sea level, metres.
+    pub altitude_msl_m: Option<f64>,
+    /// Geoid separation (ellipsoid minus MSL), metres.
+    pub geoid_separation_m: Option<f64>,
+}
+
+/// The receiver's current solution, as far as the sentences so far describe it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GnssFix {
+    /// UTC time of day of the latest position report (valid or not).
+    pub utc_time: Option<NaiveTime>,
+    /// Full UTC date-time of the latest position report, once a date is known.
+    pub utc: Option<NaiveDateTime>,
+    /// Quality of the latest position report.
+    pub quality: FixQuality,
+    /// The latest valid position; kept when the fix is lost, so `quality` says whether it
+    /// is current.
+    pub position: Option<Timed<GeoPosition>>,
+    /// Satellites used in the latest report.
+    pub satellites: Option<u16>,
+    /// HDOP of the latest report.
+    pub hdop: Option<f64>,
+    /// Age of differential corrections, seconds.
+    pub diff_age_s: Option<f64>,
+    /// Differential reference station id.
+    pub diff_station: Option<u16>,
+    /// Latest speed and course over ground.
+    pub velocity: Option<Timed<GroundVelocity>>,
+    /// Latest valid dual-antenna true heading, degrees (0 = north, clockwise).
+    pub heading_deg: Option<Timed<f64>>,
+    /// Latest GST accuracy figures.
+    pub accuracy: Option<Timed<GstAccuracy>>,
+}
+
+/// Builds [`GnssFix`] from a sentence stream.
+#[derive(Debug, Clone, Default)]
+pub struct FixAssembler {
+    fix: GnssFix,
+    utc: UtcTracker,
+    /// Time of day of the epoch being assembled.
+    epoch: Option<NaiveTime>,
+    /// Whether this epoch already had a GGA or GNS, which outrank RMC for quality.
+    epoch_has_position_report: bool,
+}
+
+impl FixAssembler {
+    /// An empty assembler.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The fix as assembled so far.
+    pub fn fix(&self) -> &GnssFix {
+        &self.fix
+    }
+
+    /// Merges one decoded sentence received at host time `rx`.
+    pub fn apply(&mut self, rx: Timestamp, sentence: &GnssSentence) {
+        match sentence {
+            GnssSentence::Gga(report) | GnssSentence::Gns(report) => {
+                self.enter_epoch(report.time);
+                self.epoch_has_position_report = true;
+                self.apply_report(rx, report);
+            }
+            GnssSentence::Rmc(rmc) => {
+                self.enter_epoch(rmc.time);
+                if let (Some(time), Some(date)) = (rmc.time, rmc.date) {
+                    self.utc.observe(time, Some(date));
+                }
+                if !self.epoch_has_position_report {
+                    self.apply_report(
+                        rx,
+                        &PositionReport {
+                            time: rmc.time,
+                            quality: rmc.quality,
+                            latitude: rmc.latitude,
+                            longitude: rmc.longitude,
+                            ..PositionReport::default()
+                        },
+                    );
+                } else {
+                    self.refresh_utc();
+                }
+                if let Some(v) = rmc.velocity {
+                    self.fix.velocity = Some(Timed { value: v, rx });
+                }
+            }
+            GnssSentence::Vtg(v) => self.fix.velocity = Some(Timed { value: *v, rx }),
+            GnssSentence::Gst(accuracy) => {
+                self.fix.accuracy = Some(Timed {
+                    value: *accuracy,
+                    rx,
+                });
+            }
+            GnssSentence::Hdt(TrueHeading { heading_deg })
+            | GnssSentence::Ths(TrueHeading { heading_deg }) => {
+                self.fix.heading_deg = heading_deg.map(|value| Timed { value, rx });
+            }
+            GnssSentence::Zda(zda) => {
+                if let (Some(time), Some(date)) = (zda.time, zda.date) {
+                    self.utc.observe(time, Some(date));
+                    self.refresh_utc();
+                }
+            }
+        }
+    }
+
+    /// Starts a new epoch when a timed sentence carries a new time of day.
+    fn enter_epoch(&mut self, time: Option<NaiveTime>) {
+        if time.is_some() && time != self.epoch {
+            self.epoch = time;
+            self.epoch_has_position_report = false;
+        }
+    }
+
+    fn apply_report(&mut self, rx: Timestamp, report: &PositionReport) {
+        let position = match (report.latitude, report.longitude) {
+            (Some(latitude_deg), Some(longitude_deg)) => Some(GeoPosition {
+                latitude_deg,
+                longitude_deg,
+                altitude_msl_m: report.altitude_msl,
+                geoid_separation_m: report.geoid_separation,
+            }),
+            _ => None,
+        };
+        // A quality that claims a fix without a position is no fix.
+        self.fix.quality = match position {
+            Some(_) => report.quality,
+            None => FixQuality::Invalid,
+        };
+        if let Some(value) = position.filter(|_| report.quality.is_valid()) {
+            self.fix.position = Some(Timed { value, rx });
+        }
+        self.fix.satellites = report.satellites;
+        self.fix.hdop = report.hdop;
+        self.fix.diff_age_s = report.diff_age_s;
+        self.fix.diff_station = report.diff_station;
+        if let Some(time) = report.time {
+            self.fix.utc_time = Some(time);
+            self.fix.utc = self.utc.observe(time, None);
+        }
+    }
+
+    /// Re-resolves the fix's date-time after a date arrived for its epoch.
+    fn refresh_utc(&mut self) {
+        if let Some(time) = self.fix.utc_time {
+            self.fix.utc = self.utc.resolve(time);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::devices::gnss::decode::decode;
+    use crate::devices::gnss::sentence::Sentence;
+
+    fn feed(asm: &mut FixAssembler, rx_s: u64, body: &str) {
+        let decoded = decode(&Sentence::parse(body)).unwrap().unwrap();
+        asm.apply(Timestamp::from_micros(rx_s * 1_000_000), &decoded);
+    }
+
+    #[test]
+    fn gga_quality_outranks_rmc_in_the_same_epoch() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "GPGGA,150119.000,5104.0859,N,11405.7387,W,5,8,0.94,1102.4,M,-17.5,M,1.0,0041",
+        );
+        feed(
+            &mut asm,
+            1,
+            "GPRMC,150119.000,A,5104.0859,N,11405.7387,W,0.09,194.17,090322,,,D",
+        );
+        let fix = asm.fix();
+        assert_eq!(fix.quality, FixQuality::RtkFloat);
+        assert_eq!(fix.diff_age_s, Some(1.0));
+        assert_eq!(fix.diff_station, Some(41));
+        assert_eq!(fix.utc.unwrap().to_string(), "2022-03-09 15:01:19");
+        let v = fix.velocity.unwrap().value;
+        assert!((v.speed_mps - 0.09 * 1852.0 / 3600.0).abs() < 1e-12);
+        assert_eq!(v.course_deg, Some(194.17));
+    }
+
+    #[test]
+    fn rmc_sets_quality_without_gga() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "GNRMC,003832.000,A,4404.1271062,N,12118.8438377,W,000.0,171.0,290322,,,F,V",
+        );
+        assert_eq!(asm.fix().quality, FixQuality::RtkFloat);
+        feed(
+            &mut asm,
+            2,
+            "GNRMC,003833.000,V,4404.1271062,N,12118.8438377,W,,,290322,,,N,V",
+        );
+        assert_eq!(asm.fix().quality, FixQuality::Invalid);
+        // The last valid position is kept, stamped when it was valid.
+        let pos = asm.fix().position.unwrap();
+        assert_eq!(pos.rx, Timestamp::from_micros(1_000_000));
+    }
+
+    #[test]
+    fn lost_fix_keeps_last_valid_position() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "GNGGA,000705.00,4404.12938,N,12118.84590,W,1,20,0.9,1108.8,M,,M,,",
+        );
+        feed(
+            &mut asm,
+            2,
+            "GNGGA,000706.00,4404.99999,N,12118.84590,W,0,00,99.99,1108.8,M,,M,,",
+        );
+        let fix = asm.fix();
+        assert_eq!(fix.quality, FixQuality::Invalid);
+        let pos = fix.position.unwrap();
+        assert!((pos.value.latitude_deg - (44.0 + 4.12938 / 60.0)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn zda_dates_an_earlier_gga() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "GNGGA,231408.00,4503.94632,N,00739.54368,E,5,12,0.82,257.4,M,47.2,M,0.0,0041",
+        );
+        assert_eq!(asm.fix().utc, None);
+        feed(&mut asm, 1, "GNZDA,231408.00,11,04,2025,00,00");
+        assert_eq!(asm.fix().utc.unwrap().to_string(), "2025-04-11 23:14:08");
+    }
+
+    #[test]
+    fn invalid_ths_clears_heading() {
+        let mut asm = FixAssembler::new();
+        feed(&mut asm, 1, "GNTHS,244.28,A");
+        assert_eq!(asm.fix().heading_deg.unwrap().value, 244.28);
+        feed(&mut asm, 2, "GNTHS,,V");
+        assert_eq!(asm.fix().heading_deg, None);
+        feed(&mut asm, 3, "GNHDT,12.5,T");
+        assert_eq!(asm.fix().heading_deg.unwrap().value, 12.5);
+    }
+}

@@ -1,0 +1,3 @@
+//! Device protocols: pure decoders from raw bytes or frames to typed measurements.
+
+pub mod gnss;

@@ -1,0 +1,15 @@
+//! chassisd: the chassis daemon of an RTK ground robot.
+//!
+//! The logic is a sans-IO core ([`core::Vehicle`]) fed through device decoders by the
+//! [`engine::Engine`]; live mode ([`runtime`]) and replay ([`replay`]) are thin edges around
+//! that one engine. See DESIGN.md in the shared folder for the architecture.
+
+pub mod api;
+pub mod config;
+pub mod core;
+pub mod devices;
+pub mod engine;
+pub mod record;
+pub mod replay;
+pub mod runtime;
+pub mod time;

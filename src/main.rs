@@ -1,0 +1,104 @@
+//! The `chassisd` command line.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+use chassisd::config::VehicleConfig;
+use chassisd::replay;
+use chassisd::runtime::live::{self, LiveOptions};
+
+#[derive(Parser)]
+#[command(version, about = "Chassis daemon for RTK ground robots")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Replay a recording folder or a plain NMEA log; print one base_status JSON line per
+    /// 100 ms of recorded time.
+    Replay {
+        /// Recording folder (with meta.toml) or NMEA text log.
+        path: PathBuf,
+        /// Vehicle configuration to use instead of the one stored with the recording.
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+    /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
+    Run {
+        /// Vehicle configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Record every raw chunk into this new folder.
+        #[arg(long)]
+        record: Option<PathBuf>,
+    },
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("chassisd: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Replay { path, config } => {
+            let config = config.map(|p| VehicleConfig::load(&p)).transpose()?;
+            let stdout = std::io::stdout();
+            let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());
+            let summary = replay::replay(&path, config.as_ref(), &mut out)
+                .with_context(|| format!("replay of {}", path.display()))?;
+            out.flush()?;
+            for skip in &summary.skipped_lines.0 {
+                eprintln!("skipped {}:{}: {}", skip.file, skip.line, skip.reason);
+            }
+            for (name, protocol) in &summary.sources_without_decoder {
+                eprintln!(
+                    "source {name:?} (protocol {protocol:?}) has no decoder yet; its frames are counted only"
+                );
+            }
+            if let Some(import) = &summary.import
+                && !import.date_known
+            {
+                eprintln!("no RMC or ZDA date in the log; 1970-01-01 assumed");
+            }
+            eprintln!("{}", summary.one_line());
+            Ok(())
+        }
+        Command::Run { config, record } => {
+            let text = std::fs::read_to_string(&config)
+                .with_context(|| format!("cannot read {}", config.display()))?;
+            let vehicle = VehicleConfig::from_toml(&text, &config)?;
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .context("cannot start the async runtime")?;
+            runtime.block_on(live::run(
+                LiveOptions {
+                    config: vehicle,
+                    config_text: Some(text),
+                    record,
+                },
+                std::io::stdout(),
+            ))
+        }
+    }
+}

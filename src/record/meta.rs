@@ -1,0 +1,154 @@
+//! `meta.toml`: names the sources of a recording and the configuration in force.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::RecordError;
+
+/// Current recording format version.
+pub const FORMAT_VERSION: u32 = 1;
+/// Name of the metadata file in a recording folder.
+pub const META_FILE: &str = "meta.toml";
+
+/// How a source's file is written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SourceKind {
+    /// Serial chunks in the hex envelope.
+    Serial,
+    /// CAN frames in `candump -L` format.
+    Can,
+    /// Received commands.
+    Commands,
+}
+
+/// One source of a recording.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceMeta {
+    /// Source name as it appears in the lines (`gnss`, `can0`, `mqtt`).
+    pub name: String,
+    /// File format.
+    pub kind: SourceKind,
+    /// File name inside the recording folder.
+    pub file: String,
+    /// Wire protocol, e.g. `nmea0183`, so replay picks the right decoder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub protocol: Option<String>,
+}
+
+/// The contents of `meta.toml`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Meta {
+    /// Format version, [`FORMAT_VERSION`].
+    pub format: u32,
+    /// Vehicle name from the configuration.
+    pub vehicle: String,
+    /// Wall-clock start of the recording, seconds since the Unix epoch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub started_unix_s: Option<u64>,
+    /// File (inside the folder) holding a copy of the vehicle configuration in force.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle_config: Option<String>,
+    /// The sources.
+    #[serde(default, rename = "source")]
+    pub sources: Vec<SourceMeta>,
+}
+
+impl Meta {
+    /// Reads and checks `dir/meta.toml`.
+    pub fn load(dir: &Path) -> Result<Self, RecordError> {
+        let path = dir.join(META_FILE);
+        let text = std::fs::read_to_string(&path).map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let meta: Meta = toml::from_str(&text).map_err(|e| RecordError::Meta {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        meta.check()
+            .map_err(|message| RecordError::Meta { path, message })?;
+        Ok(meta)
+    }
+
+    /// Checks the version and that file names stay inside the folder.
+    pub fn check(&self) -> Result<(), String> {
+        if self.format != FORMAT_VERSION {
+            return Err(format!(
+                "key `format`: version {} is not supported (this build reads {FORMAT_VERSION})",
+                self.format
+            ));
+        }
+        let files = self
+            .sources
+            .iter()
+            .map(|s| ("source.file", &s.file))
+            .chain(self.vehicle_config.iter().map(|f| ("vehicle_config", f)));
+        for (key, file) in files {
+            if !is_plain_file_name(file) {
+                return Err(format!(
+                    "key `{key}`: {file:?} must be a plain file name inside the recording folder"
+                ));
+            }
+        }
+        for s in &self.sources {
+            if s.name.is_empty() || s.name.contains(char::is_whitespace) {
+                return Err(format!(
+                    "key `source.name`: {:?} must be non-empty without spaces",
+                    s.name
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The TOML text of this meta.
+    pub fn to_toml(&self) -> String {
+        // Plain strings, numbers and enums always serialise.
+        toml::to_string(self).unwrap_or_default()
+    }
+}
+
+fn is_plain_file_name(name: &str) -> bool {
+    !name.is_empty() && name != "." && name != ".." && !name.contains(['/', '\\', '\0'])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn meta() -> Meta {
+        Meta {
+            format: FORMAT_VERSION,
+            vehicle: "m1".into(),
+            started_unix_s: Some(1_700_000_000),
+            vehicle_config: Some("vehicle.toml".into()),
+            sources: vec![SourceMeta {
+                name: "gnss".into(),
+                kind: SourceKind::Serial,
+                file: "gnss.log".into(),
+                protocol: Some("nmea0183".into()),
+            }],
+        }
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let m = meta();
+        let back: Meta = toml::from_str(&m.to_toml()).unwrap();
+        assert_eq!(back, m);
+    }
+
+    #[test]
+    fn rejects_paths_outside_the_folder_and_other_versions() {
+        let mut m = meta();
+        m.sources[0].file = "../etc/passwd".into();
+        assert!(m.check().unwrap_err().contains("source.file"));
+        let mut m = meta();
+        m.format = 99;
+        assert!(m.check().unwrap_err().contains("format"));
+    }
+}

@@ -1,0 +1,71 @@
+//! The recorded-frame layer: every raw frame with its time, written as a recording folder
+//! and read back in time order (DESIGN.md §3).
+
+pub mod envelope;
+pub mod meta;
+pub mod nmea_import;
+pub mod reader;
+pub mod writer;
+
+use bytes::Bytes;
+use socketcan::CanAnyFrame;
+
+use crate::core::LinkState;
+use crate::time::Timestamp;
+
+pub use meta::{Meta, SourceKind, SourceMeta};
+pub use reader::{RecordingReader, SkippedLine};
+pub use writer::RecordingWriter;
+
+/// One recorded event.
+#[derive(Debug, Clone)]
+pub struct Record {
+    /// When it happened (host time).
+    pub t: Timestamp,
+    /// The source: serial device name, CAN interface or command channel.
+    pub source: String,
+    /// What happened.
+    pub payload: Payload,
+}
+
+/// What a record holds.
+#[derive(Debug, Clone)]
+pub enum Payload {
+    /// A chunk of bytes read from a serial port, exactly as it arrived.
+    Serial(Bytes),
+    /// A driver's link state changed.
+    Link(LinkState),
+    /// A CAN frame.
+    Can(CanAnyFrame),
+    /// A command received over MQTT.
+    Command {
+        /// Topic it arrived on.
+        topic: String,
+        /// Raw payload.
+        payload: Bytes,
+    },
+}
+
+/// A recording that could not be opened, read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// File system trouble.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// `meta.toml` is missing or invalid.
+    #[error("{path}: {message}")]
+    Meta {
+        /// The meta file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A plain log could not be imported.
+    #[error("{0}")]
+    Import(String),
+}

@@ -1,0 +1,246 @@
+//! Reads a recording folder (or in-memory records) back as one stream in time order.
+//!
+//! Each source file is read lazily and the sources are merged by time, ties going to the
+//! source whose name sorts first and, within a source, to file order. A malformed line is
+//! counted and skipped; the rest of the recording still plays.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+
+use bytes::Bytes;
+use socketcan::dump::Reader as CandumpReader;
+
+use super::envelope::{self, EnvelopeError};
+use super::meta::{Meta, SourceKind};
+use super::{Payload, Record, RecordError};
+use crate::core::LinkState;
+use crate::time::Timestamp;
+
+/// How many skipped lines are kept for the report; the rest are only counted.
+const KEEP_SKIPPED: usize = 100;
+
+/// A line that was skipped.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkippedLine {
+    /// File name inside the recording.
+    pub file: String,
+    /// One-based line number.
+    pub line: u64,
+    /// Why it was skipped.
+    pub reason: String,
+}
+
+/// Merged, time-ordered reader over all sources of a recording.
+pub struct RecordingReader {
+    sources: Vec<SourceReader>,
+    heads: Vec<Option<Record>>,
+    skipped: Vec<SkippedLine>,
+    skipped_count: u64,
+}
+
+enum SourceReader {
+    Envelope {
+        file: String,
+        kind: SourceKind,
+        reader: BufReader<File>,
+        line_no: u64,
+        buf: Vec<u8>,
+    },
+    Candump {
+        file: String,
+        reader: CandumpReader<BufReader<File>>,
+        line_no: u64,
+    },
+    Memory(std::vec::IntoIter<Record>),
+}
+
+impl RecordingReader {
+    /// Opens the recording folder `dir` described by its `meta.toml`.
+    pub fn open(dir: &Path) -> Result<(Meta, Self), RecordError> {
+        let meta = Meta::load(dir)?;
+        let mut sources = Vec::with_capacity(meta.sources.len());
+        for source in &meta.sources {
+            let path = dir.join(&source.file);
+            let file = File::open(&path).map_err(|e| RecordError::Io {
+                path: path.clone(),
+                source: e,
+            })?;
+            sources.push(match source.kind {
+                SourceKind::Can => SourceReader::Candump {
+                    file: source.file.clone(),
+                    reader: CandumpReader::from_reader(file),
+                    line_no: 0,
+                },
+                kind => SourceReader::Envelope {
+                    file: source.file.clone(),
+                    kind,
+                    reader: BufReader::new(file),
+                    line_no: 0,
+                    buf: Vec::with_capacity(256),
+                },
+            });
+        }
+        Ok((meta, Self::from_sources(sources)))
+    }
+
+    /// A reader over records already in memory (an imported log). They are merged like file
+    /// sources, so they need not be sorted.
+    pub fn from_records(records: Vec<Record>) -> Self {
+        Self::from_sources(vec![SourceReader::Memory(records.into_iter())])
+    }
+
+    fn from_sources(sources: Vec<SourceReader>) -> Self {
+        let mut reader = Self {
+            heads: Vec::with_capacity(sources.len()),
+            sources,
+            skipped: Vec::new(),
+            skipped_count: 0,
+        };
+        for i in 0..reader.sources.len() {
+            let head = reader.pull(i);
+            reader.heads.push(head);
+        }
+        reader
+    }
+
+    /// Lines skipped so far (the first [`KEEP_SKIPPED`]) and their total count.
+    pub fn skipped(&self) -> (&[SkippedLine], u64) {
+        (&self.skipped, self.skipped_count)
+    }
+
+    /// The next valid record of source `i`, skipping and noting malformed lines.
+    fn pull(&mut self, i: usize) -> Option<Record> {
+        loop {
+            match self.sources[i].next_line()? {
+                Ok(record) => return Some(record),
+                Err(skip) => {
+                    self.skipped_count += 1;
+                    if self.skipped.len() < KEEP_SKIPPED {
+                        self.skipped.push(skip);
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl Iterator for RecordingReader {
+    type Item = Record;
+
+    fn next(&mut self) -> Option<Record> {
+        let mut best: Option<usize> = None;
+        for (i, head) in self.heads.iter().enumerate() {
+            let Some(r) = head else { continue };
+            let better = match best.and_then(|b| self.heads[b].as_ref()) {
+                None => true,
+                Some(b) => (r.t, r.source.as_str()) < (b.t, b.source.as_str()),
+            };
+            if better {
+                best = Some(i);
+            }
+        }
+        let i = best?;
+        let next = self.pull(i);
+        std::mem::replace(&mut self.heads[i], next)
+    }
+}
+
+impl SourceReader {
+    /// The next line's record, `Err` for a malformed line, `None` at the end.
+    fn next_line(&mut self) -> Option<Result<Record, SkippedLine>> {
+        match self {
+            SourceReader::Memory(records) => records.next().map(Ok),
+            SourceReader::Candump {
+                file,
+                reader,
+                line_no,
+            } => {
+                *line_no += 1;
+                match reader.next_record() {
+                    Ok(None) => None,
+                    Ok(Some(rec)) => Some(Ok(Record {
+                        t: Timestamp::from_micros(rec.t_us),
+                        source: rec.device,
+                        payload: Payload::Can(rec.frame),
+                    })),
+                    // A read error ends the source; a parse error skips one line.
+                    Err(socketcan::dump::ParseError::Io(e)) => {
+                        tracing::warn!(file = %file, line = *line_no, error = %e, "read error; source ends here");
+                        None
+                    }
+                    Err(e) => Some(Err(SkippedLine {
+                        file: file.clone(),
+                        line: *line_no,
+                        reason: e.to_string(),
+                    })),
+                }
+            }
+            SourceReader::Envelope {
+                file,
+                kind,
+                reader,
+                line_no,
+                buf,
+            } => loop {
+                buf.clear();
+                match reader.read_until(b'\n', buf) {
+                    Ok(0) => return None,
+                    Ok(_) => {}
+                    Err(e) => {
+                        tracing::warn!(file = %file, line = *line_no + 1, error = %e, "read error; source ends here");
+                        return None;
+                    }
+                }
+                *line_no += 1;
+                let skip = |reason: String| SkippedLine {
+                    file: file.clone(),
+                    line: *line_no,
+                    reason,
+                };
+                let Ok(line) = std::str::from_utf8(buf) else {
+                    return Some(Err(skip("not UTF-8".into())));
+                };
+                if line.trim().is_empty() {
+                    continue;
+                }
+                return Some(parse_envelope_line(*kind, line).map_err(|e| skip(e.to_string())));
+            },
+        }
+    }
+}
+
+fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError> {
+    let env = envelope::split(line)?;
+    let payload = match kind {
+        SourceKind::Serial => match env.payload {
+            "!link-up" => Payload::Link(LinkState::Up),
+            "!link-down" => Payload::Link(LinkState::Down),
+            hex if hex.starts_with('!') => {
+                return Err(EnvelopeError::Payload(format!("unknown event {hex:?}")));
+            }
+            "" => return Err(EnvelopeError::Payload("empty chunk".into())),
+            hex => Payload::Serial(Bytes::from(envelope::from_hex(hex)?)),
+        },
+        SourceKind::Commands => {
+            let (topic, hex) = env
+                .payload
+                .split_once('#')
+                .ok_or_else(|| EnvelopeError::Payload("expected topic#hex".into()))?;
+            Payload::Command {
+                topic: envelope::unescape_topic(topic)?,
+                payload: Bytes::from(envelope::from_hex(hex)?),
+            }
+        }
+        SourceKind::Can => {
+            return Err(EnvelopeError::Payload(
+                "CAN lines are read as candump".into(),
+            ));
+        }
+    };
+    Ok(Record {
+        t: env.t,
+        source: env.source.to_owned(),
+        payload,
+    })
+}

@@ -1,0 +1,156 @@
+//! Writes a recording folder: `meta.toml`, a copy of the vehicle configuration, and one
+//! file per source.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use socketcan::dump::CanDumpRecord;
+
+use super::envelope;
+use super::meta::{FORMAT_VERSION, META_FILE, Meta, SourceKind, SourceMeta};
+use super::{Payload, Record, RecordError};
+use crate::core::LinkState;
+
+/// File name of the vehicle configuration copy.
+pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";
+
+/// An open recording folder.
+pub struct RecordingWriter {
+    dir: PathBuf,
+    sources: BTreeMap<String, (SourceKind, BufWriter<File>)>,
+}
+
+impl RecordingWriter {
+    /// Creates `dir` (which must not exist, or be empty), and writes `meta.toml` and the
+    /// configuration copy. `sources` lists every source that may be written.
+    pub fn create(
+        dir: &Path,
+        vehicle: &str,
+        started_unix_s: u64,
+        vehicle_config_toml: Option<&str>,
+        sources: Vec<SourceMeta>,
+    ) -> Result<Self, RecordError> {
+        let io = |path: &Path| {
+            let path = path.to_owned();
+            move |source| RecordError::Io { path, source }
+        };
+        if dir.exists() {
+            let mut entries = std::fs::read_dir(dir).map_err(io(dir))?;
+            if entries.next().is_some() {
+                return Err(RecordError::Io {
+                    path: dir.to_owned(),
+                    source: std::io::Error::new(
+                        std::io::ErrorKind::AlreadyExists,
+                        "recording folder is not empty; choose a new one",
+                    ),
+                });
+            }
+        }
+        std::fs::create_dir_all(dir).map_err(io(dir))?;
+        let meta = Meta {
+            format: FORMAT_VERSION,
+            vehicle: vehicle.to_owned(),
+            started_unix_s: Some(started_unix_s),
+            vehicle_config: vehicle_config_toml.map(|_| VEHICLE_CONFIG_FILE.to_owned()),
+            sources: sources.clone(),
+        };
+        meta.check().map_err(|message| RecordError::Meta {
+            path: dir.join(META_FILE),
+            message,
+        })?;
+        if let Some(text) = vehicle_config_toml {
+            let path = dir.join(VEHICLE_CONFIG_FILE);
+            std::fs::write(&path, text).map_err(io(&path))?;
+        }
+        let meta_path = dir.join(META_FILE);
+        std::fs::write(&meta_path, meta.to_toml()).map_err(io(&meta_path))?;
+        let mut files = BTreeMap::new();
+        for s in sources {
+            let path = dir.join(&s.file);
+            let file = File::create(&path).map_err(io(&path))?;
+            files.insert(s.name, (s.kind, BufWriter::new(file)));
+        }
+        Ok(Self {
+            dir: dir.to_owned(),
+            sources: files,
+        })
+    }
+
+    /// Appends one record to its source's file.
+    pub fn write(&mut self, record: &Record) -> Result<(), RecordError> {
+        let Some((kind, out)) = self.sources.get_mut(&record.source) else {
+            return Err(RecordError::Meta {
+                path: self.dir.join(META_FILE),
+                message: format!("source {:?} is not declared", record.source),
+            });
+        };
+        let line = match (&record.payload, kind) {
+            (Payload::Serial(bytes), SourceKind::Serial) => {
+                format!(
+                    "({}) {} {}\n",
+                    record.t,
+                    record.source,
+                    envelope::to_hex(bytes)
+                )
+            }
+            (Payload::Link(state), SourceKind::Serial) => {
+                let event = match state {
+                    LinkState::Up => "!link-up",
+                    LinkState::Down => "!link-down",
+                };
+                format!("({}) {} {event}\n", record.t, record.source)
+            }
+            (Payload::Can(frame), SourceKind::Can) => {
+                let rec = CanDumpRecord {
+                    t_us: record.t.as_micros(),
+                    device: record.source.clone(),
+                    frame: *frame,
+                    direction: None,
+                };
+                format!("{rec}\n")
+            }
+            (Payload::Command { topic, payload }, SourceKind::Commands) => format!(
+                "({}) {} {}#{}\n",
+                record.t,
+                record.source,
+                envelope::escape_topic(topic),
+                envelope::to_hex(payload)
+            ),
+            (_, kind) => {
+                return Err(RecordError::Meta {
+                    path: self.dir.join(META_FILE),
+                    message: format!(
+                        "source {:?} is {kind:?}; it cannot hold this record",
+                        record.source
+                    ),
+                });
+            }
+        };
+        out.write_all(line.as_bytes())
+            .map_err(|source| RecordError::Io {
+                path: self.dir.clone(),
+                source,
+            })
+    }
+
+    /// Flushes every file to the operating system.
+    pub fn flush(&mut self) -> Result<(), RecordError> {
+        for (_, out) in self.sources.values_mut() {
+            out.flush().map_err(|source| RecordError::Io {
+                path: self.dir.clone(),
+                source,
+            })?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for RecordingWriter {
+    fn drop(&mut self) {
+        if let Err(e) = self.flush() {
+            tracing::error!(error = %e, "recording: final flush failed");
+        }
+    }
+}

@@ -1,0 +1,193 @@
+//! `chassisd replay`: a recording (or a plain NMEA log) through the same engine as live
+//! mode, as fast as the machine allows, one base_status JSON line per tick.
+
+use std::fmt::Write as _;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::api::rtk::BaseStatus;
+use crate::config::{ConfigError, VehicleConfig};
+use crate::core::{CoreConfig, Output};
+use crate::devices::gnss::GnssStats;
+use crate::engine::{Decoder, Engine, EngineStats, STATUS_PERIOD};
+use crate::record::nmea_import::{IMPORT_SOURCE, ImportReport, import_nmea_log};
+use crate::record::{RecordError, RecordingReader, SkippedLine};
+use crate::time::Timestamp;
+
+/// Why a replay could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The recording could not be opened or read.
+    #[error(transparent)]
+    Recording(#[from] RecordError),
+    /// The configuration stored with the recording is invalid.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// Writing the output failed (for example, a closed pipe).
+    #[error("writing output: {0}")]
+    Output(#[from] std::io::Error),
+}
+
+/// What a replay went through.
+#[derive(Debug, Clone, Default)]
+pub struct ReplaySummary {
+    /// Engine counters (records by source, ticks).
+    pub engine: EngineStats,
+    /// Counters per NMEA source.
+    pub gnss: Vec<(String, GnssStats)>,
+    /// Malformed recording lines that were skipped (the first hundred) and their count.
+    pub skipped_lines: (Vec<SkippedLine>, u64),
+    /// Present when the input was a plain NMEA log.
+    pub import: Option<ImportReport>,
+    /// Sources in the recording that no decoder handles (name, protocol).
+    pub sources_without_decoder: Vec<(String, String)>,
+    /// First and last record times.
+    pub span: Option<(Timestamp, Timestamp)>,
+}
+
+/// Replays `path` (a recording folder or a plain NMEA log) and writes one base_status line
+/// per tick to `out`. `config` overrides the configuration stored with the recording.
+pub fn replay(
+    path: &Path,
+    config: Option<&VehicleConfig>,
+    out: &mut impl Write,
+) -> Result<ReplaySummary, ReplayError> {
+    let mut summary = ReplaySummary::default();
+    let (reader, vehicle, sources) = if path.is_dir() {
+        let (meta, reader) = RecordingReader::open(path)?;
+        let stored = match &meta.vehicle_config {
+            Some(file) => Some(VehicleConfig::load(&path.join(file))?),
+            None => None,
+        };
+        let vehicle = config.cloned().or(stored).unwrap_or_default();
+        let mut sources = Vec::new();
+        for s in &meta.sources {
+            let protocol = s.protocol.clone().unwrap_or_default();
+            match Decoder::for_protocol(&protocol) {
+                Some(d) => sources.push((s.name.clone(), d)),
+                None => summary
+                    .sources_without_decoder
+                    .push((s.name.clone(), protocol)),
+            }
+        }
+        (reader, vehicle, sources)
+    } else {
+        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+            path: PathBuf::from(path),
+            source,
+        })?;
+        let (records, report) = import_nmea_log(&bytes)?;
+        summary.import = Some(report);
+        (
+            RecordingReader::from_records(records),
+            config.cloned().unwrap_or_default(),
+            vec![(IMPORT_SOURCE.to_owned(), Decoder::Nmea)],
+        )
+    };
+    run(reader, &vehicle, &sources, out, &mut summary)?;
+    Ok(summary)
+}
+
+fn run(
+    mut reader: RecordingReader,
+    vehicle: &VehicleConfig,
+    sources: &[(String, Decoder)],
+    out: &mut impl Write,
+    summary: &mut ReplaySummary,
+) -> Result<(), ReplayError> {
+    let mut engine = Engine::new(CoreConfig::from_vehicle(vehicle), sources);
+    let mut outputs = Vec::new();
+    let mut line = String::with_capacity(512);
+    let mut span: Option<(Timestamp, Timestamp)> = None;
+    for record in reader.by_ref() {
+        let t = engine.handle(&record, &mut outputs);
+        span = Some(span.map_or((t, t), |(first, _)| (first, t)));
+        write_statuses(&mut outputs, &mut line, out)?;
+    }
+    if let Some((_, last)) = span {
+        engine.advance_to(last.ceil_to(STATUS_PERIOD), &mut outputs);
+        write_statuses(&mut outputs, &mut line, out)?;
+    }
+    out.flush()?;
+    summary.engine = engine.stats().clone();
+    summary.gnss = engine
+        .gnss_stats()
+        .map(|(name, stats)| (name.to_owned(), stats))
+        .collect();
+    let (skipped, count) = reader.skipped();
+    summary.skipped_lines = (skipped.to_vec(), count);
+    summary.span = span;
+    Ok(())
+}
+
+fn write_statuses(
+    outputs: &mut Vec<Output>,
+    line: &mut String,
+    out: &mut impl Write,
+) -> std::io::Result<()> {
+    for output in outputs.drain(..) {
+        let Output::Status(status) = output;
+        line.clear();
+        line.push_str(&BaseStatus::from_status(&status).to_json());
+        line.push('\n');
+        out.write_all(line.as_bytes())?;
+    }
+    Ok(())
+}
+
+impl ReplaySummary {
+    /// The one-line summary printed on stderr.
+    pub fn one_line(&self) -> String {
+        let mut s = String::new();
+        let frames: u64 = self.engine.records_by_source.values().sum();
+        let _ = write!(s, "replay: {frames} frames (");
+        join(
+            &mut s,
+            self.engine
+                .records_by_source
+                .iter()
+                .map(|(k, v)| format!("{k} {v}")),
+        );
+        let _ = write!(s, "), {} status lines", self.engine.ticks);
+        for (name, g) in &self.gnss {
+            let f = &g.framer;
+            let _ = write!(s, "; {name}: {} sentences (", f.sentences);
+            join(
+                &mut s,
+                g.sentences_by_kind.iter().map(|(k, v)| format!("{k} {v}")),
+            );
+            let _ = write!(
+                s,
+                "), checksum errors {}, missing checksums {}, truncated {}, overlong {}, \
+                 bytes skipped {} of {}, decode errors {}",
+                f.checksum_errors,
+                f.missing_checksum,
+                f.truncated,
+                f.overlong,
+                f.bytes_skipped,
+                f.bytes_in,
+                g.decode_errors
+            );
+        }
+        if self.engine.undecoded > 0 {
+            let _ = write!(s, "; {} frames without a decoder", self.engine.undecoded);
+        }
+        if self.engine.commands > 0 {
+            let _ = write!(s, "; {} commands not replayed", self.engine.commands);
+        }
+        if self.engine.reordered > 0 {
+            let _ = write!(s, "; {} records re-timed", self.engine.reordered);
+        }
+        let _ = write!(s, "; skipped lines {}", self.skipped_lines.1);
+        s
+    }
+}
+
+fn join(s: &mut String, items: impl Iterator<Item = String>) {
+    for (i, item) in items.enumerate() {
+        if i > 0 {
+            s.push_str(", ");
+        }
+        s.push_str(&item);
+    }
+}

@@ -1,0 +1,89 @@
+//! Writes live records to a recording folder on its own thread, so disk stalls never hold
+//! up the engine.
+
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use crate::record::{Record, RecordingWriter};
+
+/// Records queued for the writer thread before new ones are dropped (and counted).
+const QUEUE: usize = 65_536;
+/// How often buffered lines reach the file system.
+const FLUSH_EVERY: Duration = Duration::from_secs(1);
+
+/// Handle to the recorder thread.
+pub struct Recorder {
+    tx: Option<SyncSender<Record>>,
+    thread: Option<JoinHandle<()>>,
+    dropped: u64,
+}
+
+impl Recorder {
+    /// Starts the writer thread.
+    pub fn start(writer: RecordingWriter) -> Self {
+        let (tx, rx) = sync_channel(QUEUE);
+        let thread = std::thread::Builder::new()
+            .name("recorder".into())
+            .spawn(move || write_loop(writer, rx))
+            .map_err(|e| tracing::error!(error = %e, "recorder thread did not start"))
+            .ok();
+        Self {
+            tx: Some(tx),
+            thread,
+            dropped: 0,
+        }
+    }
+
+    /// Queues a record. Never blocks; a full queue drops the record and counts it.
+    pub fn record(&mut self, record: Record) {
+        let Some(tx) = &self.tx else { return };
+        match tx.try_send(record) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.dropped += 1;
+                if self.dropped.is_power_of_two() {
+                    tracing::error!(
+                        dropped = self.dropped,
+                        "recording cannot keep up; records dropped"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Records dropped so far.
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Writes what is queued, flushes and stops the thread.
+    pub fn finish(mut self) {
+        self.tx.take();
+        if let Some(thread) = self.thread.take()
+            && thread.join().is_err()
+        {
+            tracing::error!("recorder thread panicked");
+        }
+    }
+}
+
+fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) {
+    let mut failures: u64 = 0;
+    loop {
+        let result = match rx.recv_timeout(FLUSH_EVERY) {
+            Ok(record) => writer.write(&record),
+            Err(RecvTimeoutError::Timeout) => writer.flush(),
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if let Err(e) = result {
+            failures += 1;
+            if failures.is_power_of_two() {
+                tracing::error!(error = %e, failures, "recording write failed");
+            }
+        }
+    }
+    if let Err(e) = writer.flush() {
+        tracing::error!(error = %e, "recording final flush failed");
+    }
+}

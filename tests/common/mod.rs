@@ -1,0 +1,42 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::path::PathBuf;
+
+/// The shared receiver logs (`../shared/data/gnss` beside the checkout, or
+/// `$CHASSISD_SHARED_DATA/gnss`). Panics when missing: CI must fail, not skip.
+pub fn shared_gnss_dir() -> PathBuf {
+    let base = std::env::var_os("CHASSISD_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let dir = base.join("gnss");
+    assert!(
+        dir.is_dir(),
+        "{} is missing: the GNSS tests need the shared receiver logs (set CHASSISD_SHARED_DATA)",
+        dir.display()
+    );
+    dir
+}
+
+/// Every `*.log` with a gpsd `.log.chk` beside it.
+pub fn shared_gnss_logs() -> Vec<PathBuf> {
+    let dir = shared_gnss_dir();
+    let mut logs: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .expect("readable shared data folder")
+        .map(|e| e.expect("directory entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "log"))
+        .collect();
+    logs.sort();
+    assert!(!logs.is_empty(), "no *.log files in {}", dir.display());
+    logs
+}
+
+/// Path of the chassisd binary under test.
+pub fn chassisd() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_chassisd"))
+}
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}

@@ -1,0 +1,182 @@
+//! Conformance against gpsd: every real receiver log in the shared data folder is decoded by
+//! chassisd and compared with gpsd's decoded output beside it (`.log.chk`).
+//!
+//! For every gpsd TPV with a position, chassisd's fix for the same UTC epoch must have
+//! latitude and longitude within 1e-7° and the same kind of fix (gpsd `status` 2 DGPS,
+//! 3 RTK fixed, 4 RTK float, otherwise single; `mode` 1 no fix). gpsd sometimes emits a TPV
+//! that still carries the previous epoch's time after a sentence of the next epoch (for
+//! example, after an invalid RMC); such carry-overs are recognised by the producing sentence's
+//! own time and not compared. TPVs without a time (before the first date) take the time of
+//! day of the last timed sentence before them and the date of the next dated TPV.
+
+mod common;
+
+use std::collections::BTreeMap;
+
+use chassisd::devices::gnss::decode::{GnssSentence, decode};
+use chassisd::devices::gnss::{GnssFix, NmeaReceiver, Sentence};
+use chassisd::record::Payload;
+use chassisd::record::nmea_import::import_nmea_log;
+use chrono::{NaiveDateTime, NaiveTime};
+
+/// One gpsd TPV to check.
+#[derive(Debug)]
+struct Expected {
+    line: usize,
+    time: Option<NaiveDateTime>,
+    /// Time of day of the sentence that produced it, when that sentence has one.
+    sentence_time: Option<NaiveTime>,
+    /// Time of day of the last timed sentence before it.
+    epoch_time: Option<NaiveTime>,
+    position: Option<(f64, f64)>,
+    rtk_status: u8,
+}
+
+fn sentence_time(line: &str) -> Option<NaiveTime> {
+    let body = line.trim().strip_prefix('$')?.split('*').next()?;
+    match decode(&Sentence::parse(body)).ok()?? {
+        GnssSentence::Gga(r) | GnssSentence::Gns(r) => r.time,
+        GnssSentence::Rmc(r) => r.time,
+        GnssSentence::Gst(g) => g.time,
+        GnssSentence::Zda(z) => z.time,
+        _ => None,
+    }
+}
+
+/// gpsd's fix kind as an `rtk.status` code.
+fn gpsd_kind(tpv: &serde_json::Value) -> u8 {
+    if tpv["mode"].as_u64() == Some(1) {
+        return 0;
+    }
+    match tpv["status"].as_u64() {
+        None | Some(1) => 1,
+        Some(2) => 2,
+        Some(3) => 4,
+        Some(4) => 5,
+        Some(other) => panic!("gpsd status {other} has no rtk.status mapping"),
+    }
+}
+
+fn expected_tpvs(chk: &str) -> Vec<Expected> {
+    let mut out = Vec::new();
+    let mut last_sentence_time = None;
+    let mut epoch_time = None;
+    for (i, line) in chk.lines().enumerate() {
+        if line.starts_with('$') {
+            last_sentence_time = sentence_time(line);
+            epoch_time = last_sentence_time.or(epoch_time);
+            continue;
+        }
+        let Ok(json) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        if json["class"] != "TPV" {
+            continue;
+        }
+        let time = json["time"].as_str().map(|t| {
+            NaiveDateTime::parse_from_str(t, "%Y-%m-%dT%H:%M:%S%.fZ")
+                .unwrap_or_else(|e| panic!("line {}: time {t}: {e}", i + 1))
+        });
+        let position = match (json["lat"].as_f64(), json["lon"].as_f64()) {
+            (Some(lat), Some(lon)) => Some((lat, lon)),
+            _ => None,
+        };
+        out.push(Expected {
+            line: i + 1,
+            time,
+            sentence_time: last_sentence_time,
+            epoch_time,
+            position,
+            rtk_status: gpsd_kind(&json),
+        });
+    }
+    // Undated TPVs take the date of the next dated one.
+    let mut next_date = None;
+    for e in out.iter_mut().rev() {
+        match (e.time, e.epoch_time) {
+            (Some(t), _) => next_date = Some(t.date()),
+            (None, Some(tod)) => e.time = next_date.map(|d| d.and_time(tod)),
+            (None, None) => {}
+        }
+    }
+    out
+}
+
+/// chassisd's fix at the end of each UTC epoch of the log.
+fn chassisd_epochs(log: &[u8]) -> BTreeMap<NaiveDateTime, GnssFix> {
+    let (records, _) = import_nmea_log(log).expect("importable log");
+    let mut receiver = NmeaReceiver::new();
+    let mut epochs = BTreeMap::new();
+    for record in records {
+        let Payload::Serial(bytes) = &record.payload else {
+            panic!("import yields serial chunks only")
+        };
+        receiver.push(record.t, bytes, |fix| {
+            if let Some(utc) = fix.utc {
+                epochs.insert(utc, *fix);
+            }
+        });
+    }
+    epochs
+}
+
+#[test]
+fn every_shared_log_matches_gpsd() {
+    let mut total_positions = 0;
+    for log_path in common::shared_gnss_logs() {
+        let name = log_path.file_name().unwrap().to_string_lossy().into_owned();
+        let chk_path = log_path.with_extension("log.chk");
+        let chk =
+            std::fs::read(&chk_path).unwrap_or_else(|e| panic!("{}: {e}", chk_path.display()));
+        let expected = expected_tpvs(&String::from_utf8_lossy(&chk));
+        let epochs = chassisd_epochs(&std::fs::read(&log_path).expect("readable log"));
+
+        let mut positions = 0;
+        let mut no_fix = 0;
+        let mut carried_over = 0;
+        for e in &expected {
+            let Some(time) = e.time else {
+                panic!("{name}:{}: TPV whose time cannot be derived", e.line)
+            };
+            if e.sentence_time.is_some_and(|st| st != time.time()) {
+                carried_over += 1;
+                continue;
+            }
+            let fix = epochs
+                .get(&time)
+                .unwrap_or_else(|| panic!("{name}:{}: chassisd has no fix for {time}", e.line));
+            assert_eq!(
+                fix.quality.rtk_status(),
+                e.rtk_status,
+                "{name}:{}: fix kind at {time} ({:?})",
+                e.line,
+                fix.quality
+            );
+            match e.position {
+                Some((lat, lon)) => {
+                    let pos = fix
+                        .position
+                        .unwrap_or_else(|| panic!("{name}:{}: no position at {time}", e.line))
+                        .value;
+                    assert!(
+                        (pos.latitude_deg - lat).abs() <= 1e-7
+                            && (pos.longitude_deg - lon).abs() <= 1e-7,
+                        "{name}:{}: at {time} chassisd ({}, {}) vs gpsd ({lat}, {lon})",
+                        e.line,
+                        pos.latitude_deg,
+                        pos.longitude_deg
+                    );
+                    positions += 1;
+                }
+                None => no_fix += 1,
+            }
+        }
+        eprintln!(
+            "{name}: {positions} positioned TPVs and {no_fix} no-fix TPVs match; \
+             {carried_over} carry-overs not compared"
+        );
+        assert!(positions > 0, "{name}: nothing was compared");
+        total_positions += positions;
+    }
+    assert!(total_positions > 100);
+}

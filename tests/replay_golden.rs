@@ -1,0 +1,124 @@
+//! Replay golden tests: a recording through the real binary, compared byte for byte with
+//! the expected output, and the same bytes on every run.
+//!
+//! `CHASSISD_BLESS=1 cargo test --test replay_golden` rewrites the expected files after an
+//! intended change; review the diff before committing it.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn replay(path: &Path) -> Output {
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(path)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "replay failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn statuses(stdout: &[u8]) -> Vec<serde_json::Value> {
+    String::from_utf8(stdout.to_vec())
+        .expect("UTF-8 output")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("one JSON object per line"))
+        .collect()
+}
+
+#[test]
+fn rtk_drive_matches_expected_and_is_deterministic() {
+    let fixture = common::repo().join("fixtures/rtk-drive");
+    let expected_path = fixture.join("expected/base_status.jsonl");
+    let first = replay(&fixture);
+    let second = replay(&fixture);
+    assert!(first.stdout == second.stdout, "two replays differ");
+    if std::env::var_os("CHASSISD_BLESS").is_some() {
+        std::fs::create_dir_all(expected_path.parent().unwrap()).unwrap();
+        std::fs::write(&expected_path, &first.stdout).unwrap();
+    }
+    let expected = std::fs::read(&expected_path).expect("expected output exists");
+    assert!(
+        first.stdout == expected,
+        "replay output differs from {}",
+        expected_path.display()
+    );
+
+    let stderr = String::from_utf8_lossy(&first.stderr);
+    let summary = stderr.lines().last().unwrap_or_default();
+    for part in [
+        "2489 frames (can0 20, gnss 2468, mqtt 1)",
+        "599 status lines",
+        "GGA 279",
+        "checksum errors 1",
+        "20 frames without a decoder",
+        "1 commands not replayed",
+        "skipped lines 0",
+    ] {
+        assert!(summary.contains(part), "summary lacks {part:?}: {summary}");
+    }
+}
+
+/// The fixture's script (see fixtures/rtk-drive/generate.py), checked on the output itself
+/// so the expected file cannot silently drift from it. Tick `i` is at 0.1·(i+1) s.
+#[test]
+fn rtk_drive_status_follows_the_script() {
+    let out = replay(&common::repo().join("fixtures/rtk-drive"));
+    let rows = statuses(&out.stdout);
+    assert_eq!(rows.len(), 599);
+    let at = |s: f64| &rows[(s * 10.0).round() as usize - 1];
+    let status = |s: f64| at(s)["rtk"]["status"].as_u64().unwrap();
+    let gnss_ok = |s: f64| at(s)["sensor"]["gnss"].as_bool().unwrap();
+    assert_eq!(status(2.0), 1, "single at the start");
+    assert_eq!(status(10.0), 5, "float");
+    assert_eq!(status(25.0), 4, "fixed");
+    assert!(gnss_ok(34.9));
+    // Silent from 35 s: the last fix (34.8 s) is stale 2 s later.
+    assert!(gnss_ok(36.7));
+    assert!(!gnss_ok(37.0) && status(37.0) == 0);
+    assert_eq!(status(38.5), 4, "fix again after the outage");
+    assert_eq!(status(47.0), 2, "DGPS");
+    assert!(!gnss_ok(50.5) && status(50.5) == 0, "link down at 50.3 s");
+    assert_eq!(status(52.0), 4, "after the reconnect");
+    // Dual-antenna heading while it is valid; course over ground while THS is invalid.
+    let angle = |s: f64| at(s)["rtk"]["angle"].as_f64().unwrap();
+    assert!((angle(12.0) - 30.0).abs() < 1.0, "heading {}", angle(12.0));
+    assert!((angle(40.0) - 245.0).abs() < 8.0, "course {}", angle(40.0));
+    // Position near the script's origin (23.1496524965 N, 113.0196366456667 E).
+    let lat = at(25.0)["rtk"]["latitude"].as_f64().unwrap();
+    let lon = at(25.0)["rtk"]["longitude"].as_f64().unwrap();
+    assert!((lat - 23.14965).abs() < 1e-3 && (lon - 113.01964).abs() < 1e-3);
+}
+
+#[test]
+fn shared_logs_replay_to_status_lines() {
+    for log in common::shared_gnss_logs() {
+        let out = replay(&log);
+        let rows = statuses(&out.stdout);
+        assert!(!rows.is_empty(), "{}: no status", log.display());
+        let summary = String::from_utf8_lossy(&out.stderr);
+        assert!(summary.contains("replay: "), "{summary}");
+        assert!(
+            rows.iter().any(|r| r["sensor"]["gnss"] == true),
+            "{}: never a valid fix",
+            log.display()
+        );
+        assert_eq!(out.stdout, replay(&log).stdout, "{}", log.display());
+    }
+}
+
+#[test]
+fn bad_input_paths_fail_clearly() {
+    let out = Command::new(common::chassisd())
+        .args(["replay", "/nonexistent/recording"])
+        .output()
+        .expect("chassisd runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("/nonexistent/recording"), "{stderr}");
+}
