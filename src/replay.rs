@@ -53,8 +53,13 @@ pub fn replay(
     out: &mut impl Write,
 ) -> Result<ReplaySummary, ReplayError> {
     let mut summary = ReplaySummary::default();
+    let mut span = SessionSpan::default();
     let (reader, vehicle, sources) = if path.is_dir() {
         let (meta, reader) = RecordingReader::open(path)?;
+        span = SessionSpan {
+            start: meta.start_us.map(Timestamp::from_micros),
+            end: meta.end_us.map(Timestamp::from_micros),
+        };
         let stored = match &meta.vehicle_config {
             Some(file) => Some(VehicleConfig::load(&path.join(file))?),
             None => None,
@@ -84,18 +89,29 @@ pub fn replay(
             vec![(IMPORT_SOURCE.to_owned(), Decoder::Nmea)],
         )
     };
-    run(reader, &vehicle, &sources, out, &mut summary)?;
+    run(reader, &vehicle, &sources, span, out, &mut summary)?;
     Ok(summary)
+}
+
+/// Start and end of a live session, as its recording's meta stores them.
+#[derive(Debug, Clone, Copy, Default)]
+struct SessionSpan {
+    start: Option<Timestamp>,
+    end: Option<Timestamp>,
 }
 
 fn run(
     mut reader: RecordingReader,
     vehicle: &VehicleConfig,
     sources: &[(String, Decoder)],
+    session: SessionSpan,
     out: &mut impl Write,
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
     let mut engine = Engine::new(CoreConfig::from_vehicle(vehicle), sources);
+    if let Some(start) = session.start {
+        engine.start_at(start);
+    }
     let mut outputs = Vec::new();
     let mut line = String::with_capacity(512);
     let mut span: Option<(Timestamp, Timestamp)> = None;
@@ -104,8 +120,12 @@ fn run(
         span = Some(span.map_or((t, t), |(first, _)| (first, t)));
         write_statuses(&mut outputs, &mut line, out)?;
     }
-    if let Some((_, last)) = span {
-        engine.advance_to(last.ceil_to(STATUS_PERIOD), &mut outputs);
+    // Tick to the session's recorded end, else to the period boundary after the last record.
+    let end = session
+        .end
+        .or(span.map(|(_, last)| last.ceil_to(STATUS_PERIOD)));
+    if let Some(end) = end {
+        engine.advance_to(end, &mut outputs);
         write_statuses(&mut outputs, &mut line, out)?;
     }
     out.flush()?;

@@ -53,7 +53,7 @@ fn rtk_drive_matches_expected_and_is_deterministic() {
     let summary = stderr.lines().last().unwrap_or_default();
     for part in [
         "2489 frames (can0 20, gnss 2468, mqtt 1)",
-        "599 status lines",
+        "600 status lines",
         "GGA 279",
         "checksum errors 1",
         "20 frames without a decoder",
@@ -65,15 +65,20 @@ fn rtk_drive_matches_expected_and_is_deterministic() {
 }
 
 /// The fixture's script (see fixtures/rtk-drive/generate.py), checked on the output itself
-/// so the expected file cannot silently drift from it. Tick `i` is at 0.1·(i+1) s.
+/// so the expected file cannot silently drift from it. The session starts at 0 s
+/// (`start_us` in meta.toml), so tick `i` is at 0.1·i s.
 #[test]
 fn rtk_drive_status_follows_the_script() {
     let out = replay(&common::repo().join("fixtures/rtk-drive"));
     let rows = statuses(&out.stdout);
-    assert_eq!(rows.len(), 599);
-    let at = |s: f64| &rows[(s * 10.0).round() as usize - 1];
+    assert_eq!(rows.len(), 600);
+    let at = |s: f64| &rows[(s * 10.0).round() as usize];
     let status = |s: f64| at(s)["rtk"]["status"].as_u64().unwrap();
     let gnss_ok = |s: f64| at(s)["sensor"]["gnss"].as_bool().unwrap();
+    assert!(
+        !gnss_ok(0.0) && status(0.0) == 0,
+        "nothing received at the start tick"
+    );
     assert_eq!(status(2.0), 1, "single at the start");
     assert_eq!(status(10.0), 5, "float");
     assert_eq!(status(25.0), 4, "fixed");

@@ -46,9 +46,14 @@ pub struct Meta {
     pub format: u32,
     /// Vehicle name from the configuration.
     pub vehicle: String,
-    /// Wall-clock start of the recording, seconds since the Unix epoch.
+    /// Record-clock time when the session started, microseconds since the Unix epoch. Replay
+    /// starts its status ticks here, as the live session did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub started_unix_s: Option<u64>,
+    pub start_us: Option<u64>,
+    /// Record-clock time when the session ended cleanly; replay ticks up to here. Absent
+    /// after a crash, when replay stops at the last record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub end_us: Option<u64>,
     /// File (inside the folder) holding a copy of the vehicle configuration in force.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vehicle_config: Option<String>,
@@ -110,6 +115,15 @@ impl Meta {
         // Plain strings, numbers and enums always serialise.
         toml::to_string(self).unwrap_or_default()
     }
+
+    /// Writes `dir/meta.toml` atomically (temporary file, then rename), so a crash leaves
+    /// the old or the new file, never a partial one.
+    pub fn store(&self, dir: &Path) -> std::io::Result<()> {
+        let tmp = dir.join(".meta.toml.tmp");
+        std::fs::write(&tmp, self.to_toml())?;
+        std::fs::File::open(&tmp)?.sync_all()?;
+        std::fs::rename(&tmp, dir.join(META_FILE))
+    }
 }
 
 fn is_plain_file_name(name: &str) -> bool {
@@ -124,7 +138,8 @@ mod tests {
         Meta {
             format: FORMAT_VERSION,
             vehicle: "m1".into(),
-            started_unix_s: Some(1_700_000_000),
+            start_us: Some(1_700_000_000_000_000),
+            end_us: None,
             vehicle_config: Some("vehicle.toml".into()),
             sources: vec![SourceMeta {
                 name: "gnss".into(),

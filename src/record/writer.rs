@@ -12,6 +12,7 @@ use super::envelope;
 use super::meta::{FORMAT_VERSION, META_FILE, Meta, SourceKind, SourceMeta};
 use super::{Payload, Record, RecordError};
 use crate::core::LinkState;
+use crate::time::Timestamp;
 
 /// File name of the vehicle configuration copy.
 pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";
@@ -19,6 +20,7 @@ pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";
 /// An open recording folder.
 pub struct RecordingWriter {
     dir: PathBuf,
+    meta: Meta,
     sources: BTreeMap<String, (SourceKind, BufWriter<File>)>,
 }
 
@@ -28,7 +30,7 @@ impl RecordingWriter {
     pub fn create(
         dir: &Path,
         vehicle: &str,
-        started_unix_s: u64,
+        start: Timestamp,
         vehicle_config_toml: Option<&str>,
         sources: Vec<SourceMeta>,
     ) -> Result<Self, RecordError> {
@@ -52,7 +54,8 @@ impl RecordingWriter {
         let meta = Meta {
             format: FORMAT_VERSION,
             vehicle: vehicle.to_owned(),
-            started_unix_s: Some(started_unix_s),
+            start_us: Some(start.as_micros()),
+            end_us: None,
             vehicle_config: vehicle_config_toml.map(|_| VEHICLE_CONFIG_FILE.to_owned()),
             sources: sources.clone(),
         };
@@ -64,8 +67,7 @@ impl RecordingWriter {
             let path = dir.join(VEHICLE_CONFIG_FILE);
             std::fs::write(&path, text).map_err(io(&path))?;
         }
-        let meta_path = dir.join(META_FILE);
-        std::fs::write(&meta_path, meta.to_toml()).map_err(io(&meta_path))?;
+        meta.store(dir).map_err(io(&dir.join(META_FILE)))?;
         let mut files = BTreeMap::new();
         for s in sources {
             let path = dir.join(&s.file);
@@ -74,6 +76,7 @@ impl RecordingWriter {
         }
         Ok(Self {
             dir: dir.to_owned(),
+            meta,
             sources: files,
         })
     }
@@ -144,6 +147,26 @@ impl RecordingWriter {
             })?;
         }
         Ok(())
+    }
+}
+
+impl RecordingWriter {
+    /// Flushes everything and records the session's clean end in `meta.toml`.
+    pub fn finish(mut self, end: Timestamp) -> Result<(), RecordError> {
+        self.flush()?;
+        for (_, out) in self.sources.values_mut() {
+            out.get_ref().sync_all().map_err(|source| RecordError::Io {
+                path: self.dir.clone(),
+                source,
+            })?;
+        }
+        self.meta.end_us = Some(end.as_micros());
+        self.meta
+            .store(&self.dir)
+            .map_err(|source| RecordError::Io {
+                path: self.dir.join(META_FILE),
+                source,
+            })
     }
 }
 

@@ -37,9 +37,4 @@ impl RecordClock {
     pub fn instant_at(&self, t: Timestamp) -> Instant {
         self.mono_at_start + t.saturating_since(self.wall_at_start)
     }
-
-    /// Wall-clock seconds since the Unix epoch at start.
-    pub fn started_unix_s(&self) -> u64 {
-        self.wall_at_start.as_micros() / 1_000_000
-    }
 }

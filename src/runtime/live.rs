@@ -39,6 +39,7 @@ pub struct LiveOptions {
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out`.
 pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()> {
     let clock = RecordClock::start();
+    let start = clock.now();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
     let mut sources = Vec::new();
     let mut source_meta = Vec::new();
@@ -67,7 +68,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             let writer = RecordingWriter::create(
                 dir,
                 &options.config.vehicle.name,
-                clock.started_unix_s(),
+                start,
                 options.config_text.as_deref(),
                 source_meta,
             )
@@ -79,7 +80,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
     };
 
     let mut engine = Engine::new(CoreConfig::from_vehicle(&options.config), &sources);
-    engine.start_at(clock.now());
+    engine.start_at(start);
     let mut outputs = Vec::new();
     let mut summary = tokio::time::interval(SUMMARY_EVERY);
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
@@ -113,14 +114,18 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             break Err(e).context("cannot write status output");
         }
     };
+    // The ticks up to the stop, so a replay of the recording ends where this run ended.
+    let end = clock.now();
+    engine.advance_to(end, &mut outputs);
+    let flushed = write_statuses(&mut outputs, &mut out);
     if let Some(r) = recorder {
         if r.dropped() > 0 {
             tracing::error!(dropped = r.dropped(), "recording is incomplete");
         }
-        r.finish();
+        r.finish(end);
     }
     summarise_faults(&engine, &mut reported);
-    result
+    result.and(flushed.context("cannot write status output"))
 }
 
 fn write_statuses(outputs: &mut Vec<Output>, out: &mut impl Write) -> std::io::Result<()> {

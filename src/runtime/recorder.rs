@@ -6,6 +6,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::record::{Record, RecordingWriter};
+use crate::time::Timestamp;
 
 /// Records queued for the writer thread before new ones are dropped (and counted).
 const QUEUE: usize = 65_536;
@@ -15,7 +16,7 @@ const FLUSH_EVERY: Duration = Duration::from_secs(1);
 /// Handle to the recorder thread.
 pub struct Recorder {
     tx: Option<SyncSender<Record>>,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<RecordingWriter>>,
     dropped: u64,
 }
 
@@ -57,18 +58,24 @@ impl Recorder {
         self.dropped
     }
 
-    /// Writes what is queued, flushes and stops the thread.
-    pub fn finish(mut self) {
+    /// Writes what is queued, stops the thread and marks the recording's clean end.
+    pub fn finish(mut self, end: Timestamp) {
         self.tx.take();
-        if let Some(thread) = self.thread.take()
-            && thread.join().is_err()
-        {
-            tracing::error!("recorder thread panicked");
+        let Some(thread) = self.thread.take() else {
+            return;
+        };
+        match thread.join() {
+            Ok(writer) => {
+                if let Err(e) = writer.finish(end) {
+                    tracing::error!(error = %e, "recording: cannot mark its end");
+                }
+            }
+            Err(_) => tracing::error!("recorder thread panicked"),
         }
     }
 }
 
-fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) {
+fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) -> RecordingWriter {
     let mut failures: u64 = 0;
     loop {
         let result = match rx.recv_timeout(FLUSH_EVERY) {
@@ -83,7 +90,5 @@ fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) {
             }
         }
     }
-    if let Err(e) = writer.flush() {
-        tracing::error!(error = %e, "recording final flush failed");
-    }
+    writer
 }

@@ -1,0 +1,311 @@
+//! The live serial driver against real pseudo-terminals: the real `chassisd run` reads a
+//! pty through a udev-style symlink, decodes fixes, sees the port vanish (the pty closes, as
+//! a USB adapter does when unplugged), reconnects when it reappears, and records everything.
+//! The replay of that recording must print exactly the status lines the live run printed.
+
+mod common;
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Write};
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+use nix::fcntl::{FcntlArg, FdFlag, fcntl};
+use nix::pty::openpty;
+use nix::sys::signal::{Signal, kill};
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+use nix::unistd::{Pid, ttyname};
+
+const WAIT: Duration = Duration::from_secs(10);
+
+/// The tests open ptys and spawn processes; they take turns so no child inherits another
+/// test's descriptors.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A pty whose slave is reachable at `link`, like `/dev/serial/by-id/...`.
+struct Port {
+    master: File,
+}
+
+impl Port {
+    fn open_at(link: &Path) -> Port {
+        let pty = openpty(None, None).expect("openpty");
+        // Children must not inherit the master, or closing it here would not hang up the
+        // line. (Tests in this file hold SERIAL while they open ptys and spawn, so no other
+        // thread forks in between.)
+        for fd in [pty.master.as_fd(), pty.slave.as_fd()] {
+            fcntl(fd.as_raw_fd(), FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).expect("cloexec");
+        }
+        let mut termios = tcgetattr(pty.slave.as_fd()).expect("tcgetattr");
+        cfmakeraw(&mut termios);
+        tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &termios).expect("tcsetattr");
+        let path = ttyname(pty.slave.as_fd()).expect("ttyname");
+        let _ = std::fs::remove_file(link);
+        std::os::unix::fs::symlink(&path, link).expect("symlink");
+        // The daemon opens the slave by path; the test keeps only the master.
+        drop::<OwnedFd>(pty.slave);
+        Port {
+            master: File::from(pty.master),
+        }
+    }
+
+    fn send(&mut self, sentence_body: &str) {
+        let checksum = sentence_body.bytes().fold(0u8, |a, b| a ^ b);
+        let line = format!("${sentence_body}*{checksum:02X}\r\n");
+        self.master
+            .write_all(line.as_bytes())
+            .expect("write to pty");
+    }
+}
+
+/// Lines of a child's pipe, delivered through a channel so waits can time out.
+fn lines_of(pipe: impl std::io::Read + Send + 'static) -> Receiver<String> {
+    let (tx, rx) = channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(pipe).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// Waits for a line matching `want`, keeping every line seen in `seen`.
+fn wait_for(
+    rx: &Receiver<String>,
+    seen: &mut Vec<String>,
+    what: &str,
+    want: impl Fn(&str) -> bool,
+) {
+    let deadline = Instant::now() + WAIT;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(line) => {
+                let hit = want(&line);
+                seen.push(line);
+                if hit {
+                    return;
+                }
+            }
+            Err(_) => break,
+        }
+    }
+    panic!(
+        "timed out waiting for {what}; last lines: {:?}",
+        seen.iter().rev().take(5).collect::<Vec<_>>()
+    );
+}
+
+fn status(line: &str) -> Option<serde_json::Value> {
+    serde_json::from_str(line).ok()
+}
+
+fn is_status(line: &str, rtk_status: u64, latitude: f64) -> bool {
+    status(line).is_some_and(|s| {
+        s["rtk"]["status"] == rtk_status
+            && s["sensor"]["gnss"] == true
+            && (s["rtk"]["latitude"].as_f64().unwrap_or(0.0) - latitude).abs() < 1e-9
+    })
+}
+
+struct Daemon(Child);
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn gga(quality: u8, lat_minutes: &str) -> String {
+    format!(
+        "GNGGA,120000.00,23{lat_minutes},N,11301.17918515,E,{quality},20,0.6,12.3,M,-6.1,M,1.0,0123"
+    )
+}
+
+#[test]
+fn decodes_reconnects_and_records_for_an_identical_replay() {
+    let _turn = one_at_a_time();
+    let dir = tempdir();
+    let link = dir.join("gnss-port");
+    let record = dir.join("recording");
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[gnss]\nport = \"{}\"\nbaud = 115200\nreconnect_max_s = 0.2\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+
+    let mut port = Port::open_at(&link);
+    let mut child = Command::new(common::chassisd())
+        .args(["run", "--config"])
+        .arg(&config)
+        .arg("--record")
+        .arg(&record)
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("chassisd starts");
+    let stdout = lines_of(child.stdout.take().unwrap());
+    let stderr = lines_of(child.stderr.take().unwrap());
+    let daemon = Daemon(child);
+    let (mut out, mut log) = (Vec::new(), Vec::new());
+
+    wait_for(&stderr, &mut log, "link up", |l| l.contains("link up"));
+    // RTK fixed at 23°08.98071170'.
+    let lat_fixed = 23.0 + 8.98071170 / 60.0;
+    for _ in 0..3 {
+        port.send(&gga(4, "08.98071170"));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for(&stdout, &mut out, "an RTK fixed status", |l| {
+        is_status(l, 4, lat_fixed)
+    });
+
+    // Unplug: the pty closes and the link disappears.
+    drop(port);
+    std::fs::remove_file(&link).unwrap();
+    wait_for(&stderr, &mut log, "link down", |l| l.contains("link down"));
+    wait_for(&stdout, &mut out, "a status without GNSS", |l| {
+        status(l).is_some_and(|s| s["sensor"]["gnss"] == false && s["rtk"]["status"] == 0)
+    });
+
+    // Plug back in: a new pty at the same link; the driver finds it by itself.
+    std::thread::sleep(Duration::from_millis(500));
+    let mut port = Port::open_at(&link);
+    wait_for(&stderr, &mut log, "link up again", |l| {
+        l.contains("link up")
+    });
+    let lat_float = 23.0 + 8.5 / 60.0;
+    for _ in 0..3 {
+        port.send(&gga(5, "08.50000000"));
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for(&stdout, &mut out, "an RTK float status", |l| {
+        is_status(l, 5, lat_float)
+    });
+
+    kill(Pid::from_raw(daemon.0.id() as i32), Signal::SIGTERM).unwrap();
+    let mut daemon = daemon;
+    let exit = daemon.0.wait().expect("daemon exits");
+    assert!(exit.success(), "daemon exit status {exit}");
+    // Everything it printed after the last wait.
+    out.extend(stdout.iter());
+    drop(port);
+
+    // Status lines are 10 Hz and every line is a complete status.
+    assert!(out.len() >= 10, "{} lines", out.len());
+    assert!(
+        out.iter().all(|l| status(l).is_some()),
+        "non-JSON on stdout"
+    );
+
+    let replayed = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&record)
+        .output()
+        .expect("replay runs");
+    assert!(replayed.status.success());
+    let live = out.join("\n") + "\n";
+    assert!(
+        String::from_utf8_lossy(&replayed.stdout) == live,
+        "the replay of the recording differs from the live output ({} vs {} lines)",
+        String::from_utf8_lossy(&replayed.stdout).lines().count(),
+        out.len()
+    );
+    let summary = String::from_utf8_lossy(&replayed.stderr);
+    assert!(summary.contains("GGA 6"), "{summary}");
+    let recorded = std::fs::read_to_string(record.join("gnss.log")).unwrap();
+    assert_eq!(recorded.matches("!link-up").count(), 2);
+    assert_eq!(recorded.matches("!link-down").count(), 1);
+}
+
+#[test]
+fn a_missing_port_is_retried_not_fatal() {
+    let _turn = one_at_a_time();
+    let dir = tempdir();
+    let link = dir.join("not-yet");
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[gnss]\nport = \"{}\"\nreconnect_max_s = 0.2\n",
+            link.display()
+        ),
+    )
+    .unwrap();
+    let mut child = Command::new(common::chassisd())
+        .args(["run", "--config"])
+        .arg(&config)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("chassisd starts");
+    let stdout = lines_of(child.stdout.take().unwrap());
+    let stderr = lines_of(child.stderr.take().unwrap());
+    let _daemon = Daemon(child);
+    let (mut out, mut log) = (Vec::new(), Vec::new());
+    wait_for(&stderr, &mut log, "the open failure", |l| {
+        l.contains("cannot open port")
+    });
+    // Status keeps flowing while the receiver is absent.
+    for _ in 0..3 {
+        wait_for(&stdout, &mut out, "a status", |l| {
+            status(l).is_some_and(|s| s["sensor"]["gnss"] == false)
+        });
+    }
+    let mut port = Port::open_at(&link);
+    wait_for(&stderr, &mut log, "link up", |l| l.contains("link up"));
+    port.send(&gga(4, "08.98071170"));
+    wait_for(&stdout, &mut out, "a fix", |l| {
+        is_status(l, 4, 23.0 + 8.98071170 / 60.0)
+    });
+}
+
+#[test]
+fn invalid_config_names_the_key() {
+    let _turn = one_at_a_time();
+    let dir = tempdir();
+    let config = dir.join("vehicle.toml");
+    std::fs::write(&config, "[gnss]\nport = \"/dev/null\"\nbaud = 1234\n").unwrap();
+    let out = Command::new(common::chassisd())
+        .args(["run", "--config"])
+        .arg(&config)
+        .output()
+        .expect("chassisd runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("`gnss.baud`") && stderr.contains("vehicle.toml"),
+        "{stderr}"
+    );
+}
+
+fn tempdir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "chassisd-pty-{}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
