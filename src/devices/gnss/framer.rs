@@ -75,6 +75,17 @@ impl NmeaFramer {
         self.stats
     }
 
+    /// Bytes of an unfinished sentence held until more input arrives.
+    pub fn pending(&self) -> usize {
+        let consumed_markers = match self.state {
+            State::Idle => return 0,
+            State::Body => 1,
+            State::ChecksumHigh => 2,
+            State::ChecksumLow(_) => 3,
+        };
+        consumed_markers + self.body.len()
+    }
+
     /// Feeds `data`, calling `on_sentence` with each complete sentence body (the text between
     /// `$` and `*`, checksum verified) in stream order.
     pub fn push(&mut self, data: &[u8], mut on_sentence: impl FnMut(&str)) {
