@@ -1,7 +1,7 @@
 //! The recording format: what the writer writes, the reader reads back exactly, merged in
 //! time order; CAN files are plain `candump -L`; malformed lines are skipped and reported.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use bytes::Bytes;
 use chassisd::core::LinkState;
@@ -110,7 +110,7 @@ fn records() -> Vec<Record> {
     ]
 }
 
-fn write(dir: &PathBuf, records: &[Record]) {
+fn write(dir: &Path, records: &[Record]) {
     let mut w = RecordingWriter::create(
         dir,
         "test-vehicle",
