@@ -1,26 +1,15 @@
 //! The recording format: what the writer writes, the reader reads back exactly, merged in
 //! time order; CAN files are plain `candump -L`; malformed lines are skipped and reported.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 
 use bytes::Bytes;
 use chassisd::core::LinkState;
 use chassisd::record::{Payload, Record, RecordingReader, RecordingWriter, SourceKind, SourceMeta};
 use chassisd::time::Timestamp;
 use socketcan::{CanAnyFrame, CanDataFrame, CanRemoteFrame, EmbeddedFrame, ExtendedId, StandardId};
-
-fn tempdir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "chassisd-rec-{name}-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
 
 fn sources() -> Vec<SourceMeta> {
     vec![
@@ -127,7 +116,7 @@ fn write(dir: &Path, records: &[Record]) {
 
 #[test]
 fn writes_and_reads_back_in_time_order() {
-    let dir = tempdir("roundtrip");
+    let dir = common::tempdir("rec-roundtrip");
     let records = records();
     // Written source by source, out of global order, as separate driver tasks would.
     let mut shuffled = records.clone();
@@ -147,7 +136,7 @@ fn writes_and_reads_back_in_time_order() {
 
 #[test]
 fn can_files_are_candump_lines() {
-    let dir = tempdir("candump");
+    let dir = common::tempdir("rec-candump");
     write(&dir, &records());
     let text = std::fs::read_to_string(dir.join("can0.log")).unwrap();
     assert_eq!(
@@ -172,7 +161,7 @@ fn can_files_are_candump_lines() {
 
 #[test]
 fn malformed_lines_are_skipped_and_reported() {
-    let dir = tempdir("malformed");
+    let dir = common::tempdir("rec-malformed");
     write(&dir, &records());
     let path = dir.join("gnss.log");
     let mut text = std::fs::read_to_string(&path).unwrap();
@@ -200,7 +189,7 @@ fn malformed_lines_are_skipped_and_reported() {
 
 #[test]
 fn refuses_to_overwrite_a_recording() {
-    let dir = tempdir("exists");
+    let dir = common::tempdir("rec-exists");
     write(&dir, &records());
     let again = RecordingWriter::create(&dir, "v", at(0), None, sources());
     assert!(again.is_err());
@@ -208,7 +197,7 @@ fn refuses_to_overwrite_a_recording() {
 
 #[test]
 fn meta_with_bad_paths_is_rejected() {
-    let dir = tempdir("badmeta");
+    let dir = common::tempdir("rec-badmeta");
     write(&dir, &records());
     let meta = std::fs::read_to_string(dir.join("meta.toml")).unwrap();
     std::fs::write(

@@ -8,7 +8,7 @@ mod common;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Write};
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, channel};
@@ -120,12 +120,68 @@ fn is_status(line: &str, rtk_status: u64, latitude: f64) -> bool {
     })
 }
 
-struct Daemon(Child);
+/// A running `chassisd run` on a config whose GNSS port is `link`, with its output lines.
+struct Daemon {
+    child: Child,
+    stdout: Receiver<String>,
+    stderr: Receiver<String>,
+    /// Every line seen so far on each stream.
+    out: Vec<String>,
+    log: Vec<String>,
+}
+
+impl Daemon {
+    fn start(dir: &Path, link: &Path, extra_args: &[&std::ffi::OsStr]) -> Daemon {
+        let config = dir.join("vehicle.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "[gnss]\nport = \"{}\"\nbaud = 115200\nreconnect_max_s = 0.2\n",
+                link.display()
+            ),
+        )
+        .unwrap();
+        let mut child = Command::new(common::chassisd())
+            .args(["run", "--config"])
+            .arg(&config)
+            .args(extra_args)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("chassisd starts");
+        Daemon {
+            stdout: lines_of(child.stdout.take().unwrap()),
+            stderr: lines_of(child.stderr.take().unwrap()),
+            child,
+            out: Vec::new(),
+            log: Vec::new(),
+        }
+    }
+
+    fn wait_status(&mut self, what: &str, want: impl Fn(&str) -> bool) {
+        wait_for(&self.stdout, &mut self.out, what, want);
+    }
+
+    fn wait_log(&mut self, what: &str, text: &str) {
+        wait_for(&self.stderr, &mut self.log, what, |l| l.contains(text));
+    }
+
+    /// Stops it with SIGTERM and returns every status line it printed.
+    fn stop(mut self) -> Vec<String> {
+        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).unwrap();
+        let exit = self.child.wait().expect("daemon exits");
+        assert!(exit.success(), "daemon exit status {exit}");
+        let mut out = std::mem::take(&mut self.out);
+        out.extend(self.stdout.iter());
+        out
+    }
+}
 
 impl Drop for Daemon {
     fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
 
@@ -138,75 +194,40 @@ fn gga(quality: u8, lat_minutes: &str) -> String {
 #[test]
 fn decodes_reconnects_and_records_for_an_identical_replay() {
     let _turn = one_at_a_time();
-    let dir = tempdir();
+    let dir = common::tempdir("pty");
     let link = dir.join("gnss-port");
     let record = dir.join("recording");
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[gnss]\nport = \"{}\"\nbaud = 115200\nreconnect_max_s = 0.2\n",
-            link.display()
-        ),
-    )
-    .unwrap();
 
     let mut port = Port::open_at(&link);
-    let mut child = Command::new(common::chassisd())
-        .args(["run", "--config"])
-        .arg(&config)
-        .arg("--record")
-        .arg(&record)
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("chassisd starts");
-    let stdout = lines_of(child.stdout.take().unwrap());
-    let stderr = lines_of(child.stderr.take().unwrap());
-    let daemon = Daemon(child);
-    let (mut out, mut log) = (Vec::new(), Vec::new());
-
-    wait_for(&stderr, &mut log, "link up", |l| l.contains("link up"));
+    let mut daemon = Daemon::start(&dir, &link, &["--record".as_ref(), record.as_os_str()]);
+    daemon.wait_log("link up", "link up");
     // RTK fixed at 23°08.98071170'.
     let lat_fixed = 23.0 + 8.98071170 / 60.0;
     for _ in 0..3 {
         port.send(&gga(4, "08.98071170"));
         std::thread::sleep(Duration::from_millis(100));
     }
-    wait_for(&stdout, &mut out, "an RTK fixed status", |l| {
-        is_status(l, 4, lat_fixed)
-    });
+    daemon.wait_status("an RTK fixed status", |l| is_status(l, 4, lat_fixed));
 
     // Unplug: the pty closes and the link disappears.
     drop(port);
     std::fs::remove_file(&link).unwrap();
-    wait_for(&stderr, &mut log, "link down", |l| l.contains("link down"));
-    wait_for(&stdout, &mut out, "a status without GNSS", |l| {
+    daemon.wait_log("link down", "link down");
+    daemon.wait_status("a status without GNSS", |l| {
         status(l).is_some_and(|s| s["sensor"]["gnss"] == false && s["rtk"]["status"] == 0)
     });
 
     // Plug back in: a new pty at the same link; the driver finds it by itself.
     std::thread::sleep(Duration::from_millis(500));
     let mut port = Port::open_at(&link);
-    wait_for(&stderr, &mut log, "link up again", |l| {
-        l.contains("link up")
-    });
+    daemon.wait_log("link up again", "link up");
     let lat_float = 23.0 + 8.5 / 60.0;
     for _ in 0..3 {
         port.send(&gga(5, "08.50000000"));
         std::thread::sleep(Duration::from_millis(100));
     }
-    wait_for(&stdout, &mut out, "an RTK float status", |l| {
-        is_status(l, 5, lat_float)
-    });
-
-    kill(Pid::from_raw(daemon.0.id() as i32), Signal::SIGTERM).unwrap();
-    let mut daemon = daemon;
-    let exit = daemon.0.wait().expect("daemon exits");
-    assert!(exit.success(), "daemon exit status {exit}");
-    // Everything it printed after the last wait.
-    out.extend(stdout.iter());
+    daemon.wait_status("an RTK float status", |l| is_status(l, 5, lat_float));
+    let out = daemon.stop();
     drop(port);
 
     // Status lines are 10 Hz and every line is a complete status.
@@ -239,49 +260,26 @@ fn decodes_reconnects_and_records_for_an_identical_replay() {
 #[test]
 fn a_missing_port_is_retried_not_fatal() {
     let _turn = one_at_a_time();
-    let dir = tempdir();
+    let dir = common::tempdir("pty");
     let link = dir.join("not-yet");
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[gnss]\nport = \"{}\"\nreconnect_max_s = 0.2\n",
-            link.display()
-        ),
-    )
-    .unwrap();
-    let mut child = Command::new(common::chassisd())
-        .args(["run", "--config"])
-        .arg(&config)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("chassisd starts");
-    let stdout = lines_of(child.stdout.take().unwrap());
-    let stderr = lines_of(child.stderr.take().unwrap());
-    let _daemon = Daemon(child);
-    let (mut out, mut log) = (Vec::new(), Vec::new());
-    wait_for(&stderr, &mut log, "the open failure", |l| {
-        l.contains("cannot open port")
-    });
+    let mut daemon = Daemon::start(&dir, &link, &[]);
+    daemon.wait_log("the open failure", "cannot open port");
     // Status keeps flowing while the receiver is absent.
     for _ in 0..3 {
-        wait_for(&stdout, &mut out, "a status", |l| {
+        daemon.wait_status("a status", |l| {
             status(l).is_some_and(|s| s["sensor"]["gnss"] == false)
         });
     }
     let mut port = Port::open_at(&link);
-    wait_for(&stderr, &mut log, "link up", |l| l.contains("link up"));
+    daemon.wait_log("link up", "link up");
     port.send(&gga(4, "08.98071170"));
-    wait_for(&stdout, &mut out, "a fix", |l| {
-        is_status(l, 4, 23.0 + 8.98071170 / 60.0)
-    });
+    daemon.wait_status("a fix", |l| is_status(l, 4, 23.0 + 8.98071170 / 60.0));
 }
 
 #[test]
 fn invalid_config_names_the_key() {
     let _turn = one_at_a_time();
-    let dir = tempdir();
+    let dir = common::tempdir("pty");
     let config = dir.join("vehicle.toml");
     std::fs::write(&config, "[gnss]\nport = \"/dev/null\"\nbaud = 1234\n").unwrap();
     let out = Command::new(common::chassisd())
@@ -295,17 +293,4 @@ fn invalid_config_names_the_key() {
         stderr.contains("`gnss.baud`") && stderr.contains("vehicle.toml"),
         "{stderr}"
     );
-}
-
-fn tempdir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "chassisd-pty-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
