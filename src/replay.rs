@@ -188,6 +188,9 @@ impl ReplaySummary {
                 f.bytes_in,
                 g.decode_errors
             );
+            if let Some(e) = &g.last_decode_error {
+                let _ = write!(s, " (last: {e})");
+            }
         }
         if self.engine.undecoded > 0 {
             let _ = write!(s, "; {} frames without a decoder", self.engine.undecoded);
