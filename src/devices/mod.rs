@@ -1,3 +1,5 @@
 //! Device protocols: pure decoders from raw bytes or frames to typed measurements.
 
+pub mod can;
+pub mod canopen;
 pub mod gnss;
