@@ -12,4 +12,5 @@ pub mod engine;
 pub mod record;
 pub mod replay;
 pub mod runtime;
+pub mod sim;
 pub mod time;

@@ -2,4 +2,5 @@
 
 pub mod can;
 pub mod canopen;
+pub mod cia402;
 pub mod gnss;

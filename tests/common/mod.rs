@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod canbus;
+
 use std::path::PathBuf;
 
 /// The shared receiver logs (`../shared/data/gnss` beside the checkout, or

@@ -23,8 +23,12 @@ impl NodeId {
     }
 }
 
-/// An object dictionary address: index and sub-index.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+/// An object dictionary address: index and sub-index. In configuration files it is written
+/// `"0x6040:0"`.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Deserialize, serde::Serialize,
+)]
+#[serde(try_from = "String", into = "String")]
 pub struct ObjectAddress {
     /// Index (0x1000–0xFFFF).
     pub index: u16,
@@ -42,6 +46,20 @@ impl ObjectAddress {
 impl std::fmt::Display for ObjectAddress {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "0x{:04X}:{}", self.index, self.sub)
+    }
+}
+
+impl TryFrom<String> for ObjectAddress {
+    type Error = String;
+
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<ObjectAddress> for String {
+    fn from(a: ObjectAddress) -> String {
+        a.to_string()
     }
 }
 

@@ -4,8 +4,10 @@
 use super::ObjectAddress;
 use super::sdo::{SdoData, SdoRequest};
 
-/// One mapped object: its address and width in bits (8, 16 or 32).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// One mapped object: its address and width in bits (8, 16 or 32). In configuration files
+/// it is written `"0x6041:0:16"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(try_from = "String", into = "String")]
 pub struct PdoEntry {
     /// The object.
     pub object: ObjectAddress,
@@ -19,6 +21,39 @@ impl PdoEntry {
         (u32::from(self.object.index) << 16)
             | (u32::from(self.object.sub) << 8)
             | u32::from(self.bits)
+    }
+}
+
+impl std::fmt::Display for PdoEntry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.object, self.bits)
+    }
+}
+
+impl TryFrom<String> for PdoEntry {
+    type Error = String;
+
+    fn try_from(s: String) -> Result<Self, String> {
+        let (object, bits) = s
+            .rsplit_once(':')
+            .filter(|(o, _)| o.contains(':'))
+            .ok_or_else(|| format!("{s:?}: expected index:sub:bits, e.g. 0x6041:0:16"))?;
+        let bits: u8 = bits
+            .parse()
+            .map_err(|_| format!("{s:?}: bits must be 8, 16 or 32"))?;
+        if !matches!(bits, 8 | 16 | 32) {
+            return Err(format!("{s:?}: bits must be 8, 16 or 32"));
+        }
+        Ok(Self {
+            object: object.parse()?,
+            bits,
+        })
+    }
+}
+
+impl From<PdoEntry> for String {
+    fn from(e: PdoEntry) -> String {
+        e.to_string()
     }
 }
 

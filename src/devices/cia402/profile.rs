@@ -1,0 +1,460 @@
+//! Drive profiles: which objects a CiA 402 drive uses, their units, and whether feedback and
+//! commands travel by PDO or SDO. Profiles are TOML files in `devices/`, checked on load.
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::ConfigError;
+use crate::devices::canopen::ObjectAddress;
+use crate::devices::canopen::pdo::{PdoEntry, PdoMapping};
+use crate::devices::canopen::sdo::SdoData;
+
+/// A CiA 402 drive profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveProfile {
+    /// Always `cia402`.
+    pub kind: DriveKind,
+    /// Human-readable name.
+    pub name: String,
+    /// Motor axes per node (1, or 2 for dual-channel drives).
+    pub axes: u8,
+    /// Object addresses.
+    pub objects: DriveObjects,
+    /// Unit conversions.
+    pub units: DriveUnits,
+    /// How feedback is read.
+    #[serde(default)]
+    pub feedback: FeedbackSpec,
+    /// How commands are written.
+    #[serde(default)]
+    pub command: CommandSpec,
+    /// TPDOs to configure (node → chassisd).
+    #[serde(default)]
+    pub tpdo: Vec<PdoSpec>,
+    /// RPDOs to configure (chassisd → node).
+    #[serde(default)]
+    pub rpdo: Vec<PdoSpec>,
+    /// Vendor-specific SDO writes made after the standard set-up, in order.
+    #[serde(default)]
+    pub setup: Vec<SetupWrite>,
+}
+
+/// The profile family.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriveKind {
+    /// CiA 402 drive in profile velocity mode.
+    Cia402,
+}
+
+/// Object addresses of a drive. Per-axis lists hold one address per axis, in axis order.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveObjects {
+    /// Controlword (u16), shared by all axes.
+    #[serde(default = "default_controlword")]
+    pub controlword: ObjectAddress,
+    /// Statusword.
+    #[serde(default = "default_statusword")]
+    pub statusword: ObjectAddress,
+    /// Statusword width: 16, or 32 for dual-channel drives that pack axis 1 in the low and
+    /// axis 2 in the high 16 bits.
+    #[serde(default = "default_statusword_bits")]
+    pub statusword_bits: u8,
+    /// Modes of operation (i8); profile velocity mode (3) is written at set-up.
+    #[serde(default = "default_mode_of_operation")]
+    pub mode_of_operation: ObjectAddress,
+    /// Target velocity (i32) per axis.
+    pub target_velocity: Vec<ObjectAddress>,
+    /// One object setting both axes at once: low 16 bits axis 1, high 16 bits axis 2 (i16
+    /// each). Used for commands when present.
+    #[serde(default)]
+    pub combined_target_velocity: Option<ObjectAddress>,
+    /// Actual velocity (i32) per axis.
+    pub actual_velocity: Vec<ObjectAddress>,
+    /// Actual position (i32 encoder counts) per axis.
+    pub actual_position: Vec<ObjectAddress>,
+    /// Producer heartbeat time (u16, ms).
+    #[serde(default = "default_heartbeat_producer")]
+    pub heartbeat_producer: ObjectAddress,
+}
+
+fn default_controlword() -> ObjectAddress {
+    ObjectAddress::new(0x6040, 0)
+}
+fn default_statusword() -> ObjectAddress {
+    ObjectAddress::new(0x6041, 0)
+}
+fn default_statusword_bits() -> u8 {
+    16
+}
+fn default_mode_of_operation() -> ObjectAddress {
+    ObjectAddress::new(0x6060, 0)
+}
+fn default_heartbeat_producer() -> ObjectAddress {
+    ObjectAddress::new(0x1017, 0)
+}
+
+/// Unit conversions between the drive's numbers and motor revolutions.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveUnits {
+    /// Target velocity units per motor rev/min (1 when the drive takes r/min).
+    pub target_velocity_per_rpm: f64,
+    /// Actual velocity units per motor rev/min (10 when the drive reports 0.1 r/min).
+    pub actual_velocity_per_rpm: f64,
+    /// Position counts per motor revolution.
+    pub counts_per_rev: f64,
+}
+
+/// Whether data moves by PDO or by SDO.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Transport {
+    /// SDO reads and writes.
+    #[default]
+    Sdo,
+    /// PDOs configured at set-up.
+    Pdo,
+}
+
+/// `[feedback]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FeedbackSpec {
+    /// PDO or SDO.
+    #[serde(default)]
+    pub mode: Transport,
+    /// SDO polling rate, Hz.
+    #[serde(default = "default_rate_hz")]
+    pub poll_hz: f64,
+}
+
+impl Default for FeedbackSpec {
+    fn default() -> Self {
+        Self {
+            mode: Transport::Sdo,
+            poll_hz: default_rate_hz(),
+        }
+    }
+}
+
+/// `[command]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandSpec {
+    /// PDO or SDO.
+    #[serde(default)]
+    pub mode: Transport,
+    /// How often the target is sent even when unchanged, Hz (drives watch for silence).
+    #[serde(default = "default_rate_hz")]
+    pub rate_hz: f64,
+}
+
+impl Default for CommandSpec {
+    fn default() -> Self {
+        Self {
+            mode: Transport::Sdo,
+            rate_hz: default_rate_hz(),
+        }
+    }
+}
+
+fn default_rate_hz() -> f64 {
+    20.0
+}
+
+/// A PDO to configure.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PdoSpec {
+    /// PDO number, 1–4.
+    pub number: u8,
+    /// Mapped objects, `"index:sub:bits"`.
+    pub objects: Vec<PdoEntry>,
+    /// TPDO event timer, ms.
+    #[serde(default)]
+    pub event_timer_ms: u16,
+    /// TPDO transmission type (0xFF: event-driven).
+    #[serde(default = "default_transmission_type")]
+    pub transmission_type: u8,
+}
+
+fn default_transmission_type() -> u8 {
+    0xFF
+}
+
+/// Type of a set-up value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ValueType {
+    /// Unsigned 8 bits.
+    U8,
+    /// Signed 8 bits.
+    I8,
+    /// Unsigned 16 bits.
+    U16,
+    /// Signed 16 bits.
+    I16,
+    /// Unsigned 32 bits.
+    U32,
+    /// Signed 32 bits.
+    I32,
+}
+
+/// One vendor set-up write.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetupWrite {
+    /// The object.
+    pub object: ObjectAddress,
+    /// Its type.
+    #[serde(rename = "type")]
+    pub value_type: ValueType,
+    /// The value.
+    pub value: i64,
+}
+
+impl SetupWrite {
+    /// The bytes to write, if the value fits the type.
+    pub fn data(&self) -> Option<SdoData> {
+        let v = self.value;
+        Some(match self.value_type {
+            ValueType::U8 => SdoData::u8(u8::try_from(v).ok()?),
+            ValueType::I8 => SdoData::i8(i8::try_from(v).ok()?),
+            ValueType::U16 => SdoData::u16(u16::try_from(v).ok()?),
+            ValueType::I16 => SdoData::u16(i16::try_from(v).ok()? as u16),
+            ValueType::U32 => SdoData::u32(u32::try_from(v).ok()?),
+            ValueType::I32 => SdoData::i32(i32::try_from(v).ok()?),
+        })
+    }
+}
+
+impl DriveProfile {
+    /// Parses and checks a profile; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &std::path::Path) -> Result<Self, ConfigError> {
+        let profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
+            message: e.to_string(),
+        })?;
+        profile
+            .validate()
+            .map_err(|(key, problem, fix)| ConfigError::Invalid {
+                file: file.to_owned(),
+                key,
+                problem,
+                fix,
+            })?;
+        Ok(profile)
+    }
+
+    /// The TPDO mappings, checked.
+    pub fn tpdo_mappings(&self) -> Vec<(u8, PdoMapping, &PdoSpec)> {
+        self.tpdo
+            .iter()
+            .filter_map(|s| {
+                PdoMapping::new(s.objects.clone())
+                    .ok()
+                    .map(|m| (s.number, m, s))
+            })
+            .collect()
+    }
+
+    /// The RPDO mappings, checked.
+    pub fn rpdo_mappings(&self) -> Vec<(u8, PdoMapping)> {
+        self.rpdo
+            .iter()
+            .filter_map(|s| {
+                PdoMapping::new(s.objects.clone())
+                    .ok()
+                    .map(|m| (s.number, m))
+            })
+            .collect()
+    }
+
+    /// Checks consistency; an error is (key, problem, fix).
+    pub fn validate(&self) -> Result<(), (String, String, String)> {
+        let err =
+            |key: &str, problem: String, fix: &str| Err((key.to_owned(), problem, fix.to_owned()));
+        if !(1..=2).contains(&self.axes) {
+            return err(
+                "axes",
+                format!("{} axes", self.axes),
+                "use 1, or 2 for a dual-channel drive",
+            );
+        }
+        let axes = usize::from(self.axes);
+        for (key, list) in [
+            ("objects.target_velocity", &self.objects.target_velocity),
+            ("objects.actual_velocity", &self.objects.actual_velocity),
+            ("objects.actual_position", &self.objects.actual_position),
+        ] {
+            if list.len() != axes {
+                return err(
+                    key,
+                    format!("{} entries for {axes} axes", list.len()),
+                    "give one object per axis, in axis order",
+                );
+            }
+        }
+        if !matches!(self.objects.statusword_bits, 16 | 32)
+            || (self.objects.statusword_bits == 32 && axes != 2)
+        {
+            return err(
+                "objects.statusword_bits",
+                format!("{} bits with {axes} axes", self.objects.statusword_bits),
+                "use 16, or 32 for a dual-channel drive that packs both statuswords",
+            );
+        }
+        if self.objects.combined_target_velocity.is_some() && axes != 2 {
+            return err(
+                "objects.combined_target_velocity",
+                "set on a single-axis drive".into(),
+                "remove it, or set axes = 2",
+            );
+        }
+        for (key, v) in [
+            (
+                "units.target_velocity_per_rpm",
+                self.units.target_velocity_per_rpm,
+            ),
+            (
+                "units.actual_velocity_per_rpm",
+                self.units.actual_velocity_per_rpm,
+            ),
+            ("units.counts_per_rev", self.units.counts_per_rev),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return err(
+                    key,
+                    format!("{v} is not a positive number"),
+                    "set the drive's scale",
+                );
+            }
+        }
+        for (key, hz) in [
+            ("feedback.poll_hz", self.feedback.poll_hz),
+            ("command.rate_hz", self.command.rate_hz),
+        ] {
+            if !(1.0..=1000.0).contains(&hz) {
+                return err(key, format!("{hz} Hz"), "use 1 to 1000 Hz");
+            }
+        }
+        for (key, list) in [("tpdo", &self.tpdo), ("rpdo", &self.rpdo)] {
+            let mut seen = Vec::new();
+            for (i, spec) in list.iter().enumerate() {
+                if !(1..=4).contains(&spec.number) || seen.contains(&spec.number) {
+                    return err(
+                        &format!("{key}[{i}].number"),
+                        format!("PDO number {}", spec.number),
+                        "use distinct numbers 1 to 4",
+                    );
+                }
+                seen.push(spec.number);
+                if let Err(e) = PdoMapping::new(spec.objects.clone()) {
+                    return err(
+                        &format!("{key}[{i}].objects"),
+                        e.to_string(),
+                        "map at most 8 bytes",
+                    );
+                }
+            }
+        }
+        let mapped = |list: &[PdoSpec], object: ObjectAddress| {
+            list.iter()
+                .any(|s| s.objects.iter().any(|e| e.object == object))
+        };
+        if self.feedback.mode == Transport::Pdo {
+            let needed = std::iter::once(self.objects.statusword)
+                .chain(self.objects.actual_velocity.iter().copied())
+                .chain(self.objects.actual_position.iter().copied());
+            for object in needed {
+                if !mapped(&self.tpdo, object) {
+                    return err(
+                        "tpdo",
+                        format!("feedback.mode is pdo but {object} is in no TPDO"),
+                        "map it in a [[tpdo]], or use feedback.mode = \"sdo\"",
+                    );
+                }
+            }
+        }
+        if self.command.mode == Transport::Pdo {
+            let targets: Vec<ObjectAddress> = match self.objects.combined_target_velocity {
+                Some(c) => vec![c],
+                None => self.objects.target_velocity.clone(),
+            };
+            for object in std::iter::once(self.objects.controlword).chain(targets) {
+                if !mapped(&self.rpdo, object) {
+                    return err(
+                        "rpdo",
+                        format!("command.mode is pdo but {object} is in no RPDO"),
+                        "map it in a [[rpdo]], or use command.mode = \"sdo\"",
+                    );
+                }
+            }
+        }
+        for (i, w) in self.setup.iter().enumerate() {
+            if w.data().is_none() {
+                return err(
+                    &format!("setup[{i}].value"),
+                    format!("{} does not fit {:?}", w.value, w.value_type),
+                    "use a value within the type's range",
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn shipped(name: &str) -> DriveProfile {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("devices")
+            .join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        DriveProfile::from_toml(&text, &path).unwrap()
+    }
+
+    #[test]
+    fn shipped_profiles_load() {
+        let generic = shipped("cia402-generic.toml");
+        assert_eq!(generic.axes, 1);
+        assert_eq!(generic.feedback.mode, Transport::Pdo);
+        let zlac = shipped("zlac8015d.toml");
+        assert_eq!(zlac.axes, 2);
+        assert_eq!(
+            zlac.objects.combined_target_velocity,
+            Some(ObjectAddress::new(0x60FF, 3))
+        );
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/cia402-generic.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let bad = text.replace("axes = 1", "axes = 2");
+        let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`objects.target_velocity`"), "{e}");
+        let bad = text.replace("\"0x606C:0:32\"", "\"0x6077:0:16\"");
+        let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`tpdo`") && e.contains("0x606C:0"), "{e}");
+        let bad = text.replace("counts_per_rev = 4096", "counts_per_rev = 0");
+        let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`units.counts_per_rev`"), "{e}");
+        let bad = text.replace("\"0x6041:0:16\"", "\"0x6041:0:12\"");
+        let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bits must be 8, 16 or 32"), "{e}");
+    }
+}

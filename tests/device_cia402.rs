@@ -1,0 +1,184 @@
+//! The generic CiA 402 drive (profile velocity mode, PDO feedback and commands): frame
+//! vectors worked from CiA 301/402, and the driver against a simulated drive.
+
+mod common;
+
+use chassisd::devices::can::Frame;
+use chassisd::devices::canopen::NodeId;
+use chassisd::devices::canopen::emcy::Emcy;
+use chassisd::devices::canopen::nmt::{NmtState, heartbeat_frame};
+use chassisd::devices::cia402::DriveState;
+use chassisd::devices::cia402::node::{DriveFault, Phase};
+use common::canbus::{Rig, ms};
+
+#[test]
+fn boot_and_sdo_setup_sequence() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(200, false, &[0.0]);
+    let sent = rig.sent();
+    // NMT reset communication, then the set-up writes in order, then NMT start.
+    let setup: Vec<&str> = sent.iter().map(String::as_str).take(26).collect();
+    assert_eq!(
+        setup,
+        [
+            "000#8201",             // NMT reset communication, node 1
+            "601#2B17100064000000", // 0x1017 heartbeat producer 100 ms
+            "601#2F60600003000000", // 0x6060 mode of operation 3: profile velocity
+            "601#23FF600000000000", // 0x60FF target velocity 0
+            "601#2300180181010080", // TPDO1 off
+            "601#2F001802FF000000", //   event-driven
+            "601#2B00180514000000", //   event timer 20 ms
+            "601#2F001A0000000000", //   clear mapping
+            "601#23001A0110004160", //   0x6041:0 statusword, 16 bits
+            "601#23001A0220006C60", //   0x606C:0 actual velocity, 32 bits
+            "601#2F001A0002000000", //   two entries
+            "601#2300180181010000", // TPDO1 on, COB-ID 0x181
+            "601#2301180181020080", // TPDO2 off
+            "601#2F011802FF000000",
+            "601#2B01180514000000",
+            "601#2F011A0000000000",
+            "601#23011A0120006460", //   0x6064:0 actual position, 32 bits
+            "601#2F011A0001000000",
+            "601#2301180181020000", // TPDO2 on, COB-ID 0x281
+            "601#2300140101020080", // RPDO1 off
+            "601#2F001402FF000000", //   asynchronous
+            "601#2F00160000000000",
+            "601#2300160110004060", //   0x6040:0 controlword, 16 bits
+            "601#230016022000FF60", //   0x60FF:0 target velocity, 32 bits
+            "601#2F00160002000000",
+            "601#2300140101020000", // RPDO1 on, COB-ID 0x201
+        ]
+    );
+    assert_eq!(sent[26], "601#2B07600003000000"); // 0x6007 abort connection: quick stop
+    assert_eq!(sent[27], "000#0101"); // NMT start node 1
+    assert_eq!(rig.node.phase(), Phase::Running);
+    assert_eq!(rig.sim.nmt_state(), NmtState::Operational);
+    // Not asked to enable: the drive is switched on, not enabled.
+    assert_eq!(rig.node.drive_state(), Some(DriveState::SwitchedOn));
+}
+
+#[test]
+fn enable_sequence_and_velocity_both_directions() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(200, false, &[0.0]);
+    let before = rig.log.len();
+    rig.run(200, true, &[100.0]);
+    // RPDO1 carries controlword and target velocity: 0x0F with 0, then +100 r/min.
+    let rpdos: Vec<String> = rig.log[before..]
+        .iter()
+        .filter(|(_, mine, f)| *mine && f.id() == 0x201)
+        .map(|(_, _, f)| f.to_string())
+        .collect();
+    assert_eq!(rpdos[0], "201#0F0000000000"); // 0x0F enable operation (switched on → enabled)
+    assert!(rpdos.contains(&"201#0F0064000000".to_string()), "{rpdos:?}"); // +100 r/min
+    assert!(rig.node.is_enabled());
+    let axis = rig.sim.report()[0].clone();
+    assert!((axis.rpm - 100.0).abs() < 1e-6, "{axis:?}");
+    // Feedback by TPDO.
+    let fb = rig.node.axes()[0];
+    assert_eq!(fb.velocity, Some(100));
+    assert!(fb.position.unwrap() > 0);
+    // Reverse: -100 r/min is 0xFFFFFF9C.
+    rig.run(300, true, &[-100.0]);
+    assert!(rig.sent().contains(&"201#0F009CFFFFFF".to_string()));
+    assert_eq!(rig.node.axes()[0].velocity, Some(-100));
+    // Disable: controlword 0x07, target 0.
+    rig.run(100, false, &[0.0]);
+    assert!(rig.sent().contains(&"201#070000000000".to_string()));
+    assert_eq!(rig.node.drive_state(), Some(DriveState::SwitchedOn));
+}
+
+#[test]
+fn shutdown_switch_on_enable_from_switch_on_disabled() {
+    // The full 6 → 7 → 0x0F sequence from switch on disabled, as after power-up.
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(300, true, &[0.0]);
+    let cws: Vec<u8> = rig
+        .log
+        .iter()
+        .filter(|(_, mine, f)| *mine && f.id() == 0x201)
+        .map(|(_, _, f)| f.data()[0])
+        .collect();
+    let mut seq: Vec<u8> = cws.clone();
+    seq.dedup();
+    assert_eq!(&seq[..3], &[0x06, 0x07, 0x0F], "{cws:?}");
+    assert!(rig.node.is_enabled());
+}
+
+#[test]
+fn lost_heartbeat_faults_within_timeout_and_commands_zero() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(500, true, &[200.0]);
+    assert!(rig.node.is_enabled());
+    let silent_from = rig.now_ms;
+    rig.sim.set_heartbeat(false);
+    let mut faulted_at = None;
+    for _ in 0..100 {
+        rig.run(10, true, &[200.0]);
+        if rig.node.fault().is_some() {
+            faulted_at = Some(rig.now_ms);
+            break;
+        }
+    }
+    let faulted_at = faulted_at.expect("heartbeat loss detected");
+    assert_eq!(rig.node.fault(), Some(DriveFault::HeartbeatLost));
+    // Timeout 350 ms after the last heartbeat (sent every 100 ms), checked every 10 ms.
+    assert!(
+        faulted_at - silent_from <= 350 + 100 + 10,
+        "{}",
+        faulted_at - silent_from
+    );
+    // The stop went out at once: zero target, disable operation.
+    let stop = rig
+        .log
+        .iter()
+        .find(|(t, mine, f)| *t == faulted_at && *mine && f.id() == 0x201)
+        .map(|(_, _, f)| f.to_string());
+    assert_eq!(stop.as_deref(), Some("201#070000000000"));
+    rig.run(200, true, &[200.0]);
+    assert_eq!(rig.sim.report()[0].target, 0);
+    assert!(rig.sim.report()[0].rpm.abs() < 1e-9);
+}
+
+#[test]
+fn emcy_faults_and_needs_a_reset() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(400, true, &[50.0]);
+    let mut out = Vec::new();
+    rig.sim.inject_fault(0, 0x2310, &mut out);
+    rig.deliver(out, Vec::new());
+    rig.run(50, true, &[50.0]);
+    match rig.node.fault() {
+        Some(DriveFault::Emcy(e)) => assert_eq!(e.code, 0x2310),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(rig.node.drive_state(), Some(DriveState::Fault));
+    // Still asked to move, but nothing happens until the fault is reset.
+    rig.run(200, true, &[50.0]);
+    assert!(!rig.node.is_enabled());
+    assert!(rig.node.reset_fault());
+    rig.run(300, true, &[50.0]);
+    assert!(rig.node.is_enabled(), "{:?}", rig.node.drive_state());
+    assert!(
+        rig.sent().iter().any(|f| f == "201#800000000000"),
+        "fault reset sent"
+    );
+}
+
+#[test]
+fn frame_vectors() {
+    let node = NodeId::new(1).unwrap();
+    assert_eq!(
+        heartbeat_frame(node, NmtState::Operational).to_string(),
+        "701#05"
+    );
+    let e = Emcy::decode(&Frame::std(0x081, [0x30, 0x81, 0x11, 0, 0, 0, 0, 0])).unwrap();
+    assert_eq!(e.code, 0x8130);
+    assert_eq!(e.description(), "life guard or heartbeat error");
+    let _ = ms(0);
+}
