@@ -1,5 +1,6 @@
 //! Device protocols: pure decoders from raw bytes or frames to typed measurements.
 
+pub mod bms;
 pub mod can;
 pub mod canopen;
 pub mod cia402;

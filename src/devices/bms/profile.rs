@@ -1,0 +1,216 @@
+//! BMS profiles (TOML in `devices/`): Daly polling settings, or a DBC file and a mapping of
+//! its signals to the status fields.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::alarm;
+use crate::config::ConfigError;
+
+/// A BMS profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum BmsProfile {
+    /// Daly CAN protocol.
+    Daly(DalyProfile),
+    /// Broadcast BMS described by a DBC file.
+    Dbc(DbcProfile),
+}
+
+/// Which way a raw Daly current above its 30000 offset flows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CurrentAboveOffset {
+    /// Above the offset is charging.
+    Charge,
+    /// Above the offset is discharging.
+    Discharge,
+}
+
+/// `kind = "daly"`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DalyProfile {
+    /// Human-readable name.
+    pub name: String,
+    /// The host's address in the identifiers (Daly's "upper computer", 0x40).
+    #[serde(default = "default_host")]
+    pub host_address: u8,
+    /// Direction of a current above the offset; firmware differs, so check at bring-up
+    /// that the current reads negative under load.
+    #[serde(default = "default_current")]
+    pub current_above_offset: CurrentAboveOffset,
+}
+
+fn default_host() -> u8 {
+    0x40
+}
+fn default_current() -> CurrentAboveOffset {
+    CurrentAboveOffset::Charge
+}
+
+/// `kind = "dbc"`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcProfile {
+    /// Human-readable name.
+    pub name: String,
+    /// DBC file, relative to the profile. Read into `dbc_text` on load.
+    #[serde(default, skip_serializing)]
+    pub dbc: Option<String>,
+    /// The DBC's text (written inline in effective configurations).
+    #[serde(default)]
+    pub dbc_text: String,
+    /// +1 when the DBC's current is positive while charging, -1 when while discharging.
+    #[serde(default = "default_sign")]
+    pub current_sign: f64,
+    /// Signals for the reading's fields, `"message.signal"`.
+    pub fields: DbcFields,
+    /// Signals that raise alarm bits while non-zero.
+    #[serde(default)]
+    pub alarm: Vec<DbcAlarm>,
+}
+
+fn default_sign() -> f64 {
+    1.0
+}
+
+/// `[fields]` of a DBC profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcFields {
+    /// Pack voltage, V.
+    pub voltage: String,
+    /// Current, A.
+    pub current: String,
+    /// SOC, %.
+    pub soc: String,
+    /// Temperature, °C.
+    #[serde(default)]
+    pub temperature: Option<String>,
+    /// Remaining capacity, Ah.
+    #[serde(default)]
+    pub remaining_capacity: Option<String>,
+}
+
+/// `[[alarm]]` of a DBC profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcAlarm {
+    /// The signal, `"message.signal"`.
+    pub signal: String,
+    /// The alarm bit's name (see the README's `bms.error` table).
+    pub bit: String,
+    /// Whether the BMS has tripped a protection when this is set.
+    #[serde(default)]
+    pub protection: bool,
+}
+
+impl BmsProfile {
+    /// Reads and checks a profile file; a DBC file it names is read relative to it.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        let mut profile: Self = toml::from_str(&text).map_err(|e| ConfigError::Parse {
+            file: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        if let Self::Dbc(p) = &mut profile
+            && let Some(file) = &p.dbc
+        {
+            let dbc_path = path.parent().unwrap_or(Path::new(".")).join(file);
+            p.dbc_text =
+                std::fs::read_to_string(&dbc_path).map_err(|source| ConfigError::Read {
+                    file: dbc_path.clone(),
+                    source,
+                })?;
+        }
+        profile.validate(path)?;
+        Ok(profile)
+    }
+
+    /// Checks names and the DBC mapping.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
+            file: file.to_owned(),
+            key: key.to_owned(),
+            problem,
+            fix: fix.to_owned(),
+        };
+        let Self::Dbc(p) = self else {
+            return Ok(());
+        };
+        if p.dbc_text.trim().is_empty() {
+            return Err(invalid(
+                "dbc",
+                "no DBC given".into(),
+                "name the DBC file, e.g. dbc = \"pack.dbc\"",
+            ));
+        }
+        if p.current_sign != 1.0 && p.current_sign != -1.0 {
+            return Err(invalid(
+                "current_sign",
+                format!("{}", p.current_sign),
+                "use 1 or -1",
+            ));
+        }
+        for (i, a) in p.alarm.iter().enumerate() {
+            if alarm::by_name(&a.bit).is_none() {
+                return Err(invalid(
+                    &format!("alarm[{i}].bit"),
+                    format!("{:?} is not an alarm bit", a.bit),
+                    "use a name from the README's bms.error table",
+                ));
+            }
+        }
+        super::dbc::DbcBms::new(p).map_err(|e| {
+            invalid(
+                "fields",
+                e.to_string(),
+                "check the message and signal names against the DBC",
+            )
+        })?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_profiles_load() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        assert!(matches!(
+            BmsProfile::load(&dir.join("daly-bms.toml")).unwrap(),
+            BmsProfile::Daly(_)
+        ));
+        let BmsProfile::Dbc(p) = BmsProfile::load(&dir.join("pylontech-bms.toml")).unwrap() else {
+            panic!("not a DBC profile")
+        };
+        assert!(p.dbc_text.contains("BO_ 854"));
+    }
+
+    #[test]
+    fn a_bad_mapping_names_the_key() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let BmsProfile::Dbc(mut p) = BmsProfile::load(&dir.join("pylontech-bms.toml")).unwrap()
+        else {
+            panic!()
+        };
+        p.fields.soc = "pylon_soc_soh.state_of_charge".into();
+        let e = BmsProfile::Dbc(p.clone())
+            .validate(Path::new("b.toml"))
+            .unwrap_err();
+        assert!(e.to_string().contains("`fields`") && e.to_string().contains("state_of_charge"));
+        p.fields.soc = "pylon_soc_soh.soc".into();
+        p.alarm[0].bit = "too_hot".into();
+        let e = BmsProfile::Dbc(p)
+            .validate(Path::new("b.toml"))
+            .unwrap_err();
+        assert!(e.to_string().contains("`alarm[0].bit`"), "{e}");
+    }
+}
