@@ -34,9 +34,13 @@ enum Command {
         /// Vehicle configuration (TOML).
         #[arg(long)]
         config: PathBuf,
-        /// Record every raw chunk into this new folder.
+        /// Record every raw chunk, frame and command into this new folder.
         #[arg(long)]
         record: Option<PathBuf>,
+        /// Read commands from standard input, one `TOPIC JSON` per line
+        /// (e.g. `cmd_vel {"linear":{"x":0.2},"angular":{"z":0}}`).
+        #[arg(long)]
+        commands_stdin: bool,
     },
 }
 
@@ -72,7 +76,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             for (name, protocol) in &summary.sources_without_decoder {
                 eprintln!(
-                    "source {name:?} (protocol {protocol:?}) has no decoder yet; its frames are counted only"
+                    "source {name:?} is not decoded ({protocol}); its frames are counted only"
                 );
             }
             if let Some(import) = &summary.import
@@ -83,10 +87,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             eprintln!("{}", summary.one_line());
             Ok(())
         }
-        Command::Run { config, record } => {
-            let text = std::fs::read_to_string(&config)
-                .with_context(|| format!("cannot read {}", config.display()))?;
-            let vehicle = VehicleConfig::from_toml(&text, &config)?;
+        Command::Run {
+            config,
+            record,
+            commands_stdin,
+        } => {
+            let vehicle = VehicleConfig::load(&config)?;
             let runtime = tokio::runtime::Builder::new_multi_thread()
                 .worker_threads(2)
                 .enable_all()
@@ -95,8 +101,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             runtime.block_on(live::run(
                 LiveOptions {
                     config: vehicle,
-                    config_text: Some(text),
                     record,
+                    commands_stdin,
                 },
                 std::io::stdout(),
             ))

@@ -7,11 +7,12 @@ use std::path::{Path, PathBuf};
 
 use crate::api::rtk::BaseStatus;
 use crate::config::{ConfigError, VehicleConfig};
-use crate::core::{CoreConfig, Output};
 use crate::devices::gnss::GnssStats;
+use crate::engine::EngineOutput;
+use crate::engine::drivetrain::BusStats;
 use crate::engine::{Decoder, Engine, EngineStats, STATUS_PERIOD};
 use crate::record::nmea_import::{IMPORT_SOURCE, ImportReport, import_nmea_log};
-use crate::record::{RecordError, RecordingReader, SkippedLine};
+use crate::record::{RecordError, RecordingReader, SkippedLine, SourceKind};
 use crate::time::Timestamp;
 
 /// Why a replay could not run.
@@ -35,6 +36,8 @@ pub struct ReplaySummary {
     pub engine: EngineStats,
     /// Counters per NMEA source.
     pub gnss: Vec<(String, GnssStats)>,
+    /// Counters per CAN interface.
+    pub buses: Vec<(String, BusStats)>,
     /// Malformed recording lines that were skipped (the first hundred) and their count.
     pub skipped_lines: (Vec<SkippedLine>, u64),
     /// Present when the input was a plain NMEA log.
@@ -67,12 +70,23 @@ pub fn replay(
         let vehicle = config.cloned().or(stored).unwrap_or_default();
         let mut sources = Vec::new();
         for s in &meta.sources {
-            let protocol = s.protocol.clone().unwrap_or_default();
-            match Decoder::for_protocol(&protocol) {
-                Some(d) => sources.push((s.name.clone(), d)),
-                None => summary
-                    .sources_without_decoder
-                    .push((s.name.clone(), protocol)),
+            match s.kind {
+                SourceKind::Serial => {
+                    let protocol = s.protocol.clone().unwrap_or_default();
+                    match Decoder::for_protocol(&protocol) {
+                        Some(d) => sources.push((s.name.clone(), d)),
+                        None => summary
+                            .sources_without_decoder
+                            .push((s.name.clone(), protocol)),
+                    }
+                }
+                SourceKind::Can if !vehicle.can.iter().any(|c| c.interface == s.name) => {
+                    summary.sources_without_decoder.push((
+                        s.name.clone(),
+                        "CAN interface not in the configuration".into(),
+                    ))
+                }
+                SourceKind::Can | SourceKind::Commands => {}
             }
         }
         (reader, vehicle, sources)
@@ -108,7 +122,8 @@ fn run(
     out: &mut impl Write,
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
-    let mut engine = Engine::new(CoreConfig::from_vehicle(vehicle), sources);
+    let mut engine = Engine::new(vehicle, sources);
+    engine.check_recorded_transmissions();
     if let Some(start) = session.start {
         engine.start_at(start);
     }
@@ -134,6 +149,10 @@ fn run(
         .gnss_stats()
         .map(|(name, stats)| (name.to_owned(), stats))
         .collect();
+    summary.buses = engine
+        .bus_stats()
+        .map(|(name, stats)| (name.to_owned(), stats.clone()))
+        .collect();
     let (skipped, count) = reader.skipped();
     summary.skipped_lines = (skipped.to_vec(), count);
     summary.span = span;
@@ -141,12 +160,14 @@ fn run(
 }
 
 fn write_statuses(
-    outputs: &mut Vec<Output>,
+    outputs: &mut Vec<EngineOutput>,
     line: &mut String,
     out: &mut impl Write,
 ) -> std::io::Result<()> {
     for output in outputs.drain(..) {
-        let Output::Status(status) = output;
+        let EngineOutput::Status(status) = output else {
+            continue;
+        };
         line.clear();
         line.push_str(&BaseStatus::from_status(&status).to_json());
         line.push('\n');
@@ -195,8 +216,36 @@ impl ReplaySummary {
         if self.engine.undecoded > 0 {
             let _ = write!(s, "; {} frames without a decoder", self.engine.undecoded);
         }
+        if self.engine.commands_without_dialect > 0 {
+            let _ = write!(
+                s,
+                "; {} commands from channels without a dialect",
+                self.engine.commands_without_dialect
+            );
+        }
         if self.engine.commands > 0 {
-            let _ = write!(s, "; {} commands not replayed", self.engine.commands);
+            let _ = write!(
+                s,
+                "; {} commands ({} refused)",
+                self.engine.commands, self.engine.commands_rejected
+            );
+        }
+        for (bus, b) in &self.buses {
+            let _ = write!(
+                s,
+                "; {bus}: {} frames received, {} sent, {} error frames",
+                b.rx, b.tx, b.error_frames
+            );
+            if let Some(e) = &b.last_error {
+                let _ = write!(s, " (last: {e})");
+            }
+        }
+        if self.engine.tx_matched + self.engine.tx_mismatched > 0 {
+            let _ = write!(
+                s,
+                "; recorded transmissions: {} reproduced, {} differ",
+                self.engine.tx_matched, self.engine.tx_mismatched
+            );
         }
         if self.engine.reordered > 0 {
             let _ = write!(s, "; {} records re-timed", self.engine.reordered);

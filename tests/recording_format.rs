@@ -44,6 +44,7 @@ fn render(r: &Record) -> String {
         Payload::Serial(b) => format!("serial {b:?}"),
         Payload::Link(s) => format!("link {s:?}"),
         Payload::Can(f) => format!("can {f:X}"),
+        Payload::CanTx(f) => format!("can-tx {f:X}"),
         Payload::Command { topic, payload } => format!("cmd {topic:?} {payload:?}"),
     };
     format!("{} {} {payload}", r.t, r.source)

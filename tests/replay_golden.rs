@@ -57,7 +57,7 @@ fn rtk_drive_matches_expected_and_is_deterministic() {
         "GGA 279",
         "checksum errors 1",
         "20 frames without a decoder",
-        "1 commands not replayed",
+        "1 commands from channels without a dialect",
         "skipped lines 0",
     ] {
         assert!(summary.contains(part), "summary lacks {part:?}: {summary}");

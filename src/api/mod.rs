@@ -1,3 +1,4 @@
 //! Protocol dialects: codecs between each protocol's JSON and the core's types.
 
+pub mod local;
 pub mod rtk;

@@ -2,9 +2,11 @@
 //!
 //! Every key of the protocol's example is always present, in the protocol's units:
 //! degrees for `rtk.angle` (0 = north, clockwise) and `rtk.latitude/longitude`, metres and
-//! radians (ENU) for `pose`, m/s and rad/s for `robot`. Devices chassisd does not drive yet
-//! (BMS, motor drives, IMU, lidar) report zeros and a `false` sensor flag, so a consumer can
-//! tell "absent" from "zero". `sensor.gnss` is an addition to the protocol.
+//! radians (ENU) for `pose`, m/s and rad/s for `robot`. Absent devices (no BMS, no drives,
+//! and the IMU and lidar chassisd does not drive yet) report zeros and a `false` sensor
+//! flag, so a consumer can tell "absent" from "zero". `sensor.gnss` is an addition to the
+//! protocol. `bms.status`, `bms.error` and `robot.robot_status` are bit sets documented in
+//! the README.
 
 use serde::Serialize;
 
@@ -113,15 +115,20 @@ impl BaseStatus {
     /// The report for a core status snapshot.
     pub fn from_status(status: &VehicleStatus) -> Self {
         let gnss = &status.gnss;
+        let battery = status
+            .battery
+            .map(|b| (b.reading, b.reading.status_bits(b.stale)));
+        let reading = battery.map(|(r, _)| r).unwrap_or_default();
+        let chassis = status.chassis.clone().unwrap_or_default();
         Self {
             bms: Bms {
-                current: 0.0,
-                error: 0,
-                remaining_capacity: 0.0,
-                soc: 0.0,
-                status: 0,
-                tem: 0.0,
-                voltage: 0.0,
+                current: reading.current_a.unwrap_or(0.0),
+                error: reading.alarms,
+                remaining_capacity: reading.remaining_capacity_ah.unwrap_or(0.0),
+                soc: reading.soc_pct.unwrap_or(0.0),
+                status: battery.map_or(0, |(_, bits)| bits),
+                tem: reading.temperature_c.unwrap_or(0.0),
+                voltage: reading.voltage_v.unwrap_or(0.0),
             },
             nav: Nav {
                 locate: match status.localization {
@@ -143,11 +150,11 @@ impl BaseStatus {
                 yaw: status.pose.yaw,
             },
             robot: Robot {
-                power: 0.0,
-                robot_status: 0,
-                vx: 0.0,
+                power: reading.soc_pct.unwrap_or(0.0),
+                robot_status: chassis.status_bits,
+                vx: chassis.vx,
                 vy: 0.0,
-                vz: 0.0,
+                vz: chassis.wz,
             },
             rtk: Rtk {
                 angle: gnss.heading_deg,
@@ -159,7 +166,7 @@ impl BaseStatus {
                 gnss: gnss.ok,
                 imu: false,
                 laser: false,
-                robot: false,
+                robot: chassis.ok,
             },
         }
     }

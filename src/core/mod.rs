@@ -1,14 +1,18 @@
 //! The sans-IO vehicle core: owns the vehicle state and is driven only by
 //! [`Vehicle::handle`], which takes the time as an argument and never reads a clock.
 
+pub mod chassis;
 pub mod status;
 
 use std::time::Duration;
 
 use crate::config::VehicleConfig;
+use crate::config::chassis::ChassisConfig;
+use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::time::Timestamp;
-pub use status::{GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
+use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
+pub use status::{BatteryStatus, GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
 
 /// Core settings, taken from the vehicle configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -17,6 +21,10 @@ pub struct CoreConfig {
     pub gnss_fix_timeout: Duration,
     /// Course over ground stands in for heading only above this speed, m/s.
     pub cog_min_speed_mps: f64,
+    /// The drive train, when the vehicle has drives.
+    pub chassis: Option<ChassisConfig>,
+    /// A BMS reading older than this is stale; `None` without a BMS.
+    pub bms_stale_after: Option<Duration>,
 }
 
 impl Default for CoreConfig {
@@ -24,6 +32,8 @@ impl Default for CoreConfig {
         Self {
             gnss_fix_timeout: Duration::from_secs(2),
             cog_min_speed_mps: 0.3,
+            chassis: None,
+            bms_stale_after: None,
         }
     }
 }
@@ -31,13 +41,22 @@ impl Default for CoreConfig {
 impl CoreConfig {
     /// The core settings of a vehicle configuration.
     pub fn from_vehicle(config: &VehicleConfig) -> Self {
-        match &config.gnss {
+        let mut core = match &config.gnss {
             Some(g) => Self {
                 gnss_fix_timeout: g.fix_timeout(),
                 cog_min_speed_mps: g.cog_min_speed_mps,
+                ..Self::default()
             },
             None => Self::default(),
+        };
+        if !config.drive.is_empty() {
+            core.chassis = config.chassis;
         }
+        core.bms_stale_after = config
+            .bms
+            .as_ref()
+            .map(|b| Duration::from_secs_f64(b.stale_s));
+        core
     }
 }
 
@@ -57,6 +76,19 @@ pub enum LinkState {
     Down,
 }
 
+/// A command from a protocol dialect.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// Drive at forward speed `vx` (m/s) and yaw rate `wz` (rad/s) until the command
+    /// times out.
+    Velocity {
+        /// Forward speed, m/s.
+        vx: f64,
+        /// Yaw rate, rad/s, counter-clockwise.
+        wz: f64,
+    },
+}
+
 /// One input to the core.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Input<'a> {
@@ -64,6 +96,14 @@ pub enum Input<'a> {
     Gnss(&'a GnssFix),
     /// A driver reports its link state.
     Link(Device, LinkState),
+    /// The drives' feedback, every control period.
+    Chassis(&'a ChassisFeedback),
+    /// The BMS reading changed.
+    Bms(&'a BmsReading),
+    /// A command.
+    Command(Command),
+    /// The control period elapsed: produce the wheel command.
+    ControlTick,
     /// The status period elapsed.
     Tick,
 }
@@ -72,7 +112,11 @@ pub enum Input<'a> {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Output {
     /// A status snapshot, produced on every tick.
-    Status(VehicleStatus),
+    Status(Box<VehicleStatus>),
+    /// What the drives should do, every control tick.
+    Wheels(WheelCommand),
+    /// The answer to a command.
+    CommandResult(Result<(), CommandRejected>),
 }
 
 /// The vehicle core.
@@ -83,16 +127,20 @@ pub struct Vehicle {
     gnss_link_down: bool,
     /// The heading last published, held while no fresh source exists.
     held_heading_deg: f64,
+    chassis: Option<Chassis>,
+    bms: Option<BmsReading>,
 }
 
 impl Vehicle {
     /// A core with nothing known yet.
     pub fn new(config: CoreConfig) -> Self {
         Self {
+            chassis: config.chassis.map(Chassis::new),
             config,
             gnss_fix: None,
             gnss_link_down: false,
             held_heading_deg: 0.0,
+            bms: None,
         }
     }
 
@@ -107,13 +155,43 @@ impl Vehicle {
                 self.gnss_link_down = state == LinkState::Down;
                 Vec::new()
             }
-            Input::Tick => vec![Output::Status(self.status(t))],
+            Input::Chassis(feedback) => {
+                if let Some(c) = &mut self.chassis {
+                    c.feedback(feedback.clone());
+                }
+                Vec::new()
+            }
+            Input::Bms(reading) => {
+                self.bms = Some(*reading);
+                Vec::new()
+            }
+            Input::Command(Command::Velocity { vx, wz }) => {
+                let result = match &mut self.chassis {
+                    Some(c) => c.command(t, vx, wz),
+                    None => Err(CommandRejected::NoDrives),
+                };
+                vec![Output::CommandResult(result)]
+            }
+            Input::ControlTick => match &mut self.chassis {
+                Some(c) => vec![Output::Wheels(c.tick(t))],
+                None => Vec::new(),
+            },
+            Input::Tick => vec![Output::Status(Box::new(self.status(t)))],
         }
     }
 
     fn status(&mut self, t: Timestamp) -> VehicleStatus {
+        let battery = self.config.bms_stale_after.map(|stale_after| {
+            let reading = self.bms.unwrap_or_default();
+            BatteryStatus {
+                stale: is_stale(&reading, t, stale_after),
+                reading,
+            }
+        });
         VehicleStatus {
             time: t,
+            chassis: self.chassis.as_ref().map(|c| c.status(t)),
+            battery,
             gnss: self.gnss_status(t),
             pose: Pose2D::default(),
             localization: Localization::Uninitialized,
@@ -186,8 +264,8 @@ mod tests {
 
     fn tick(v: &mut Vehicle, ms: u64) -> VehicleStatus {
         match v.handle(at(ms), Input::Tick).pop() {
-            Some(Output::Status(s)) => s,
-            None => panic!("a tick must produce a status"),
+            Some(Output::Status(s)) => *s,
+            other => panic!("a tick must produce a status, not {other:?}"),
         }
     }
 

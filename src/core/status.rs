@@ -1,13 +1,19 @@
 //! The vehicle status snapshot the core hands to the dialects, in SI units.
 
+use super::chassis::ChassisStatus;
+use crate::devices::bms::BmsReading;
 use crate::devices::gnss::FixQuality;
 use crate::time::Timestamp;
 
 /// Everything a status report needs, taken at one tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct VehicleStatus {
     /// Tick time.
     pub time: Timestamp,
+    /// The drive train; `None` without drives.
+    pub chassis: Option<ChassisStatus>,
+    /// The battery; `None` without a BMS.
+    pub battery: Option<BatteryStatus>,
     /// GNSS receiver state.
     pub gnss: GnssStatus,
     /// Pose in the local ENU frame. Zero until fusion provides it.
@@ -18,6 +24,15 @@ pub struct VehicleStatus {
     pub navigation: Navigation,
     /// Whether an obstacle has stopped the vehicle.
     pub obstacle_stop: bool,
+}
+
+/// The battery at a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BatteryStatus {
+    /// The last reading (all `None` before the first).
+    pub reading: BmsReading,
+    /// No reading within the stale timeout.
+    pub stale: bool,
 }
 
 /// GNSS state at a tick.

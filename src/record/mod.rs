@@ -35,8 +35,10 @@ pub enum Payload {
     Serial(Bytes),
     /// A driver's link state changed.
     Link(LinkState),
-    /// A CAN frame.
+    /// A CAN frame received from the bus.
     Can(CanAnyFrame),
+    /// A CAN frame chassisd transmitted (`T` direction in the candump file).
+    CanTx(CanAnyFrame),
     /// A command received over MQTT.
     Command {
         /// Topic it arrived on.

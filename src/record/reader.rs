@@ -9,7 +9,7 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 use bytes::Bytes;
-use socketcan::dump::Reader as CandumpReader;
+use socketcan::dump::{Direction, Reader as CandumpReader};
 
 use super::envelope::{self, EnvelopeError};
 use super::meta::{Meta, SourceKind};
@@ -162,7 +162,10 @@ impl SourceReader {
                     Ok(Some(rec)) => Some(Ok(Record {
                         t: Timestamp::from_micros(rec.t_us),
                         source: rec.device,
-                        payload: Payload::Can(rec.frame),
+                        payload: match rec.direction {
+                            Some(Direction::Transmitted) => Payload::CanTx(rec.frame),
+                            _ => Payload::Can(rec.frame),
+                        },
                     })),
                     // A read error ends the source; a parse error skips one line.
                     Err(socketcan::dump::ParseError::Io(e)) => {

@@ -6,7 +6,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use socketcan::dump::CanDumpRecord;
+use socketcan::dump::{CanDumpRecord, Direction};
 
 use super::envelope;
 use super::meta::{FORMAT_VERSION, META_FILE, Meta, SourceKind, SourceMeta};
@@ -105,12 +105,14 @@ impl RecordingWriter {
                 };
                 format!("({}) {} {event}\n", record.t, record.source)
             }
-            (Payload::Can(frame), SourceKind::Can) => {
+            (Payload::Can(frame), SourceKind::Can) | (Payload::CanTx(frame), SourceKind::Can) => {
                 let rec = CanDumpRecord {
                     t_us: record.t.as_micros(),
                     device: record.source.clone(),
                     frame: *frame,
-                    direction: None,
+                    // Only chassisd's own frames are marked, as `candump -x` marks them.
+                    direction: matches!(record.payload, Payload::CanTx(_))
+                        .then_some(Direction::Transmitted),
                 };
                 format!("{rec}\n")
             }

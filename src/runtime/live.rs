@@ -1,39 +1,46 @@
-//! Live mode: drivers feed the engine task, which owns the core, ticks at 10 Hz and writes
-//! base_status lines.
+//! Live mode: drivers feed the engine task, which owns the core, runs the 10 ms control loop,
+//! sends the drives' frames, and writes a base_status line every 100 ms.
 
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
+use bytes::Bytes;
+use tokio::io::AsyncBufReadExt;
 use tokio::sync::mpsc;
 
+use super::can::{self, CanSpec, CanTx};
 use super::clock::RecordClock;
 use super::recorder::Recorder;
 use super::serial::{self, SerialSpec};
+use crate::api::local;
 use crate::api::rtk::BaseStatus;
 use crate::config::VehicleConfig;
-use crate::core::{CoreConfig, Output};
 use crate::devices::gnss::GnssStats;
-use crate::engine::{Decoder, Engine};
-use crate::record::{RecordingWriter, SourceKind, SourceMeta};
+use crate::engine::{Decoder, Engine, EngineOutput};
+use crate::record::{Payload, Record, RecordingWriter, SourceKind, SourceMeta};
+use crate::time::Timestamp;
 
 /// Records waiting for the engine before drivers wait.
-const CHANNEL: usize = 1024;
+const CHANNEL: usize = 4096;
 /// How often fault counters are summarised in the log.
 const SUMMARY_EVERY: Duration = Duration::from_secs(30);
 /// Source name of the GNSS receiver.
 pub const GNSS_SOURCE: &str = "gnss";
+/// Source name of the local command channel.
+pub const STDIN_SOURCE: &str = crate::engine::LOCAL_COMMANDS;
 
 /// Options of `chassisd run`.
 #[derive(Debug, Clone)]
 pub struct LiveOptions {
     /// The vehicle configuration.
     pub config: VehicleConfig,
-    /// Its TOML text, copied into recordings.
-    pub config_text: Option<String>,
-    /// Record every raw chunk into this folder.
+    /// Record every raw chunk, frame and command into this folder.
     pub record: Option<PathBuf>,
+    /// Read `TOPIC JSON` commands from standard input.
+    pub commands_stdin: bool,
 }
 
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out`.
@@ -41,9 +48,10 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
     let clock = RecordClock::start();
     let start = clock.now();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
+    let config = &options.config;
     let mut sources = Vec::new();
     let mut source_meta = Vec::new();
-    if let Some(gnss) = &options.config.gnss {
+    if let Some(gnss) = &config.gnss {
         sources.push((GNSS_SOURCE.to_owned(), Decoder::Nmea));
         source_meta.push(SourceMeta {
             name: GNSS_SOURCE.into(),
@@ -58,18 +66,46 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             reconnect_max: gnss.reconnect_max(),
         };
         tokio::spawn(serial::run(spec, clock, tx.clone()));
-    } else {
+    }
+    let mut can_tx: BTreeMap<String, CanTx> = BTreeMap::new();
+    for bus in &config.can {
+        source_meta.push(SourceMeta {
+            name: bus.interface.clone(),
+            kind: SourceKind::Can,
+            file: format!("{}.log", bus.interface),
+            protocol: None,
+        });
+        let spec = CanSpec {
+            interface: bus.interface.clone(),
+            reconnect_max: Duration::from_secs_f64(bus.reconnect_max_s),
+        };
+        can_tx.insert(
+            bus.interface.clone(),
+            can::spawn(spec, clock, tx.clone(), bus.tx_queue),
+        );
+    }
+    if options.commands_stdin {
+        source_meta.push(SourceMeta {
+            name: STDIN_SOURCE.into(),
+            kind: SourceKind::Commands,
+            file: "commands.log".into(),
+            protocol: None,
+        });
+        tokio::spawn(read_commands(clock, tx.clone()));
+    }
+    if source_meta.is_empty() {
         tracing::warn!("no devices configured; status will show every sensor absent");
     }
+    let drivers_running = !source_meta.is_empty();
     drop(tx);
 
     let mut recorder = match &options.record {
         Some(dir) => {
             let writer = RecordingWriter::create(
                 dir,
-                &options.config.vehicle.name,
+                &config.vehicle.name,
                 start,
-                options.config_text.as_deref(),
+                Some(&config.to_effective_toml()),
                 source_meta,
             )
             .with_context(|| format!("cannot start recording in {}", dir.display()))?;
@@ -79,17 +115,17 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
         None => None,
     };
 
-    let mut engine = Engine::new(CoreConfig::from_vehicle(&options.config), &sources);
+    let mut engine = Engine::new(config, &sources);
     engine.start_at(start);
     let mut outputs = Vec::new();
     let mut summary = tokio::time::interval(SUMMARY_EVERY);
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("cannot install the SIGTERM handler")?;
-    // With no device configured there is no driver, but status still ticks.
-    let mut drivers_running = !sources.is_empty();
+    let mut drivers_running = drivers_running;
     let result = loop {
         let next_tick = engine.next_tick().unwrap_or_else(|| clock.now());
+        let mut now = None;
         tokio::select! {
             record = rx.recv(), if drivers_running => {
                 let Some(mut record) = record else {
@@ -97,52 +133,122 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
                     continue;
                 };
                 record.t = engine.handle(&record, &mut outputs);
+                now = Some(record.t);
                 if let Some(r) = recorder.as_mut() {
                     r.record(record);
                 }
             }
             () = tokio::time::sleep_until(clock.instant_at(next_tick)) => {
                 engine.advance_to(next_tick, &mut outputs);
+                now = Some(next_tick);
             }
             _ = summary.tick() => {
-                summarise_faults(&engine, &mut reported);
+                summarise_faults(&engine, &can_tx, &mut reported);
             }
             _ = tokio::signal::ctrl_c() => break Ok(()),
             _ = sigterm.recv() => break Ok(()),
         }
-        if let Err(e) = write_statuses(&mut outputs, &mut out) {
+        let t = now.unwrap_or_else(|| clock.now());
+        if let Err(e) = dispatch(&mut outputs, t, &can_tx, recorder.as_mut(), &mut out) {
             break Err(e).context("cannot write status output");
         }
     };
     // The ticks up to the stop, so a replay of the recording ends where this run ended.
     let end = clock.now();
     engine.advance_to(end, &mut outputs);
-    let flushed = write_statuses(&mut outputs, &mut out);
+    let flushed = dispatch(&mut outputs, end, &can_tx, recorder.as_mut(), &mut out);
     if let Some(r) = recorder {
         if r.dropped() > 0 {
             tracing::error!(dropped = r.dropped(), "recording is incomplete");
         }
         r.finish(end);
     }
-    summarise_faults(&engine, &mut reported);
+    summarise_faults(&engine, &can_tx, &mut reported);
     result.and(flushed.context("cannot write status output"))
 }
 
-fn write_statuses(outputs: &mut Vec<Output>, out: &mut impl Write) -> std::io::Result<()> {
-    if outputs.is_empty() {
-        return Ok(());
-    }
+/// Routes the engine's outputs: status lines to `out`, frames to their interface (and the
+/// recording), command answers to the log.
+fn dispatch(
+    outputs: &mut Vec<EngineOutput>,
+    t: Timestamp,
+    can_tx: &BTreeMap<String, CanTx>,
+    mut recorder: Option<&mut Recorder>,
+    out: &mut impl Write,
+) -> std::io::Result<()> {
+    let mut wrote = false;
     for output in outputs.drain(..) {
-        let Output::Status(status) = output;
-        let mut line = BaseStatus::from_status(&status).to_json();
-        line.push('\n');
-        out.write_all(line.as_bytes())?;
+        match output {
+            EngineOutput::Status(status) => {
+                let mut line = BaseStatus::from_status(&status).to_json();
+                line.push('\n');
+                out.write_all(line.as_bytes())?;
+                wrote = true;
+            }
+            EngineOutput::CanTx { bus, frame } => {
+                if let Some(r) = recorder.as_deref_mut() {
+                    r.record(Record {
+                        t,
+                        source: bus.clone(),
+                        payload: Payload::CanTx(frame.into()),
+                    });
+                }
+                if let Some(q) = can_tx.get(&bus) {
+                    q.send(frame);
+                }
+            }
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                result,
+            } => match result {
+                Ok(()) => tracing::info!(%source, %topic, "command accepted"),
+                Err(reason) => tracing::warn!(%source, %topic, %reason, "command refused"),
+            },
+        }
     }
-    out.flush()
+    if wrote {
+        out.flush()?;
+    }
+    Ok(())
 }
 
-/// Logs the GNSS fault counters when they changed since the last summary.
-fn summarise_faults(engine: &Engine, reported: &mut Vec<(String, GnssStats)>) {
+/// Reads `TOPIC JSON` lines from standard input as commands.
+async fn read_commands(clock: RecordClock, tx: mpsc::Sender<Record>) {
+    let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    loop {
+        match lines.next_line().await {
+            Ok(Some(line)) => {
+                let Some((topic, payload)) = local::split_line(&line) else {
+                    continue;
+                };
+                let record = Record {
+                    t: clock.now(),
+                    source: STDIN_SOURCE.into(),
+                    payload: Payload::Command {
+                        topic: topic.to_owned(),
+                        payload: Bytes::copy_from_slice(payload.as_bytes()),
+                    },
+                };
+                if tx.send(record).await.is_err() {
+                    return;
+                }
+            }
+            Ok(None) => return,
+            Err(e) => {
+                tracing::warn!(error = %e, "standard input unreadable; no more commands");
+                return;
+            }
+        }
+    }
+}
+
+/// Logs the fault counters when they changed since the last summary.
+fn summarise_faults(
+    engine: &Engine,
+    can_tx: &BTreeMap<String, CanTx>,
+    reported: &mut Vec<(String, GnssStats)>,
+) {
     let now: Vec<(String, GnssStats)> = engine
         .gnss_stats()
         .map(|(n, s)| (n.to_owned(), s))
@@ -177,4 +283,21 @@ fn summarise_faults(engine: &Engine, reported: &mut Vec<(String, GnssStats)>) {
         }
     }
     *reported = now;
+    for (bus, stats) in engine.bus_stats() {
+        let dropped = can_tx.get(bus).map_or(0, CanTx::dropped);
+        if stats.error_frames > 0 || dropped > 0 {
+            tracing::warn!(
+                device = %bus,
+                error_frames = stats.error_frames,
+                last_error = ?stats.last_error,
+                frames_dropped = dropped,
+                "CAN faults so far"
+            );
+        }
+    }
+    for (bus, name, node) in engine.drivetrain().nodes() {
+        if let Some(fault) = node.fault() {
+            tracing::warn!(device = %bus, drive = %name, node = node.node().get(), %fault, "drive fault latched");
+        }
+    }
 }

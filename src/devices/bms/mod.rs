@@ -82,6 +82,46 @@ pub mod alarm {
     }
 }
 
+/// Bits of `bms.status`.
+pub mod status {
+    /// A reading younger than the stale timeout.
+    pub const FRESH: u32 = 1 << 0;
+    /// No reading within the stale timeout; the values are the last known.
+    pub const STALE: u32 = 1 << 1;
+    /// Charging.
+    pub const CHARGING: u32 = 1 << 2;
+    /// Discharging.
+    pub const DISCHARGING: u32 = 1 << 3;
+    /// Charge MOSFET on.
+    pub const CHARGE_MOSFET: u32 = 1 << 4;
+    /// Discharge MOSFET on.
+    pub const DISCHARGE_MOSFET: u32 = 1 << 5;
+    /// Nothing received since start.
+    pub const NEVER_RECEIVED: u32 = 1 << 6;
+}
+
+impl BmsReading {
+    /// The `bms.status` bits of this reading.
+    pub fn status_bits(&self, stale: bool) -> u32 {
+        let mut bits = if stale { status::STALE } else { status::FRESH };
+        if self.rx.is_none() {
+            bits |= status::NEVER_RECEIVED;
+        }
+        match self.charge_state {
+            Some(ChargeState::Charging) => bits |= status::CHARGING,
+            Some(ChargeState::Discharging) => bits |= status::DISCHARGING,
+            _ => {}
+        }
+        if self.charge_mosfet == Some(true) {
+            bits |= status::CHARGE_MOSFET;
+        }
+        if self.discharge_mosfet == Some(true) {
+            bits |= status::DISCHARGE_MOSFET;
+        }
+        bits
+    }
+}
+
 /// Whether the pack is charging.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ChargeState {

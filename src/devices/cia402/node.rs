@@ -16,7 +16,9 @@ use crate::devices::can::Frame;
 use crate::devices::canopen::emcy::Emcy;
 use crate::devices::canopen::nmt::{NmtCommand, NmtState};
 use crate::devices::canopen::pdo::{PdoMapping, TpdoTrigger};
-use crate::devices::canopen::sdo::{AbortCode, SdoClient, SdoData, SdoOutcome, SdoRequest};
+use crate::devices::canopen::sdo::{
+    AbortCode, SdoClient, SdoData, SdoOutcome, SdoRequest, SdoResponse, decode_response,
+};
 use crate::devices::canopen::{Cob, NodeId, ObjectAddress, rpdo_cob_id, tpdo_cob_id};
 use crate::time::Timestamp;
 
@@ -161,9 +163,8 @@ enum Tag {
     Setup(usize),
     Controlword(u16),
     Target,
-    ReadStatusword,
-    ReadVelocity(usize),
-    ReadPosition(usize),
+    /// A read of statusword, velocity or position.
+    Feedback,
 }
 
 /// A CiA 402 drive node.
@@ -194,6 +195,8 @@ pub struct DriveNode {
     next_poll: Timestamp,
     next_command: Timestamp,
     last_emcy: Option<Emcy>,
+    /// Listen only: decode what passes on the bus, never transmit.
+    monitor: bool,
     stats: NodeStats,
 }
 
@@ -238,8 +241,15 @@ impl DriveNode {
             next_poll: Timestamp::default(),
             next_command: Timestamp::default(),
             last_emcy: None,
+            monitor: false,
             stats: NodeStats::default(),
         }
+    }
+
+    /// Listen-only mode: the node is never started and sends nothing; feedback is taken
+    /// from whatever passes on the bus, SDO answers to another master included.
+    pub fn set_monitor(&mut self, on: bool) {
+        self.monitor = on;
     }
 
     /// The node id.
@@ -393,6 +403,11 @@ impl DriveNode {
     pub fn on_frame(&mut self, t: Timestamp, frame: &Frame, out: &mut Vec<Frame>) {
         match Cob::of(frame) {
             Cob::Heartbeat(n) if n == self.settings.node => self.on_heartbeat(t, frame, out),
+            Cob::SdoResponse(n) if n == self.settings.node && self.monitor => {
+                if let Ok(SdoResponse::Data(addr, data)) = decode_response(frame) {
+                    self.observe(t, addr, data);
+                }
+            }
             Cob::SdoResponse(n) if n == self.settings.node => {
                 if let Some(outcome) = self.sdo.on_response(t, frame, out) {
                     self.on_sdo(t, outcome, out);
@@ -455,28 +470,12 @@ impl DriveNode {
                     // See at once where the drive went.
                     self.sdo.push(
                         SdoRequest::Read(self.profile.objects.statusword),
-                        Tag::ReadStatusword,
+                        Tag::Feedback,
                     );
                 }
-                (Tag::ReadStatusword, Some(d)) => {
-                    let value = d.as_u32();
-                    if self.profile.objects.statusword_bits == 32 {
-                        self.set_statusword(0, (value & 0xFFFF) as u16, t);
-                        self.set_statusword(1, (value >> 16) as u16, t);
-                    } else {
-                        self.set_statusword(0, value as u16, t);
-                    }
-                }
-                (Tag::ReadVelocity(a), Some(d)) => {
-                    if let Some(axis) = self.axes.get_mut(a) {
-                        axis.velocity = Some(d.as_i32());
-                        axis.rx = Some(t);
-                    }
-                }
-                (Tag::ReadPosition(a), Some(d)) => {
-                    if let Some(axis) = self.axes.get_mut(a) {
-                        axis.position = Some(d.as_i32());
-                        axis.rx = Some(t);
+                (Tag::Feedback, Some(d)) => {
+                    if let SdoOutcome::Done { request, .. } = outcome {
+                        self.observe(t, request.address(), d);
                     }
                 }
                 _ => {}
@@ -500,6 +499,31 @@ impl DriveNode {
                 });
                 // The node stopped answering: contact it again from the start.
                 self.start(t, out);
+            }
+        }
+    }
+
+    /// Takes an object value seen on the bus (listen-only mode).
+    fn observe(&mut self, t: Timestamp, addr: ObjectAddress, data: SdoData) {
+        let objects = &self.profile.objects;
+        if addr == objects.statusword {
+            let value = data.as_u32();
+            if objects.statusword_bits == 32 {
+                self.set_statusword(0, (value & 0xFFFF) as u16, t);
+                self.set_statusword(1, (value >> 16) as u16, t);
+            } else {
+                self.set_statusword(0, value as u16, t);
+            }
+            return;
+        }
+        for (a, axis) in self.axes.iter_mut().enumerate() {
+            if objects.actual_velocity.get(a) == Some(&addr) {
+                axis.velocity = Some(data.as_i32());
+                axis.rx = Some(t);
+            }
+            if objects.actual_position.get(a) == Some(&addr) {
+                axis.position = Some(data.as_i32());
+                axis.rx = Some(t);
             }
         }
     }
@@ -651,14 +675,13 @@ impl DriveNode {
         }
         let objects = &self.profile.objects;
         self.sdo
-            .push(SdoRequest::Read(objects.statusword), Tag::ReadStatusword);
-        for (a, object) in objects.actual_velocity.iter().enumerate() {
-            self.sdo
-                .push(SdoRequest::Read(*object), Tag::ReadVelocity(a));
-        }
-        for (a, object) in objects.actual_position.iter().enumerate() {
-            self.sdo
-                .push(SdoRequest::Read(*object), Tag::ReadPosition(a));
+            .push(SdoRequest::Read(objects.statusword), Tag::Feedback);
+        for object in objects
+            .actual_velocity
+            .iter()
+            .chain(&objects.actual_position)
+        {
+            self.sdo.push(SdoRequest::Read(*object), Tag::Feedback);
         }
     }
 

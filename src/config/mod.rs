@@ -3,7 +3,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
+
+pub mod chassis;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -39,18 +41,34 @@ pub enum ConfigError {
 }
 
 /// The whole vehicle configuration.
-#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct VehicleConfig {
     /// Identity of the vehicle.
     #[serde(default)]
     pub vehicle: VehicleSection,
     /// The GNSS receiver; absent on vehicles without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gnss: Option<GnssConfig>,
+    /// Geometry, limits and safety of the drive train; required with `[[drive]]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chassis: Option<chassis::ChassisConfig>,
+    /// Per-wheel direction and gear ratio.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheels: Option<chassis::WheelsConfig>,
+    /// CAN interfaces.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub can: Vec<chassis::CanBusConfig>,
+    /// Motor drives on CAN.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub drive: Vec<chassis::DriveConfig>,
+    /// The battery management system.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bms: Option<chassis::BmsConfig>,
 }
 
 /// `[vehicle]`
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct VehicleSection {
     /// A name for logs and recordings.
@@ -71,7 +89,7 @@ fn default_vehicle_name() -> String {
 }
 
 /// Wire protocol of a GNSS receiver.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
 #[serde(rename_all = "lowercase")]
 pub enum GnssProtocol {
     /// NMEA 0183 sentences.
@@ -80,7 +98,7 @@ pub enum GnssProtocol {
 }
 
 /// `[gnss]`
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct GnssConfig {
     /// Serial device path, e.g. `/dev/ttyUSB0` or a udev symlink.
@@ -106,7 +124,7 @@ pub struct GnssConfig {
 }
 
 /// A position in the vehicle frame, metres.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]
 pub struct Vector3 {
     /// Forward, metres.
@@ -151,7 +169,7 @@ impl GnssConfig {
 }
 
 impl VehicleConfig {
-    /// Reads and validates a TOML file.
+    /// Reads and validates a TOML file. Device profiles it names are read relative to it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             file: path.to_owned(),
@@ -160,14 +178,29 @@ impl VehicleConfig {
         Self::from_toml(&text, path)
     }
 
-    /// Parses and validates TOML text; `file` names it in errors.
+    /// Parses and validates TOML text; `file` names it in errors, and profile files are
+    /// found relative to its folder.
     pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        let mut config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_owned(),
             message: e.to_string(),
         })?;
+        let base = file.parent().unwrap_or(Path::new("."));
+        for drive in &mut config.drive {
+            drive.profile.resolve(base)?;
+        }
+        if let Some(bms) = &mut config.bms {
+            bms.profile.resolve(base)?;
+        }
         config.validate(file)?;
         Ok(config)
+    }
+
+    /// This configuration as self-contained TOML, with every device profile written inline,
+    /// as recordings store it.
+    pub fn to_effective_toml(&self) -> String {
+        // Plain data structures always serialise.
+        toml::to_string(self).unwrap_or_default()
     }
 
     /// Checks ranges and consistency.
@@ -185,6 +218,7 @@ impl VehicleConfig {
                 "give the vehicle a name",
             ));
         }
+        chassis::validate(self, file)?;
         let Some(gnss) = &self.gnss else {
             return Ok(());
         };
@@ -234,7 +268,7 @@ impl VehicleConfig {
     }
 }
 
-fn check_range(
+pub(crate) fn check_range(
     file: &Path,
     key: &str,
     value: f64,

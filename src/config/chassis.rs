@@ -1,0 +1,481 @@
+//! Configuration of the drive train and the CAN devices: geometry, limits, wheels, CAN
+//! interfaces, drives and the BMS.
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, VehicleConfig, check_range};
+use crate::devices::bms::BmsProfile;
+use crate::devices::cia402::DriveProfile;
+
+/// `[chassis]`: differential-drive geometry, motion limits and the command watchdog.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChassisConfig {
+    /// Wheel radius, m.
+    pub wheel_radius_m: f64,
+    /// Distance between the wheel contact points, m.
+    pub track_m: f64,
+    /// Forward and reverse speed limit, m/s.
+    #[serde(default = "default_max_speed")]
+    pub max_speed_mps: f64,
+    /// Yaw rate limit, rad/s.
+    #[serde(default = "default_max_yaw_rate")]
+    pub max_yaw_rate_rps: f64,
+    /// Linear acceleration limit, m/s².
+    #[serde(default = "default_max_accel")]
+    pub max_accel_mps2: f64,
+    /// Linear deceleration limit (also for stops), m/s².
+    #[serde(default = "default_max_decel")]
+    pub max_decel_mps2: f64,
+    /// Yaw acceleration limit, rad/s².
+    #[serde(default = "default_max_yaw_accel")]
+    pub max_yaw_accel_rps2: f64,
+    /// A velocity command older than this is void: the vehicle decelerates to zero, s.
+    #[serde(default = "default_cmd_timeout")]
+    pub cmd_timeout_s: f64,
+    /// Enable the drives (holding zero) as soon as they are ready, without a command.
+    #[serde(default = "default_true")]
+    pub enable_on_start: bool,
+}
+
+fn default_max_speed() -> f64 {
+    1.0
+}
+fn default_max_yaw_rate() -> f64 {
+    1.5
+}
+fn default_max_accel() -> f64 {
+    0.5
+}
+fn default_max_decel() -> f64 {
+    1.0
+}
+fn default_max_yaw_accel() -> f64 {
+    2.0
+}
+fn default_cmd_timeout() -> f64 {
+    0.5
+}
+fn default_true() -> bool {
+    true
+}
+
+impl ChassisConfig {
+    /// The command watchdog period.
+    pub fn cmd_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.cmd_timeout_s)
+    }
+}
+
+/// `[wheels.left]`, `[wheels.right]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelsConfig {
+    /// The left wheel.
+    pub left: WheelConfig,
+    /// The right wheel.
+    pub right: WheelConfig,
+}
+
+/// One wheel.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelConfig {
+    /// +1 when positive motor velocity drives the wheel forward, -1 when backward.
+    pub direction: i8,
+    /// Motor revolutions per wheel revolution.
+    #[serde(default = "default_gear")]
+    pub gear_ratio: f64,
+}
+
+fn default_gear() -> f64 {
+    1.0
+}
+
+/// Which wheel a drive axis turns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Wheel {
+    /// Left wheel.
+    Left,
+    /// Right wheel.
+    Right,
+}
+
+/// `[[can]]`: a CAN interface. Its bit rate is set outside the daemon (`ip link`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanBusConfig {
+    /// Interface name, e.g. `can0`.
+    pub interface: String,
+    /// Decode only; never transmit (bus monitoring, or replaying another master's session).
+    #[serde(default)]
+    pub listen_only: bool,
+    /// Longest wait between reconnect attempts, s.
+    #[serde(default = "default_reconnect_max")]
+    pub reconnect_max_s: f64,
+    /// Frames waiting to be written before new ones are dropped (and counted).
+    #[serde(default = "default_tx_queue")]
+    pub tx_queue: usize,
+}
+
+fn default_reconnect_max() -> f64 {
+    5.0
+}
+fn default_tx_queue() -> usize {
+    256
+}
+
+/// A device profile: a file name (relative to the configuration) or, in effective
+/// configurations, the profile itself.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ProfileRef<T> {
+    /// Read from this file.
+    File(String),
+    /// Already read.
+    Inline(Box<T>),
+}
+
+/// A profile type that can be read from a file.
+pub trait LoadProfile: Sized {
+    /// Reads and checks the file.
+    fn load_file(path: &Path) -> Result<Self, ConfigError>;
+}
+
+impl LoadProfile for DriveProfile {
+    fn load_file(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        DriveProfile::from_toml(&text, path)
+    }
+}
+
+impl LoadProfile for BmsProfile {
+    fn load_file(path: &Path) -> Result<Self, ConfigError> {
+        BmsProfile::load(path)
+    }
+}
+
+impl<T: LoadProfile> ProfileRef<T> {
+    /// Reads a file reference, relative to `base`.
+    pub fn resolve(&mut self, base: &Path) -> Result<(), ConfigError> {
+        if let Self::File(name) = self {
+            *self = Self::Inline(Box::new(T::load_file(&base.join(name.as_str()))?));
+        }
+        Ok(())
+    }
+
+    /// The profile, once resolved.
+    pub fn get(&self) -> Option<&T> {
+        match self {
+            Self::Inline(p) => Some(p),
+            Self::File(_) => None,
+        }
+    }
+}
+
+/// `[[drive]]`: a CiA 402 drive node.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriveConfig {
+    /// Name for logs and status.
+    pub name: String,
+    /// Drive profile.
+    pub profile: ProfileRef<DriveProfile>,
+    /// CAN interface.
+    pub bus: String,
+    /// CANopen node id.
+    pub node: u8,
+    /// The wheel each axis turns, in axis order.
+    pub wheels: Vec<Wheel>,
+    /// Heartbeat producer time written to the node, ms.
+    #[serde(default = "default_heartbeat_ms")]
+    pub heartbeat_ms: u16,
+    /// Silence after which the node is lost, ms.
+    #[serde(default = "default_heartbeat_timeout_ms")]
+    pub heartbeat_timeout_ms: u64,
+    /// SDO answer timeout, ms.
+    #[serde(default = "default_sdo_timeout_ms")]
+    pub sdo_timeout_ms: u64,
+    /// SDO retries.
+    #[serde(default = "default_sdo_retries")]
+    pub sdo_retries: u8,
+    /// Wait for the boot-up message before resetting the node again, ms.
+    #[serde(default = "default_boot_timeout_ms")]
+    pub boot_timeout_ms: u64,
+    /// Time the enable sequence may take, ms.
+    #[serde(default = "default_enable_timeout_ms")]
+    pub enable_timeout_ms: u64,
+}
+
+fn default_heartbeat_ms() -> u16 {
+    100
+}
+fn default_heartbeat_timeout_ms() -> u64 {
+    350
+}
+fn default_sdo_timeout_ms() -> u64 {
+    50
+}
+fn default_sdo_retries() -> u8 {
+    2
+}
+fn default_boot_timeout_ms() -> u64 {
+    1000
+}
+fn default_enable_timeout_ms() -> u64 {
+    1000
+}
+
+/// `[bms]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BmsConfig {
+    /// BMS profile.
+    pub profile: ProfileRef<BmsProfile>,
+    /// CAN interface.
+    pub bus: String,
+    /// Daly: the pack's address.
+    #[serde(default = "default_bms_address")]
+    pub address: u8,
+    /// Daly: full polling rounds per second.
+    #[serde(default = "default_poll_hz")]
+    pub poll_hz: f64,
+    /// A reading older than this is stale, s.
+    #[serde(default = "default_stale_s")]
+    pub stale_s: f64,
+}
+
+fn default_bms_address() -> u8 {
+    1
+}
+fn default_poll_hz() -> f64 {
+    2.0
+}
+fn default_stale_s() -> f64 {
+    3.0
+}
+
+/// Checks the drive train and CAN sections of `config`.
+pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> {
+    let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
+        file: file.to_owned(),
+        key: key.to_owned(),
+        problem,
+        fix: fix.to_owned(),
+    };
+    for (i, bus) in config.can.iter().enumerate() {
+        let key = format!("can[{i}].interface");
+        if bus.interface.is_empty()
+            || bus.interface.len() > 15
+            || bus.interface.contains(char::is_whitespace)
+        {
+            return Err(invalid(
+                &key,
+                format!("{:?}", bus.interface),
+                "use a kernel interface name such as can0",
+            ));
+        }
+        if config.can[..i].iter().any(|b| b.interface == bus.interface) {
+            return Err(invalid(
+                &key,
+                format!("{:?} is listed twice", bus.interface),
+                "list each interface once",
+            ));
+        }
+        check_range(
+            file,
+            &format!("can[{i}].reconnect_max_s"),
+            bus.reconnect_max_s,
+            0.05..=300.0,
+            "seconds",
+        )?;
+        check_range(
+            file,
+            &format!("can[{i}].tx_queue"),
+            bus.tx_queue as f64,
+            8.0..=65536.0,
+            "frames",
+        )?;
+    }
+    let bus_known = |name: &str| config.can.iter().any(|b| b.interface == name);
+    if !config.drive.is_empty() {
+        let Some(chassis) = &config.chassis else {
+            return Err(invalid(
+                "chassis",
+                "missing while [[drive]] is set".into(),
+                "add [chassis] with wheel_radius_m and track_m",
+            ));
+        };
+        if config.wheels.is_none() {
+            return Err(invalid(
+                "wheels",
+                "missing while [[drive]] is set".into(),
+                "add [wheels.left] and [wheels.right]",
+            ));
+        }
+        for (key, value, range, unit) in [
+            (
+                "chassis.wheel_radius_m",
+                chassis.wheel_radius_m,
+                0.01..=2.0,
+                "m",
+            ),
+            ("chassis.track_m", chassis.track_m, 0.05..=5.0, "m"),
+            (
+                "chassis.max_speed_mps",
+                chassis.max_speed_mps,
+                0.01..=20.0,
+                "m/s",
+            ),
+            (
+                "chassis.max_yaw_rate_rps",
+                chassis.max_yaw_rate_rps,
+                0.01..=20.0,
+                "rad/s",
+            ),
+            (
+                "chassis.max_accel_mps2",
+                chassis.max_accel_mps2,
+                0.01..=20.0,
+                "m/s²",
+            ),
+            (
+                "chassis.max_decel_mps2",
+                chassis.max_decel_mps2,
+                0.01..=50.0,
+                "m/s²",
+            ),
+            (
+                "chassis.max_yaw_accel_rps2",
+                chassis.max_yaw_accel_rps2,
+                0.01..=50.0,
+                "rad/s²",
+            ),
+            (
+                "chassis.cmd_timeout_s",
+                chassis.cmd_timeout_s,
+                0.05..=10.0,
+                "s",
+            ),
+        ] {
+            check_range(file, key, value, range, unit)?;
+        }
+    }
+    if let Some(wheels) = &config.wheels {
+        for (name, w) in [("left", wheels.left), ("right", wheels.right)] {
+            if w.direction != 1 && w.direction != -1 {
+                return Err(invalid(
+                    &format!("wheels.{name}.direction"),
+                    format!("{}", w.direction),
+                    "use 1 or -1",
+                ));
+            }
+            check_range(
+                file,
+                &format!("wheels.{name}.gear_ratio"),
+                w.gear_ratio,
+                0.01..=1000.0,
+                "",
+            )?;
+        }
+    }
+    let mut wheels_seen: Vec<Wheel> = Vec::new();
+    for (i, d) in config.drive.iter().enumerate() {
+        let key = |k: &str| format!("drive[{i}].{k}");
+        if !bus_known(&d.bus) {
+            return Err(invalid(
+                &key("bus"),
+                format!("{:?} is not a [[can]] interface", d.bus),
+                "add it under [[can]], or fix the name",
+            ));
+        }
+        if !(1..=127).contains(&d.node) {
+            return Err(invalid(
+                &key("node"),
+                format!("{}", d.node),
+                "use a CANopen node id 1 to 127",
+            ));
+        }
+        if config.drive[..i]
+            .iter()
+            .any(|o| o.bus == d.bus && o.node == d.node)
+        {
+            return Err(invalid(
+                &key("node"),
+                format!("node {} is used twice on {}", d.node, d.bus),
+                "give each drive its own node id",
+            ));
+        }
+        let Some(profile) = d.profile.get() else {
+            return Err(invalid(
+                &key("profile"),
+                "not loaded".into(),
+                "name a profile file",
+            ));
+        };
+        if d.wheels.len() != usize::from(profile.axes) {
+            return Err(invalid(
+                &key("wheels"),
+                format!(
+                    "{} wheels for a {}-axis drive",
+                    d.wheels.len(),
+                    profile.axes
+                ),
+                "list the wheel of each axis, in axis order",
+            ));
+        }
+        for w in &d.wheels {
+            if wheels_seen.contains(w) {
+                return Err(invalid(
+                    &key("wheels"),
+                    format!("{w:?} is driven twice"),
+                    "each wheel belongs to one axis",
+                ));
+            }
+            wheels_seen.push(*w);
+        }
+        if d.heartbeat_ms == 0 || u64::from(d.heartbeat_ms) * 2 > d.heartbeat_timeout_ms {
+            return Err(invalid(
+                &key("heartbeat_timeout_ms"),
+                format!(
+                    "{} ms with a {} ms heartbeat",
+                    d.heartbeat_timeout_ms, d.heartbeat_ms
+                ),
+                "allow at least two heartbeat periods",
+            ));
+        }
+        for (k, v) in [
+            ("sdo_timeout_ms", d.sdo_timeout_ms),
+            ("boot_timeout_ms", d.boot_timeout_ms),
+            ("enable_timeout_ms", d.enable_timeout_ms),
+        ] {
+            check_range(file, &key(k), v as f64, 1.0..=60_000.0, "ms")?;
+        }
+    }
+    if !config.drive.is_empty() && wheels_seen.len() != 2 {
+        return Err(invalid(
+            "drive",
+            "not both wheels are driven".into(),
+            "assign left and right to drive axes",
+        ));
+    }
+    if let Some(bms) = &config.bms {
+        if !bus_known(&bms.bus) {
+            return Err(invalid(
+                "bms.bus",
+                format!("{:?} is not a [[can]] interface", bms.bus),
+                "add it under [[can]], or fix the name",
+            ));
+        }
+        check_range(file, "bms.poll_hz", bms.poll_hz, 0.1..=50.0, "Hz")?;
+        check_range(file, "bms.stale_s", bms.stale_s, 0.1..=600.0, "s")?;
+    }
+    Ok(())
+}

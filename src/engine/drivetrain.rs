@@ -1,0 +1,395 @@
+//! The CAN side of the engine: each interface with its drive nodes and BMS, the mapping of
+//! drive axes to wheels, unit conversion between motor and wheel, and encoder unwrapping.
+
+use std::f64::consts::TAU;
+
+use crate::config::VehicleConfig;
+use crate::config::chassis::{Wheel, WheelConfig};
+use crate::core::chassis::{ChassisFeedback, DriveSummary, WheelCommand, WheelFeedback};
+use crate::devices::bms::daly::DalyBms;
+use crate::devices::bms::dbc::DbcBms;
+use crate::devices::bms::profile::CurrentAboveOffset;
+use crate::devices::bms::{BmsDevice, BmsProfile};
+use crate::devices::can::{Frame, Received};
+use crate::devices::canopen::NodeId;
+use crate::devices::cia402::node::{DriveFault, DriveNode, NodeSettings, Phase};
+use crate::time::Timestamp;
+use std::time::Duration;
+
+/// Whether an interface is usable, as its driver last said.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BusLink {
+    /// No report yet (replays of plain candump logs): treated as up.
+    Unknown,
+    /// Up.
+    Up,
+    /// Down.
+    Down,
+}
+
+/// Counters of one interface.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct BusStats {
+    /// Data frames received.
+    pub rx: u64,
+    /// Frames chassisd queued for transmission.
+    pub tx: u64,
+    /// Frames not sent because the interface is listen-only.
+    pub suppressed: u64,
+    /// Error frames received.
+    pub error_frames: u64,
+    /// The last error frame, decoded.
+    pub last_error: Option<String>,
+    /// Remote and CAN FD frames, which no device uses.
+    pub ignored: u64,
+}
+
+/// Unwraps a 32-bit encoder count into a continuous one.
+#[derive(Debug, Clone, Copy, Default)]
+struct Unwrap {
+    last: Option<i32>,
+    total: i64,
+}
+
+impl Unwrap {
+    fn update(&mut self, raw: i32) -> i64 {
+        match self.last {
+            None => self.total = i64::from(raw),
+            Some(last) => self.total += i64::from(raw.wrapping_sub(last)),
+        }
+        self.last = Some(raw);
+        self.total
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Axis {
+    wheel: Wheel,
+    /// Motor revolutions per wheel revolution, signed by the wheel's direction.
+    ratio: f64,
+    unwrap: Unwrap,
+}
+
+#[derive(Debug, Clone)]
+struct Drive {
+    name: String,
+    node: DriveNode,
+    axes: Vec<Axis>,
+    started: bool,
+}
+
+/// One CAN interface and its devices.
+#[derive(Debug, Clone)]
+pub struct Bus {
+    name: String,
+    listen_only: bool,
+    link: BusLink,
+    drives: Vec<Drive>,
+    bms: Option<BmsDevice>,
+    stats: BusStats,
+}
+
+/// Every CAN interface of the vehicle.
+#[derive(Debug, Clone, Default)]
+pub struct Drivetrain {
+    buses: Vec<Bus>,
+}
+
+impl Drivetrain {
+    /// The interfaces and devices of `config` (profiles must be resolved).
+    pub fn new(config: &VehicleConfig) -> Self {
+        let wheel_config = |w: Wheel| -> WheelConfig {
+            let wheels = config
+                .wheels
+                .unwrap_or(crate::config::chassis::WheelsConfig {
+                    left: WheelConfig {
+                        direction: 1,
+                        gear_ratio: 1.0,
+                    },
+                    right: WheelConfig {
+                        direction: 1,
+                        gear_ratio: 1.0,
+                    },
+                });
+            match w {
+                Wheel::Left => wheels.left,
+                Wheel::Right => wheels.right,
+            }
+        };
+        let buses = config
+            .can
+            .iter()
+            .map(|c| {
+                let drives = config
+                    .drive
+                    .iter()
+                    .filter(|d| d.bus == c.interface)
+                    .filter_map(|d| {
+                        let profile = d.profile.get()?.clone();
+                        let settings = NodeSettings {
+                            node: NodeId::new(d.node)?,
+                            heartbeat_producer_ms: d.heartbeat_ms,
+                            heartbeat_timeout: Duration::from_millis(d.heartbeat_timeout_ms),
+                            sdo_timeout: Duration::from_millis(d.sdo_timeout_ms),
+                            sdo_retries: d.sdo_retries,
+                            boot_timeout: Duration::from_millis(d.boot_timeout_ms),
+                            enable_timeout: Duration::from_millis(d.enable_timeout_ms),
+                        };
+                        let mut node = DriveNode::new(settings, profile);
+                        node.set_monitor(c.listen_only);
+                        let axes = d
+                            .wheels
+                            .iter()
+                            .map(|w| {
+                                let wc = wheel_config(*w);
+                                Axis {
+                                    wheel: *w,
+                                    ratio: wc.gear_ratio * f64::from(wc.direction),
+                                    unwrap: Unwrap::default(),
+                                }
+                            })
+                            .collect();
+                        Some(Drive {
+                            name: d.name.clone(),
+                            node,
+                            axes,
+                            started: false,
+                        })
+                    })
+                    .collect();
+                let bms = config
+                    .bms
+                    .as_ref()
+                    .filter(|b| b.bus == c.interface)
+                    .and_then(|b| {
+                        Some(match b.profile.get()? {
+                            BmsProfile::Daly(p) => BmsDevice::Daly(DalyBms::new(
+                                b.address,
+                                p.host_address,
+                                match p.current_above_offset {
+                                    CurrentAboveOffset::Charge => 1.0,
+                                    CurrentAboveOffset::Discharge => -1.0,
+                                },
+                                b.poll_hz,
+                            )),
+                            BmsProfile::Dbc(p) => BmsDevice::Dbc(DbcBms::new(p).ok()?),
+                        })
+                    });
+                Bus {
+                    name: c.interface.clone(),
+                    listen_only: c.listen_only,
+                    link: BusLink::Unknown,
+                    drives,
+                    bms,
+                    stats: BusStats::default(),
+                }
+            })
+            .collect();
+        Self { buses }
+    }
+
+    /// Whether `source` names one of the interfaces.
+    pub fn has_bus(&self, source: &str) -> bool {
+        self.buses.iter().any(|b| b.name == source)
+    }
+
+    /// Whether there is no CAN device at all.
+    pub fn is_empty(&self) -> bool {
+        self.buses
+            .iter()
+            .all(|b| b.drives.is_empty() && b.bms.is_none())
+    }
+
+    /// Whether any interface carries drives.
+    pub fn has_drives(&self) -> bool {
+        self.buses.iter().any(|b| !b.drives.is_empty())
+    }
+
+    /// Whether any interface is listen-only.
+    pub fn is_listen_only(&self, source: &str) -> bool {
+        self.buses.iter().any(|b| b.name == source && b.listen_only)
+    }
+
+    /// Takes a frame from `source`. Frames for the bus go to `tx`; returns whether the BMS
+    /// reading changed.
+    pub fn on_frame(
+        &mut self,
+        t: Timestamp,
+        source: &str,
+        received: &Received,
+        tx: &mut Vec<(String, Frame)>,
+    ) -> bool {
+        let Some(bus) = self.buses.iter_mut().find(|b| b.name == source) else {
+            return false;
+        };
+        let frame = match received {
+            Received::Data(f) => f,
+            Received::Error(e) => {
+                bus.stats.error_frames += 1;
+                bus.stats.last_error = Some(e.to_string());
+                return false;
+            }
+            Received::Remote | Received::Fd => {
+                bus.stats.ignored += 1;
+                return false;
+            }
+        };
+        bus.stats.rx += 1;
+        let mut out = Vec::new();
+        for d in &mut bus.drives {
+            d.node.on_frame(t, frame, &mut out);
+        }
+        let bms_changed = bus.bms.as_mut().is_some_and(|b| b.on_frame(t, frame));
+        bus.emit(out, tx);
+        bms_changed
+    }
+
+    /// An interface went up or down.
+    pub fn link(&mut self, t: Timestamp, source: &str, up: bool, tx: &mut Vec<(String, Frame)>) {
+        let Some(bus) = self.buses.iter_mut().find(|b| b.name == source) else {
+            return;
+        };
+        bus.link = if up { BusLink::Up } else { BusLink::Down };
+        let mut out = Vec::new();
+        for d in &mut bus.drives {
+            if up {
+                if d.started && !bus.listen_only {
+                    d.node.link_up(t, &mut out);
+                }
+            } else {
+                d.node.link_down();
+            }
+        }
+        bus.emit(out, tx);
+    }
+
+    /// Runs every device's timers; starts nodes on interfaces not known to be down.
+    pub fn poll(&mut self, t: Timestamp, tx: &mut Vec<(String, Frame)>) {
+        for bus in &mut self.buses {
+            if bus.link == BusLink::Down {
+                continue;
+            }
+            let mut out = Vec::new();
+            for d in &mut bus.drives {
+                if !d.started && !bus.listen_only {
+                    d.started = true;
+                    d.node.start(t, &mut out);
+                }
+                d.node.poll(t, &mut out);
+            }
+            if let Some(bms) = &mut bus.bms {
+                bms.poll(t, &mut out);
+            }
+            bus.emit(out, tx);
+        }
+    }
+
+    /// The drive train's feedback, in wheel terms.
+    pub fn feedback(&mut self) -> ChassisFeedback {
+        let mut fb = ChassisFeedback::default();
+        for bus in &mut self.buses {
+            if bus.link == BusLink::Down && !bus.drives.is_empty() {
+                fb.bus_down = true;
+            }
+            for d in &mut bus.drives {
+                let units = d.node.profile().units;
+                for (a, axis) in d.axes.iter_mut().enumerate() {
+                    let Some(raw) = d.node.axes().get(a).copied() else {
+                        continue;
+                    };
+                    let wheel = WheelFeedback {
+                        velocity_rad_s: raw.velocity.map(|v| {
+                            f64::from(v) / units.actual_velocity_per_rpm / 60.0 * TAU / axis.ratio
+                        }),
+                        angle_rad: raw.position.map(|p| {
+                            axis.unwrap.update(p) as f64 / units.counts_per_rev * TAU / axis.ratio
+                        }),
+                    };
+                    match axis.wheel {
+                        Wheel::Left => fb.left = wheel,
+                        Wheel::Right => fb.right = wheel,
+                    }
+                }
+                let fault = d.node.fault();
+                fb.drives.push(DriveSummary {
+                    name: d.name.clone(),
+                    ready: d.node.is_ready(),
+                    running: d.node.phase() == Phase::Running,
+                    enabled: d.node.is_enabled(),
+                    fault: fault.map(|f| f.to_string()),
+                    heartbeat_lost: fault == Some(DriveFault::HeartbeatLost),
+                });
+            }
+        }
+        fb
+    }
+
+    /// Applies the core's wheel command to every drive.
+    pub fn command(&mut self, t: Timestamp, command: &WheelCommand) {
+        for bus in &mut self.buses {
+            for d in &mut bus.drives {
+                if command.reset_faults {
+                    d.node.reset_fault();
+                }
+                let rpm: Vec<f64> = d
+                    .axes
+                    .iter()
+                    .map(|axis| {
+                        let wheel = match axis.wheel {
+                            Wheel::Left => command.left_rad_s,
+                            Wheel::Right => command.right_rad_s,
+                        };
+                        wheel / TAU * 60.0 * axis.ratio
+                    })
+                    .collect();
+                d.node.command(t, command.enable, &rpm);
+            }
+        }
+    }
+
+    /// The BMS reading, if a BMS is configured.
+    pub fn bms_reading(&self) -> Option<&crate::devices::bms::BmsReading> {
+        self.buses
+            .iter()
+            .find_map(|b| b.bms.as_ref())
+            .map(BmsDevice::reading)
+    }
+
+    /// Counters per interface.
+    pub fn stats(&self) -> impl Iterator<Item = (&str, &BusStats)> {
+        self.buses.iter().map(|b| (b.name.as_str(), &b.stats))
+    }
+
+    /// Drive nodes, for diagnostics: (bus, name, node).
+    pub fn nodes(&self) -> impl Iterator<Item = (&str, &str, &DriveNode)> {
+        self.buses.iter().flat_map(|b| {
+            b.drives
+                .iter()
+                .map(move |d| (b.name.as_str(), d.name.as_str(), &d.node))
+        })
+    }
+}
+
+impl Bus {
+    fn emit(&mut self, out: Vec<Frame>, tx: &mut Vec<(String, Frame)>) {
+        if self.listen_only {
+            self.stats.suppressed += out.len() as u64;
+            return;
+        }
+        self.stats.tx += out.len() as u64;
+        tx.extend(out.into_iter().map(|f| (self.name.clone(), f)));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unwraps_encoder_roll_over() {
+        let mut u = Unwrap::default();
+        assert_eq!(u.update(i32::MAX - 10), i64::from(i32::MAX - 10));
+        assert_eq!(u.update(i32::MIN + 9), i64::from(i32::MAX) + 10);
+        assert_eq!(u.update(i32::MAX - 10), i64::from(i32::MAX - 10));
+    }
+}

@@ -1,0 +1,421 @@
+//! The sans-IO engine: routes recorded or live records through the device decoders into the
+//! vehicle core, runs the control loop and schedules the status ticks. Live mode and replay
+//! both drive this one type, so a live run and the replay of its recording produce the same
+//! output.
+//!
+//! Ticks fall on whole multiples of the control period (10 ms) of the record clock; every
+//! tenth is also a status tick (100 ms). A tick at `T` sees every record stamped at or before
+//! `T`. Time seen by the core never runs backwards: a record stamped before the previous
+//! record is processed at that record's time, and one stamped at or before an emitted tick
+//! 1 µs after it. Equal stamps from different sources are ordered by source name, as the
+//! recording reader orders them. [`Engine::handle`] returns the time it used, which is what
+//! a recording must store.
+
+pub mod drivetrain;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::time::Duration;
+
+use crate::api::local;
+use crate::config::VehicleConfig;
+use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
+use crate::core::{CoreConfig, Device, Input, LinkState, Output, Vehicle, VehicleStatus};
+use crate::devices::can::{Frame, Received};
+use crate::devices::gnss::{GnssStats, NmeaReceiver};
+use crate::record::{Payload, Record};
+use crate::time::Timestamp;
+use drivetrain::{BusStats, Drivetrain};
+
+/// The status period of base_status (10 Hz).
+pub const STATUS_PERIOD: Duration = Duration::from_millis(100);
+
+/// Source name of the local command channel (`chassisd run --commands-stdin`).
+pub const LOCAL_COMMANDS: &str = "stdin";
+
+/// The smallest time step of the record clock.
+const ONE_MICRO: Duration = Duration::from_micros(1);
+
+/// The decoder a serial source's bytes go through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Decoder {
+    /// NMEA 0183 from a GNSS receiver.
+    Nmea,
+}
+
+impl Decoder {
+    /// The decoder for a recording's `protocol` name.
+    pub fn for_protocol(protocol: &str) -> Option<Self> {
+        match protocol {
+            "nmea0183" => Some(Self::Nmea),
+            _ => None,
+        }
+    }
+}
+
+/// What the engine produces.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EngineOutput {
+    /// A status snapshot (every 100 ms).
+    Status(Box<VehicleStatus>),
+    /// A frame to transmit on a CAN interface.
+    CanTx {
+        /// The interface.
+        bus: String,
+        /// The frame.
+        frame: Frame,
+    },
+    /// The answer to a command record.
+    CommandResult {
+        /// The channel it came on.
+        source: String,
+        /// Its topic.
+        topic: String,
+        /// Accepted, or why not.
+        result: Result<(), String>,
+    },
+}
+
+/// Counters of what went through the engine.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct EngineStats {
+    /// Records by source.
+    pub records_by_source: BTreeMap<String, u64>,
+    /// Records from sources with no decoder.
+    pub undecoded: u64,
+    /// Commands received.
+    pub commands: u64,
+    /// Commands refused (malformed, or refused by the core).
+    pub commands_rejected: u64,
+    /// Command records from channels without a dialect yet.
+    pub commands_without_dialect: u64,
+    /// Records whose time was moved forward to keep the core's time monotonic.
+    pub reordered: u64,
+    /// Status ticks emitted.
+    pub ticks: u64,
+    /// Recorded transmissions (replay) that matched what the engine sent.
+    pub tx_matched: u64,
+    /// Recorded transmissions that differed from what the engine sent, or had no
+    /// counterpart.
+    pub tx_mismatched: u64,
+}
+
+/// Records and ticks in, outputs out.
+pub struct Engine {
+    vehicle: Vehicle,
+    nmea: BTreeMap<String, NmeaReceiver>,
+    drivetrain: Drivetrain,
+    next_tick: Option<Timestamp>,
+    /// Time and source of the last record processed.
+    last_record: Option<(Timestamp, String)>,
+    /// Time of the last tick emitted.
+    last_tick: Option<Timestamp>,
+    /// Frames sent and not yet matched against recorded transmissions (replay only).
+    sent: Option<VecDeque<(String, Frame)>>,
+    stats: EngineStats,
+}
+
+impl Engine {
+    /// An engine for `config` whose serial `sources` (name and decoder) feed a core.
+    pub fn new(config: &VehicleConfig, sources: &[(String, Decoder)]) -> Self {
+        let nmea = sources
+            .iter()
+            .filter(|(_, d)| *d == Decoder::Nmea)
+            .map(|(name, _)| (name.clone(), NmeaReceiver::new()))
+            .collect();
+        Self {
+            vehicle: Vehicle::new(CoreConfig::from_vehicle(config)),
+            nmea,
+            drivetrain: Drivetrain::new(config),
+            next_tick: None,
+            last_record: None,
+            last_tick: None,
+            sent: None,
+            stats: EngineStats::default(),
+        }
+    }
+
+    /// Replay mode: transmissions are checked against the recording's `T` frames instead of
+    /// going anywhere.
+    pub fn check_recorded_transmissions(&mut self) {
+        self.sent = Some(VecDeque::new());
+    }
+
+    /// Sets the first tick to the first control period boundary at or after `t` (live mode
+    /// calls it at start; replay lets the session start or the first record set it).
+    pub fn start_at(&mut self, t: Timestamp) {
+        if self.next_tick.is_none() {
+            self.next_tick = Some(t.ceil_to(CONTROL_PERIOD));
+        }
+    }
+
+    /// The time of the next tick, once known.
+    pub fn next_tick(&self) -> Option<Timestamp> {
+        self.next_tick
+    }
+
+    /// Processes one record; outputs (including those of ticks that fell due before it) go
+    /// to `out`. Returns the time the core saw.
+    pub fn handle(&mut self, record: &Record, out: &mut Vec<EngineOutput>) -> Timestamp {
+        let t = self.effective_time(record);
+        self.start_at(t);
+        self.emit_ticks(|tick| tick < t, out);
+        self.last_record = Some((t, record.source.clone()));
+        match self.stats.records_by_source.get_mut(&record.source) {
+            Some(n) => *n += 1,
+            None => {
+                self.stats
+                    .records_by_source
+                    .insert(record.source.clone(), 1);
+            }
+        }
+        let mut tx = Vec::new();
+        match &record.payload {
+            Payload::Serial(bytes) => match self.nmea.get_mut(&record.source) {
+                Some(receiver) => {
+                    let vehicle = &mut self.vehicle;
+                    receiver.push(t, bytes, |fix| {
+                        vehicle.handle(t, Input::Gnss(fix));
+                    });
+                }
+                None => self.stats.undecoded += 1,
+            },
+            Payload::Link(state) if self.nmea.contains_key(&record.source) => {
+                self.vehicle.handle(t, Input::Link(Device::Gnss, *state));
+            }
+            Payload::Link(state) if self.drivetrain.has_bus(&record.source) => {
+                self.drivetrain
+                    .link(t, &record.source, *state == LinkState::Up, &mut tx);
+            }
+            Payload::Can(frame) if self.drivetrain.has_bus(&record.source) => {
+                self.can_frame(t, &record.source, frame, &mut tx);
+            }
+            Payload::CanTx(frame) if self.drivetrain.has_bus(&record.source) => {
+                if self.drivetrain.is_listen_only(&record.source) {
+                    // A monitor sees every frame on the bus, another master's included.
+                    self.can_frame(t, &record.source, frame, &mut tx);
+                } else {
+                    self.match_transmission(&record.source, frame);
+                }
+            }
+            Payload::Command { .. } if record.source != LOCAL_COMMANDS => {
+                // MQTT dialects come with their own issue; until then such records are
+                // counted, not acted on.
+                self.stats.commands_without_dialect += 1;
+            }
+            Payload::Command { topic, payload } => {
+                self.stats.commands += 1;
+                let result = match local::decode(topic, payload) {
+                    Ok(Some(command)) => self
+                        .vehicle
+                        .handle(t, Input::Command(command))
+                        .into_iter()
+                        .find_map(|o| match o {
+                            Output::CommandResult(r) => {
+                                Some(r.map_err(|e: CommandRejected| e.to_string()))
+                            }
+                            _ => None,
+                        })
+                        .unwrap_or(Ok(())),
+                    Ok(None) => Err(format!("unknown topic {topic:?}")),
+                    Err(e) => Err(e),
+                };
+                if result.is_err() {
+                    self.stats.commands_rejected += 1;
+                }
+                out.push(EngineOutput::CommandResult {
+                    source: record.source.clone(),
+                    topic: topic.clone(),
+                    result,
+                });
+            }
+            _ => self.stats.undecoded += 1,
+        }
+        self.transmit(tx, out);
+        t
+    }
+
+    fn can_frame(
+        &mut self,
+        t: Timestamp,
+        source: &str,
+        frame: &socketcan::CanAnyFrame,
+        tx: &mut Vec<(String, Frame)>,
+    ) {
+        let received = Received::from_socketcan(frame);
+        if self.drivetrain.on_frame(t, source, &received, tx)
+            && let Some(reading) = self.drivetrain.bms_reading()
+        {
+            let reading = *reading;
+            self.vehicle.handle(t, Input::Bms(&reading));
+        }
+    }
+
+    /// Compares a recorded transmission with the oldest frame the engine sent.
+    fn match_transmission(&mut self, source: &str, frame: &socketcan::CanAnyFrame) {
+        let Some(sent) = &mut self.sent else {
+            return;
+        };
+        let recorded = match Received::from_socketcan(frame) {
+            Received::Data(f) => Some(f),
+            _ => None,
+        };
+        match (sent.pop_front(), recorded) {
+            (Some((bus, mine)), Some(f)) if bus == source && mine == f => {
+                self.stats.tx_matched += 1
+            }
+            _ => self.stats.tx_mismatched += 1,
+        }
+    }
+
+    fn transmit(&mut self, tx: Vec<(String, Frame)>, out: &mut Vec<EngineOutput>) {
+        for (bus, frame) in tx {
+            match &mut self.sent {
+                Some(sent) => sent.push_back((bus, frame)),
+                None => out.push(EngineOutput::CanTx { bus, frame }),
+            }
+        }
+    }
+
+    /// Emits every tick at or before `t`.
+    pub fn advance_to(&mut self, t: Timestamp, out: &mut Vec<EngineOutput>) {
+        self.emit_ticks(|tick| tick <= t, out);
+    }
+
+    fn emit_ticks(&mut self, due: impl Fn(Timestamp) -> bool, out: &mut Vec<EngineOutput>) {
+        while let Some(tick) = self.next_tick.filter(|&tick| due(tick)) {
+            self.control_tick(tick, out);
+            if tick.as_nanos() % STATUS_PERIOD.as_nanos() as u64 == 0 {
+                for output in self.vehicle.handle(tick, Input::Tick) {
+                    if let Output::Status(s) = output {
+                        out.push(EngineOutput::Status(s));
+                        self.stats.ticks += 1;
+                    }
+                }
+            }
+            self.last_tick = Some(tick);
+            self.next_tick = Some(tick.saturating_add(CONTROL_PERIOD));
+        }
+    }
+
+    /// One control step: device timers, feedback to the core, the core's wheel command back.
+    fn control_tick(&mut self, t: Timestamp, out: &mut Vec<EngineOutput>) {
+        if self.drivetrain.is_empty() {
+            return;
+        }
+        let mut tx = Vec::new();
+        self.drivetrain.poll(t, &mut tx);
+        if self.drivetrain.has_drives() {
+            let feedback = self.drivetrain.feedback();
+            self.vehicle.handle(t, Input::Chassis(&feedback));
+            for output in self.vehicle.handle(t, Input::ControlTick) {
+                if let Output::Wheels(command) = output {
+                    self.drivetrain.command(t, &command);
+                }
+            }
+        }
+        self.transmit(tx, out);
+    }
+
+    /// The record's time, moved forward where needed so the core's time never runs back.
+    fn effective_time(&mut self, record: &Record) -> Timestamp {
+        let mut t = record.t;
+        if let Some(tick) = self.last_tick {
+            t = t.max(tick.saturating_add(ONE_MICRO));
+        }
+        if let Some((last, last_source)) = &self.last_record {
+            if t < *last {
+                t = *last;
+            }
+            if t == *last && record.source.as_str() < last_source.as_str() {
+                t = t.saturating_add(ONE_MICRO);
+            }
+        }
+        if t != record.t {
+            self.stats.reordered += 1;
+        }
+        t
+    }
+
+    /// Engine counters.
+    pub fn stats(&self) -> &EngineStats {
+        &self.stats
+    }
+
+    /// Counters of each NMEA source.
+    pub fn gnss_stats(&self) -> impl Iterator<Item = (&str, GnssStats)> {
+        self.nmea.iter().map(|(name, r)| (name.as_str(), r.stats()))
+    }
+
+    /// Counters of each CAN interface.
+    pub fn bus_stats(&self) -> impl Iterator<Item = (&str, &BusStats)> {
+        self.drivetrain.stats()
+    }
+
+    /// The drive train, for diagnostics.
+    pub fn drivetrain(&self) -> &Drivetrain {
+        &self.drivetrain
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rec(us: u64, source: &str) -> Record {
+        Record {
+            t: Timestamp::from_micros(us),
+            source: source.into(),
+            payload: Payload::Link(LinkState::Up),
+        }
+    }
+
+    fn engine() -> Engine {
+        Engine::new(
+            &VehicleConfig::default(),
+            &[("a".into(), Decoder::Nmea), ("b".into(), Decoder::Nmea)],
+        )
+    }
+
+    fn ticks(out: &[EngineOutput]) -> Vec<u64> {
+        out.iter()
+            .filter_map(|o| match o {
+                EngineOutput::Status(s) => Some(s.time.as_micros()),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn ticks_fall_on_period_boundaries_after_records_at_the_same_time() {
+        let mut e = engine();
+        let mut out = Vec::new();
+        assert_eq!(
+            e.handle(&rec(100_000, "a"), &mut out),
+            Timestamp::from_micros(100_000)
+        );
+        assert!(
+            out.is_empty(),
+            "the tick at 0.1 s waits for records stamped 0.1 s"
+        );
+        e.handle(&rec(350_000, "a"), &mut out);
+        assert_eq!(ticks(&out), [100_000, 200_000, 300_000]);
+        out.clear();
+        e.advance_to(Timestamp::from_micros(400_000), &mut out);
+        assert_eq!(ticks(&out), [400_000]);
+    }
+
+    #[test]
+    fn stragglers_move_after_the_tick_and_the_last_record() {
+        let mut e = engine();
+        let mut out = Vec::new();
+        e.start_at(Timestamp::from_micros(0));
+        e.advance_to(Timestamp::from_micros(100_000), &mut out);
+        // Stamped before the tick that was already emitted.
+        assert_eq!(e.handle(&rec(99_000, "b"), &mut out).as_micros(), 100_001);
+        // Stamped before the previous record.
+        assert_eq!(e.handle(&rec(50_000, "b"), &mut out).as_micros(), 100_001);
+        // Same time, but a source that sorts first: after, as the reader would order it.
+        assert_eq!(e.handle(&rec(100_001, "a"), &mut out).as_micros(), 100_002);
+        assert_eq!(e.stats().reordered, 3);
+    }
+}
