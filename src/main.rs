@@ -42,6 +42,13 @@ enum Command {
         #[arg(long)]
         commands_stdin: bool,
     },
+    /// Simulate the CAN devices of a vehicle configuration (drives, BMS) on its CAN
+    /// interfaces, e.g. vcan0. Standard input takes fault injections; see the README.
+    CanSim {
+        /// Vehicle configuration whose [[can]], [[drive]] and [bms] are simulated.
+        #[arg(long)]
+        config: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -98,14 +105,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .enable_all()
                 .build()
                 .context("cannot start the async runtime")?;
-            runtime.block_on(live::run(
+            let result = runtime.block_on(live::run(
                 LiveOptions {
                     config: vehicle,
                     record,
                     commands_stdin,
                 },
                 std::io::stdout(),
-            ))
+            ));
+            // A read of standard input may still be blocked in a runtime thread; do not wait
+            // for it.
+            runtime.shutdown_background();
+            return result;
+        }
+        Command::CanSim { config } => {
+            let vehicle = VehicleConfig::load(&config)?;
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+                .context("cannot start the async runtime")?;
+            let result = runtime.block_on(chassisd::runtime::can_sim::run(vehicle));
+            runtime.shutdown_background();
+            result
         }
     }
 }

@@ -143,6 +143,7 @@ fn run(
         engine.advance_to(end, &mut outputs);
         write_statuses(&mut outputs, &mut line, out)?;
     }
+    engine.finish();
     out.flush()?;
     summary.engine = engine.stats().clone();
     summary.gnss = engine

@@ -6,19 +6,19 @@
 mod common;
 
 use std::fs::File;
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::os::fd::{AsFd, AsRawFd, OwnedFd};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::Mutex;
-use std::sync::mpsc::{Receiver, channel};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use common::process::Proc;
 
 use nix::fcntl::{FcntlArg, FdFlag, fcntl};
 use nix::pty::openpty;
-use nix::sys::signal::{Signal, kill};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-use nix::unistd::{Pid, ttyname};
+use nix::unistd::ttyname;
 
 const WAIT: Duration = Duration::from_secs(10);
 
@@ -68,46 +68,6 @@ impl Port {
     }
 }
 
-/// Lines of a child's pipe, delivered through a channel so waits can time out.
-fn lines_of(pipe: impl std::io::Read + Send + 'static) -> Receiver<String> {
-    let (tx, rx) = channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(pipe).lines() {
-            let Ok(line) = line else { break };
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    rx
-}
-
-/// Waits for a line matching `want`, keeping every line seen in `seen`.
-fn wait_for(
-    rx: &Receiver<String>,
-    seen: &mut Vec<String>,
-    what: &str,
-    want: impl Fn(&str) -> bool,
-) {
-    let deadline = Instant::now() + WAIT;
-    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
-        match rx.recv_timeout(left) {
-            Ok(line) => {
-                let hit = want(&line);
-                seen.push(line);
-                if hit {
-                    return;
-                }
-            }
-            Err(_) => break,
-        }
-    }
-    panic!(
-        "timed out waiting for {what}; last lines: {:?}",
-        seen.iter().rev().take(5).collect::<Vec<_>>()
-    );
-}
-
 fn status(line: &str) -> Option<serde_json::Value> {
     serde_json::from_str(line).ok()
 }
@@ -120,15 +80,8 @@ fn is_status(line: &str, rtk_status: u64, latitude: f64) -> bool {
     })
 }
 
-/// A running `chassisd run` on a config whose GNSS port is `link`, with its output lines.
-struct Daemon {
-    child: Child,
-    stdout: Receiver<String>,
-    stderr: Receiver<String>,
-    /// Every line seen so far on each stream.
-    out: Vec<String>,
-    log: Vec<String>,
-}
+/// A running `chassisd run` on a config whose GNSS port is `link`.
+struct Daemon(Proc);
 
 impl Daemon {
     fn start(dir: &Path, link: &Path, extra_args: &[&std::ffi::OsStr]) -> Daemon {
@@ -141,47 +94,22 @@ impl Daemon {
             ),
         )
         .unwrap();
-        let mut child = Command::new(common::chassisd())
-            .args(["run", "--config"])
-            .arg(&config)
-            .args(extra_args)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("chassisd starts");
-        Daemon {
-            stdout: lines_of(child.stdout.take().unwrap()),
-            stderr: lines_of(child.stderr.take().unwrap()),
-            child,
-            out: Vec::new(),
-            log: Vec::new(),
-        }
+        let mut args: Vec<&std::ffi::OsStr> =
+            vec!["run".as_ref(), "--config".as_ref(), config.as_os_str()];
+        args.extend_from_slice(extra_args);
+        Daemon(Proc::start(&args))
     }
 
     fn wait_status(&mut self, what: &str, want: impl Fn(&str) -> bool) {
-        wait_for(&self.stdout, &mut self.out, what, want);
+        self.0.wait_out(WAIT, what, want);
     }
 
-    fn wait_log(&mut self, what: &str, text: &str) {
-        wait_for(&self.stderr, &mut self.log, what, |l| l.contains(text));
+    fn wait_log(&mut self, _what: &str, text: &str) {
+        self.0.wait_log(WAIT, text);
     }
 
-    /// Stops it with SIGTERM and returns every status line it printed.
-    fn stop(mut self) -> Vec<String> {
-        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).unwrap();
-        let exit = self.child.wait().expect("daemon exits");
-        assert!(exit.success(), "daemon exit status {exit}");
-        let mut out = std::mem::take(&mut self.out);
-        out.extend(self.stdout.iter());
-        out
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+    fn stop(self) -> Vec<String> {
+        self.0.stop()
     }
 }
 

@@ -122,13 +122,13 @@ impl BaseStatus {
         let chassis = status.chassis.clone().unwrap_or_default();
         Self {
             bms: Bms {
-                current: reading.current_a.unwrap_or(0.0),
+                current: num(reading.current_a.unwrap_or(0.0)),
                 error: reading.alarms,
-                remaining_capacity: reading.remaining_capacity_ah.unwrap_or(0.0),
-                soc: reading.soc_pct.unwrap_or(0.0),
+                remaining_capacity: num(reading.remaining_capacity_ah.unwrap_or(0.0)),
+                soc: num(reading.soc_pct.unwrap_or(0.0)),
                 status: battery.map_or(0, |(_, bits)| bits),
-                tem: reading.temperature_c.unwrap_or(0.0),
-                voltage: reading.voltage_v.unwrap_or(0.0),
+                tem: num(reading.temperature_c.unwrap_or(0.0)),
+                voltage: num(reading.voltage_v.unwrap_or(0.0)),
             },
             nav: Nav {
                 locate: match status.localization {
@@ -145,21 +145,21 @@ impl BaseStatus {
                 },
             },
             pose: Pose {
-                x: status.pose.x,
-                y: status.pose.y,
-                yaw: status.pose.yaw,
+                x: num(status.pose.x),
+                y: num(status.pose.y),
+                yaw: num(status.pose.yaw),
             },
             robot: Robot {
-                power: reading.soc_pct.unwrap_or(0.0),
+                power: num(reading.soc_pct.unwrap_or(0.0)),
                 robot_status: chassis.status_bits,
-                vx: chassis.vx,
+                vx: num(chassis.vx),
                 vy: 0.0,
-                vz: chassis.wz,
+                vz: num(chassis.wz),
             },
             rtk: Rtk {
-                angle: gnss.heading_deg,
-                latitude: gnss.latitude_deg,
-                longitude: gnss.longitude_deg,
+                angle: num(gnss.heading_deg),
+                latitude: num(gnss.latitude_deg),
+                longitude: num(gnss.longitude_deg),
                 status: gnss.quality.rtk_status(),
             },
             sensor: Sensor {
@@ -176,6 +176,11 @@ impl BaseStatus {
         // Serialising plain structs of numbers, bools and static strings cannot fail.
         serde_json::to_string(self).unwrap_or_default()
     }
+}
+
+/// A number JSON can carry: NaN and infinities become 0, and negative zero is written 0.
+fn num(v: f64) -> f64 {
+    if v.is_finite() { v + 0.0 } else { 0.0 }
 }
 
 #[cfg(test)]

@@ -195,7 +195,8 @@ impl Chassis {
         let r = self.config.wheel_radius_m;
         self.odometry.left_mps = feedback.left.velocity_rad_s.unwrap_or(0.0) * r;
         self.odometry.right_mps = feedback.right.velocity_rad_s.unwrap_or(0.0) * r;
-        if self.armed {
+        // A fault already being reset by a fresh command does not latch again.
+        if self.armed && !self.reset_pending {
             let reason = if feedback.bus_down {
                 Some(StopReason::BusDown)
             } else {

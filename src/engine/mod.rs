@@ -64,6 +64,8 @@ pub enum EngineOutput {
         /// The frame.
         frame: Frame,
     },
+    /// A notable change: a drive set up and running, a drive fault raised or cleared.
+    Event(String),
     /// The answer to a command record.
     CommandResult {
         /// The channel it came on.
@@ -111,6 +113,10 @@ pub struct Engine {
     last_tick: Option<Timestamp>,
     /// Frames sent and not yet matched against recorded transmissions (replay only).
     sent: Option<VecDeque<(String, Frame)>>,
+    /// Recorded transmissions not yet matched (replay only).
+    recorded_tx: VecDeque<(String, Received)>,
+    /// The drives as last reported, to announce changes.
+    drive_states: Vec<(bool, Option<String>)>,
     stats: EngineStats,
 }
 
@@ -130,6 +136,8 @@ impl Engine {
             last_record: None,
             last_tick: None,
             sent: None,
+            recorded_tx: VecDeque::new(),
+            drive_states: Vec::new(),
             stats: EngineStats::default(),
         }
     }
@@ -156,18 +164,24 @@ impl Engine {
     /// Processes one record; outputs (including those of ticks that fell due before it) go
     /// to `out`. Returns the time the core saw.
     pub fn handle(&mut self, record: &Record, out: &mut Vec<EngineOutput>) -> Timestamp {
+        // A recorded transmission is an output of the live run, not an input: it is checked
+        // against what this engine sends, and does not move time.
+        if let Payload::CanTx(frame) = &record.payload
+            && self.sent.is_some()
+            && self.drivetrain.has_bus(&record.source)
+            && !self.drivetrain.is_listen_only(&record.source)
+        {
+            self.count_record(&record.source);
+            self.recorded_tx
+                .push_back((record.source.clone(), Received::from_socketcan(frame)));
+            self.compare_transmissions();
+            return record.t;
+        }
         let t = self.effective_time(record);
         self.start_at(t);
         self.emit_ticks(|tick| tick < t, out);
         self.last_record = Some((t, record.source.clone()));
-        match self.stats.records_by_source.get_mut(&record.source) {
-            Some(n) => *n += 1,
-            None => {
-                self.stats
-                    .records_by_source
-                    .insert(record.source.clone(), 1);
-            }
-        }
+        self.count_record(&record.source);
         let mut tx = Vec::new();
         match &record.payload {
             Payload::Serial(bytes) => match self.nmea.get_mut(&record.source) {
@@ -189,13 +203,9 @@ impl Engine {
             Payload::Can(frame) if self.drivetrain.has_bus(&record.source) => {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
-            Payload::CanTx(frame) if self.drivetrain.has_bus(&record.source) => {
-                if self.drivetrain.is_listen_only(&record.source) {
-                    // A monitor sees every frame on the bus, another master's included.
-                    self.can_frame(t, &record.source, frame, &mut tx);
-                } else {
-                    self.match_transmission(&record.source, frame);
-                }
+            // A monitor sees every frame on the bus, another master's included.
+            Payload::CanTx(frame) if self.drivetrain.is_listen_only(&record.source) => {
+                self.can_frame(t, &record.source, frame, &mut tx);
             }
             Payload::Command { .. } if record.source != LOCAL_COMMANDS => {
                 // MQTT dialects come with their own issue; until then such records are
@@ -250,21 +260,42 @@ impl Engine {
         }
     }
 
-    /// Compares a recorded transmission with the oldest frame the engine sent.
-    fn match_transmission(&mut self, source: &str, frame: &socketcan::CanAnyFrame) {
+    fn count_record(&mut self, source: &str) {
+        match self.stats.records_by_source.get_mut(source) {
+            Some(n) => *n += 1,
+            None => {
+                self.stats.records_by_source.insert(source.to_owned(), 1);
+            }
+        }
+    }
+
+    /// Pairs recorded transmissions with the frames this engine sent, in order.
+    fn compare_transmissions(&mut self) {
         let Some(sent) = &mut self.sent else {
             return;
         };
-        let recorded = match Received::from_socketcan(frame) {
-            Received::Data(f) => Some(f),
-            _ => None,
-        };
-        match (sent.pop_front(), recorded) {
-            (Some((bus, mine)), Some(f)) if bus == source && mine == f => {
-                self.stats.tx_matched += 1
+        while !sent.is_empty() && !self.recorded_tx.is_empty() {
+            let (Some((bus, mine)), Some((source, recorded))) =
+                (sent.pop_front(), self.recorded_tx.pop_front())
+            else {
+                break;
+            };
+            match recorded {
+                Received::Data(f) if bus == source && f == mine => self.stats.tx_matched += 1,
+                _ => self.stats.tx_mismatched += 1,
             }
-            _ => self.stats.tx_mismatched += 1,
         }
+    }
+
+    /// Ends a replay: transmissions left over on either side count as differences.
+    pub fn finish(&mut self) {
+        self.compare_transmissions();
+        let left = self.sent.as_ref().map_or(0, VecDeque::len) + self.recorded_tx.len();
+        self.stats.tx_mismatched += left as u64;
+        if let Some(sent) = &mut self.sent {
+            sent.clear();
+        }
+        self.recorded_tx.clear();
     }
 
     fn transmit(&mut self, tx: Vec<(String, Frame)>, out: &mut Vec<EngineOutput>) {
@@ -274,6 +305,7 @@ impl Engine {
                 None => out.push(EngineOutput::CanTx { bus, frame }),
             }
         }
+        self.compare_transmissions();
     }
 
     /// Emits every tick at or before `t`.
@@ -306,6 +338,7 @@ impl Engine {
         self.drivetrain.poll(t, &mut tx);
         if self.drivetrain.has_drives() {
             let feedback = self.drivetrain.feedback();
+            self.announce_drive_changes(&feedback.drives, out);
             self.vehicle.handle(t, Input::Chassis(&feedback));
             for output in self.vehicle.handle(t, Input::ControlTick) {
                 if let Output::Wheels(command) = output {
@@ -314,6 +347,30 @@ impl Engine {
             }
         }
         self.transmit(tx, out);
+    }
+
+    fn announce_drive_changes(
+        &mut self,
+        drives: &[crate::core::chassis::DriveSummary],
+        out: &mut Vec<EngineOutput>,
+    ) {
+        let now: Vec<(bool, Option<String>)> = drives
+            .iter()
+            .map(|d| (d.running, d.fault.clone()))
+            .collect();
+        for (i, d) in drives.iter().enumerate() {
+            let before = self.drive_states.get(i).cloned().unwrap_or((false, None));
+            if d.fault != before.1 {
+                out.push(EngineOutput::Event(match &d.fault {
+                    Some(f) => format!("drive {}: fault: {f}", d.name),
+                    None => format!("drive {}: fault cleared", d.name),
+                }));
+            }
+            if d.running && !before.0 {
+                out.push(EngineOutput::Event(format!("drive {}: running", d.name)));
+            }
+        }
+        self.drive_states = now;
     }
 
     /// The record's time, moved forward where needed so the core's time never runs back.

@@ -71,7 +71,7 @@ pub fn spawn(
 }
 
 /// Whether the kernel says the interface is administratively up (IFF_UP).
-fn interface_up(name: &str) -> Result<bool, String> {
+pub(crate) fn interface_up(name: &str) -> Result<bool, String> {
     let flags = std::fs::read_to_string(format!("/sys/class/net/{name}/flags"))
         .map_err(|e| format!("no interface {name}: {e}"))?;
     let flags = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16)
@@ -79,7 +79,7 @@ fn interface_up(name: &str) -> Result<bool, String> {
     Ok(flags & 0x1 != 0)
 }
 
-fn open(name: &str) -> Result<CanSocket, String> {
+pub(crate) fn open(name: &str) -> Result<CanSocket, String> {
     if !interface_up(name)? {
         return Err(format!("{name} is down"));
     }

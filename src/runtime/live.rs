@@ -197,6 +197,7 @@ fn dispatch(
                     q.send(frame);
                 }
             }
+            EngineOutput::Event(event) => tracing::info!("{event}"),
             EngineOutput::CommandResult {
                 source,
                 topic,

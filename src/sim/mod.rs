@@ -1,4 +1,5 @@
 //! Simulated devices that speak the real protocols, for tests and for `chassisd can-sim`:
 //! the frames they exchange are the frames real hardware would.
 
+pub mod bms;
 pub mod cia402_drive;

@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 pub mod canbus;
+pub mod process;
 
 use std::path::PathBuf;
 
@@ -55,4 +56,39 @@ pub fn tempdir(name: &str) -> PathBuf {
     ));
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir
+}
+
+/// Replays a recording through the library's engine and returns the drive train's wheel
+/// odometry at its end.
+pub fn replay_odometry(dir: &std::path::Path) -> chassisd::core::chassis::WheelOdometry {
+    use chassisd::config::VehicleConfig;
+    use chassisd::engine::{Engine, EngineOutput};
+    use chassisd::record::RecordingReader;
+    use chassisd::time::Timestamp;
+
+    let (meta, reader) = RecordingReader::open(dir).expect("recording opens");
+    let file = meta
+        .vehicle_config
+        .as_deref()
+        .expect("recording holds its configuration");
+    let config = VehicleConfig::load(&dir.join(file)).expect("stored configuration loads");
+    let mut engine = Engine::new(&config, &[]);
+    engine.check_recorded_transmissions();
+    if let Some(start) = meta.start_us {
+        engine.start_at(Timestamp::from_micros(start));
+    }
+    let mut out = Vec::new();
+    for record in reader {
+        engine.handle(&record, &mut out);
+    }
+    if let Some(end) = meta.end_us {
+        engine.advance_to(Timestamp::from_micros(end), &mut out);
+    }
+    out.iter()
+        .rev()
+        .find_map(|o| match o {
+            EngineOutput::Status(s) => s.chassis.as_ref().map(|c| c.odometry),
+            _ => None,
+        })
+        .expect("a status with the drive train")
 }

@@ -353,7 +353,7 @@ impl DriveNode {
 
     /// The interface is (back) up: contact the node again. A latched fault stays latched.
     pub fn link_up(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
-        if matches!(self.phase, Phase::Offline | Phase::Booting { .. }) {
+        if self.phase == Phase::Offline {
             self.start(t, out);
         }
     }
@@ -362,7 +362,12 @@ impl DriveNode {
     /// in motor r/min. Targets are ignored (zero is sent) unless enabled and fault-free.
     pub fn command(&mut self, t: Timestamp, enable: bool, motor_rpm: &[f64]) {
         let enable = enable && self.fault.is_none();
-        if enable && !self.enable {
+        // The enable sequence is timed from when the node could first carry it out.
+        if enable
+            && self.enable_asked_at.is_none()
+            && self.phase == Phase::Running
+            && self.drive_state().is_some()
+        {
             self.enable_asked_at = Some(t);
         }
         if !enable {
@@ -440,8 +445,10 @@ impl DriveNode {
         self.last_heartbeat = Some(t);
         match (self.phase, state) {
             (Phase::Booting { .. }, _) => self.configure(t, out),
-            (Phase::Configuring | Phase::Running, NmtState::BootUp) => {
-                // It lost its set-up: stop, and set it up again.
+            // A second boot-up while setting up (a repeated reset): start the set-up over.
+            (Phase::Configuring, NmtState::BootUp) => self.configure(t, out),
+            (Phase::Running, NmtState::BootUp) => {
+                // It lost its set-up while running: stop, and set it up again.
                 self.raise(DriveFault::Rebooted);
                 self.configure(t, out);
             }

@@ -1,0 +1,254 @@
+//! `chassisd can-sim`: the CAN devices of a vehicle configuration, simulated on real
+//! SocketCAN interfaces (vcan in tests). Every `[[drive]]` becomes a simulated CiA 402 node
+//! and the `[bms]` a simulated pack, speaking the same protocols chassisd expects.
+//!
+//! Standard input takes commands that inject faults, one per line:
+//! `heartbeat DRIVE off|on`, `fault DRIVE AXIS CODE` (CODE an EMCY code such as 0x2310),
+//! `report` (one JSON line on standard output with every node's state).
+
+use std::time::Duration;
+
+use anyhow::Context;
+use serde_json::json;
+use socketcan::tokio::CanSocket;
+use socketcan::{CanAnyFrame, CanFrame};
+use tokio::io::AsyncBufReadExt;
+use tokio::sync::mpsc;
+
+use super::can::{interface_up, open};
+use super::clock::RecordClock;
+use crate::config::VehicleConfig;
+use crate::devices::bms::BmsProfile;
+use crate::devices::can::{Frame, Received};
+use crate::devices::canopen::NodeId;
+use crate::sim::bms::{Battery, SimDaly, SimDbcBms};
+use crate::sim::cia402_drive::{MotorModel, SimDrive};
+
+/// Simulation step.
+const STEP: Duration = Duration::from_millis(5);
+
+/// The devices on one interface.
+struct SimBus {
+    name: String,
+    drives: Vec<(String, SimDrive)>,
+    daly: Option<SimDaly>,
+    dbc: Option<SimDbcBms>,
+}
+
+#[derive(Debug)]
+enum SimCommand {
+    Heartbeat(String, bool),
+    Fault(String, usize, u16),
+    Report,
+}
+
+/// Runs until standard input closes or SIGTERM.
+pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
+    let clock = RecordClock::start();
+    let mut senders = Vec::new();
+    let mut tasks = Vec::new();
+    for bus in &config.can {
+        let mut sim = SimBus {
+            name: bus.interface.clone(),
+            drives: Vec::new(),
+            daly: None,
+            dbc: None,
+        };
+        for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
+            let profile = d.profile.get().context("drive profile not loaded")?.clone();
+            let node = NodeId::new(d.node).context("node id out of range")?;
+            sim.drives.push((
+                d.name.clone(),
+                SimDrive::new(node, profile, MotorModel::default()),
+            ));
+        }
+        if let Some(b) = config.bms.as_ref().filter(|b| b.bus == bus.interface) {
+            match b.profile.get().context("BMS profile not loaded")? {
+                BmsProfile::Daly(p) => sim.daly = Some(SimDaly::new(p, b.address)),
+                BmsProfile::Dbc(p) => {
+                    sim.dbc =
+                        Some(SimDbcBms::new(p).context("the BMS profile's DBC does not parse")?)
+                }
+            }
+        }
+        let (tx, rx) = mpsc::channel(64);
+        senders.push(tx);
+        tasks.push(tokio::spawn(serve_bus(sim, clock, rx)));
+    }
+    anyhow::ensure!(
+        !tasks.is_empty(),
+        "the configuration has no [[can]] interface to simulate"
+    );
+    let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    loop {
+        tokio::select! {
+            line = lines.next_line() => {
+                let Ok(Some(line)) = line else { break };
+                match parse(&line) {
+                    Ok(Some(cmd)) => {
+                        for tx in &senders {
+                            let _ = tx.send(clone_command(&cmd)).await;
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(e) => eprintln!("can-sim: {e}"),
+                }
+            }
+            _ = sigterm.recv() => break,
+            _ = tokio::signal::ctrl_c() => break,
+        }
+    }
+    Ok(())
+}
+
+fn clone_command(c: &SimCommand) -> SimCommand {
+    match c {
+        SimCommand::Heartbeat(n, on) => SimCommand::Heartbeat(n.clone(), *on),
+        SimCommand::Fault(n, a, code) => SimCommand::Fault(n.clone(), *a, *code),
+        SimCommand::Report => SimCommand::Report,
+    }
+}
+
+fn parse(line: &str) -> Result<Option<SimCommand>, String> {
+    let words: Vec<&str> = line.split_whitespace().collect();
+    Ok(Some(match words.as_slice() {
+        [] => return Ok(None),
+        ["heartbeat", name, "on"] => SimCommand::Heartbeat((*name).to_owned(), true),
+        ["heartbeat", name, "off"] => SimCommand::Heartbeat((*name).to_owned(), false),
+        ["fault", name, axis, code] => {
+            let axis: usize = axis.parse().map_err(|_| format!("axis {axis:?}"))?;
+            let code = u16::from_str_radix(code.trim_start_matches("0x"), 16)
+                .map_err(|_| format!("EMCY code {code:?}"))?;
+            SimCommand::Fault((*name).to_owned(), axis.saturating_sub(1), code)
+        }
+        ["report"] => SimCommand::Report,
+        _ => return Err(format!("unknown command {line:?}")),
+    }))
+}
+
+async fn serve_bus(mut sim: SimBus, clock: RecordClock, mut commands: mpsc::Receiver<SimCommand>) {
+    loop {
+        match open(&sim.name) {
+            Ok(socket) => {
+                if let Err(e) = exchange(&mut sim, &socket, clock, &mut commands).await {
+                    eprintln!("can-sim: {}: {e}", sim.name);
+                }
+            }
+            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+        }
+        if commands.is_closed() {
+            return;
+        }
+    }
+}
+
+async fn exchange(
+    sim: &mut SimBus,
+    socket: &CanSocket,
+    clock: RecordClock,
+    commands: &mut mpsc::Receiver<SimCommand>,
+) -> Result<(), String> {
+    let mut step = tokio::time::interval(STEP);
+    step.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut check = tokio::time::interval(Duration::from_millis(200));
+    let mut last = clock.now();
+    loop {
+        let mut out = Vec::new();
+        tokio::select! {
+            _ = step.tick() => {
+                let t = clock.now();
+                let mut load_rpm = 0.0;
+                for (_, d) in &mut sim.drives {
+                    d.step(t, &mut out);
+                    load_rpm += d.report().iter().map(|a| a.rpm.abs()).sum::<f64>();
+                }
+                let dt = t.saturating_since(last);
+                last = t;
+                let draw = -(1.5 + 0.004 * load_rpm);
+                for battery in batteries(sim) {
+                    battery.current_a = draw;
+                    battery.step(dt);
+                }
+                if let Some(dbc) = &mut sim.dbc {
+                    dbc.step(t, &mut out);
+                }
+            }
+            read = socket.read_frame() => {
+                let frame = read.map_err(|e| e.to_string())?;
+                let t = clock.now();
+                if let Received::Data(f) = Received::from_socketcan(&CanAnyFrame::from(frame)) {
+                    for (_, d) in &mut sim.drives {
+                        d.on_frame(t, &f, &mut out);
+                    }
+                    if let Some(daly) = &mut sim.daly {
+                        daly.on_frame(&f, &mut out);
+                    }
+                }
+            }
+            cmd = commands.recv() => match cmd {
+                Some(cmd) => apply(sim, cmd, &mut out),
+                None => return Ok(()),
+            },
+            _ = check.tick() => {
+                if !interface_up(&sim.name).unwrap_or(false) {
+                    return Err("interface down".into());
+                }
+            }
+        }
+        for f in out {
+            let frame: CanFrame = f.to_socketcan();
+            // A full buffer means nobody acknowledges; the frame is lost as on a real bus.
+            let _ =
+                tokio::time::timeout(Duration::from_millis(20), socket.write_frame(frame)).await;
+        }
+    }
+}
+
+fn batteries(sim: &mut SimBus) -> impl Iterator<Item = &mut Battery> {
+    sim.daly
+        .as_mut()
+        .map(|d| &mut d.battery)
+        .into_iter()
+        .chain(sim.dbc.as_mut().map(|d| &mut d.battery))
+}
+
+fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
+    match cmd {
+        SimCommand::Heartbeat(name, on) => {
+            for (n, d) in &mut sim.drives {
+                if *n == name {
+                    d.set_heartbeat(on);
+                }
+            }
+        }
+        SimCommand::Fault(name, axis, code) => {
+            for (n, d) in &mut sim.drives {
+                if *n == name {
+                    d.inject_fault(axis, code, out);
+                }
+            }
+        }
+        SimCommand::Report => {
+            let drives: Vec<_> = sim
+                .drives
+                .iter()
+                .map(|(n, d)| {
+                    json!({
+                        "name": n,
+                        "node": d.node().get(),
+                        "nmt": format!("{:?}", d.nmt_state()),
+                        "axes": d.report(),
+                    })
+                })
+                .collect();
+            let battery = batteries(sim)
+                .next()
+                .map(|b| json!({"voltage": b.voltage_v, "current": b.current_a, "soc": b.soc_pct}));
+            println!(
+                "{}",
+                json!({"bus": sim.name, "drives": drives, "battery": battery})
+            );
+        }
+    }
+}

@@ -1,0 +1,142 @@
+//! Running the real binary in tests: a child process whose output lines can be awaited with
+//! a timeout, stopped with SIGTERM, and killed when the test ends.
+
+use std::ffi::OsStr;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+/// Lines of a child's pipe, delivered through a channel so waits can time out.
+pub fn lines_of(pipe: impl std::io::Read + Send + 'static) -> Receiver<String> {
+    let (tx, rx) = channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(pipe).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// Waits up to `wait` for a line matching `want`, keeping every line seen in `seen`.
+pub fn wait_for(
+    rx: &Receiver<String>,
+    seen: &mut Vec<String>,
+    wait: Duration,
+    what: &str,
+    want: impl Fn(&str) -> bool,
+) {
+    let deadline = Instant::now() + wait;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match rx.recv_timeout(left) {
+            Ok(line) => {
+                let hit = want(&line);
+                seen.push(line);
+                if hit {
+                    return;
+                }
+            }
+            Err(_) => break,
+        }
+    }
+    panic!(
+        "timed out after {wait:?} waiting for {what}; last lines: {:#?}",
+        seen.iter().rev().take(8).collect::<Vec<_>>()
+    );
+}
+
+/// A running `chassisd` with its stdin, stdout lines and stderr lines.
+pub struct Proc {
+    /// The process.
+    pub child: Child,
+    /// Its standard input.
+    pub stdin: Option<ChildStdin>,
+    /// Its standard output, line by line.
+    pub stdout: Receiver<String>,
+    /// Its standard error, line by line.
+    pub stderr: Receiver<String>,
+    /// Every stdout line seen so far.
+    pub out: Vec<String>,
+    /// Every stderr line seen so far.
+    pub log: Vec<String>,
+}
+
+impl Proc {
+    /// Starts `chassisd ARGS`.
+    pub fn start<S: AsRef<OsStr>>(args: &[S]) -> Proc {
+        let mut child = Command::new(super::chassisd())
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("chassisd starts");
+        Proc {
+            stdin: child.stdin.take(),
+            stdout: lines_of(child.stdout.take().expect("piped stdout")),
+            stderr: lines_of(child.stderr.take().expect("piped stderr")),
+            child,
+            out: Vec::new(),
+            log: Vec::new(),
+        }
+    }
+
+    /// Writes one line to its standard input.
+    pub fn send(&mut self, line: &str) {
+        if let Some(stdin) = &mut self.stdin {
+            writeln!(stdin, "{line}").expect("write to stdin");
+            stdin.flush().expect("flush stdin");
+        }
+    }
+
+    /// Waits for a stdout line matching `want`.
+    pub fn wait_out(&mut self, wait: Duration, what: &str, want: impl Fn(&str) -> bool) {
+        wait_for(&self.stdout, &mut self.out, wait, what, want);
+    }
+
+    /// Waits for a stderr line containing `text`.
+    pub fn wait_log(&mut self, wait: Duration, text: &str) {
+        wait_for(&self.stderr, &mut self.log, wait, text, |l| {
+            l.contains(text)
+        });
+    }
+
+    /// Takes every stdout line that has arrived, without waiting.
+    pub fn drain_out(&mut self) -> &[String] {
+        let before = self.out.len();
+        self.out.extend(self.stdout.try_iter());
+        &self.out[before..]
+    }
+
+    /// Stops it with SIGTERM, checks it exits cleanly within ten seconds, and returns every
+    /// stdout line.
+    pub fn stop(mut self) -> Vec<String> {
+        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).expect("signal");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let exit = loop {
+            if let Some(exit) = self.child.try_wait().expect("process status") {
+                break exit;
+            }
+            assert!(Instant::now() < deadline, "no exit within 10 s of SIGTERM");
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert!(exit.success(), "exit status {exit}");
+        let mut out = std::mem::take(&mut self.out);
+        out.extend(self.stdout.iter());
+        out
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

@@ -1,0 +1,366 @@
+//! CAN on a real SocketCAN bus: `vcan0` inside the VM that `tests/vm/can-tests` boots. The
+//! simulated drives and BMS (`chassisd can-sim`) and the daemon (`chassisd run`) are separate
+//! processes talking over the kernel's CAN stack.
+//!
+//! These tests are ignored on the host, which has no CAN; `tests/vm/can-tests` runs them with
+//! `--ignored` inside the VM.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use common::process::Proc;
+use serde_json::Value;
+
+/// Generous waits: the VM emulates its CPU.
+const WAIT: Duration = Duration::from_secs(20);
+/// The tests share vcan0: one at a time.
+static BUS: Mutex<()> = Mutex::new(());
+
+const ENABLED: u64 = 1 << 0;
+const FAULT: u64 = 1 << 1;
+const HEARTBEAT_LOST: u64 = 1 << 2;
+const BUS_DOWN: u64 = 1 << 5;
+const AWAITING_COMMAND: u64 = 1 << 6;
+
+fn config(name: &str) -> PathBuf {
+    common::repo().join("tests/vm").join(name)
+}
+
+fn status(line: &str) -> Option<Value> {
+    serde_json::from_str(line).ok()
+}
+
+fn robot_status(line: &str) -> u64 {
+    status(line).map_or(0, |s| s["robot"]["robot_status"].as_u64().unwrap_or(0))
+}
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    BUS.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The simulator and the daemon on vcan0.
+struct Rig {
+    sim: Proc,
+    daemon: Proc,
+}
+
+impl Rig {
+    fn start(record: Option<&Path>) -> Rig {
+        let vehicle = config("vehicle-vcan.toml");
+        let sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "run".as_ref(),
+            "--config".as_ref(),
+            vehicle.as_os_str(),
+            "--commands-stdin".as_ref(),
+        ];
+        if let Some(dir) = record {
+            args.extend(["--record".as_ref(), dir.as_os_str()]);
+        }
+        let daemon = Proc::start(&args);
+        Rig { sim, daemon }
+    }
+
+    /// Waits until both drives are enabled (the configuration enables them on start).
+    fn wait_enabled(&mut self) {
+        self.daemon.wait_log(WAIT, "drive left: running");
+        self.daemon.wait_out(WAIT, "both drives enabled", |l| {
+            robot_status(l) & ENABLED != 0
+                && status(l).is_some_and(|s| s["sensor"]["robot"] == true)
+        });
+    }
+
+    /// Sends a velocity command every 100 ms for `duration`.
+    fn drive(&mut self, vx: f64, wz: f64, duration: Duration) {
+        let until = Instant::now() + duration;
+        while Instant::now() < until {
+            self.daemon.send(&format!(
+                r#"cmd_vel {{"linear":{{"x":{vx}}},"angular":{{"z":{wz}}}}}"#
+            ));
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// The simulator's state.
+    fn report(&mut self) -> Value {
+        self.sim.send("report");
+        self.sim.wait_out(WAIT, "a simulator report", |l| {
+            l.starts_with("{\"battery\"")
+        });
+        serde_json::from_str(self.sim.out.last().expect("report")).expect("JSON report")
+    }
+
+    fn latest_status(&mut self) -> Value {
+        self.daemon.drain_out();
+        self.daemon
+            .out
+            .last()
+            .and_then(|l| status(l))
+            .expect("a status line")
+    }
+}
+
+fn axis(report: &Value, drive: &str) -> Value {
+    report["drives"]
+        .as_array()
+        .and_then(|d| d.iter().find(|x| x["name"] == drive))
+        .map(|d| d["axes"][0].clone())
+        .expect("drive in report")
+}
+
+fn ip_link(state: &str) {
+    let ok = Command::new("ip")
+        .args(["link", "set", "vcan0", state])
+        .status()
+        .expect("ip runs")
+        .success();
+    assert!(ok, "ip link set vcan0 {state}");
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn two_drives_enable_follow_velocity_and_report_odometry() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("vcan");
+    let recording = dir.join("session");
+    let mut rig = Rig::start(Some(&recording));
+    rig.wait_enabled();
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        assert_eq!(
+            axis(&report, drive)["state"],
+            "operation enabled",
+            "{report}"
+        );
+    }
+    assert_eq!(report["drives"][0]["nmt"], "Operational");
+
+    // 0.3 m/s: 3 rad/s at the wheel, 286.5 r/min at the motor (gear 10); the right motor
+    // turns the other way.
+    rig.drive(0.3, 0.0, Duration::from_secs(2));
+    let s = rig.latest_status();
+    assert!(
+        (s["robot"]["vx"].as_f64().unwrap() - 0.3).abs() < 0.01,
+        "{s}"
+    );
+    let report = rig.report();
+    let rpm = 0.3 / 0.1 * 60.0 / std::f64::consts::TAU * 10.0;
+    assert!(
+        (axis(&report, "left")["rpm"].as_f64().unwrap() - rpm).abs() < 1.0,
+        "{report}"
+    );
+    assert!(
+        (axis(&report, "right")["rpm"].as_f64().unwrap() + rpm).abs() < 1.0,
+        "{report}"
+    );
+
+    // Turning on the spot: 0.5 rad/s.
+    rig.drive(0.0, 0.5, Duration::from_secs(2));
+    let s = rig.latest_status();
+    assert!(
+        (s["robot"]["vz"].as_f64().unwrap() - 0.5).abs() < 0.01,
+        "{s}"
+    );
+
+    // Commands stop: the vehicle comes to rest by itself.
+    std::thread::sleep(Duration::from_secs(2));
+    let s = rig.latest_status();
+    assert_eq!(s["robot"]["vx"].as_f64(), Some(0.0), "{s}");
+    assert_eq!(s["robot"]["vz"].as_f64(), Some(0.0), "{s}");
+    let report = rig.report();
+    let live = rig.daemon.stop();
+    let bms = status(live.last().expect("status")).expect("JSON");
+    assert!(
+        bms["bms"]["voltage"].as_f64().unwrap() > 40.0,
+        "Daly BMS decoded: {bms}"
+    );
+    assert!(
+        bms["bms"]["status"].as_u64().unwrap() & 1 != 0,
+        "BMS fresh: {bms}"
+    );
+
+    // The recording replays to exactly the live output, reproducing every transmission.
+    let replay = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&recording)
+        .output()
+        .expect("replay runs");
+    let summary = String::from_utf8_lossy(&replay.stderr);
+    assert!(summary.contains(" 0 differ"), "{summary}");
+    assert_eq!(
+        String::from_utf8_lossy(&replay.stdout),
+        live.join("\n") + "\n"
+    );
+
+    // Wheel odometry from the encoders matches the simulated motors' travel.
+    let odometry = common::replay_odometry(&recording);
+    let counts_to_m = |c: f64| c / 4096.0 / 10.0 * std::f64::consts::TAU * 0.1;
+    let left_m = counts_to_m(axis(&report, "left")["counts"].as_f64().unwrap());
+    let right_m = -counts_to_m(axis(&report, "right")["counts"].as_f64().unwrap());
+    // 2 s at 0.3 m/s, then 2 s turning left on the spot (the left wheel backwards).
+    assert!(
+        left_m > 0.2 && right_m > left_m + 0.3,
+        "travelled {left_m} m and {right_m} m"
+    );
+    assert!(
+        (odometry.left_m - left_m).abs() < 0.01,
+        "{odometry:?} vs {left_m}"
+    );
+    assert!(
+        (odometry.right_m - right_m).abs() < 0.01,
+        "{odometry:?} vs {right_m}"
+    );
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn lost_heartbeat_stops_and_needs_a_fresh_command() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    rig.drive(0.2, 0.0, Duration::from_secs(1));
+    rig.sim.send("heartbeat left off");
+    let silenced = Instant::now();
+    rig.daemon
+        .wait_log(WAIT, "drive left: fault: heartbeat lost");
+    let detected = silenced.elapsed();
+    // Timeout 400 ms after the last heartbeat (every 100 ms), plus the VM's scheduling.
+    assert!(
+        detected < Duration::from_millis(1000),
+        "detected after {detected:?}"
+    );
+    rig.daemon.wait_out(WAIT, "the fault in the status", |l| {
+        let bits = robot_status(l);
+        bits & HEARTBEAT_LOST != 0 && bits & AWAITING_COMMAND != 0 && bits & ENABLED == 0
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        let a = axis(&report, drive);
+        assert_eq!(a["target"], 0, "{drive}: zero velocity commanded: {report}");
+        assert!(
+            a["rpm"].as_f64().unwrap().abs() < 1e-6,
+            "{drive} stopped: {report}"
+        );
+    }
+    // Refused while the drive is unreachable.
+    rig.daemon.send(r#"cmd_vel {"linear":{"x":0.2}}"#);
+    rig.daemon.wait_log(WAIT, "command refused");
+
+    // The heartbeat returns: the drive is set up again but stays disabled...
+    rig.sim.send("heartbeat left on");
+    rig.daemon.wait_log(WAIT, "drive left: running");
+    std::thread::sleep(Duration::from_secs(1));
+    let s = rig.latest_status();
+    let bits = s["robot"]["robot_status"].as_u64().unwrap();
+    assert!(bits & AWAITING_COMMAND != 0 && bits & ENABLED == 0, "{s}");
+    assert_ne!(axis(&rig.report(), "left")["state"], "operation enabled");
+    // ...until a fresh command.
+    rig.drive(0.2, 0.0, Duration::from_secs(1));
+    rig.daemon.wait_out(WAIT, "moving again", |l| {
+        robot_status(l) & ENABLED != 0
+            && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
+    });
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn interface_down_and_up_reconnects_and_waits_for_a_command() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    rig.drive(0.2, 0.0, Duration::from_secs(1));
+    ip_link("down");
+    rig.daemon.wait_log(WAIT, "link down");
+    rig.daemon.wait_out(WAIT, "bus down in the status", |l| {
+        robot_status(l) & BUS_DOWN != 0 && status(l).is_some_and(|s| s["sensor"]["robot"] == false)
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    ip_link("up");
+    rig.daemon.wait_log(WAIT, "link up");
+    rig.daemon.wait_log(WAIT, "drive right: running");
+    std::thread::sleep(Duration::from_secs(1));
+    let s = rig.latest_status();
+    let bits = s["robot"]["robot_status"].as_u64().unwrap();
+    assert!(bits & BUS_DOWN == 0, "{s}");
+    assert!(
+        bits & AWAITING_COMMAND != 0 && bits & ENABLED == 0,
+        "not re-enabled by itself: {s}"
+    );
+    for drive in ["left", "right"] {
+        assert_ne!(axis(&rig.report(), drive)["state"], "operation enabled");
+    }
+    rig.drive(0.2, 0.0, Duration::from_secs(1));
+    rig.daemon
+        .wait_out(WAIT, "enabled and moving after the command", |l| {
+            let bits = robot_status(l);
+            bits & ENABLED != 0
+                && bits & FAULT == 0
+                && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
+        });
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn canplayer_session_decodes_like_replay() {
+    let _turn = one_at_a_time();
+    let fixture = common::repo().join("fixtures/can-drive");
+    let listen = config("vehicle-vcan-listen.toml");
+    let mut monitor = Proc::start(&["run".as_ref(), "--config".as_ref(), listen.as_os_str()]);
+    monitor.wait_log(WAIT, "link up");
+    let played = Command::new("canplayer")
+        .arg("-I")
+        .arg(fixture.join("vcan0.log"))
+        .status()
+        .expect("canplayer runs");
+    assert!(played.success());
+    std::thread::sleep(Duration::from_millis(500));
+    let live = monitor.stop();
+    let replay = Command::new(common::chassisd())
+        .args(["replay", "--config"])
+        .arg(&listen)
+        .arg(&fixture)
+        .output()
+        .expect("replay runs");
+    let replayed: Vec<String> = String::from_utf8_lossy(&replay.stdout)
+        .lines()
+        .map(str::to_owned)
+        .collect();
+    // Live and replay tick at different phases of the same traffic, so compare what was
+    // decoded rather than line by line: the sequence of BMS readings, and the speeds seen.
+    let readings = |lines: &[String]| -> Vec<String> {
+        let mut seen: Vec<String> = lines
+            .iter()
+            .filter_map(|l| status(l))
+            .filter(|s| s["bms"]["status"].as_u64().unwrap_or(0) & 1 != 0)
+            .map(|s| {
+                format!(
+                    "{} {} {}",
+                    s["bms"]["voltage"], s["bms"]["soc"], s["bms"]["current"]
+                )
+            })
+            .collect();
+        seen.dedup();
+        seen
+    };
+    let (live_bms, replay_bms) = (readings(&live), readings(&replayed));
+    assert!(replay_bms.len() >= 3, "{replay_bms:?}");
+    assert_eq!(live_bms, replay_bms);
+    let top_speed = |lines: &[String]| {
+        lines
+            .iter()
+            .filter_map(|l| status(l))
+            .map(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0))
+            .fold(0.0, f64::max)
+    };
+    let (live_top, replay_top) = (top_speed(&live), top_speed(&replayed));
+    assert!(replay_top > 0.2, "{replay_top}");
+    assert!(
+        (live_top - replay_top).abs() < 1e-9,
+        "{live_top} vs {replay_top}"
+    );
+}
