@@ -116,7 +116,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             // A read of standard input may still be blocked in a runtime thread; do not wait
             // for it.
             runtime.shutdown_background();
-            return result;
+            result
         }
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
