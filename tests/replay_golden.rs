@@ -127,3 +127,64 @@ fn bad_input_paths_fail_clearly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("/nonexistent/recording"), "{stderr}");
 }
+
+/// A CAN session recorded on vcan0 in the VM (tests/vm/record-can-fixture): two CiA 402
+/// drives and a Daly BMS. Replay fills bms.*, robot.* and sensor.robot from the frames, and
+/// regenerates every frame chassisd sent in the live session.
+#[test]
+fn can_drive_replays_drives_and_bms() {
+    let fixture = common::repo().join("fixtures/can-drive");
+    let out = replay(&fixture);
+    let expected =
+        std::fs::read(fixture.join("expected/base_status.jsonl")).expect("expected output exists");
+    assert!(
+        out.stdout == expected,
+        "replay differs from expected/base_status.jsonl"
+    );
+    assert_eq!(out.stdout, replay(&fixture).stdout, "two replays differ");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("recorded transmissions: 1751 reproduced, 0 differ"),
+        "{stderr}"
+    );
+
+    let rows = statuses(&out.stdout);
+    let bits = |r: &serde_json::Value| r["robot"]["robot_status"].as_u64().unwrap();
+    // BMS: decoded from the Daly replies, fresh, discharging with both MOSFETs on.
+    let last = rows.last().unwrap();
+    assert_eq!(last["bms"]["voltage"], 52.8);
+    assert_eq!(last["bms"]["soc"], 80.0);
+    assert_eq!(last["robot"]["power"], 80.0);
+    assert_eq!(last["bms"]["status"], 1 | 8 | 16 | 32);
+    let capacity = last["bms"]["remaining_capacity"].as_f64().unwrap();
+    assert!(
+        (23.9..24.0).contains(&capacity),
+        "remaining capacity {capacity} Ah"
+    );
+    // Drives: ready and enabled, then at 0.3 m/s, then turning at 0.4 rad/s.
+    assert!(
+        rows.iter()
+            .any(|r| r["sensor"]["robot"] == true && bits(r) & 1 != 0)
+    );
+    let top = rows
+        .iter()
+        .map(|r| r["robot"]["vx"].as_f64().unwrap())
+        .fold(0.0, f64::max);
+    assert!((top - 0.3).abs() < 0.002, "top speed {top}");
+    // Motor speeds arrive in whole r/min: 0.4 rad/s reads back as 0.398.
+    assert!(
+        rows.iter()
+            .any(|r| (r["robot"]["vz"].as_f64().unwrap() - 0.4).abs() < 0.005)
+    );
+    // The injected over-current: a latched fault that waits for a command, then clears.
+    let faulted = rows
+        .iter()
+        .position(|r| bits(r) & 2 != 0 && bits(r) & 64 != 0)
+        .expect("fault");
+    assert_eq!(rows[faulted]["sensor"]["robot"], false);
+    assert!(
+        rows[faulted..]
+            .iter()
+            .any(|r| bits(r) & 2 == 0 && r["robot"]["vx"].as_f64().unwrap() > 0.15)
+    );
+}
