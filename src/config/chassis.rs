@@ -144,6 +144,8 @@ pub enum ProfileRef<T> {
 pub trait LoadProfile: Sized {
     /// Reads and checks the file.
     fn load_file(path: &Path) -> Result<Self, ConfigError>;
+    /// Checks a profile given inline; `file` names the configuration in errors.
+    fn check(&self, file: &Path) -> Result<(), ConfigError>;
 }
 
 impl LoadProfile for DriveProfile {
@@ -154,21 +156,39 @@ impl LoadProfile for DriveProfile {
         })?;
         DriveProfile::from_toml(&text, path)
     }
+
+    fn check(&self, file: &Path) -> Result<(), ConfigError> {
+        self.validate()
+            .map_err(|(key, problem, fix)| ConfigError::Invalid {
+                file: file.to_owned(),
+                key: format!("drive.profile.{key}"),
+                problem,
+                fix,
+            })
+    }
 }
 
 impl LoadProfile for BmsProfile {
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
         BmsProfile::load(path)
     }
+
+    fn check(&self, file: &Path) -> Result<(), ConfigError> {
+        self.validate(file)
+    }
 }
 
 impl<T: LoadProfile> ProfileRef<T> {
-    /// Reads a file reference, relative to `base`.
-    pub fn resolve(&mut self, base: &Path) -> Result<(), ConfigError> {
-        if let Self::File(name) = self {
-            *self = Self::Inline(Box::new(T::load_file(&base.join(name.as_str()))?));
+    /// Reads a file reference, relative to `base`; checks an inline profile. `file` is the
+    /// configuration, for errors.
+    pub fn resolve(&mut self, base: &Path, file: &Path) -> Result<(), ConfigError> {
+        match self {
+            Self::File(name) => {
+                *self = Self::Inline(Box::new(T::load_file(&base.join(name.as_str()))?));
+                Ok(())
+            }
+            Self::Inline(profile) => profile.check(file),
         }
-        Ok(())
     }
 
     /// The profile, once resolved.

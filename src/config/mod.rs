@@ -187,10 +187,10 @@ impl VehicleConfig {
         })?;
         let base = file.parent().unwrap_or(Path::new("."));
         for drive in &mut config.drive {
-            drive.profile.resolve(base)?;
+            drive.profile.resolve(base, file)?;
         }
         if let Some(bms) = &mut config.bms {
-            bms.profile.resolve(base)?;
+            bms.profile.resolve(base, file)?;
         }
         config.validate(file)?;
         Ok(config)
@@ -330,6 +330,71 @@ mod tests {
         assert!(e.to_string().contains("`gnss.fix_timeout_s`"));
         let e = load("[gnss]\nport = \"/dev/x\"\n[gnss.antenna]\nz = 40.0\n").unwrap_err();
         assert!(e.to_string().contains("`gnss.antenna.z`"));
+    }
+
+    #[test]
+    fn drive_train_errors_name_the_key() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let check = |from: &str, to: &str, key: &str| {
+            let bad = text.replace(from, to);
+            assert_ne!(bad, text, "{from:?} not in the example");
+            let e = VehicleConfig::from_toml(&bad, &path)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(&format!("`{key}`")), "{key}: {e}");
+        };
+        check(
+            "bus = \"can0\"\nnode = 1",
+            "bus = \"can9\"\nnode = 1",
+            "drive[0].bus",
+        );
+        check("node = 1\n", "node = 200\n", "drive[0].node");
+        check(
+            "wheels = [\"left\", \"right\"]",
+            "wheels = [\"left\"]",
+            "drive[0].wheels",
+        );
+        check(
+            "wheels = [\"left\", \"right\"]",
+            "wheels = [\"left\", \"left\"]",
+            "drive[0].wheels",
+        );
+        check(
+            "heartbeat_timeout_ms = 350",
+            "heartbeat_timeout_ms = 150",
+            "drive[0].heartbeat_timeout_ms",
+        );
+        check("track_m = 0.42", "track_m = 0.0", "chassis.track_m");
+        check("direction = -1", "direction = 0", "wheels.right.direction");
+        check(
+            "bus = \"can1\"\naddress",
+            "bus = \"can7\"\naddress",
+            "bms.bus",
+        );
+        check(
+            "interface = \"can1\"",
+            "interface = \"can0\"",
+            "can[1].interface",
+        );
+        let e = VehicleConfig::from_toml(
+            &text.replace("profile = \"zlac8015d.toml\"", "profile = \"missing.toml\""),
+            &path,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("missing.toml"), "{e}");
+    }
+
+    #[test]
+    fn effective_configuration_is_self_contained() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let config = VehicleConfig::load(&path).unwrap();
+        let effective = config.to_effective_toml();
+        // Loaded from anywhere: the profiles are inline.
+        let again =
+            VehicleConfig::from_toml(&effective, Path::new("/nonexistent/vehicle.toml")).unwrap();
+        assert_eq!(again, config);
     }
 
     #[test]
