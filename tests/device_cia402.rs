@@ -50,8 +50,10 @@ fn boot_and_sdo_setup_sequence() {
             "601#2300140101020000", // RPDO1 on, COB-ID 0x201
         ]
     );
-    assert_eq!(sent[26], "601#2B07600003000000"); // 0x6007 abort connection: quick stop
-    assert_eq!(sent[27], "000#0101"); // NMT start node 1
+    assert_eq!(sent[26], "601#23836000B80B0000"); // 0x6083 acceleration 3000 r/min/s
+    assert_eq!(sent[27], "601#2384600070170000"); // 0x6084 deceleration 6000 r/min/s
+    assert_eq!(sent[28], "601#2B07600003000000"); // 0x6007 abort connection: quick stop
+    assert_eq!(sent[29], "000#0101"); // NMT start node 1
     assert_eq!(rig.node.phase(), Phase::Running);
     assert_eq!(rig.sim.nmt_state(), NmtState::Operational);
     // Not asked to enable: the drive is switched on, not enabled.
@@ -168,6 +170,30 @@ fn emcy_faults_and_needs_a_reset() {
         rig.sent().iter().any(|f| f == "201#800000000000"),
         "fault reset sent"
     );
+}
+
+#[test]
+fn tpdo_bytes_decode_into_feedback() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(200, false, &[0.0]);
+    // TPDO1: statusword 0x0637 (operation enabled), actual velocity -250 r/min;
+    // TPDO2: position 123456 counts.
+    let tpdo1 = Frame::std(0x181, [0x37, 0x06, 0x06, 0xFF, 0xFF, 0xFF]);
+    let tpdo2 = Frame::std(0x281, [0x40, 0xE2, 0x01, 0x00]);
+    let mut out = Vec::new();
+    rig.node.on_frame(ms(rig.now_ms), &tpdo1, &mut out);
+    rig.node.on_frame(ms(rig.now_ms), &tpdo2, &mut out);
+    let fb = rig.node.axes()[0];
+    assert_eq!(fb.statusword, Some(0x0637));
+    assert_eq!(fb.velocity, Some(-250));
+    assert_eq!(fb.position, Some(123_456));
+    assert_eq!(rig.node.drive_state(), Some(DriveState::OperationEnabled));
+    // A TPDO shorter than its mapping is counted and ignored.
+    rig.node
+        .on_frame(ms(rig.now_ms), &Frame::std(0x181, [0x37, 0x06]), &mut out);
+    assert_eq!(rig.node.stats().short_tpdos, 1);
+    assert_eq!(rig.node.axes()[0].velocity, Some(-250));
 }
 
 #[test]

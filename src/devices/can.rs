@@ -191,6 +191,20 @@ mod tests {
     }
 
     #[test]
+    fn error_frames_decode_into_causes() {
+        // Class bits 0x40 (bus off) and 0x20 (no acknowledge).
+        let frame = socketcan::CanErrorFrame::new_error(0x60, &[0; 8]).unwrap();
+        match Received::from_socketcan(&CanAnyFrame::Error(frame)) {
+            Received::Error(e) => {
+                assert!(e.is_bus_off() && e.is_no_ack());
+                let text = e.to_string();
+                assert!(text.contains("bus off"), "{text}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
     fn displays_like_candump() {
         let f = Frame::extended(0x1890_4001, &[0x02, 0x12]).unwrap();
         assert_eq!(f.to_string(), "18904001#0212");
