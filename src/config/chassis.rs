@@ -158,13 +158,9 @@ impl LoadProfile for DriveProfile {
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {
-        self.validate()
-            .map_err(|(key, problem, fix)| ConfigError::Invalid {
-                file: file.to_owned(),
-                key: format!("drive.profile.{key}"),
-                problem,
-                fix,
-            })
+        self.validate().map_err(|(key, problem, fix)| {
+            ConfigError::invalid(file, &format!("drive.profile.{key}"), problem, &fix)
+        })
     }
 }
 
@@ -284,12 +280,8 @@ fn default_stale_s() -> f64 {
 
 /// Checks the drive train and CAN sections of `config`.
 pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> {
-    let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
-        file: file.to_owned(),
-        key: key.to_owned(),
-        problem,
-        fix: fix.to_owned(),
-    };
+    let invalid =
+        |key: &str, problem: String, fix: &str| ConfigError::invalid(file, key, problem, fix);
     for (i, bus) in config.can.iter().enumerate() {
         let key = format!("can[{i}].interface");
         if bus.interface.is_empty()

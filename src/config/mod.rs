@@ -40,6 +40,18 @@ pub enum ConfigError {
     },
 }
 
+impl ConfigError {
+    /// An invalid value in `file` at `key`, with what is wrong and how to fix it.
+    pub fn invalid(file: &Path, key: &str, problem: impl Into<String>, fix: &str) -> Self {
+        Self::Invalid {
+            file: file.to_owned(),
+            key: key.to_owned(),
+            problem: problem.into(),
+            fix: fix.to_owned(),
+        }
+    }
+}
+
 /// The whole vehicle configuration.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -205,12 +217,8 @@ impl VehicleConfig {
 
     /// Checks ranges and consistency.
     pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
-        let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
-            file: file.to_owned(),
-            key: key.to_owned(),
-            problem,
-            fix: fix.to_owned(),
-        };
+        let invalid =
+            |key: &str, problem: String, fix: &str| ConfigError::invalid(file, key, problem, fix);
         if self.vehicle.name.trim().is_empty() {
             return Err(invalid(
                 "vehicle.name",

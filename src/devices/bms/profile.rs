@@ -134,12 +134,8 @@ impl BmsProfile {
 
     /// Checks names and the DBC mapping.
     pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
-        let invalid = |key: &str, problem: String, fix: &str| ConfigError::Invalid {
-            file: file.to_owned(),
-            key: key.to_owned(),
-            problem,
-            fix: fix.to_owned(),
-        };
+        let invalid =
+            |key: &str, problem: String, fix: &str| ConfigError::invalid(file, key, problem, fix);
         let Self::Dbc(p) = self else {
             return Ok(());
         };

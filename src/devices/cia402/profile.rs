@@ -239,12 +239,7 @@ impl DriveProfile {
         })?;
         profile
             .validate()
-            .map_err(|(key, problem, fix)| ConfigError::Invalid {
-                file: file.to_owned(),
-                key,
-                problem,
-                fix,
-            })?;
+            .map_err(|(key, problem, fix)| ConfigError::invalid(file, &key, problem, &fix))?;
         Ok(profile)
     }
 
