@@ -228,6 +228,7 @@ fn lost_heartbeat_stops_and_needs_a_fresh_command() {
     rig.daemon
         .wait_log(WAIT, "drive left: fault: heartbeat lost");
     let detected = silenced.elapsed();
+    eprintln!("heartbeat loss reported {detected:?} after the heartbeat stopped");
     // Timeout 400 ms after the last heartbeat (every 100 ms), plus the VM's scheduling.
     assert!(
         detected < Duration::from_millis(1000),
