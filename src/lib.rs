@@ -9,6 +9,7 @@ pub mod config;
 pub mod core;
 pub mod devices;
 pub mod engine;
+pub mod fusion;
 pub mod record;
 pub mod replay;
 pub mod runtime;

@@ -85,15 +85,16 @@ struct Daemon(Proc);
 
 impl Daemon {
     fn start(dir: &Path, link: &Path, extra_args: &[&std::ffi::OsStr]) -> Daemon {
+        let config = format!(
+            "[gnss]\nport = \"{}\"\nbaud = 115200\nreconnect_max_s = 0.2\n",
+            link.display()
+        );
+        Daemon::with_config(dir, &config, extra_args)
+    }
+
+    fn with_config(dir: &Path, config_text: &str, extra_args: &[&std::ffi::OsStr]) -> Daemon {
         let config = dir.join("vehicle.toml");
-        std::fs::write(
-            &config,
-            format!(
-                "[gnss]\nport = \"{}\"\nbaud = 115200\nreconnect_max_s = 0.2\n",
-                link.display()
-            ),
-        )
-        .unwrap();
+        std::fs::write(&config, config_text).unwrap();
         let mut args: Vec<&std::ffi::OsStr> =
             vec!["run".as_ref(), "--config".as_ref(), config.as_os_str()];
         args.extend_from_slice(extra_args);
@@ -202,6 +203,54 @@ fn a_missing_port_is_retried_not_fatal() {
     daemon.wait_log("link up", "link up");
     port.send(&gga(4, "08.98071170"));
     daemon.wait_status("a fix", |l| is_status(l, 4, 23.0 + 8.98071170 / 60.0));
+}
+
+#[test]
+fn imu_over_pty_reports_health() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("pty");
+    let link = dir.join("imu-port");
+    let config = format!(
+        "[imu]\nport = \"{}\"\nprotocol = \"hipnuc\"\ntimeout_s = 0.3\nreconnect_max_s = 0.2\n",
+        link.display()
+    );
+    let mut port = Port::open_at(&link);
+    let mut daemon = Daemon::with_config(&dir, &config, &[]);
+    daemon.wait_log("link up", "link up");
+    let imu_ok = |l: &str| status(l).is_some_and(|s| s["sensor"]["imu"] == true);
+    let imu_bad = |l: &str| status(l).is_some_and(|s| s["sensor"]["imu"] == false);
+    let frame = chassisd::devices::imu::hipnuc::frame(&chassisd::devices::imu::hipnuc::packet_91(
+        0,
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, 10.0],
+        [1.0, 0.0, 0.0, 0.0],
+    ));
+    let dead = chassisd::devices::imu::hipnuc::frame(&chassisd::devices::imu::hipnuc::packet_91(
+        0,
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0, 0.0],
+    ));
+    for _ in 0..30 {
+        port.master.write_all(&[0x00, 0x5A]).unwrap(); // garbage between frames
+        port.master.write_all(&frame).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    daemon.wait_status("IMU ok", imu_ok);
+    // Frames keep coming but say the accelerometer feels no gravity: not ok.
+    for _ in 0..60 {
+        port.master.write_all(&dead).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    daemon.wait_status("IMU implausible", imu_bad);
+    for _ in 0..30 {
+        port.master.write_all(&frame).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    daemon.wait_status("IMU ok again", imu_ok);
+    // Silence: stale after the 0.3 s timeout.
+    daemon.wait_status("IMU silent", imu_bad);
+    drop(port);
 }
 
 #[test]

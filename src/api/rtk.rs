@@ -164,7 +164,7 @@ impl BaseStatus {
             },
             sensor: Sensor {
                 gnss: gnss.ok,
-                imu: false,
+                imu: status.imu_ok,
                 laser: false,
                 robot: chassis.ok,
             },

@@ -6,6 +6,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 pub mod chassis;
+pub mod imu;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -62,6 +63,9 @@ pub struct VehicleConfig {
     /// The GNSS receiver; absent on vehicles without one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gnss: Option<GnssConfig>,
+    /// The IMU; absent on vehicles without one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub imu: Option<imu::ImuConfig>,
     /// Geometry, limits and safety of the drive train; required with `[[drive]]`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chassis: Option<chassis::ChassisConfig>,
@@ -164,7 +168,7 @@ fn default_reconnect_max_s() -> f64 {
 }
 
 /// Baud rates a serial GNSS receiver can use.
-const STANDARD_BAUDS: [u32; 10] = [
+pub(crate) const STANDARD_BAUDS: [u32; 10] = [
     4_800, 9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 921_600, 1_000_000,
 ];
 
@@ -204,6 +208,9 @@ impl VehicleConfig {
         if let Some(bms) = &mut config.bms {
             bms.profile.resolve(base, file)?;
         }
+        if let Some(imu) = &mut config.imu {
+            imu.resolve(base)?;
+        }
         config.validate(file)?;
         Ok(config)
     }
@@ -227,6 +234,9 @@ impl VehicleConfig {
             ));
         }
         chassis::validate(self, file)?;
+        if let Some(imu) = &self.imu {
+            imu.validate(file)?;
+        }
         let Some(gnss) = &self.gnss else {
             return Ok(());
         };

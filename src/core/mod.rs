@@ -10,6 +10,7 @@ use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
+use crate::devices::imu::ImuSample;
 use crate::time::Timestamp;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
 pub use status::{BatteryStatus, GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
@@ -25,6 +26,8 @@ pub struct CoreConfig {
     pub chassis: Option<ChassisConfig>,
     /// A BMS reading older than this is stale; `None` without a BMS.
     pub bms_stale_after: Option<Duration>,
+    /// No plausible IMU sample for this long: the IMU is not ok; `None` without an IMU.
+    pub imu_timeout: Option<Duration>,
 }
 
 impl Default for CoreConfig {
@@ -34,6 +37,7 @@ impl Default for CoreConfig {
             cog_min_speed_mps: 0.3,
             chassis: None,
             bms_stale_after: None,
+            imu_timeout: None,
         }
     }
 }
@@ -56,6 +60,7 @@ impl CoreConfig {
             .bms
             .as_ref()
             .map(|b| Duration::from_secs_f64(b.stale_s));
+        core.imu_timeout = config.imu.as_ref().map(|i| i.timeout());
         core
     }
 }
@@ -65,6 +70,8 @@ impl CoreConfig {
 pub enum Device {
     /// The GNSS receiver.
     Gnss,
+    /// The IMU.
+    Imu,
 }
 
 /// Whether a device's port or bus is usable.
@@ -100,6 +107,8 @@ pub enum Input<'a> {
     Chassis(&'a ChassisFeedback),
     /// The BMS reading changed.
     Bms(&'a BmsReading),
+    /// An IMU sample, in the vehicle frame.
+    Imu(&'a ImuSample),
     /// A command.
     Command(Command),
     /// The control period elapsed: produce the wheel command.
@@ -129,6 +138,9 @@ pub struct Vehicle {
     held_heading_deg: f64,
     chassis: Option<Chassis>,
     bms: Option<BmsReading>,
+    /// The last plausible IMU sample.
+    imu: Option<ImuSample>,
+    imu_link_down: bool,
 }
 
 impl Vehicle {
@@ -141,6 +153,8 @@ impl Vehicle {
             gnss_link_down: false,
             held_heading_deg: 0.0,
             bms: None,
+            imu: None,
+            imu_link_down: false,
         }
     }
 
@@ -153,6 +167,16 @@ impl Vehicle {
             }
             Input::Link(Device::Gnss, state) => {
                 self.gnss_link_down = state == LinkState::Down;
+                Vec::new()
+            }
+            Input::Link(Device::Imu, state) => {
+                self.imu_link_down = state == LinkState::Down;
+                Vec::new()
+            }
+            Input::Imu(sample) => {
+                if sample.is_plausible() {
+                    self.imu = Some(*sample);
+                }
                 Vec::new()
             }
             Input::Chassis(feedback) => {
@@ -188,8 +212,15 @@ impl Vehicle {
                 reading,
             }
         });
+        let imu_ok = self.config.imu_timeout.is_some_and(|timeout| {
+            !self.imu_link_down
+                && self
+                    .imu
+                    .is_some_and(|s| t.saturating_since(s.rx) <= timeout)
+        });
         VehicleStatus {
             time: t,
+            imu_ok,
             chassis: self.chassis.as_ref().map(|c| c.status(t)),
             battery,
             gnss: self.gnss_status(t),

@@ -10,6 +10,8 @@ use crate::time::Timestamp;
 pub struct VehicleStatus {
     /// Tick time.
     pub time: Timestamp,
+    /// An IMU is configured, its link is up, and a plausible sample is fresh.
+    pub imu_ok: bool,
     /// The drive train; `None` without drives.
     pub chassis: Option<ChassisStatus>,
     /// The battery; `None` without a BMS.

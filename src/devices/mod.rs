@@ -5,3 +5,4 @@ pub mod can;
 pub mod canopen;
 pub mod cia402;
 pub mod gnss;
+pub mod imu;

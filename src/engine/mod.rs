@@ -18,10 +18,14 @@ use std::time::Duration;
 
 use crate::api::local;
 use crate::config::VehicleConfig;
+use crate::config::imu::{ImuConfig, ImuProtocol};
 use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
 use crate::core::{CoreConfig, Device, Input, LinkState, Output, Vehicle, VehicleStatus};
 use crate::devices::can::{Frame, Received};
 use crate::devices::gnss::{GnssStats, NmeaReceiver};
+use crate::devices::imu::hipnuc::HiPnuc;
+use crate::devices::imu::witmotion::WitMotion;
+use crate::devices::imu::{ImuDecoder, ImuStats, Mounting};
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
 use drivetrain::{BusStats, Drivetrain};
@@ -40,6 +44,8 @@ const ONE_MICRO: Duration = Duration::from_micros(1);
 pub enum Decoder {
     /// NMEA 0183 from a GNSS receiver.
     Nmea,
+    /// An IMU.
+    Imu(ImuProtocol),
 }
 
 impl Decoder {
@@ -47,7 +53,17 @@ impl Decoder {
     pub fn for_protocol(protocol: &str) -> Option<Self> {
         match protocol {
             "nmea0183" => Some(Self::Nmea),
+            "witmotion" => Some(Self::Imu(ImuProtocol::Witmotion)),
+            "hipnuc" => Some(Self::Imu(ImuProtocol::Hipnuc)),
             _ => None,
+        }
+    }
+
+    /// The protocol name recordings use.
+    pub fn protocol(self) -> &'static str {
+        match self {
+            Self::Nmea => "nmea0183",
+            Self::Imu(p) => p.name(),
         }
     }
 }
@@ -105,6 +121,7 @@ pub struct EngineStats {
 pub struct Engine {
     vehicle: Vehicle,
     nmea: BTreeMap<String, NmeaReceiver>,
+    imu: BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: Drivetrain,
     next_tick: Option<Timestamp>,
     /// Time and source of the last record processed.
@@ -128,9 +145,28 @@ impl Engine {
             .filter(|(_, d)| *d == Decoder::Nmea)
             .map(|(name, _)| (name.clone(), NmeaReceiver::new()))
             .collect();
+        let mounting = config
+            .imu
+            .as_ref()
+            .map(ImuConfig::mounting)
+            .unwrap_or_default();
+        let imu = sources
+            .iter()
+            .filter_map(|(name, d)| match d {
+                Decoder::Imu(ImuProtocol::Witmotion) => Some((
+                    name.clone(),
+                    (ImuDecoder::WitMotion(WitMotion::new()), mounting),
+                )),
+                Decoder::Imu(ImuProtocol::Hipnuc) => {
+                    Some((name.clone(), (ImuDecoder::HiPnuc(HiPnuc::new()), mounting)))
+                }
+                Decoder::Nmea => None,
+            })
+            .collect();
         Self {
             vehicle: Vehicle::new(CoreConfig::from_vehicle(config)),
             nmea,
+            imu,
             drivetrain: Drivetrain::new(config),
             next_tick: None,
             last_record: None,
@@ -184,17 +220,25 @@ impl Engine {
         self.count_record(&record.source);
         let mut tx = Vec::new();
         match &record.payload {
-            Payload::Serial(bytes) => match self.nmea.get_mut(&record.source) {
-                Some(receiver) => {
-                    let vehicle = &mut self.vehicle;
+            Payload::Serial(bytes) => {
+                let vehicle = &mut self.vehicle;
+                if let Some(receiver) = self.nmea.get_mut(&record.source) {
                     receiver.push(t, bytes, |fix| {
                         vehicle.handle(t, Input::Gnss(fix));
                     });
+                } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
+                    decoder.push(t, bytes, |sample| {
+                        vehicle.handle(t, Input::Imu(&mounting.apply(&sample)));
+                    });
+                } else {
+                    self.stats.undecoded += 1;
                 }
-                None => self.stats.undecoded += 1,
-            },
+            }
             Payload::Link(state) if self.nmea.contains_key(&record.source) => {
                 self.vehicle.handle(t, Input::Link(Device::Gnss, *state));
+            }
+            Payload::Link(state) if self.imu.contains_key(&record.source) => {
+                self.vehicle.handle(t, Input::Link(Device::Imu, *state));
             }
             Payload::Link(state) if self.drivetrain.has_bus(&record.source) => {
                 self.drivetrain
@@ -401,6 +445,13 @@ impl Engine {
     /// Counters of each NMEA source.
     pub fn gnss_stats(&self) -> impl Iterator<Item = (&str, GnssStats)> {
         self.nmea.iter().map(|(name, r)| (name.as_str(), r.stats()))
+    }
+
+    /// Counters of each IMU source.
+    pub fn imu_stats(&self) -> impl Iterator<Item = (&str, ImuStats)> {
+        self.imu
+            .iter()
+            .map(|(name, (d, _))| (name.as_str(), d.stats()))
     }
 
     /// Counters of each CAN interface.

@@ -29,6 +29,8 @@ const CHANNEL: usize = 4096;
 const SUMMARY_EVERY: Duration = Duration::from_secs(30);
 /// Source name of the GNSS receiver.
 pub const GNSS_SOURCE: &str = "gnss";
+/// Source name of the IMU.
+pub const IMU_SOURCE: &str = "imu";
 /// Source name of the local command channel.
 pub const STDIN_SOURCE: &str = crate::engine::LOCAL_COMMANDS;
 
@@ -57,13 +59,30 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             name: GNSS_SOURCE.into(),
             kind: SourceKind::Serial,
             file: format!("{GNSS_SOURCE}.log"),
-            protocol: Some("nmea0183".into()),
+            protocol: Some(Decoder::Nmea.protocol().into()),
         });
         let spec = SerialSpec {
             source: GNSS_SOURCE.into(),
             port: gnss.port.clone(),
             baud: gnss.baud,
             reconnect_max: gnss.reconnect_max(),
+        };
+        tokio::spawn(serial::run(spec, clock, tx.clone()));
+    }
+    if let Some(imu) = &config.imu {
+        let decoder = Decoder::Imu(imu.protocol);
+        sources.push((IMU_SOURCE.to_owned(), decoder));
+        source_meta.push(SourceMeta {
+            name: IMU_SOURCE.into(),
+            kind: SourceKind::Serial,
+            file: format!("{IMU_SOURCE}.log"),
+            protocol: Some(decoder.protocol().into()),
+        });
+        let spec = SerialSpec {
+            source: IMU_SOURCE.into(),
+            port: imu.port.clone(),
+            baud: imu.baud,
+            reconnect_max: Duration::from_secs_f64(imu.reconnect_max_s),
         };
         tokio::spawn(serial::run(spec, clock, tx.clone()));
     }

@@ -1,0 +1,165 @@
+//! `[imu]`: an IMU on a serial port, its mounting and its calibration.
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, check_range};
+use crate::devices::imu::Mounting;
+
+/// Wire protocol of an IMU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ImuProtocol {
+    /// WitMotion standard protocol (0x55 frames).
+    Witmotion,
+    /// HiPNUC protocol (0x5A 0xA5 frames).
+    Hipnuc,
+}
+
+impl ImuProtocol {
+    /// The protocol name in recordings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Witmotion => "witmotion",
+            Self::Hipnuc => "hipnuc",
+        }
+    }
+}
+
+/// `[imu]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuConfig {
+    /// Serial device.
+    pub port: String,
+    /// Baud rate.
+    #[serde(default = "default_baud")]
+    pub baud: u32,
+    /// Wire protocol.
+    pub protocol: ImuProtocol,
+    /// Rotation from the sensor frame to the vehicle frame: roll, pitch, yaw, degrees.
+    #[serde(default)]
+    pub mounting_rpy_deg: [f64; 3],
+    /// Gyro bias in the sensor frame, rad/s; a calibration file overrides it.
+    #[serde(default)]
+    pub gyro_bias_rps: [f64; 3],
+    /// Calibration result written by `chassisd calibrate` (relative to this file). Read on
+    /// load; its bias replaces `gyro_bias_rps`.
+    #[serde(default, skip_serializing)]
+    pub calibration: Option<String>,
+    /// No plausible sample for this long: the IMU is not ok, s.
+    #[serde(default = "default_timeout")]
+    pub timeout_s: f64,
+    /// Longest wait between reconnect attempts, s.
+    #[serde(default = "default_reconnect")]
+    pub reconnect_max_s: f64,
+}
+
+fn default_baud() -> u32 {
+    115_200
+}
+fn default_timeout() -> f64 {
+    0.5
+}
+fn default_reconnect() -> f64 {
+    5.0
+}
+
+/// `calib/imu.toml`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuCalibration {
+    /// When it was made.
+    pub date: String,
+    /// How it was made.
+    pub method: String,
+    /// Gyro bias in the sensor frame, rad/s.
+    pub gyro_bias_rps: [f64; 3],
+}
+
+impl ImuConfig {
+    /// The mounting rotation and bias.
+    pub fn mounting(&self) -> Mounting {
+        Mounting::from_rpy_deg(self.mounting_rpy_deg, self.gyro_bias_rps)
+    }
+
+    /// The stale timeout.
+    pub fn timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.timeout_s)
+    }
+
+    /// Reads the calibration file, if one is named, into `gyro_bias_rps`.
+    pub fn resolve(&mut self, base: &Path) -> Result<(), ConfigError> {
+        let Some(name) = self.calibration.take() else {
+            return Ok(());
+        };
+        let path = base.join(&name);
+        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
+            file: path.clone(),
+            source,
+        })?;
+        let calib: ImuCalibration = toml::from_str(&text).map_err(|e| ConfigError::Parse {
+            file: path.clone(),
+            message: e.to_string(),
+        })?;
+        for (i, b) in calib.gyro_bias_rps.iter().enumerate() {
+            check_range(
+                &path,
+                &format!("gyro_bias_rps[{i}]"),
+                *b,
+                -0.5..=0.5,
+                "rad/s",
+            )?;
+        }
+        self.gyro_bias_rps = calib.gyro_bias_rps;
+        Ok(())
+    }
+
+    /// Checks ranges.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        if self.port.trim().is_empty() {
+            return Err(ConfigError::invalid(
+                file,
+                "imu.port",
+                "is empty",
+                "set the serial device",
+            ));
+        }
+        if !super::STANDARD_BAUDS.contains(&self.baud) {
+            return Err(ConfigError::invalid(
+                file,
+                "imu.baud",
+                format!("{} is not a standard rate", self.baud),
+                "use one of 4800 ... 921600",
+            ));
+        }
+        for (i, a) in self.mounting_rpy_deg.iter().enumerate() {
+            check_range(
+                file,
+                &format!("imu.mounting_rpy_deg[{i}]"),
+                *a,
+                -360.0..=360.0,
+                "degrees",
+            )?;
+        }
+        for (i, b) in self.gyro_bias_rps.iter().enumerate() {
+            check_range(
+                file,
+                &format!("imu.gyro_bias_rps[{i}]"),
+                *b,
+                -0.5..=0.5,
+                "rad/s",
+            )?;
+        }
+        check_range(file, "imu.timeout_s", self.timeout_s, 0.01..=10.0, "s")?;
+        check_range(
+            file,
+            "imu.reconnect_max_s",
+            self.reconnect_max_s,
+            0.05..=300.0,
+            "s",
+        )
+    }
+}

@@ -1,0 +1,3 @@
+//! Localisation: geodesy and the fusion filter.
+
+pub mod geodesy;
