@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod chassis;
 pub mod imu;
+pub mod localization;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -63,6 +64,9 @@ pub struct VehicleConfig {
     /// The GNSS receiver; absent on vehicles without one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gnss: Option<GnssConfig>,
+    /// The datum and the fusion filter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub localization: Option<localization::LocalizationConfig>,
     /// The IMU; absent on vehicles without one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub imu: Option<imu::ImuConfig>,
@@ -236,6 +240,9 @@ impl VehicleConfig {
         chassis::validate(self, file)?;
         if let Some(imu) = &self.imu {
             imu.validate(file)?;
+        }
+        if let Some(l) = &self.localization {
+            l.validate(file)?;
         }
         let Some(gnss) = &self.gnss else {
             return Ok(());

@@ -114,9 +114,12 @@ pub enum CommandRejected {
     /// A drive cannot take commands yet.
     #[error("drive {0} is not ready")]
     NotReady(String),
-    /// The command's values are not finite numbers.
-    #[error("velocity is not a finite number")]
+    /// The command's values are not finite numbers or out of range.
+    #[error("a value is not a finite number in range")]
     NotFinite,
+    /// The command needs a position, and there is none yet.
+    #[error("no position yet")]
+    NoPosition,
 }
 
 /// Travelled distance and speed of each wheel.

@@ -8,9 +8,15 @@ use std::time::Duration;
 
 use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
+use crate::config::localization::localizer_config;
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
+use crate::fusion;
+use crate::fusion::geodesy::Geodetic;
+use crate::fusion::localizer::{
+    Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
+};
 use crate::time::Timestamp;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
 pub use status::{BatteryStatus, GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
@@ -28,6 +34,8 @@ pub struct CoreConfig {
     pub bms_stale_after: Option<Duration>,
     /// No plausible IMU sample for this long: the IMU is not ok; `None` without an IMU.
     pub imu_timeout: Option<Duration>,
+    /// The fusion filter.
+    pub localizer: LocalizerConfig,
 }
 
 impl Default for CoreConfig {
@@ -38,6 +46,7 @@ impl Default for CoreConfig {
             chassis: None,
             bms_stale_after: None,
             imu_timeout: None,
+            localizer: LocalizerConfig::default(),
         }
     }
 }
@@ -61,6 +70,7 @@ impl CoreConfig {
             .as_ref()
             .map(|b| Duration::from_secs_f64(b.stale_s));
         core.imu_timeout = config.imu.as_ref().map(|i| i.timeout());
+        core.localizer = localizer_config(config);
         core
     }
 }
@@ -94,6 +104,19 @@ pub enum Command {
         /// Yaw rate, rad/s, counter-clockwise.
         wz: f64,
     },
+    /// Re-zero the local frame at the vehicle's position (`init_rtk_data`).
+    ZeroLocalFrame,
+    /// Set the pose in the local frame (INIT_POSITION).
+    SetPose {
+        /// East, m.
+        x: f64,
+        /// North, m.
+        y: f64,
+        /// Yaw, rad, counter-clockwise from east.
+        yaw: f64,
+    },
+    /// Move the datum of the local frame (SET_LNG_LAT).
+    SetDatum(Geodetic),
 }
 
 /// One input to the core.
@@ -141,6 +164,9 @@ pub struct Vehicle {
     /// The last plausible IMU sample.
     imu: Option<ImuSample>,
     imu_link_down: bool,
+    localizer: Localizer,
+    /// Receive times of the GNSS data already given to the localiser.
+    fed_gnss: (Option<Timestamp>, Option<Timestamp>, Option<Timestamp>),
 }
 
 impl Vehicle {
@@ -155,6 +181,8 @@ impl Vehicle {
             bms: None,
             imu: None,
             imu_link_down: false,
+            localizer: Localizer::new(config.localizer),
+            fed_gnss: (None, None, None),
         }
     }
 
@@ -163,6 +191,7 @@ impl Vehicle {
         match input {
             Input::Gnss(fix) => {
                 self.gnss_fix = Some(*fix);
+                self.feed_gnss(fix);
                 Vec::new()
             }
             Input::Link(Device::Gnss, state) => {
@@ -176,12 +205,26 @@ impl Vehicle {
             Input::Imu(sample) => {
                 if sample.is_plausible() {
                     self.imu = Some(*sample);
+                    self.localizer
+                        .add(sample.rx, Measurement::Gyro { wz: sample.gyro.z });
                 }
                 Vec::new()
             }
             Input::Chassis(feedback) => {
-                if let Some(c) = &mut self.chassis {
+                if let (Some(c), Some(cfg)) = (&mut self.chassis, self.config.chassis) {
                     c.feedback(feedback.clone());
+                    if let (Some(l), Some(r)) =
+                        (feedback.left.velocity_rad_s, feedback.right.velocity_rad_s)
+                    {
+                        let (vl, vr) = (l * cfg.wheel_radius_m, r * cfg.wheel_radius_m);
+                        self.localizer.add(
+                            t,
+                            Measurement::Odometry {
+                                v: (vl + vr) / 2.0,
+                                w: (vr - vl) / cfg.track_m,
+                            },
+                        );
+                    }
                 }
                 Vec::new()
             }
@@ -193,6 +236,35 @@ impl Vehicle {
                 let result = match &mut self.chassis {
                     Some(c) => c.command(t, vx, wz),
                     None => Err(CommandRejected::NoDrives),
+                };
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::ZeroLocalFrame) => {
+                let result = if self.localizer.zero_here() {
+                    Ok(())
+                } else {
+                    Err(CommandRejected::NoPosition)
+                };
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::SetPose { x, y, yaw }) => {
+                let result = if [x, y, yaw].iter().all(|v| v.is_finite()) {
+                    self.localizer.set_pose(t, x, y, yaw);
+                    Ok(())
+                } else {
+                    Err(CommandRejected::NotFinite)
+                };
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::SetDatum(datum)) => {
+                let valid = (-90.0..=90.0).contains(&datum.lat_deg)
+                    && (-180.0..=180.0).contains(&datum.lon_deg)
+                    && datum.h_m.is_finite();
+                let result = if valid {
+                    self.localizer.set_datum(datum);
+                    Ok(())
+                } else {
+                    Err(CommandRejected::NotFinite)
                 };
                 vec![Output::CommandResult(result)]
             }
@@ -218,17 +290,118 @@ impl Vehicle {
                     .imu
                     .is_some_and(|s| t.saturating_since(s.rx) <= timeout)
         });
+        let localization = match self.localizer.locate(t) {
+            LocateState::Uninitialized => Localization::Uninitialized,
+            LocateState::Good => Localization::Good,
+            LocateState::Lost => Localization::Lost,
+        };
+        let pose = self
+            .localizer
+            .predicted(t)
+            .map_or_else(Pose2D::default, |e| Pose2D {
+                x: e.x[fusion::ekf::X],
+                y: e.x[fusion::ekf::Y],
+                yaw: e.x[fusion::ekf::YAW],
+            });
         VehicleStatus {
             time: t,
             imu_ok,
             chassis: self.chassis.as_ref().map(|c| c.status(t)),
             battery,
             gnss: self.gnss_status(t),
-            pose: Pose2D::default(),
-            localization: Localization::Uninitialized,
+            pose,
+            localization,
             navigation: Navigation::Idle,
             obstacle_stop: false,
         }
+    }
+
+    /// Gives the localiser what is new in the fix: heading, course, position.
+    fn feed_gnss(&mut self, fix: &GnssFix) {
+        let latency = self.localizer.config().gnss_latency;
+        let at = |rx: Timestamp| {
+            Timestamp::from_nanos(rx.as_nanos().saturating_sub(latency.as_nanos() as u64))
+        };
+        if let Some(h) = fix.heading_deg
+            && self.fed_gnss.0 != Some(h.rx)
+        {
+            self.fed_gnss.0 = Some(h.rx);
+            let sigma = self.localizer.config().heading_sigma_rad;
+            self.localizer.add(
+                at(h.rx),
+                Measurement::Heading {
+                    yaw: yaw_of_heading_deg(h.value),
+                    sigma,
+                },
+            );
+        }
+        if let Some(v) = fix.velocity
+            && self.fed_gnss.1 != Some(v.rx)
+        {
+            self.fed_gnss.1 = Some(v.rx);
+            let speed = v.value.speed_mps;
+            if let Some(course) = v.value.course_deg
+                && speed >= self.localizer.config().cog_min_speed_mps
+            {
+                // Reversing, the velocity points behind the vehicle.
+                let backwards = self
+                    .localizer
+                    .ekf()
+                    .is_some_and(|e| e.x[fusion::ekf::V] < 0.0);
+                let yaw =
+                    yaw_of_heading_deg(course) + if backwards { std::f64::consts::PI } else { 0.0 };
+                self.localizer.add(
+                    at(v.rx),
+                    Measurement::Course {
+                        yaw: fusion::ekf::wrap(yaw),
+                        sigma: (0.1f64).atan2(speed).max(2f64.to_radians()),
+                    },
+                );
+            }
+        }
+        let Some(p) = fix.position.filter(|_| fix.quality.is_valid()) else {
+            return;
+        };
+        if self.fed_gnss.2 == Some(p.rx) {
+            return;
+        }
+        self.fed_gnss.2 = Some(p.rx);
+        let here = Geodetic {
+            lat_deg: p.value.latitude_deg,
+            lon_deg: p.value.longitude_deg,
+            h_m: p.value.altitude_msl_m.unwrap_or(0.0) + p.value.geoid_separation_m.unwrap_or(0.0),
+        };
+        if fix.quality == FixQuality::RtkFixed {
+            self.localizer.offer_datum(here);
+        }
+        let Some(frame) = self.localizer.frame() else {
+            return;
+        };
+        let enu = frame.to_enu(&here);
+        let by_quality = match fix.quality {
+            FixQuality::RtkFixed => 0.02,
+            FixQuality::RtkFloat => 0.3,
+            FixQuality::Dgps => 0.8,
+            _ => 2.5,
+        };
+        // The receiver's own error estimate for this epoch, when it sends GST.
+        let sigma = fix
+            .accuracy
+            .filter(|a| {
+                a.rx.saturating_since(p.rx) < Duration::from_secs(1)
+                    && p.rx.saturating_since(a.rx) < Duration::from_secs(1)
+            })
+            .and_then(|a| a.value.latitude_sd_m.zip(a.value.longitude_sd_m))
+            .map_or((by_quality, by_quality), |(lat, lon)| {
+                (lon.max(0.005), lat.max(0.005))
+            });
+        self.localizer.add(
+            at(p.rx),
+            Measurement::Position {
+                en: (enu.x, enu.y),
+                sigma,
+            },
+        );
     }
 
     fn gnss_status(&mut self, t: Timestamp) -> GnssStatus {

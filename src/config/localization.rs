@@ -1,0 +1,121 @@
+//! `[localization]`: the datum and the fusion filter's settings.
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, VehicleConfig, check_range};
+use crate::fusion::geodesy::Geodetic;
+use crate::fusion::localizer::LocalizerConfig;
+
+/// `[localization]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LocalizationConfig {
+    /// Datum of the local frame: latitude, longitude (degrees), ellipsoidal height (m).
+    /// Without it, the first RTK-fixed position is the datum.
+    #[serde(default)]
+    pub datum: Option<[f64; 3]>,
+    /// `nav.locate` is `LOCATE_TRUE` while the 1σ position uncertainty is within this, m.
+    #[serde(default = "default_bound")]
+    pub locate_bound_m: f64,
+    /// How long a GNSS fix takes to arrive after its epoch, s.
+    #[serde(default)]
+    pub gnss_latency_s: f64,
+    /// Dual-antenna heading noise, 1σ degrees.
+    #[serde(default = "default_heading_sigma")]
+    pub heading_sigma_deg: f64,
+    /// Consecutive rejected GNSS positions that make the filter take GNSS's position.
+    #[serde(default = "default_rejections")]
+    pub reset_after_rejections: u32,
+}
+
+fn default_bound() -> f64 {
+    0.5
+}
+fn default_heading_sigma() -> f64 {
+    0.5
+}
+fn default_rejections() -> u32 {
+    10
+}
+
+impl Default for LocalizationConfig {
+    fn default() -> Self {
+        Self {
+            datum: None,
+            locate_bound_m: default_bound(),
+            gnss_latency_s: 0.0,
+            heading_sigma_deg: default_heading_sigma(),
+            reset_after_rejections: default_rejections(),
+        }
+    }
+}
+
+impl LocalizationConfig {
+    /// Checks ranges.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        if let Some([lat, lon, h]) = self.datum {
+            check_range(file, "localization.datum[0]", lat, -90.0..=90.0, "degrees")?;
+            check_range(
+                file,
+                "localization.datum[1]",
+                lon,
+                -180.0..=180.0,
+                "degrees",
+            )?;
+            check_range(file, "localization.datum[2]", h, -1000.0..=10000.0, "m")?;
+        }
+        check_range(
+            file,
+            "localization.locate_bound_m",
+            self.locate_bound_m,
+            0.01..=100.0,
+            "m",
+        )?;
+        check_range(
+            file,
+            "localization.gnss_latency_s",
+            self.gnss_latency_s,
+            0.0..=1.0,
+            "s",
+        )?;
+        check_range(
+            file,
+            "localization.heading_sigma_deg",
+            self.heading_sigma_deg,
+            0.01..=30.0,
+            "degrees",
+        )?;
+        check_range(
+            file,
+            "localization.reset_after_rejections",
+            f64::from(self.reset_after_rejections),
+            1.0..=1000.0,
+            "",
+        )
+    }
+}
+
+/// The localiser settings of a vehicle configuration.
+pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
+    let l = config.localization.unwrap_or_default();
+    let mut c = LocalizerConfig {
+        datum: l.datum.map(|[lat_deg, lon_deg, h_m]| Geodetic {
+            lat_deg,
+            lon_deg,
+            h_m,
+        }),
+        gnss_latency: Duration::from_secs_f64(l.gnss_latency_s),
+        locate_bound_m: l.locate_bound_m,
+        heading_sigma_rad: l.heading_sigma_deg.to_radians(),
+        reset_after_rejections: l.reset_after_rejections,
+        ..LocalizerConfig::default()
+    };
+    if let Some(g) = &config.gnss {
+        c.antenna = (g.antenna.x, g.antenna.y);
+        c.cog_min_speed_mps = g.cog_min_speed_mps;
+    }
+    c
+}

@@ -1,0 +1,243 @@
+//! A planar extended Kalman filter on fixed-size matrices. State: x, y (m, local ENU), yaw
+//! (rad, counter-clockwise from east), v (m/s forward), ω (rad/s) and the gyro's z bias
+//! (rad/s). Updates use the Joseph form, so the covariance stays symmetric and positive
+//! definite, and report the innovation's Mahalanobis distance for gating.
+
+use nalgebra::{SMatrix, SVector};
+use std::f64::consts::PI;
+
+/// State dimension.
+pub const N: usize = 6;
+/// Index of x.
+pub const X: usize = 0;
+/// Index of y.
+pub const Y: usize = 1;
+/// Index of yaw.
+pub const YAW: usize = 2;
+/// Index of forward speed.
+pub const V: usize = 3;
+/// Index of yaw rate.
+pub const W: usize = 4;
+/// Index of gyro bias.
+pub const BIAS: usize = 5;
+
+/// State vector.
+pub type State = SVector<f64, N>;
+/// Covariance.
+pub type Cov = SMatrix<f64, N, N>;
+
+/// Wraps an angle into (-π, π].
+pub fn wrap(a: f64) -> f64 {
+    let mut a = a % (2.0 * PI);
+    if a > PI {
+        a -= 2.0 * PI;
+    } else if a <= -PI {
+        a += 2.0 * PI;
+    }
+    a
+}
+
+/// Process noise densities.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProcessNoise {
+    /// Forward acceleration, m/s² per √s.
+    pub accel: f64,
+    /// Angular acceleration, rad/s² per √s.
+    pub angular_accel: f64,
+    /// Gyro bias random walk, rad/s per √s.
+    pub bias_walk: f64,
+    /// Position diffusion (lateral slip), m per √s.
+    pub position: f64,
+}
+
+/// The result of one update.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Innovation {
+    /// Squared Mahalanobis distance of the innovation (normalised innovation squared).
+    pub nis: f64,
+    /// Whether it was applied (within the gate).
+    pub applied: bool,
+}
+
+/// The filter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Ekf {
+    /// State estimate.
+    pub x: State,
+    /// Covariance.
+    pub p: Cov,
+}
+
+impl Ekf {
+    /// A filter at `x` with covariance `p`.
+    pub fn new(x: State, p: Cov) -> Self {
+        Self { x, p }
+    }
+
+    /// Propagates by `dt` seconds: constant speed and yaw rate along the heading.
+    pub fn predict(&mut self, dt: f64, q: &ProcessNoise) {
+        if dt <= 0.0 {
+            return;
+        }
+        let (yaw, v, w) = (self.x[YAW], self.x[V], self.x[W]);
+        let (s, c) = yaw.sin_cos();
+        self.x[X] += v * c * dt;
+        self.x[Y] += v * s * dt;
+        self.x[YAW] = wrap(yaw + w * dt);
+        let mut f = Cov::identity();
+        f[(X, YAW)] = -v * s * dt;
+        f[(X, V)] = c * dt;
+        f[(Y, YAW)] = v * c * dt;
+        f[(Y, V)] = s * dt;
+        f[(YAW, W)] = dt;
+        let mut qm = Cov::zeros();
+        qm[(X, X)] = q.position.powi(2) * dt;
+        qm[(Y, Y)] = q.position.powi(2) * dt;
+        qm[(V, V)] = q.accel.powi(2) * dt;
+        qm[(W, W)] = q.angular_accel.powi(2) * dt;
+        qm[(BIAS, BIAS)] = q.bias_walk.powi(2) * dt;
+        self.p = f * self.p * f.transpose() + qm;
+        self.symmetrise();
+    }
+
+    /// A measurement update: `z` measured, `hx` predicted from the state, `h` its Jacobian,
+    /// `r` its covariance. Components listed in `angles` are wrapped. Applied only when the
+    /// normalised innovation squared is within `gate` (pass `f64::INFINITY` to always apply).
+    pub fn update<const M: usize>(
+        &mut self,
+        z: &SVector<f64, M>,
+        hx: &SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        angles: &[usize],
+        gate: f64,
+    ) -> Innovation {
+        let mut y = z - hx;
+        for &i in angles {
+            y[i] = wrap(y[i]);
+        }
+        let s = h * self.p * h.transpose() + r;
+        let Some(s_inv) = s.try_inverse() else {
+            return Innovation {
+                nis: f64::INFINITY,
+                applied: false,
+            };
+        };
+        let nis = (y.transpose() * s_inv * y)[(0, 0)];
+        if nis.is_nan() || nis > gate {
+            return Innovation {
+                nis,
+                applied: false,
+            };
+        }
+        let k = self.p * h.transpose() * s_inv;
+        self.x += k * y;
+        self.x[YAW] = wrap(self.x[YAW]);
+        // Joseph form: (I - KH) P (I - KH)ᵀ + K R Kᵀ.
+        let i_kh = Cov::identity() - k * h;
+        self.p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
+        self.symmetrise();
+        Innovation { nis, applied: true }
+    }
+
+    fn symmetrise(&mut self) {
+        self.p = (self.p + self.p.transpose()) * 0.5;
+    }
+
+    /// The 1σ position uncertainty: the square root of the largest eigenvalue of the
+    /// position covariance, m.
+    pub fn position_sigma(&self) -> f64 {
+        let (a, b, c) = (self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)]);
+        let mean = (a + b) / 2.0;
+        let spread = (((a - b) / 2.0).powi(2) + c * c).sqrt();
+        (mean + spread).max(0.0).sqrt()
+    }
+
+    /// The 1σ yaw uncertainty, rad.
+    pub fn yaw_sigma(&self) -> f64 {
+        self.p[(YAW, YAW)].max(0.0).sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn q() -> ProcessNoise {
+        ProcessNoise {
+            accel: 0.5,
+            angular_accel: 0.5,
+            bias_walk: 1e-4,
+            position: 0.01,
+        }
+    }
+
+    #[test]
+    fn wraps_angles() {
+        assert!((wrap(3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap(-3.0 * PI) - PI).abs() < 1e-12);
+        assert!((wrap(0.5) - 0.5).abs() < 1e-15);
+        assert!((wrap(2.0 * PI + 0.1) - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn predicts_along_the_heading() {
+        let mut x = State::zeros();
+        x[YAW] = PI / 2.0;
+        x[V] = 2.0;
+        let mut f = Ekf::new(x, Cov::identity() * 0.01);
+        for _ in 0..100 {
+            f.predict(0.01, &q());
+        }
+        assert!(f.x[X].abs() < 1e-9 && (f.x[Y] - 2.0).abs() < 1e-9);
+        assert!(f.p[(Y, Y)] > 0.01, "uncertainty grows");
+    }
+
+    #[test]
+    fn updates_keep_the_covariance_symmetric_positive_definite() {
+        let mut f = Ekf::new(State::zeros(), Cov::identity() * 10.0);
+        let h = SMatrix::<f64, 2, N>::from_row_slice(&[
+            1.0, 0.0, 0.0, 0.0, 0.0, 0.0, //
+            0.0, 1.0, 0.0, 0.0, 0.0, 0.0,
+        ]);
+        let r = SMatrix::<f64, 2, 2>::identity() * 1e-6;
+        for i in 0..1000 {
+            f.predict(0.1, &q());
+            let z = SVector::<f64, 2>::new(f64::from(i) * 1e-3, 1.0);
+            let hx = SVector::<f64, 2>::new(f.x[X], f.x[Y]);
+            f.update(&z, &hx, &h, &r, &[], f64::INFINITY);
+            assert_eq!(f.p, f.p.transpose());
+            assert!(
+                f.p.cholesky().is_some(),
+                "not positive definite at {i}"
+            );
+        }
+        assert!((f.x[Y] - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn gate_rejects_outliers() {
+        let mut f = Ekf::new(State::zeros(), Cov::identity() * 0.01);
+        let h = SMatrix::<f64, 1, N>::from_row_slice(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let r = SMatrix::<f64, 1, 1>::new(0.01);
+        let far = f.update(
+            &SVector::<f64, 1>::new(5.0),
+            &SVector::<f64, 1>::new(0.0),
+            &h,
+            &r,
+            &[],
+            10.83,
+        );
+        assert!(!far.applied && far.nis > 1000.0);
+        assert_eq!(f.x[X], 0.0);
+        let near = f.update(
+            &SVector::<f64, 1>::new(0.1),
+            &SVector::<f64, 1>::new(0.0),
+            &h,
+            &r,
+            &[],
+            10.83,
+        );
+        assert!(near.applied);
+    }
+}

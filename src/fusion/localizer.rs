@@ -1,0 +1,525 @@
+//! The localiser: the EKF fed by wheel odometry, the gyro, GNSS position, dual-antenna
+//! heading and course over ground, in the local ENU frame of a datum.
+//!
+//! - Measurements are applied in the order of the time they describe, not of their arrival:
+//!   the last second of measurements is kept with the filter state after each, and a late one
+//!   (a GNSS fix arrives after the IMU samples of its epoch) rewinds to before its time and
+//!   re-applies what followed.
+//! - GNSS position, heading and course are gated on the innovation's Mahalanobis distance; a
+//!   run of rejected positions means the vehicle really is elsewhere (it was carried, or the
+//!   filter drifted), and resets the position to GNSS.
+//! - The GNSS antenna's lever arm is rotated by the heading.
+
+use std::collections::VecDeque;
+use std::f64::consts::FRAC_PI_2;
+use std::time::Duration;
+
+use nalgebra::{SMatrix, SVector, Vector3};
+
+use super::ekf::{BIAS, Cov, Ekf, N, ProcessNoise, State, V, W, X, Y, YAW, wrap};
+use super::geodesy::{Enu, Geodetic};
+use crate::time::Timestamp;
+
+/// χ² gate, 1 degree of freedom, 99.9 %.
+const GATE_1: f64 = 10.83;
+/// χ² gate, 2 degrees of freedom, 99.9 %.
+const GATE_2: f64 = 13.82;
+
+/// Settings of the localiser.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalizerConfig {
+    /// GNSS antenna in the vehicle frame (x forward, y left), m.
+    pub antenna: (f64, f64),
+    /// The datum, when fixed by configuration; else the first RTK-fixed position.
+    pub datum: Option<Geodetic>,
+    /// How long a position fix takes to arrive after its epoch.
+    pub gnss_latency: Duration,
+    /// `LOCATE_TRUE` while the 1σ position uncertainty is within this, m.
+    pub locate_bound_m: f64,
+    /// Leaving `LOCATE_UNINIT` also needs the 1σ heading within this, rad.
+    pub converged_yaw_rad: f64,
+    /// Dual-antenna heading noise, 1σ rad.
+    pub heading_sigma_rad: f64,
+    /// Course over ground is used only above this speed, m/s.
+    pub cog_min_speed_mps: f64,
+    /// Consecutive rejected positions that reset the position to GNSS.
+    pub reset_after_rejections: u32,
+    /// How far back a late measurement may reach.
+    pub window: Duration,
+    /// Process noise.
+    pub noise: ProcessNoise,
+    /// Wheel speed noise: 1σ m/s plus a fraction of the speed (slip).
+    pub odometry_sigma: (f64, f64),
+    /// Yaw rate from the wheels, 1σ rad/s (slips when turning).
+    pub odometry_yaw_rate_sigma: f64,
+    /// Gyro noise, 1σ rad/s.
+    pub gyro_sigma: f64,
+}
+
+impl Default for LocalizerConfig {
+    fn default() -> Self {
+        Self {
+            antenna: (0.0, 0.0),
+            datum: None,
+            gnss_latency: Duration::ZERO,
+            locate_bound_m: 0.5,
+            converged_yaw_rad: 5f64.to_radians(),
+            heading_sigma_rad: 0.5f64.to_radians(),
+            cog_min_speed_mps: 0.3,
+            reset_after_rejections: 10,
+            window: Duration::from_secs(1),
+            noise: ProcessNoise {
+                accel: 1.0,
+                angular_accel: 1.0,
+                bias_walk: 2e-4,
+                position: 0.005,
+            },
+            odometry_sigma: (0.01, 0.02),
+            odometry_yaw_rate_sigma: 0.05,
+            gyro_sigma: 0.003,
+        }
+    }
+}
+
+/// One measurement, in the local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Measurement {
+    /// Wheel odometry: forward speed (m/s) and yaw rate (rad/s).
+    Odometry {
+        /// Forward speed, m/s.
+        v: f64,
+        /// Yaw rate, rad/s.
+        w: f64,
+    },
+    /// Gyro yaw rate, rad/s (bias included).
+    Gyro {
+        /// Yaw rate, rad/s.
+        wz: f64,
+    },
+    /// GNSS antenna position: east, north (m) and their 1σ.
+    Position {
+        /// East, north, m.
+        en: (f64, f64),
+        /// 1σ east, north, m.
+        sigma: (f64, f64),
+    },
+    /// Dual-antenna heading as ENU yaw, rad.
+    Heading {
+        /// Yaw, rad.
+        yaw: f64,
+        /// 1σ, rad.
+        sigma: f64,
+    },
+    /// Course over ground as ENU yaw, rad, at a speed (m/s).
+    Course {
+        /// Yaw of the velocity, rad.
+        yaw: f64,
+        /// 1σ, rad.
+        sigma: f64,
+    },
+}
+
+/// Where localisation stands (`nav.locate`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LocateState {
+    /// Not converged yet.
+    #[default]
+    Uninitialized,
+    /// Within the bound.
+    Good,
+    /// Lost: uncertainty beyond the bound.
+    Lost,
+}
+
+/// Counters.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LocalizerStats {
+    /// Measurements applied.
+    pub applied: u64,
+    /// Positions, headings or courses rejected by the gate.
+    pub rejected: u64,
+    /// Position resets after a run of rejections.
+    pub resets: u64,
+    /// Measurements applied after later ones (rewound).
+    pub late: u64,
+    /// Measurements older than the window, dropped.
+    pub too_late: u64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Filter {
+    ekf: Ekf,
+    time: Timestamp,
+    rejections: u32,
+}
+
+/// The localiser.
+#[derive(Debug, Clone)]
+pub struct Localizer {
+    config: LocalizerConfig,
+    frame: Option<Enu>,
+    /// The filter before the oldest buffered measurement.
+    base: Option<Filter>,
+    /// Measurements in time order, with the filter after each.
+    buffer: VecDeque<(Timestamp, Measurement, Filter)>,
+    /// Latest heading and course seen, to initialise with.
+    last_heading: Option<(Timestamp, f64)>,
+    last_speed: f64,
+    converged: bool,
+    stats: LocalizerStats,
+}
+
+impl Localizer {
+    /// A localiser with nothing known.
+    pub fn new(config: LocalizerConfig) -> Self {
+        Self {
+            frame: config.datum.map(Enu::new),
+            config,
+            base: None,
+            buffer: VecDeque::new(),
+            last_heading: None,
+            last_speed: 0.0,
+            converged: false,
+            stats: LocalizerStats::default(),
+        }
+    }
+
+    /// Settings.
+    pub fn config(&self) -> &LocalizerConfig {
+        &self.config
+    }
+
+    /// The local frame, once it has a datum.
+    pub fn frame(&self) -> Option<&Enu> {
+        self.frame.as_ref()
+    }
+
+    /// Sets the datum unless one is set (the first RTK-fixed position).
+    pub fn offer_datum(&mut self, datum: Geodetic) {
+        if self.frame.is_none() {
+            self.frame = Some(Enu::new(datum));
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> LocalizerStats {
+        self.stats
+    }
+
+    fn current(&self) -> Option<&Filter> {
+        self.buffer.back().map(|(_, _, f)| f).or(self.base.as_ref())
+    }
+
+    /// The filter's state, if initialised.
+    pub fn ekf(&self) -> Option<&Ekf> {
+        self.current().map(|f| &f.ekf)
+    }
+
+    /// Pose of the vehicle reference point: x, y (m, ENU), yaw (rad).
+    pub fn pose(&self) -> Option<(f64, f64, f64)> {
+        self.ekf().map(|e| (e.x[X], e.x[Y], e.x[YAW]))
+    }
+
+    /// The filter predicted to `t` (no measurement since then), without changing it.
+    pub fn predicted(&self, t: Timestamp) -> Option<Ekf> {
+        let f = self.current()?;
+        let mut ekf = f.ekf.clone();
+        if t > f.time {
+            ekf.predict(t.saturating_since(f.time).as_secs_f64(), &self.config.noise);
+        }
+        Some(ekf)
+    }
+
+    /// The `nav.locate` state at `t`.
+    pub fn locate(&mut self, t: Timestamp) -> LocateState {
+        let Some(ekf) = self.predicted(t) else {
+            return LocateState::Uninitialized;
+        };
+        let (sigma, yaw_sigma) = (ekf.position_sigma(), ekf.yaw_sigma());
+        if !self.converged {
+            if sigma <= self.config.locate_bound_m && yaw_sigma <= self.config.converged_yaw_rad {
+                self.converged = true;
+            } else {
+                return LocateState::Uninitialized;
+            }
+        }
+        if sigma <= self.config.locate_bound_m {
+            LocateState::Good
+        } else {
+            LocateState::Lost
+        }
+    }
+
+    /// Adds a measurement that describes time `t`.
+    pub fn add(&mut self, t: Timestamp, m: Measurement) {
+        match m {
+            Measurement::Heading { yaw, .. } | Measurement::Course { yaw, .. } => {
+                self.last_heading = Some((t, yaw));
+            }
+            Measurement::Odometry { v, .. } => self.last_speed = v,
+            _ => {}
+        }
+        let Some(current) = self.current().cloned() else {
+            self.try_initialise(t, &m);
+            return;
+        };
+        if t >= current.time {
+            let mut f = current;
+            self.apply(&mut f, t, &m);
+            self.buffer.push_back((t, m, f));
+            self.trim();
+            return;
+        }
+        // Late: rewind to before `t`, then re-apply everything after it.
+        let base_time = self.base.as_ref().map_or(t, |b| b.time);
+        if t < base_time {
+            self.stats.too_late += 1;
+            return;
+        }
+        self.stats.late += 1;
+        let at = self.buffer.partition_point(|(bt, _, _)| *bt <= t);
+        let mut f = if at == 0 {
+            self.base.clone()
+        } else {
+            self.buffer.get(at - 1).map(|(_, _, f)| f.clone())
+        }
+        .unwrap_or(current);
+        let later: Vec<(Timestamp, Measurement)> = self
+            .buffer
+            .drain(at..)
+            .map(|(bt, bm, _)| (bt, bm))
+            .collect();
+        self.apply(&mut f, t, &m);
+        self.buffer.push_back((t, m, f.clone()));
+        for (bt, bm) in later {
+            self.apply(&mut f, bt, &bm);
+            self.buffer.push_back((bt, bm, f.clone()));
+        }
+        self.trim();
+    }
+
+    /// Drops buffered measurements older than the window; the filter before the oldest
+    /// kept one becomes the base.
+    fn trim(&mut self) {
+        let Some(newest) = self.buffer.back().map(|(t, _, _)| *t) else {
+            return;
+        };
+        while self.buffer.len() > 1
+            && self
+                .buffer
+                .front()
+                .is_some_and(|(t, _, _)| newest.saturating_since(*t) > self.config.window)
+        {
+            if let Some((_, _, f)) = self.buffer.pop_front() {
+                self.base = Some(f);
+            }
+        }
+    }
+
+    fn try_initialise(&mut self, t: Timestamp, m: &Measurement) {
+        let Measurement::Position { en, sigma } = *m else {
+            return;
+        };
+        // A heading from the last second: dual antenna, or course while moving.
+        let Some((_, yaw)) = self
+            .last_heading
+            .filter(|(ht, _)| t.saturating_since(*ht) < Duration::from_secs(1) || *ht > t)
+        else {
+            return;
+        };
+        let (ax, ay) = self.config.antenna;
+        let (s, c) = yaw.sin_cos();
+        let mut x = State::zeros();
+        x[X] = en.0 - (c * ax - s * ay);
+        x[Y] = en.1 - (s * ax + c * ay);
+        x[YAW] = yaw;
+        x[V] = self.last_speed;
+        let mut p = Cov::zeros();
+        p[(X, X)] = sigma.0.powi(2) + 0.01;
+        p[(Y, Y)] = sigma.1.powi(2) + 0.01;
+        p[(YAW, YAW)] = 5f64.to_radians().powi(2);
+        p[(V, V)] = 0.25;
+        p[(W, W)] = 0.25;
+        p[(BIAS, BIAS)] = 0.02f64.powi(2);
+        self.base = Some(Filter {
+            ekf: Ekf::new(x, p),
+            time: t,
+            rejections: 0,
+        });
+        self.buffer.clear();
+    }
+
+    /// Predicts `f` to `t` and applies `m`.
+    fn apply(&mut self, f: &mut Filter, t: Timestamp, m: &Measurement) {
+        if t > f.time {
+            f.ekf
+                .predict(t.saturating_since(f.time).as_secs_f64(), &self.config.noise);
+            f.time = t;
+        }
+        let e = &mut f.ekf;
+        let row = |i: usize| {
+            let mut h = SMatrix::<f64, 1, N>::zeros();
+            h[(0, i)] = 1.0;
+            h
+        };
+        let one = |v: f64| SVector::<f64, 1>::new(v);
+        let var = |s: f64| SMatrix::<f64, 1, 1>::new(s * s);
+        match *m {
+            Measurement::Odometry { v, w } => {
+                let (base, rel) = self.config.odometry_sigma;
+                e.update(
+                    &one(v),
+                    &one(e.x[V]),
+                    &row(V),
+                    &var(base + rel * v.abs()),
+                    &[],
+                    f64::INFINITY,
+                );
+                let yaw_rate_sigma = self.config.odometry_yaw_rate_sigma;
+                e.update(
+                    &one(w),
+                    &one(e.x[W]),
+                    &row(W),
+                    &var(yaw_rate_sigma),
+                    &[],
+                    f64::INFINITY,
+                );
+                self.stats.applied += 1;
+            }
+            Measurement::Gyro { wz } => {
+                let mut h = row(W);
+                h[(0, BIAS)] = 1.0;
+                e.update(
+                    &one(wz),
+                    &one(e.x[W] + e.x[BIAS]),
+                    &h,
+                    &var(self.config.gyro_sigma),
+                    &[],
+                    f64::INFINITY,
+                );
+                self.stats.applied += 1;
+            }
+            Measurement::Heading { yaw, sigma } | Measurement::Course { yaw, sigma } => {
+                let r = e.update(
+                    &one(yaw),
+                    &one(e.x[YAW]),
+                    &row(YAW),
+                    &var(sigma),
+                    &[0],
+                    GATE_1,
+                );
+                self.count(r.applied);
+            }
+            Measurement::Position { en, sigma } => {
+                let (ax, ay) = self.config.antenna;
+                let (s, c) = e.x[YAW].sin_cos();
+                let hx = SVector::<f64, 2>::new(e.x[X] + c * ax - s * ay, e.x[Y] + s * ax + c * ay);
+                let mut h = SMatrix::<f64, 2, N>::zeros();
+                h[(0, X)] = 1.0;
+                h[(1, Y)] = 1.0;
+                h[(0, YAW)] = -s * ax - c * ay;
+                h[(1, YAW)] = c * ax - s * ay;
+                let r = SMatrix::<f64, 2, 2>::new(sigma.0.powi(2), 0.0, 0.0, sigma.1.powi(2));
+                let z = SVector::<f64, 2>::new(en.0, en.1);
+                let result = e.update(&z, &hx, &h, &r, &[], GATE_2);
+                self.count(result.applied);
+                if result.applied {
+                    f.rejections = 0;
+                } else {
+                    f.rejections += 1;
+                    if f.rejections >= self.config.reset_after_rejections {
+                        // The vehicle is elsewhere: take GNSS's word for the position.
+                        let e = &mut f.ekf;
+                        e.x[X] = en.0 - (c * ax - s * ay);
+                        e.x[Y] = en.1 - (s * ax + c * ay);
+                        for i in 0..N {
+                            e.p[(X, i)] = 0.0;
+                            e.p[(i, X)] = 0.0;
+                            e.p[(Y, i)] = 0.0;
+                            e.p[(i, Y)] = 0.0;
+                        }
+                        e.p[(X, X)] = sigma.0.powi(2);
+                        e.p[(Y, Y)] = sigma.1.powi(2);
+                        f.rejections = 0;
+                        self.stats.resets += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    fn count(&mut self, applied: bool) {
+        if applied {
+            self.stats.applied += 1;
+        } else {
+            self.stats.rejected += 1;
+        }
+    }
+
+    /// Re-zeroes the local frame at the current position (`init_rtk_data`). Returns false
+    /// when there is no position yet.
+    pub fn zero_here(&mut self) -> bool {
+        let (Some(frame), Some((x, y, _))) = (self.frame, self.pose()) else {
+            return false;
+        };
+        let here = frame.to_geodetic(&Vector3::new(x, y, 0.0));
+        self.set_datum(here);
+        true
+    }
+
+    /// Moves the local frame to `datum`, keeping the vehicle where it is on the ground.
+    pub fn set_datum(&mut self, datum: Geodetic) {
+        let old = self.frame.replace(Enu::new(datum));
+        let (Some(old), Some(new)) = (old, self.frame) else {
+            return;
+        };
+        let shift = |f: &mut Filter| {
+            let g = old.to_geodetic(&Vector3::new(f.ekf.x[X], f.ekf.x[Y], 0.0));
+            let enu = new.to_enu(&g);
+            f.ekf.x[X] = enu.x;
+            f.ekf.x[Y] = enu.y;
+        };
+        if let Some(b) = &mut self.base {
+            shift(b);
+        }
+        for (_, _, f) in &mut self.buffer {
+            shift(f);
+        }
+    }
+
+    /// Sets the pose (INIT_POSITION): x, y (m), yaw (rad), with a small uncertainty.
+    pub fn set_pose(&mut self, t: Timestamp, x: f64, y: f64, yaw: f64) {
+        let mut state = self.ekf().map_or_else(State::zeros, |e| e.x);
+        state[X] = x;
+        state[Y] = y;
+        state[YAW] = wrap(yaw);
+        let mut p = self.ekf().map_or_else(|| Cov::identity() * 0.25, |e| e.p);
+        for i in 0..N {
+            for j in [X, Y, YAW] {
+                p[(i, j)] = 0.0;
+                p[(j, i)] = 0.0;
+            }
+        }
+        p[(X, X)] = 0.05f64.powi(2);
+        p[(Y, Y)] = 0.05f64.powi(2);
+        p[(YAW, YAW)] = 1f64.to_radians().powi(2);
+        let time = self.current().map_or(t, |f| f.time.max(t));
+        self.base = Some(Filter {
+            ekf: Ekf::new(state, p),
+            time,
+            rejections: 0,
+        });
+        self.buffer.clear();
+    }
+}
+
+/// ENU yaw (rad, counter-clockwise from east) of a true heading (degrees, clockwise from
+/// north).
+pub fn yaw_of_heading_deg(heading_deg: f64) -> f64 {
+    wrap(FRAC_PI_2 - heading_deg.to_radians())
+}
+
+/// True heading (degrees, 0–360, clockwise from north) of an ENU yaw.
+pub fn heading_deg_of_yaw(yaw: f64) -> f64 {
+    (90.0 - yaw.to_degrees()).rem_euclid(360.0)
+}
