@@ -63,13 +63,13 @@ impl Drive {
                 wz: self.w + GYRO_BIAS + self.noise(c.gyro_sigma),
             },
         )];
-        if k % 2 == 0 {
+        if k.is_multiple_of(2) {
             let (base, rel) = c.odometry_sigma;
             let v = self.v + self.noise(base + rel * self.v);
             let w = self.w + self.noise(c.odometry_yaw_rate_sigma);
             out.push((t, Measurement::Odometry { v, w }));
         }
-        if k % 20 == 0 {
+        if k.is_multiple_of(20) {
             let (s, co) = self.yaw.sin_cos();
             let sigma = 0.02;
             let e = self.x + co * ANTENNA.0 - s * ANTENNA.1 + self.noise(sigma);
@@ -204,7 +204,7 @@ fn estimation_error_is_consistent_across_seeds() {
             for (t, m) in drive.step(k) {
                 loc.add(t, m);
             }
-            if k >= 500 && k % 100 == 0 {
+            if k >= 500 && k.is_multiple_of(100) {
                 let ekf = loc.ekf().unwrap();
                 let e = nalgebra::Vector3::new(
                     ekf.x[X] - drive.x,

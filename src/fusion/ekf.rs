@@ -207,10 +207,7 @@ mod tests {
             let hx = SVector::<f64, 2>::new(f.x[X], f.x[Y]);
             f.update(&z, &hx, &h, &r, &[], f64::INFINITY);
             assert_eq!(f.p, f.p.transpose());
-            assert!(
-                f.p.cholesky().is_some(),
-                "not positive definite at {i}"
-            );
+            assert!(f.p.cholesky().is_some(), "not positive definite at {i}");
         }
         assert!((f.x[Y] - 1.0).abs() < 1e-3);
     }
