@@ -177,7 +177,7 @@ fn a_jump_is_rejected_and_a_relocation_is_accepted() {
     run(&mut loc, &mut drive, 100, 0.0);
     let ekf = loc.ekf().unwrap();
     assert!((ekf.x[X] - drive.x).abs() < 0.05);
-    // The vehicle really is 5 m further east (it was carried): after ten rejected fixes the
+    // The vehicle really is 5 m further east (it was carried): after 3 s of rejected fixes the
     // filter takes the GNSS position, and keeps tracking.
     run(&mut loc, &mut drive, 600, 5.0);
     assert_eq!(loc.stats().resets, 1);

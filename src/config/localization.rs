@@ -26,9 +26,10 @@ pub struct LocalizationConfig {
     /// Dual-antenna heading noise, 1σ degrees.
     #[serde(default = "default_heading_sigma")]
     pub heading_sigma_deg: f64,
-    /// Consecutive rejected GNSS positions that make the filter take GNSS's position.
-    #[serde(default = "default_rejections")]
-    pub reset_after_rejections: u32,
+    /// GNSS positions rejected without a break for this long make the filter take GNSS's
+    /// position (the vehicle really is elsewhere), s.
+    #[serde(default = "default_relocate_after_s")]
+    pub relocate_after_s: f64,
 }
 
 fn default_bound() -> f64 {
@@ -37,8 +38,8 @@ fn default_bound() -> f64 {
 fn default_heading_sigma() -> f64 {
     0.5
 }
-fn default_rejections() -> u32 {
-    10
+fn default_relocate_after_s() -> f64 {
+    3.0
 }
 
 impl Default for LocalizationConfig {
@@ -48,7 +49,7 @@ impl Default for LocalizationConfig {
             locate_bound_m: default_bound(),
             gnss_latency_s: 0.0,
             heading_sigma_deg: default_heading_sigma(),
-            reset_after_rejections: default_rejections(),
+            relocate_after_s: default_relocate_after_s(),
         }
     }
 }
@@ -90,10 +91,10 @@ impl LocalizationConfig {
         )?;
         check_range(
             file,
-            "localization.reset_after_rejections",
-            f64::from(self.reset_after_rejections),
-            1.0..=1000.0,
-            "",
+            "localization.relocate_after_s",
+            self.relocate_after_s,
+            0.2..=60.0,
+            "s",
         )
     }
 }
@@ -110,7 +111,7 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         gnss_latency: Duration::from_secs_f64(l.gnss_latency_s),
         locate_bound_m: l.locate_bound_m,
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
-        reset_after_rejections: l.reset_after_rejections,
+        relocate_after: Duration::from_secs_f64(l.relocate_after_s),
         ..LocalizerConfig::default()
     };
     if let Some(g) = &config.gnss {

@@ -24,6 +24,8 @@ use crate::time::Timestamp;
 const GATE_1: f64 = 10.83;
 /// χ² gate, 2 degrees of freedom, 99.9 %.
 const GATE_2: f64 = 13.82;
+/// A relocation needs at least this many rejected positions, whatever their rate.
+pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
 
 /// Settings of the localiser.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,8 +44,10 @@ pub struct LocalizerConfig {
     pub heading_sigma_rad: f64,
     /// Course over ground is used only above this speed, m/s.
     pub cog_min_speed_mps: f64,
-    /// Consecutive rejected positions that reset the position to GNSS.
-    pub reset_after_rejections: u32,
+    /// Positions rejected without a break for this long (and at least
+    /// [`MIN_REJECTIONS_TO_RELOCATE`] of them) reset the position to GNSS. A glitch shorter
+    /// than this is ridden out; a vehicle that really moved is found again after it.
+    pub relocate_after: Duration,
     /// How far back a late measurement may reach.
     pub window: Duration,
     /// Process noise.
@@ -66,7 +70,7 @@ impl Default for LocalizerConfig {
             converged_yaw_rad: 5f64.to_radians(),
             heading_sigma_rad: 0.5f64.to_radians(),
             cog_min_speed_mps: 0.3,
-            reset_after_rejections: 10,
+            relocate_after: Duration::from_secs(3),
             window: Duration::from_secs(1),
             noise: ProcessNoise {
                 accel: 1.0,
@@ -150,7 +154,8 @@ pub struct LocalizerStats {
 struct Filter {
     ekf: Ekf,
     time: Timestamp,
-    rejections: u32,
+    /// The current run of rejected positions: its first time and its length.
+    rejections: Option<(Timestamp, u32)>,
 }
 
 /// The localiser.
@@ -344,7 +349,7 @@ impl Localizer {
         self.base = Some(Filter {
             ekf: Ekf::new(x, p),
             time: t,
-            rejections: 0,
+            rejections: None,
         });
         self.buffer.clear();
     }
@@ -424,10 +429,13 @@ impl Localizer {
                 let result = e.update(&z, &hx, &h, &r, &[], GATE_2);
                 self.count(result.applied);
                 if result.applied {
-                    f.rejections = 0;
+                    f.rejections = None;
                 } else {
-                    f.rejections += 1;
-                    if f.rejections >= self.config.reset_after_rejections {
+                    let (since, count) = f.rejections.map_or((t, 1), |(s, n)| (s, n + 1));
+                    f.rejections = Some((since, count));
+                    if count >= MIN_REJECTIONS_TO_RELOCATE
+                        && t.saturating_since(since) >= self.config.relocate_after
+                    {
                         // The vehicle is elsewhere: take GNSS's word for the position.
                         let e = &mut f.ekf;
                         e.x[X] = en.0 - (c * ax - s * ay);
@@ -440,7 +448,7 @@ impl Localizer {
                         }
                         e.p[(X, X)] = sigma.0.powi(2);
                         e.p[(Y, Y)] = sigma.1.powi(2);
-                        f.rejections = 0;
+                        f.rejections = None;
                         self.stats.resets += 1;
                     }
                 }
@@ -507,7 +515,7 @@ impl Localizer {
         self.base = Some(Filter {
             ekf: Ekf::new(state, p),
             time,
-            rejections: 0,
+            rejections: None,
         });
         self.buffer.clear();
     }

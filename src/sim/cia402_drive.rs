@@ -24,6 +24,8 @@ use crate::time::Timestamp;
 pub struct MotorModel {
     /// Acceleration limit, r/min per second.
     pub accel_rpm_per_s: f64,
+    /// First-order lag of the speed loop, s (0: none, only the acceleration limit).
+    pub time_constant_s: f64,
     /// Silence from the master after which an enabled drive quick-stops.
     pub comm_timeout: Duration,
 }
@@ -32,6 +34,7 @@ impl Default for MotorModel {
     fn default() -> Self {
         Self {
             accel_rpm_per_s: 3000.0,
+            time_constant_s: 0.0,
             comm_timeout: Duration::from_millis(500),
         }
     }
@@ -187,6 +190,11 @@ impl SimDrive {
     /// The NMT state.
     pub fn nmt_state(&self) -> NmtState {
         self.nmt
+    }
+
+    /// Each axis's motor speed, r/min.
+    pub fn motor_rpm(&self) -> Vec<f64> {
+        self.axes.iter().map(|a| a.rpm).collect()
     }
 
     /// A report of each axis.
@@ -531,7 +539,13 @@ impl SimDrive {
             } else {
                 0.0
             };
-            let change = (wanted - a.rpm).clamp(-max_step, max_step);
+            // The speed loop's lag, then the acceleration limit.
+            let lagged = if self.model.time_constant_s > 0.0 {
+                (wanted - a.rpm) * (1.0 - (-dt / self.model.time_constant_s).exp())
+            } else {
+                wanted - a.rpm
+            };
+            let change = lagged.clamp(-max_step, max_step);
             // Average speed over the step moves the encoder.
             let rpm_before = a.rpm;
             a.rpm += change;

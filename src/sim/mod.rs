@@ -3,3 +3,5 @@
 
 pub mod bms;
 pub mod cia402_drive;
+pub mod nmea_out;
+pub mod plant;

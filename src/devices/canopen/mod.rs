@@ -13,8 +13,12 @@ pub struct NodeId(u8);
 
 impl NodeId {
     /// The node id, if it is in 1..=127.
-    pub fn new(id: u8) -> Option<Self> {
-        (1..=127).contains(&id).then_some(Self(id))
+    pub const fn new(id: u8) -> Option<Self> {
+        if id >= 1 && id <= 127 {
+            Some(Self(id))
+        } else {
+            None
+        }
     }
 
     /// The raw id.

@@ -1,0 +1,141 @@
+//! NMEA 0183 sentences as a receiver writes them, for the simulated GNSS receiver.
+
+use std::fmt::Write;
+
+use chrono::{NaiveDateTime, Timelike};
+
+use crate::devices::gnss::FixQuality;
+use crate::devices::gnss::framer::checksum;
+
+/// Appends `$body*HH\r\n` to `out`.
+pub fn sentence(out: &mut String, body: &str) {
+    let _ = write!(out, "${body}*{:02X}\r\n", checksum(body.as_bytes()));
+}
+
+fn hms(t: NaiveDateTime) -> String {
+    format!(
+        "{:02}{:02}{:02}.{:02}",
+        t.hour(),
+        t.minute(),
+        t.second(),
+        t.nanosecond() / 10_000_000
+    )
+}
+
+fn angle(value: f64, lat: bool) -> String {
+    let hemisphere = match (lat, value >= 0.0) {
+        (true, true) => 'N',
+        (true, false) => 'S',
+        (false, true) => 'E',
+        (false, false) => 'W',
+    };
+    let v = value.abs();
+    let deg = v.trunc();
+    let min = (v - deg) * 60.0;
+    if lat {
+        format!("{deg:02.0}{min:011.8},{hemisphere}")
+    } else {
+        format!("{deg:03.0}{min:011.8},{hemisphere}")
+    }
+}
+
+/// The GGA quality digit.
+pub fn quality_digit(q: FixQuality) -> u8 {
+    match q {
+        FixQuality::Invalid => 0,
+        FixQuality::Single => 1,
+        FixQuality::Dgps => 2,
+        FixQuality::Pps => 3,
+        FixQuality::RtkFixed => 4,
+        FixQuality::RtkFloat => 5,
+        FixQuality::DeadReckoning => 6,
+        FixQuality::Manual => 7,
+        FixQuality::Simulation => 8,
+    }
+}
+
+/// One epoch of a receiver's output.
+#[derive(Debug, Clone, Copy)]
+pub struct Epoch {
+    /// UTC time of the epoch.
+    pub utc: NaiveDateTime,
+    /// Fix quality.
+    pub quality: FixQuality,
+    /// Latitude, longitude (degrees), ellipsoidal height (m).
+    pub position: (f64, f64, f64),
+    /// Speed over ground, m/s.
+    pub speed_mps: f64,
+    /// Course over ground, degrees true.
+    pub course_deg: f64,
+    /// 1σ position error the receiver reports (GST), m.
+    pub sigma_m: f64,
+    /// Dual-antenna heading, degrees true.
+    pub heading_deg: Option<f64>,
+}
+
+/// GGA, RMC, VTG, GST and (with a heading) HDT for `e`, as one chunk.
+pub fn epoch(e: &Epoch) -> String {
+    let mut out = String::with_capacity(400);
+    let geoid = -6.1;
+    let (lat, lon, h) = e.position;
+    let mode = match e.quality {
+        FixQuality::RtkFixed => 'R',
+        FixQuality::RtkFloat => 'F',
+        FixQuality::Dgps => 'D',
+        FixQuality::Invalid => 'N',
+        _ => 'A',
+    };
+    let age = if matches!(
+        e.quality,
+        FixQuality::RtkFixed | FixQuality::RtkFloat | FixQuality::Dgps
+    ) {
+        "1.0,0001"
+    } else {
+        ","
+    };
+    sentence(
+        &mut out,
+        &format!(
+            "GNGGA,{},{},{},{},24,0.60,{:.4},M,{geoid:.3},M,{age}",
+            hms(e.utc),
+            angle(lat, true),
+            angle(lon, false),
+            quality_digit(e.quality),
+            h - geoid
+        ),
+    );
+    let knots = e.speed_mps / (1852.0 / 3600.0);
+    let status = if e.quality.is_valid() { 'A' } else { 'V' };
+    sentence(
+        &mut out,
+        &format!(
+            "GNRMC,{},{status},{},{},{knots:.3},{:.2},{},,,{mode},V",
+            hms(e.utc),
+            angle(lat, true),
+            angle(lon, false),
+            e.course_deg,
+            e.utc.format("%d%m%y")
+        ),
+    );
+    sentence(
+        &mut out,
+        &format!(
+            "GNVTG,{:.2},T,,M,{knots:.3},N,{:.3},K,{mode}",
+            e.course_deg,
+            e.speed_mps * 3.6
+        ),
+    );
+    let s = e.sigma_m;
+    sentence(
+        &mut out,
+        &format!(
+            "GNGST,{},{s:.3},{s:.3},{s:.3},0.0,{s:.3},{s:.3},{:.3}",
+            hms(e.utc),
+            2.0 * s
+        ),
+    );
+    if let Some(h) = e.heading_deg {
+        sentence(&mut out, &format!("GNHDT,{h:.2},T"));
+    }
+    out
+}

@@ -1,0 +1,516 @@
+//! The simulated vehicle: a differential-drive plant turned by simulated CiA 402 drives, with
+//! wheel slip, and the sensors it carries — an IMU (HiPNUC or WitMotion frames) with noise and
+//! a drifting gyro bias, and an RTK receiver (NMEA) with noise per fix quality, outages, jumps
+//! and latency. It emits the frames a real vehicle would; the truth is kept beside them.
+//! Parameters come from a plant TOML file (`devices/plant.*.toml`).
+
+use std::collections::VecDeque;
+use std::f64::consts::TAU;
+use std::path::Path;
+use std::time::Duration;
+
+use bytes::Bytes;
+use chrono::NaiveDateTime;
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use super::cia402_drive::{MotorModel, SimDrive};
+use super::nmea_out::{self, Epoch};
+use crate::config::ConfigError;
+use crate::config::imu::ImuProtocol;
+use crate::devices::can::Frame;
+use crate::devices::canopen::NodeId;
+use crate::devices::cia402::DriveProfile;
+use crate::devices::gnss::FixQuality;
+use crate::devices::imu::{G, hipnuc, witmotion};
+use crate::fusion::ekf::wrap;
+use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::record::{Payload, Record};
+use crate::time::Timestamp;
+
+/// The CAN interface name of the simulated drives.
+pub const SIM_BUS: &str = "sim0";
+
+/// The node of the left wheel's drive.
+pub const LEFT_NODE: NodeId = match NodeId::new(1) {
+    Some(n) => n,
+    None => panic!("node id 1 is in range"),
+};
+/// The node of the right wheel's drive.
+pub const RIGHT_NODE: NodeId = match NodeId::new(2) {
+    Some(n) => n,
+    None => panic!("node id 2 is in range"),
+};
+
+/// A plant file.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantConfig {
+    /// Name of the vehicle.
+    pub name: String,
+    /// Where it drives: latitude, longitude (degrees), ellipsoidal height (m).
+    pub datum: [f64; 3],
+    /// Geometry.
+    pub geometry: Geometry,
+    /// Drive motors.
+    pub motors: Motors,
+    /// Wheel slip.
+    pub slip: Slip,
+    /// IMU.
+    pub imu: ImuModel,
+    /// GNSS receiver.
+    pub gnss: GnssModel,
+}
+
+/// `[geometry]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Geometry {
+    /// Wheel radius, m.
+    pub wheel_radius_m: f64,
+    /// Track, m.
+    pub track_m: f64,
+    /// Motor revolutions per wheel revolution.
+    pub gear_ratio: f64,
+    /// GNSS antenna in the vehicle frame (x forward, y left), m.
+    pub antenna: [f64; 2],
+}
+
+/// `[motors]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Motors {
+    /// Acceleration limit, motor r/min per second.
+    pub accel_rpm_per_s: f64,
+    /// Speed-loop lag, s.
+    pub time_constant_s: f64,
+}
+
+/// `[slip]`: the ground speed of each wheel is its surface speed times (1 + slip).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Slip {
+    /// Random slip, 1σ fraction, redrawn every 100 ms.
+    pub sigma: f64,
+    /// Systematic slip of the left and right wheels, fraction (unequal tyres, soft ground).
+    pub bias: [f64; 2],
+}
+
+/// `[imu]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImuModel {
+    /// Wire protocol.
+    pub protocol: ImuProtocol,
+    /// Output rate, Hz.
+    pub rate_hz: f64,
+    /// Gyro white noise per sample, 1σ rad/s.
+    pub gyro_noise_rps: f64,
+    /// Gyro z bias at start, rad/s.
+    pub gyro_bias_rps: f64,
+    /// Gyro bias random walk, rad/s per √s.
+    pub gyro_bias_walk: f64,
+    /// Accelerometer noise per sample, 1σ m/s².
+    pub accel_noise_mps2: f64,
+}
+
+/// `[gnss]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnssModel {
+    /// Epochs per second.
+    pub rate_hz: f64,
+    /// Delay from an epoch to its sentences, s.
+    pub latency_s: f64,
+    /// Whether the receiver has a second antenna for heading.
+    pub dual_antenna: bool,
+    /// Heading noise, 1σ degrees.
+    pub heading_sigma_deg: f64,
+    /// Horizontal position noise per axis, 1σ m: RTK fixed, float, DGPS, single.
+    pub sigma_m: [f64; 4],
+    /// Part of the position noise that is correlated in time (multipath), fraction of σ.
+    pub correlated_fraction: f64,
+    /// Correlation time of that part, s.
+    pub correlation_time_s: f64,
+}
+
+impl PlantConfig {
+    /// Reads and checks a plant file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_owned(),
+            source,
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Parses and checks plant TOML.
+    pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        let p: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
+            message: e.to_string(),
+        })?;
+        use crate::config::check_range;
+        let g = &p.geometry;
+        check_range(
+            file,
+            "geometry.wheel_radius_m",
+            g.wheel_radius_m,
+            0.01..=2.0,
+            "m",
+        )?;
+        check_range(file, "geometry.track_m", g.track_m, 0.05..=5.0, "m")?;
+        check_range(file, "geometry.gear_ratio", g.gear_ratio, 0.1..=500.0, "")?;
+        check_range(
+            file,
+            "motors.accel_rpm_per_s",
+            p.motors.accel_rpm_per_s,
+            1.0..=1e6,
+            "r/min/s",
+        )?;
+        check_range(
+            file,
+            "motors.time_constant_s",
+            p.motors.time_constant_s,
+            0.0..=5.0,
+            "s",
+        )?;
+        check_range(file, "slip.sigma", p.slip.sigma, 0.0..=0.5, "")?;
+        check_range(file, "imu.rate_hz", p.imu.rate_hz, 1.0..=1000.0, "Hz")?;
+        check_range(file, "gnss.rate_hz", p.gnss.rate_hz, 0.2..=50.0, "Hz")?;
+        check_range(file, "gnss.latency_s", p.gnss.latency_s, 0.0..=1.0, "s")?;
+        check_range(
+            file,
+            "gnss.correlated_fraction",
+            p.gnss.correlated_fraction,
+            0.0..=1.0,
+            "",
+        )?;
+        check_range(
+            file,
+            "gnss.correlation_time_s",
+            p.gnss.correlation_time_s,
+            0.1..=600.0,
+            "s",
+        )?;
+        Ok(p)
+    }
+
+    /// The datum as a geodetic position.
+    pub fn datum(&self) -> Geodetic {
+        Geodetic {
+            lat_deg: self.datum[0],
+            lon_deg: self.datum[1],
+            h_m: self.datum[2],
+        }
+    }
+
+    /// The 1σ position noise of a fix quality, m.
+    pub fn sigma(&self, q: FixQuality) -> f64 {
+        let s = self.gnss.sigma_m;
+        match q {
+            FixQuality::RtkFixed => s[0],
+            FixQuality::RtkFloat => s[1],
+            FixQuality::Dgps => s[2],
+            _ => s[3],
+        }
+    }
+}
+
+/// What the GNSS receiver can do at a moment (the scenario decides).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssCondition {
+    /// Fix quality, or `None` during an outage.
+    pub quality: Option<FixQuality>,
+    /// A position error added on top of the noise (a jump), east and north, m.
+    pub offset: (f64, f64),
+}
+
+/// The vehicle's true state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Truth {
+    /// East, m (local frame of the plant's datum).
+    pub x: f64,
+    /// North, m.
+    pub y: f64,
+    /// Yaw, rad.
+    pub yaw: f64,
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Yaw rate, rad/s.
+    pub w: f64,
+}
+
+/// The simulated vehicle.
+pub struct SimVehicle {
+    plant: PlantConfig,
+    rng: ChaCha8Rng,
+    left: SimDrive,
+    right: SimDrive,
+    truth: Truth,
+    frame: Enu,
+    utc_at_zero: NaiveDateTime,
+    start: Timestamp,
+    last: Option<Timestamp>,
+    slip: (f64, f64),
+    next_slip: Timestamp,
+    gyro_bias: f64,
+    next_imu: Timestamp,
+    next_gnss: Timestamp,
+    gnss_error: (f64, f64),
+    pending_gnss: VecDeque<(Timestamp, Bytes)>,
+    imu_count: u32,
+}
+
+impl SimVehicle {
+    /// A vehicle at rest at the datum facing east, its drives on `profile`, started at `start`.
+    pub fn new(plant: PlantConfig, profile: DriveProfile, seed: u64, start: Timestamp) -> Self {
+        let model = MotorModel {
+            accel_rpm_per_s: plant.motors.accel_rpm_per_s,
+            time_constant_s: plant.motors.time_constant_s,
+            ..MotorModel::default()
+        };
+        let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
+            .map(|d| d.naive_utc())
+            .unwrap_or_default();
+        Self {
+            frame: Enu::new(plant.datum()),
+            left: SimDrive::new(LEFT_NODE, profile.clone(), model),
+            right: SimDrive::new(RIGHT_NODE, profile, model),
+            gyro_bias: plant.imu.gyro_bias_rps,
+            plant,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            truth: Truth::default(),
+            utc_at_zero,
+            start,
+            last: None,
+            slip: (0.0, 0.0),
+            next_slip: start,
+            next_imu: start,
+            next_gnss: start,
+            gnss_error: (0.0, 0.0),
+            pending_gnss: VecDeque::new(),
+            imu_count: 0,
+        }
+    }
+
+    /// The true state.
+    pub fn truth(&self) -> Truth {
+        self.truth
+    }
+
+    /// The plant.
+    pub fn plant(&self) -> &PlantConfig {
+        &self.plant
+    }
+
+    /// Adds to the gyro's z bias (a scenario's temperature drift), rad/s.
+    pub fn add_gyro_bias(&mut self, rps: f64) {
+        self.gyro_bias += rps;
+    }
+
+    /// The GNSS antenna's true position (east, north), m.
+    pub fn true_antenna(&self) -> (f64, f64) {
+        let [ax, ay] = self.plant.geometry.antenna;
+        let (s, c) = self.truth.yaw.sin_cos();
+        (
+            self.truth.x + c * ax - s * ay,
+            self.truth.y + s * ax + c * ay,
+        )
+    }
+
+    /// The UTC time the receiver stamps on an epoch at `t`.
+    pub fn utc_at(&self, t: Timestamp) -> NaiveDateTime {
+        self.utc_at_zero
+            + chrono::TimeDelta::microseconds(t.saturating_since(self.start).as_micros() as i64)
+    }
+
+    fn normal(&mut self, sigma: f64) -> f64 {
+        if sigma <= 0.0 {
+            return 0.0;
+        }
+        Normal::new(0.0, sigma).map_or(0.0, |n| n.sample(&mut self.rng))
+    }
+
+    /// Wheel ground speeds from the motors, m/s.
+    fn wheel_speeds(&self) -> (f64, f64) {
+        let g = &self.plant.geometry;
+        let speed =
+            |rpm: f64, slip: f64| rpm * TAU / 60.0 / g.gear_ratio * g.wheel_radius_m * (1.0 + slip);
+        let l = self.left.motor_rpm().first().copied().unwrap_or(0.0);
+        let r = self.right.motor_rpm().first().copied().unwrap_or(0.0);
+        (
+            speed(l, self.slip.0 + self.plant.slip.bias[0]),
+            speed(r, self.slip.1 + self.plant.slip.bias[1]),
+        )
+    }
+
+    /// Advances to `t` and emits what is due, as records at `t`.
+    pub fn step(&mut self, t: Timestamp, gnss: GnssCondition, out: &mut Vec<Record>) {
+        let dt = self
+            .last
+            .map_or(0.0, |l| t.saturating_since(l).as_secs_f64());
+        self.last = Some(t);
+        let mut frames = Vec::new();
+        self.left.step(t, &mut frames);
+        self.right.step(t, &mut frames);
+        for f in frames {
+            out.push(can_record(t, f));
+        }
+        if t >= self.next_slip {
+            self.next_slip = t.saturating_add(Duration::from_millis(100));
+            let s = self.plant.slip.sigma;
+            self.slip = (self.normal(s), self.normal(s));
+        }
+        let (vl, vr) = self.wheel_speeds();
+        let v = (vl + vr) / 2.0;
+        let w = (vr - vl) / self.plant.geometry.track_m;
+        let tr = &mut self.truth;
+        let mid_yaw = tr.yaw + w * dt / 2.0;
+        tr.x += v * mid_yaw.cos() * dt;
+        tr.y += v * mid_yaw.sin() * dt;
+        tr.yaw = wrap(tr.yaw + w * dt);
+        let accel = (v - tr.v) / dt.max(1e-6);
+        tr.v = v;
+        tr.w = w;
+        self.gyro_bias += self.normal(self.plant.imu.gyro_bias_walk * dt.sqrt());
+        if t >= self.next_imu {
+            self.next_imu = t.saturating_add(Duration::from_secs_f64(1.0 / self.plant.imu.rate_hz));
+            out.push(self.imu_record(t, accel));
+        }
+        if t >= self.next_gnss {
+            self.next_gnss =
+                t.saturating_add(Duration::from_secs_f64(1.0 / self.plant.gnss.rate_hz));
+            if let Some(bytes) = self.gnss_epoch(t, gnss) {
+                let due = t.saturating_add(Duration::from_secs_f64(self.plant.gnss.latency_s));
+                self.pending_gnss.push_back((due, bytes));
+            }
+        }
+        while self.pending_gnss.front().is_some_and(|(due, _)| *due <= t) {
+            if let Some((_, bytes)) = self.pending_gnss.pop_front() {
+                out.push(Record {
+                    t,
+                    source: "gnss".into(),
+                    payload: Payload::Serial(bytes),
+                });
+            }
+        }
+    }
+
+    /// A frame chassisd sent to the drives; their answers go to `out`.
+    pub fn on_can(&mut self, t: Timestamp, frame: &Frame, out: &mut Vec<Record>) {
+        let mut frames = Vec::new();
+        self.left.on_frame(t, frame, &mut frames);
+        self.right.on_frame(t, frame, &mut frames);
+        out.extend(frames.into_iter().map(|f| can_record(t, f)));
+    }
+
+    fn imu_record(&mut self, t: Timestamp, forward_accel: f64) -> Record {
+        let m = self.plant.imu;
+        let gyro = Vector3::new(
+            self.normal(m.gyro_noise_rps),
+            self.normal(m.gyro_noise_rps),
+            self.truth.w + self.gyro_bias + self.normal(m.gyro_noise_rps),
+        );
+        let accel = Vector3::new(
+            forward_accel.clamp(-20.0, 20.0) + self.normal(m.accel_noise_mps2),
+            self.truth.v * self.truth.w + self.normal(m.accel_noise_mps2),
+            G + self.normal(m.accel_noise_mps2),
+        );
+        let q = nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, self.truth.yaw);
+        self.imu_count = self.imu_count.wrapping_add(1);
+        let bytes = match m.protocol {
+            ImuProtocol::Hipnuc => hipnuc::frame(&hipnuc::packet_91(
+                self.imu_count,
+                (accel / G).map(|a| a as f32).into(),
+                gyro.map(|g| g.to_degrees() as f32).into(),
+                [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+            )),
+            ImuProtocol::Witmotion => {
+                let scale = |v: f64, full: f64| {
+                    (v / full * 32768.0).round().clamp(-32768.0, 32767.0) as i16
+                };
+                let mut b = witmotion::frame(
+                    witmotion::ACCEL,
+                    [
+                        scale(accel.x, 16.0 * G),
+                        scale(accel.y, 16.0 * G),
+                        scale(accel.z, 16.0 * G),
+                        2500,
+                    ],
+                )
+                .to_vec();
+                let full_rate = 2000f64.to_radians();
+                b.extend(witmotion::frame(
+                    witmotion::GYRO,
+                    [
+                        scale(gyro.x, full_rate),
+                        scale(gyro.y, full_rate),
+                        scale(gyro.z, full_rate),
+                        0,
+                    ],
+                ));
+                b
+            }
+        };
+        Record {
+            t,
+            source: "imu".into(),
+            payload: Payload::Serial(Bytes::from(bytes)),
+        }
+    }
+
+    fn gnss_epoch(&mut self, t: Timestamp, c: GnssCondition) -> Option<Bytes> {
+        let quality = c.quality?;
+        let g = self.plant.gnss;
+        let sigma = self.plant.sigma(quality);
+        // A first-order Gauss-Markov error (multipath) plus white noise. The slow part is kept
+        // at unit variance and scaled by the current quality's σ, so a change of fix quality
+        // changes the error at once, as it does on a receiver.
+        let dt = 1.0 / g.rate_hz;
+        let phi = (-dt / g.correlation_time_s).exp();
+        let drive = (1.0 - phi * phi).sqrt();
+        self.gnss_error = (
+            phi * self.gnss_error.0 + self.normal(drive),
+            phi * self.gnss_error.1 + self.normal(drive),
+        );
+        let sc = sigma * g.correlated_fraction;
+        let white = sigma * (1.0 - g.correlated_fraction * g.correlated_fraction).sqrt();
+        let tr = self.truth;
+        let [ax, ay] = self.plant.geometry.antenna;
+        let (s, co) = tr.yaw.sin_cos();
+        let e = tr.x + co * ax - s * ay + sc * self.gnss_error.0 + self.normal(white) + c.offset.0;
+        let n = tr.y + s * ax + co * ay + sc * self.gnss_error.1 + self.normal(white) + c.offset.1;
+        let p = self.frame.to_geodetic(&Vector3::new(e, n, 0.0));
+        let heading = (90.0 - tr.yaw.to_degrees()).rem_euclid(360.0);
+        let heading_noise = self.normal(g.heading_sigma_deg);
+        let utc = self.utc_at(t);
+        let epoch = Epoch {
+            utc,
+            quality,
+            position: (p.lat_deg, p.lon_deg, p.h_m),
+            speed_mps: tr.v.abs() + self.normal(0.02).abs(),
+            course_deg: if tr.v >= 0.0 {
+                heading
+            } else {
+                (heading + 180.0) % 360.0
+            },
+            sigma_m: sigma,
+            heading_deg: g
+                .dual_antenna
+                .then(|| (heading + heading_noise).rem_euclid(360.0)),
+        };
+        Some(Bytes::from(nmea_out::epoch(&epoch)))
+    }
+}
+
+fn can_record(t: Timestamp, frame: Frame) -> Record {
+    Record {
+        t,
+        source: SIM_BUS.into(),
+        payload: Payload::Can(frame.into()),
+    }
+}
