@@ -5,6 +5,7 @@
 //! that one engine. See DESIGN.md in the shared folder for the architecture.
 
 pub mod api;
+pub mod bench;
 pub mod config;
 pub mod core;
 pub mod devices;

@@ -7,9 +7,12 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+use chassisd::bench::fusion;
 use chassisd::config::VehicleConfig;
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
+use chassisd::sim::plant::PlantConfig;
+use chassisd::sim::scenario::Scenario;
 
 #[derive(Parser)]
 #[command(version, about = "Chassis daemon for RTK ground robots")]
@@ -42,12 +45,36 @@ enum Command {
         #[arg(long)]
         commands_stdin: bool,
     },
+    /// Run a benchmark that prints figures.
+    Bench {
+        #[command(subcommand)]
+        which: BenchCommand,
+    },
     /// Simulate the CAN devices of a vehicle configuration (drives, BMS) on its CAN
     /// interfaces, e.g. vcan0. Standard input takes fault injections; see the README.
     CanSim {
         /// Vehicle configuration whose [[can]], [[drive]] and [bms] are simulated.
         #[arg(long)]
         config: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Score the fusion filter on scripted drives of the simulated vehicle against its
+    /// truth; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Fusion {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run only these scenarios (repeatable): straight, turns, loop-10min, float,
+        /// outage-30s, jump-5m, bias-drift.
+        #[arg(long)]
+        scenario: Vec<String>,
     },
 }
 
@@ -61,7 +88,8 @@ fn main() -> ExitCode {
         )
         .init();
     match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
         Err(e) => {
             eprintln!("chassisd: {e:#}");
             ExitCode::FAILURE
@@ -69,8 +97,18 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: Cli) -> anyhow::Result<()> {
+/// Runs the command; `Ok(false)` when it ran but its verdict is negative (a benchmark missed
+/// a target).
+fn run(cli: Cli) -> anyhow::Result<bool> {
     match cli.command {
+        Command::Bench {
+            which:
+                BenchCommand::Fusion {
+                    plant,
+                    seed,
+                    scenario,
+                },
+        } => bench_fusion(plant, seed, &scenario),
         Command::Replay { path, config } => {
             let config = config.map(|p| VehicleConfig::load(&p)).transpose()?;
             let stdout = std::io::stdout();
@@ -92,7 +130,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 eprintln!("no RMC or ZDA date in the log; 1970-01-01 assumed");
             }
             eprintln!("{}", summary.one_line());
-            Ok(())
+            Ok(true)
         }
         Command::Run {
             config,
@@ -116,7 +154,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             // A read of standard input may still be blocked in a runtime thread; do not wait
             // for it.
             runtime.shutdown_background();
-            result
+            result.map(|()| true)
         }
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
@@ -127,7 +165,42 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .context("cannot start the async runtime")?;
             let result = runtime.block_on(chassisd::runtime::can_sim::run(vehicle));
             runtime.shutdown_background();
-            result
+            result.map(|()| true)
         }
     }
+}
+
+fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::Result<bool> {
+    let plant = match plant {
+        Some(path) => PlantConfig::load(&path)?,
+        None => PlantConfig::builtin()?,
+    };
+    let mut scenarios = Scenario::all();
+    if !names.is_empty() {
+        for name in names {
+            if !scenarios.iter().any(|s| s.name == name) {
+                anyhow::bail!(
+                    "no scenario {name:?}; there are {}",
+                    scenarios
+                        .iter()
+                        .map(|s| s.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+        }
+        scenarios.retain(|s| names.iter().any(|n| n == s.name));
+    }
+    let started = std::time::Instant::now();
+    let report = fusion::run(&plant, &scenarios, seed)?;
+    let elapsed = started.elapsed();
+    print!("{}", report.table());
+    println!(
+        "simulated {:.0} s in {:.1} s of wall time ({:.0}x real time)",
+        fusion::simulated_time(&scenarios).as_secs_f64(),
+        elapsed.as_secs_f64(),
+        fusion::simulated_time(&scenarios).as_secs_f64() / elapsed.as_secs_f64().max(1e-9),
+    );
+    println!("{}", report.json());
+    Ok(report.pass)
 }

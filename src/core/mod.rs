@@ -343,17 +343,11 @@ impl Vehicle {
             if let Some(course) = v.value.course_deg
                 && speed >= self.localizer.config().cog_min_speed_mps
             {
-                // Reversing, the velocity points behind the vehicle.
-                let backwards = self
-                    .localizer
-                    .ekf()
-                    .is_some_and(|e| e.x[fusion::ekf::V] < 0.0);
-                let yaw =
-                    yaw_of_heading_deg(course) + if backwards { std::f64::consts::PI } else { 0.0 };
+                // The localiser models the antenna's motion (turning, reversing).
                 self.localizer.add(
                     at(v.rx),
                     Measurement::Course {
-                        yaw: fusion::ekf::wrap(yaw),
+                        yaw: yaw_of_heading_deg(course),
                         sigma: (0.1f64).atan2(speed).max(2f64.to_radians()),
                     },
                 );

@@ -24,6 +24,18 @@ use crate::time::Timestamp;
 const GATE_1: f64 = 10.83;
 /// χ² gate, 2 degrees of freedom, 99.9 %.
 const GATE_2: f64 = 13.82;
+/// A gyro rate this recent makes the gyro, not the wheels, the source of yaw rate.
+const GYRO_LIVE: Duration = Duration::from_millis(200);
+/// Wheels slower than this stand still, m/s ...
+const STILL_MPS: f64 = 0.002;
+/// ... and rad/s.
+const STILL_RPS: f64 = 0.005;
+/// The yaw rate of standing wheels, 1σ rad/s.
+const STILL_YAW_RATE_SIGMA: f64 = 0.002;
+/// A fix whose σ is below this fraction of the last one's marks a better fix quality ...
+const QUALITY_STEP: f64 = 0.5;
+/// ... and the estimate keeps at least this fraction of the old σ as its uncertainty.
+const CORRELATED_PART: f64 = 0.5;
 /// A relocation needs at least this many rejected positions, whatever their rate.
 pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
 
@@ -114,9 +126,9 @@ pub enum Measurement {
         /// 1σ, rad.
         sigma: f64,
     },
-    /// Course over ground as ENU yaw, rad, at a speed (m/s).
+    /// Course over ground: the direction the antenna moves, as an ENU angle (rad).
     Course {
-        /// Yaw of the velocity, rad.
+        /// Direction of the antenna's velocity, rad.
         yaw: f64,
         /// 1σ, rad.
         sigma: f64,
@@ -156,6 +168,10 @@ struct Filter {
     time: Timestamp,
     /// The current run of rejected positions: its first time and its length.
     rejections: Option<(Timestamp, u32)>,
+    /// The last gyro rate applied.
+    last_gyro: Option<Timestamp>,
+    /// The larger 1σ of the last position fix.
+    last_position_sigma: Option<f64>,
 }
 
 /// The localiser.
@@ -350,6 +366,8 @@ impl Localizer {
             ekf: Ekf::new(x, p),
             time: t,
             rejections: None,
+            last_gyro: None,
+            last_position_sigma: None,
         });
         self.buffer.clear();
     }
@@ -380,18 +398,32 @@ impl Localizer {
                     &[],
                     f64::INFINITY,
                 );
-                let yaw_rate_sigma = self.config.odometry_yaw_rate_sigma;
-                e.update(
-                    &one(w),
-                    &one(e.x[W]),
-                    &row(W),
-                    &var(yaw_rate_sigma),
-                    &[],
-                    f64::INFINITY,
-                );
+                // The wheels' yaw rate carries the slip and track errors, which the gyro bias
+                // would soak up; with a live gyro it is used only when the wheels stand still,
+                // where it is exact (and makes the bias observable).
+                let gyro_live = f
+                    .last_gyro
+                    .is_some_and(|g| t.saturating_since(g) <= GYRO_LIVE);
+                let still = v.abs() < STILL_MPS && w.abs() < STILL_RPS;
+                let yaw_rate_sigma = match (gyro_live, still) {
+                    (false, _) => Some(self.config.odometry_yaw_rate_sigma),
+                    (true, true) => Some(STILL_YAW_RATE_SIGMA),
+                    (true, false) => None,
+                };
+                if let Some(sigma) = yaw_rate_sigma {
+                    e.update(
+                        &one(w),
+                        &one(e.x[W]),
+                        &row(W),
+                        &var(sigma),
+                        &[],
+                        f64::INFINITY,
+                    );
+                }
                 self.stats.applied += 1;
             }
             Measurement::Gyro { wz } => {
+                f.last_gyro = Some(t);
                 let mut h = row(W);
                 h[(0, BIAS)] = 1.0;
                 e.update(
@@ -404,7 +436,7 @@ impl Localizer {
                 );
                 self.stats.applied += 1;
             }
-            Measurement::Heading { yaw, sigma } | Measurement::Course { yaw, sigma } => {
+            Measurement::Heading { yaw, sigma } => {
                 let r = e.update(
                     &one(yaw),
                     &one(e.x[YAW]),
@@ -415,7 +447,42 @@ impl Localizer {
                 );
                 self.count(r.applied);
             }
+            Measurement::Course { yaw, sigma } => {
+                // The antenna moves at (v - ω·ay, ω·ax) in the vehicle frame: off the heading
+                // while turning, and behind it when reversing.
+                let (ax, ay) = self.config.antenna;
+                let (along, across) = (e.x[V] - e.x[W] * ay, e.x[W] * ax);
+                let speed_sq = along * along + across * across;
+                if speed_sq < 0.01 {
+                    return;
+                }
+                let mut h = row(YAW);
+                h[(0, V)] = -across / speed_sq;
+                h[(0, W)] = (along * ax + across * ay) / speed_sq;
+                let predicted = e.x[YAW] + across.atan2(along);
+                let r = e.update(&one(yaw), &one(predicted), &h, &var(sigma), &[0], GATE_1);
+                self.count(r.applied);
+            }
             Measurement::Position { en, sigma } => {
+                // GNSS errors wander slowly, so averaging worse fixes leaves an error the
+                // filter cannot see; when the fix gets much better (float to fixed), the
+                // estimate is only as good as a part of the old fixes' σ.
+                let sigma_now = sigma.0.max(sigma.1);
+                if let Some(before) = f.last_position_sigma
+                    && sigma_now < before * QUALITY_STEP
+                {
+                    let floor = (before * CORRELATED_PART).powi(2);
+                    for i in [X, Y] {
+                        if e.p[(i, i)] < floor {
+                            let scale = (floor / e.p[(i, i)].max(1e-12)).sqrt();
+                            for j in 0..N {
+                                e.p[(i, j)] *= scale;
+                                e.p[(j, i)] *= scale;
+                            }
+                        }
+                    }
+                }
+                f.last_position_sigma = Some(sigma_now);
                 let (ax, ay) = self.config.antenna;
                 let (s, c) = e.x[YAW].sin_cos();
                 let hx = SVector::<f64, 2>::new(e.x[X] + c * ax - s * ay, e.x[Y] + s * ax + c * ay);
@@ -516,6 +583,8 @@ impl Localizer {
             ekf: Ekf::new(state, p),
             time,
             rejections: None,
+            last_gyro: None,
+            last_position_sigma: None,
         });
         self.buffer.clear();
     }

@@ -129,6 +129,8 @@ pub struct GnssModel {
     pub dual_antenna: bool,
     /// Heading noise, 1σ degrees.
     pub heading_sigma_deg: f64,
+    /// Velocity noise per axis, 1σ m/s (speed and course over ground come from it).
+    pub velocity_sigma_mps: f64,
     /// Horizontal position noise per axis, 1σ m: RTK fixed, float, DGPS, single.
     pub sigma_m: [f64; 4],
     /// Part of the position noise that is correlated in time (multipath), fraction of σ.
@@ -137,7 +139,15 @@ pub struct GnssModel {
     pub correlation_time_s: f64,
 }
 
+/// The plant `chassisd sim` and `chassisd bench fusion` use without `--plant`.
+pub const DEFAULT_PLANT: &str = include_str!("../../devices/plant.mower.toml");
+
 impl PlantConfig {
+    /// The built-in plant (`devices/plant.mower.toml`).
+    pub fn builtin() -> Result<Self, ConfigError> {
+        Self::from_toml(DEFAULT_PLANT, Path::new("plant.mower.toml (built in)"))
+    }
+
     /// Reads and checks a plant file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
@@ -480,24 +490,25 @@ impl SimVehicle {
         let sc = sigma * g.correlated_fraction;
         let white = sigma * (1.0 - g.correlated_fraction * g.correlated_fraction).sqrt();
         let tr = self.truth;
-        let [ax, ay] = self.plant.geometry.antenna;
-        let (s, co) = tr.yaw.sin_cos();
-        let e = tr.x + co * ax - s * ay + sc * self.gnss_error.0 + self.normal(white) + c.offset.0;
-        let n = tr.y + s * ax + co * ay + sc * self.gnss_error.1 + self.normal(white) + c.offset.1;
+        let (antenna_e, antenna_n) = self.true_antenna();
+        let e = antenna_e + sc * self.gnss_error.0 + self.normal(white) + c.offset.0;
+        let n = antenna_n + sc * self.gnss_error.1 + self.normal(white) + c.offset.1;
         let p = self.frame.to_geodetic(&Vector3::new(e, n, 0.0));
         let heading = (90.0 - tr.yaw.to_degrees()).rem_euclid(360.0);
         let heading_noise = self.normal(g.heading_sigma_deg);
+        // The antenna's velocity: the vehicle's, plus the turn about the antenna's offset.
+        let [ax, ay] = self.plant.geometry.antenna;
+        let (along, across) = (tr.v - tr.w * ay, tr.w * ax);
+        let (s, co) = tr.yaw.sin_cos();
+        let ve = along * co - across * s + self.normal(g.velocity_sigma_mps);
+        let vn = along * s + across * co + self.normal(g.velocity_sigma_mps);
         let utc = self.utc_at(t);
         let epoch = Epoch {
             utc,
             quality,
             position: (p.lat_deg, p.lon_deg, p.h_m),
-            speed_mps: tr.v.abs() + self.normal(0.02).abs(),
-            course_deg: if tr.v >= 0.0 {
-                heading
-            } else {
-                (heading + 180.0) % 360.0
-            },
+            speed_mps: ve.hypot(vn),
+            course_deg: (90.0 - vn.atan2(ve).to_degrees()).rem_euclid(360.0),
             sigma_m: sigma,
             heading_deg: g
                 .dual_antenna

@@ -1,0 +1,564 @@
+//! `chassisd bench fusion`: scripted drives of the simulated vehicle through the whole
+//! decoding path and the core, scored against the simulator's truth. The fused pose (what
+//! base_status publishes) is compared with two baselines: GNSS alone (each decoded fix's
+//! antenna position at its epoch, and its heading) and wheel odometry alone (the status's
+//! wheel distances, dead-reckoned from the true start).
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use bytes::Bytes;
+use serde::Serialize;
+
+use crate::config::ConfigError;
+use crate::core::status::VehicleStatus;
+use crate::devices::gnss::NmeaReceiver;
+use crate::engine::EngineOutput;
+use crate::fusion::ekf::wrap;
+use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::fusion::localizer::yaw_of_heading_deg;
+use crate::record::{Payload, Record};
+use crate::sim::lockstep::{GNSS_SOURCE, Lockstep, PLANT_STEP, Sink};
+use crate::sim::plant::{PlantConfig, Truth};
+use crate::sim::scenario::{Regime, Scenario, WARMUP_S};
+use crate::time::Timestamp;
+
+/// Simulated sessions start here (2026-01-01T00:00:00Z), so receiver times are fixed too.
+const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
+/// The window after a jump in which the estimate must not follow it, s.
+const JUMP_SETTLE_S: f64 = 5.0;
+/// An estimate that stays this close to the truth through a jump has rejected it, m.
+const JUMP_REJECTED_M: f64 = 0.3;
+/// Speed above which a single-antenna receiver's course stands in for its heading, m/s.
+const COURSE_MIN_SPEED: f64 = 0.3;
+
+/// The targets the figures are held to.
+pub mod target {
+    /// Fused position RMSE over GNSS-only RMSE in float, DGPS and single segments, at most.
+    pub const DEGRADED_RATIO: f64 = 0.5;
+    /// Fused position RMSE over GNSS-only RMSE while RTK-fixed, at most.
+    pub const FIXED_RATIO: f64 = 1.2;
+    /// Fused heading RMSE, under, degrees.
+    pub const HEADING_RMSE_DEG: f64 = 1.0;
+    /// Position error at the end of a 30 s outage at 1 m/s, under, m.
+    pub const OUTAGE_DRIFT_M: f64 = 0.5;
+}
+
+/// Sums of squared errors.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Errors {
+    position: (f64, u64),
+    heading: (f64, u64),
+}
+
+impl Errors {
+    fn position(&mut self, e: f64) {
+        self.position.0 += e * e;
+        self.position.1 += 1;
+    }
+
+    fn heading(&mut self, e: f64) {
+        self.heading.0 += e * e;
+        self.heading.1 += 1;
+    }
+
+    fn merge(&mut self, other: &Errors) {
+        self.position.0 += other.position.0;
+        self.position.1 += other.position.1;
+        self.heading.0 += other.heading.0;
+        self.heading.1 += other.heading.1;
+    }
+
+    fn figures(&self) -> Figures {
+        let rms = |(sum, n): (f64, u64)| (n > 0).then(|| (sum / n as f64).sqrt());
+        Figures {
+            position_rmse_m: rms(self.position),
+            heading_rmse_deg: rms(self.heading).map(f64::to_degrees),
+            samples: self.position.1,
+        }
+    }
+}
+
+/// Root-mean-square errors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Figures {
+    /// Position, m.
+    pub position_rmse_m: Option<f64>,
+    /// Heading, degrees.
+    pub heading_rmse_deg: Option<f64>,
+    /// Position samples.
+    pub samples: u64,
+}
+
+/// One estimator's errors by GNSS regime.
+type ByRegime = BTreeMap<Regime, Errors>;
+
+/// The figures of one scenario.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ScenarioFigures {
+    /// Scenario name.
+    pub name: String,
+    /// Fused pose, by regime ("fixed", "degraded", "outage").
+    pub fused: BTreeMap<&'static str, Figures>,
+    /// GNSS alone, by regime.
+    pub gnss_only: BTreeMap<&'static str, Figures>,
+    /// Odometry alone, by regime.
+    pub odometry_only: BTreeMap<&'static str, Figures>,
+    /// Fused position error when the fix returns after the outage, m.
+    pub outage_drift_m: Option<f64>,
+    /// Odometry-only position error at the same moment, m.
+    pub outage_drift_odometry_m: Option<f64>,
+    /// Largest fused position error from the jump to 5 s after it, m.
+    pub jump_max_error_m: Option<f64>,
+    /// Largest GNSS-only position error in the jump, m.
+    pub jump_gnss_max_error_m: Option<f64>,
+    /// Status lines scored.
+    #[serde(skip)]
+    errors: [ByRegime; 3],
+}
+
+/// The whole benchmark's result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FusionReport {
+    /// Plant name.
+    pub plant: String,
+    /// Noise seed.
+    pub seed: u64,
+    /// Each scenario.
+    pub scenarios: Vec<ScenarioFigures>,
+    /// Fused / GNSS-only position RMSE in float, DGPS and single segments.
+    pub degraded_ratio: Option<f64>,
+    /// Fused / GNSS-only position RMSE while RTK-fixed.
+    pub fixed_ratio: Option<f64>,
+    /// Fused heading RMSE over every scored moment, degrees.
+    pub heading_rmse_deg: Option<f64>,
+    /// Worst drift at the end of an outage, m.
+    pub outage_drift_m: Option<f64>,
+    /// Whether every jump was rejected.
+    pub jump_rejected: bool,
+    /// Every target met.
+    pub pass: bool,
+}
+
+fn regime_name(r: Regime) -> &'static str {
+    match r {
+        Regime::Fixed => "fixed",
+        Regime::Degraded => "degraded",
+        Regime::Outage => "outage",
+    }
+}
+
+/// What a scenario run keeps for scoring.
+#[derive(Default)]
+struct Collector {
+    statuses: Vec<VehicleStatus>,
+    gnss: Vec<(Timestamp, Bytes)>,
+    rejected_commands: u64,
+}
+
+impl Sink for Collector {
+    fn record(&mut self, record: &Record) {
+        if record.source == GNSS_SOURCE
+            && let Payload::Serial(bytes) = &record.payload
+        {
+            self.gnss.push((record.t, bytes.clone()));
+        }
+    }
+
+    fn output(&mut self, output: EngineOutput) {
+        match output {
+            EngineOutput::Status(s) => self.statuses.push(*s),
+            EngineOutput::CommandResult { result: Err(_), .. } => self.rejected_commands += 1,
+            _ => {}
+        }
+    }
+}
+
+/// The truth at every plant step.
+struct TruthLog {
+    steps: Vec<Truth>,
+}
+
+impl TruthLog {
+    fn at(&self, t: Timestamp) -> Option<Truth> {
+        let step = PLANT_STEP.as_nanos() as u64;
+        let k = t.saturating_since(START).as_nanos() as u64;
+        // Round to the nearest step.
+        let i = ((k + step / 2) / step) as usize;
+        self.steps.get(i).copied()
+    }
+}
+
+fn seconds(t: Timestamp) -> f64 {
+    t.saturating_since(START).as_secs_f64()
+}
+
+/// Runs `scenarios` on `plant` with noise `seed`, spread over the machine's cores. Each
+/// scenario has its own seed derived from `seed` and its place, so the figures do not
+/// depend on the number of threads.
+pub fn run(
+    plant: &PlantConfig,
+    scenarios: &[Scenario],
+    seed: u64,
+) -> Result<FusionReport, ConfigError> {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut results: Vec<Option<Result<ScenarioFigures, ConfigError>>> =
+        (0..scenarios.len()).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        for (worker, slots) in results
+            .chunks_mut(scenarios.len().div_ceil(threads).max(1))
+            .enumerate()
+        {
+            let first = worker * scenarios.len().div_ceil(threads).max(1);
+            scope.spawn(move || {
+                for (j, slot) in slots.iter_mut().enumerate() {
+                    let i = first + j;
+                    if let Some(scenario) = scenarios.get(i) {
+                        let scenario_seed = seed.wrapping_mul(1000).wrapping_add(i as u64);
+                        *slot = Some(run_scenario(plant, scenario, scenario_seed));
+                    }
+                }
+            });
+        }
+    });
+    let mut figures = Vec::with_capacity(scenarios.len());
+    for r in results.into_iter().flatten() {
+        figures.push(r?);
+    }
+    Ok(report(plant, seed, figures))
+}
+
+/// Drives one scenario and scores it.
+pub fn run_scenario(
+    plant: &PlantConfig,
+    scenario: &Scenario,
+    seed: u64,
+) -> Result<ScenarioFigures, ConfigError> {
+    let mut sim = Lockstep::new(plant.clone(), seed, START)?;
+    let mut sink = Collector::default();
+    let step_s = PLANT_STEP.as_secs_f64();
+    let steps = (scenario.duration_s() / step_s).round() as u64;
+    let command_every = (0.1 / step_s).round() as u64;
+    let mut truth = TruthLog {
+        steps: Vec::with_capacity(steps as usize + 1),
+    };
+    truth.steps.push(sim.vehicle().truth());
+    for k in 0..steps {
+        let s = k as f64 * step_s;
+        // Commands start once the drives have had a second to boot.
+        if k % command_every == 0 && s >= 1.0 {
+            let (v, w) = scenario.command_at(s);
+            let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
+            sim.command("cmd_vel", &twist, &mut sink);
+        }
+        sim.vehicle_mut()
+            .add_gyro_bias(scenario.gyro_bias_ramp * step_s);
+        sim.step(scenario.gnss_at(s), &mut sink);
+        truth.steps.push(sim.vehicle().truth());
+    }
+    if sink.rejected_commands > 0 {
+        tracing::warn!(
+            scenario = scenario.name,
+            rejected = sink.rejected_commands,
+            "commands refused"
+        );
+    }
+    Ok(score(plant, scenario, &sink, &truth, &sim))
+}
+
+fn score(
+    plant: &PlantConfig,
+    scenario: &Scenario,
+    sink: &Collector,
+    truth: &TruthLog,
+    sim: &Lockstep,
+) -> ScenarioFigures {
+    let mut fused = ByRegime::new();
+    let mut gnss = ByRegime::new();
+    let mut odometry = ByRegime::new();
+    let mut outage_drift = None;
+    let mut outage_drift_odometry = None;
+    let mut jump_max: Option<f64> = None;
+    let mut jump_gnss_max: Option<f64> = None;
+    let in_jump = |s: f64| {
+        scenario
+            .jump
+            .is_some_and(|j| s >= j.from_s && s <= j.to_s + JUMP_SETTLE_S)
+    };
+    let outage_end = scenario.outage_end_s();
+
+    // Fused pose and dead reckoning, at every status.
+    let track = plant.geometry.track_m;
+    let mut dead_reckoning = (0.0, 0.0, 0.0);
+    let mut last_wheels: Option<(f64, f64)> = None;
+    for status in &sink.statuses {
+        let s = seconds(status.time);
+        let Some(tr) = truth.at(status.time) else {
+            continue;
+        };
+        if let Some(chassis) = &status.chassis {
+            let (l, r) = (chassis.odometry.left_m, chassis.odometry.right_m);
+            if let Some((l0, r0)) = last_wheels {
+                let (dl, dr) = (l - l0, r - r0);
+                let (x, y, yaw) = &mut dead_reckoning;
+                let mid = *yaw + (dr - dl) / track / 2.0;
+                *x += (dl + dr) / 2.0 * mid.cos();
+                *y += (dl + dr) / 2.0 * mid.sin();
+                *yaw = wrap(*yaw + (dr - dl) / track);
+            }
+            last_wheels = Some((l, r));
+        }
+        if s < WARMUP_S {
+            continue;
+        }
+        let pose = status.pose;
+        let error = (pose.x - tr.x).hypot(pose.y - tr.y);
+        let (dx, dy, dyaw) = dead_reckoning;
+        let odometry_error = (dx - tr.x).hypot(dy - tr.y);
+        if outage_end.is_some_and(|end| (s - end).abs() < 0.05) {
+            outage_drift = Some(error);
+            outage_drift_odometry = Some(odometry_error);
+        }
+        if in_jump(s) {
+            jump_max = Some(jump_max.map_or(error, |m| m.max(error)));
+            continue;
+        }
+        let regime = scenario.regime_at(s);
+        let f = fused.entry(regime).or_default();
+        f.position(error);
+        f.heading(wrap(pose.yaw - tr.yaw));
+        let o = odometry.entry(regime).or_default();
+        o.position(odometry_error);
+        o.heading(wrap(dyaw - tr.yaw));
+    }
+
+    // GNSS alone: each decoded epoch against the antenna's true position at the epoch.
+    let frame = Enu::new(plant.datum());
+    let utc_zero = sim.vehicle().utc_at(START);
+    let [ax, ay] = plant.geometry.antenna;
+    let mut receiver = NmeaReceiver::new();
+    for (t, bytes) in &sink.gnss {
+        receiver.push(*t, bytes, |_| {});
+        let fix = receiver.fix();
+        let (Some(position), Some(utc)) = (fix.position, fix.utc) else {
+            continue;
+        };
+        if position.rx != *t || !fix.quality.is_valid() {
+            continue;
+        }
+        let Ok(since) = (utc - utc_zero).to_std() else {
+            continue;
+        };
+        let epoch = START.saturating_add(since);
+        let s = seconds(epoch);
+        let Some(tr) = truth.at(epoch) else { continue };
+        let p = &position.value;
+        let h = p.altitude_msl_m.unwrap_or(0.0) + p.geoid_separation_m.unwrap_or(0.0);
+        let enu = frame.to_enu(&Geodetic {
+            lat_deg: p.latitude_deg,
+            lon_deg: p.longitude_deg,
+            h_m: h,
+        });
+        let (sn, c) = tr.yaw.sin_cos();
+        let antenna = (tr.x + c * ax - sn * ay, tr.y + sn * ax + c * ay);
+        let error = (enu.x - antenna.0).hypot(enu.y - antenna.1);
+        if s < WARMUP_S {
+            continue;
+        }
+        if in_jump(s) {
+            jump_gnss_max = Some(jump_gnss_max.map_or(error, |m| m.max(error)));
+            continue;
+        }
+        let g = gnss.entry(scenario.regime_at(s)).or_default();
+        g.position(error);
+        let heading = match (fix.heading_deg, fix.velocity) {
+            (Some(h), _) if h.rx == *t => Some(yaw_of_heading_deg(h.value)),
+            (_, Some(v)) if v.rx == *t && v.value.speed_mps > COURSE_MIN_SPEED && tr.v > 0.0 => {
+                v.value.course_deg.map(yaw_of_heading_deg)
+            }
+            _ => None,
+        };
+        if let Some(yaw) = heading {
+            g.heading(wrap(yaw - tr.yaw));
+        }
+    }
+
+    let by_name = |m: &ByRegime| {
+        m.iter()
+            .map(|(r, e)| (regime_name(*r), e.figures()))
+            .collect::<BTreeMap<_, _>>()
+    };
+    ScenarioFigures {
+        name: scenario.name.to_owned(),
+        fused: by_name(&fused),
+        gnss_only: by_name(&gnss),
+        odometry_only: by_name(&odometry),
+        outage_drift_m: outage_drift,
+        outage_drift_odometry_m: outage_drift_odometry,
+        jump_max_error_m: jump_max,
+        jump_gnss_max_error_m: jump_gnss_max,
+        errors: [fused, gnss, odometry],
+    }
+}
+
+fn report(plant: &PlantConfig, seed: u64, scenarios: Vec<ScenarioFigures>) -> FusionReport {
+    let mut fused = ByRegime::new();
+    let mut gnss = ByRegime::new();
+    for s in &scenarios {
+        for (r, e) in &s.errors[0] {
+            fused.entry(*r).or_default().merge(e);
+        }
+        for (r, e) in &s.errors[1] {
+            gnss.entry(*r).or_default().merge(e);
+        }
+    }
+    let ratio = |r: Regime| {
+        let f = fused.get(&r)?.figures().position_rmse_m?;
+        let g = gnss.get(&r)?.figures().position_rmse_m?;
+        (g > 0.0).then_some(f / g)
+    };
+    let mut all = Errors::default();
+    for e in fused.values() {
+        all.merge(e);
+    }
+    let degraded_ratio = ratio(Regime::Degraded);
+    let fixed_ratio = ratio(Regime::Fixed);
+    let heading_rmse_deg = all.figures().heading_rmse_deg;
+    let outage_drift_m = scenarios
+        .iter()
+        .filter_map(|s| s.outage_drift_m)
+        .reduce(f64::max);
+    let jumps: Vec<f64> = scenarios
+        .iter()
+        .filter_map(|s| s.jump_max_error_m)
+        .collect();
+    let jump_rejected = !jumps.is_empty() && jumps.iter().all(|e| *e < JUMP_REJECTED_M);
+    let pass = degraded_ratio.is_some_and(|r| r <= target::DEGRADED_RATIO)
+        && fixed_ratio.is_some_and(|r| r <= target::FIXED_RATIO)
+        && heading_rmse_deg.is_some_and(|h| h < target::HEADING_RMSE_DEG)
+        && outage_drift_m.is_some_and(|d| d < target::OUTAGE_DRIFT_M)
+        && jump_rejected;
+    FusionReport {
+        plant: plant.name.clone(),
+        seed,
+        scenarios,
+        degraded_ratio,
+        fixed_ratio,
+        heading_rmse_deg,
+        outage_drift_m,
+        jump_rejected,
+        pass,
+    }
+}
+
+impl FusionReport {
+    /// The table, a line per scenario and regime, then the targets.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::new();
+        let num = |v: Option<f64>, digits: usize| {
+            v.map_or_else(|| "-".to_owned(), |v| format!("{v:.digits$}"))
+        };
+        let _ = writeln!(
+            out,
+            "fusion benchmark: plant {}, seed {}",
+            self.plant, self.seed
+        );
+        let _ = writeln!(
+            out,
+            "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>6}",
+            "scenario", "regime", "fused m", "GNSS m", "odom m", "fused °", "GNSS °", "odom °", "n"
+        );
+        for s in &self.scenarios {
+            for (regime, f) in &s.fused {
+                let g = s.gnss_only.get(regime);
+                let o = s.odometry_only.get(regime);
+                let _ = writeln!(
+                    out,
+                    "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>6}",
+                    s.name,
+                    regime,
+                    num(f.position_rmse_m, 3),
+                    num(g.and_then(|g| g.position_rmse_m), 3),
+                    num(o.and_then(|o| o.position_rmse_m), 3),
+                    num(f.heading_rmse_deg, 2),
+                    num(g.and_then(|g| g.heading_rmse_deg), 2),
+                    num(o.and_then(|o| o.heading_rmse_deg), 2),
+                    f.samples,
+                );
+            }
+            if let Some(d) = s.outage_drift_m {
+                let _ = writeln!(
+                    out,
+                    "{:<11} drift at the end of the outage: fused {} m, odometry alone {} m",
+                    s.name,
+                    num(Some(d), 3),
+                    num(s.outage_drift_odometry_m, 3),
+                );
+            }
+            if let Some(j) = s.jump_max_error_m {
+                let _ = writeln!(
+                    out,
+                    "{:<11} largest error from the jump to {JUMP_SETTLE_S} s after: fused {} m, GNSS alone {} m",
+                    s.name,
+                    num(Some(j), 3),
+                    num(s.jump_gnss_max_error_m, 3),
+                );
+            }
+        }
+        let verdict = |ok: bool| if ok { "ok" } else { "MISSED" };
+        let _ = writeln!(
+            out,
+            "target: float/DGPS/single fused/GNSS RMSE {} <= {}: {}",
+            num(self.degraded_ratio, 3),
+            target::DEGRADED_RATIO,
+            verdict(
+                self.degraded_ratio
+                    .is_some_and(|r| r <= target::DEGRADED_RATIO)
+            ),
+        );
+        let _ = writeln!(
+            out,
+            "target: RTK-fixed fused/GNSS RMSE {} <= {}: {}",
+            num(self.fixed_ratio, 3),
+            target::FIXED_RATIO,
+            verdict(self.fixed_ratio.is_some_and(|r| r <= target::FIXED_RATIO)),
+        );
+        let _ = writeln!(
+            out,
+            "target: heading RMSE {}° < {}°: {}",
+            num(self.heading_rmse_deg, 3),
+            target::HEADING_RMSE_DEG,
+            verdict(
+                self.heading_rmse_deg
+                    .is_some_and(|h| h < target::HEADING_RMSE_DEG)
+            ),
+        );
+        let _ = writeln!(
+            out,
+            "target: drift after a 30 s outage {} m < {} m: {}",
+            num(self.outage_drift_m, 3),
+            target::OUTAGE_DRIFT_M,
+            verdict(
+                self.outage_drift_m
+                    .is_some_and(|d| d < target::OUTAGE_DRIFT_M)
+            ),
+        );
+        let _ = writeln!(
+            out,
+            "target: 5 m jump rejected (error stays under {JUMP_REJECTED_M} m): {}",
+            verdict(self.jump_rejected),
+        );
+        out
+    }
+
+    /// The one-line JSON summary.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_else(|e| format!(r#"{{"error":"{e}"}}"#))
+    }
+}
+
+/// How long the plant runs for `scenarios`, for the throughput figure.
+pub fn simulated_time(scenarios: &[Scenario]) -> Duration {
+    Duration::from_secs_f64(scenarios.iter().map(Scenario::duration_s).sum())
+}

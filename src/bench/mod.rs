@@ -1,0 +1,4 @@
+//! Benchmarks that print figures (`chassisd bench ...`), as opposed to the criterion
+//! micro-benchmarks under `benches/`.
+
+pub mod fusion;

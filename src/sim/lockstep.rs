@@ -1,0 +1,278 @@
+//! The simulated vehicle and the chassisd engine in lockstep: the plant advances 1 ms at a
+//! time, its frames go through the engine's decoders and core, and the frames the engine sends
+//! go back to the simulated drives. Every record the engine saw is handed out with the time
+//! it saw it, so a recording of them replays to the same output.
+
+use std::collections::VecDeque;
+use std::path::Path;
+use std::time::Duration;
+
+use bytes::Bytes;
+
+use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
+use crate::config::chassis::ProfileRef;
+use crate::config::{ConfigError, VehicleConfig};
+use crate::core::LinkState;
+use crate::devices::cia402::DriveProfile;
+use crate::engine::{Decoder, Engine, EngineOutput, LOCAL_COMMANDS};
+use crate::record::{Payload, Record, SourceKind, SourceMeta};
+use crate::time::Timestamp;
+
+/// The plant's time step.
+pub const PLANT_STEP: Duration = Duration::from_millis(1);
+/// Source name of the simulated GNSS receiver.
+pub const GNSS_SOURCE: &str = "gnss";
+/// Source name of the simulated IMU.
+pub const IMU_SOURCE: &str = "imu";
+
+/// The drive profile of the simulated drives.
+const DRIVE_PROFILE: &str = include_str!("../../devices/cia402-generic.toml");
+/// Names the configuration built for a plant in errors.
+const SIM_CONFIG_NAME: &str = "<simulated vehicle>";
+
+/// Where a lockstep run's records and outputs go.
+pub trait Sink {
+    /// A record the engine processed (with the time it saw), or a frame it sent (`CanTx`).
+    fn record(&mut self, record: &Record);
+    /// A status, event or command answer.
+    fn output(&mut self, output: EngineOutput);
+}
+
+/// The chassisd configuration of a simulated vehicle: its GNSS receiver and IMU, and one
+/// generic CiA 402 drive per wheel (nodes 1 and 2) on the simulated bus.
+pub fn vehicle_config(plant: &PlantConfig) -> Result<VehicleConfig, ConfigError> {
+    let file = Path::new(SIM_CONFIG_NAME);
+    let g = &plant.geometry;
+    let [lat, lon, h] = plant.datum;
+    let text = format!(
+        r#"
+[vehicle]
+name = "{name}"
+
+[gnss]
+port = "sim:gnss"
+cog_min_speed_mps = 0.3
+
+[gnss.antenna]
+x = {ax}
+y = {ay}
+z = 0.0
+
+[localization]
+datum = [{lat}, {lon}, {h}]
+gnss_latency_s = {latency}
+heading_sigma_deg = {heading_sigma}
+
+[imu]
+port = "sim:imu"
+protocol = "{imu}"
+
+[chassis]
+wheel_radius_m = {radius}
+track_m = {track}
+max_speed_mps = 1.5
+max_yaw_rate_rps = 1.5
+max_accel_mps2 = 1.0
+max_decel_mps2 = 1.5
+max_yaw_accel_rps2 = 3.0
+cmd_timeout_s = 0.5
+
+[wheels.left]
+direction = 1
+gear_ratio = {gear}
+
+[wheels.right]
+direction = 1
+gear_ratio = {gear}
+
+[[can]]
+interface = "{bus}"
+
+[[drive]]
+name = "left"
+profile = "cia402-generic.toml"
+bus = "{bus}"
+node = {left}
+wheels = ["left"]
+
+[[drive]]
+name = "right"
+profile = "cia402-generic.toml"
+bus = "{bus}"
+node = {right}
+wheels = ["right"]
+"#,
+        name = plant.name.replace(['"', '\\'], "_"),
+        ax = g.antenna[0],
+        ay = g.antenna[1],
+        latency = plant.gnss.latency_s,
+        heading_sigma = plant.gnss.heading_sigma_deg.max(0.01),
+        imu = plant.imu.protocol.name(),
+        radius = g.wheel_radius_m,
+        track = g.track_m,
+        gear = g.gear_ratio,
+        bus = SIM_BUS,
+        left = LEFT_NODE.get(),
+        right = RIGHT_NODE.get(),
+    );
+    let mut config: VehicleConfig = toml::from_str(&text).map_err(|e| ConfigError::Parse {
+        file: file.to_owned(),
+        message: e.to_string(),
+    })?;
+    let profile = drive_profile()?;
+    for drive in &mut config.drive {
+        drive.profile = ProfileRef::Inline(Box::new(profile.clone()));
+    }
+    config.validate(file)?;
+    Ok(config)
+}
+
+/// The profile of the simulated drives.
+pub fn drive_profile() -> Result<DriveProfile, ConfigError> {
+    DriveProfile::from_toml(DRIVE_PROFILE, Path::new("cia402-generic.toml"))
+}
+
+/// The sources of a simulated session, as a recording lists them.
+pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
+    let serial = |name: &str, decoder: Decoder| SourceMeta {
+        name: name.into(),
+        kind: SourceKind::Serial,
+        file: format!("{name}.log"),
+        protocol: Some(decoder.protocol().into()),
+    };
+    vec![
+        serial(GNSS_SOURCE, Decoder::Nmea),
+        serial(IMU_SOURCE, Decoder::Imu(plant.imu.protocol)),
+        SourceMeta {
+            name: SIM_BUS.into(),
+            kind: SourceKind::Can,
+            file: format!("{SIM_BUS}.log"),
+            protocol: None,
+        },
+        SourceMeta {
+            name: LOCAL_COMMANDS.into(),
+            kind: SourceKind::Commands,
+            file: "commands.log".into(),
+            protocol: None,
+        },
+    ]
+}
+
+/// The plant and the engine, stepped together.
+pub struct Lockstep {
+    vehicle: SimVehicle,
+    engine: Engine,
+    config: VehicleConfig,
+    t: Timestamp,
+    queue: VecDeque<Record>,
+    outputs: Vec<EngineOutput>,
+    replies: Vec<Record>,
+}
+
+impl Lockstep {
+    /// A vehicle on `plant` with noise from `seed`, at rest at the datum at `start`.
+    pub fn new(plant: PlantConfig, seed: u64, start: Timestamp) -> Result<Self, ConfigError> {
+        let config = vehicle_config(&plant)?;
+        let decoders = [
+            (GNSS_SOURCE.to_owned(), Decoder::Nmea),
+            (IMU_SOURCE.to_owned(), Decoder::Imu(plant.imu.protocol)),
+        ];
+        let mut engine = Engine::new(&config, &decoders);
+        engine.start_at(start);
+        // The devices are connected from the start, as live drivers report them.
+        let queue = [GNSS_SOURCE, IMU_SOURCE, SIM_BUS]
+            .into_iter()
+            .map(|source| Record {
+                t: start,
+                source: source.into(),
+                payload: Payload::Link(LinkState::Up),
+            })
+            .collect();
+        Ok(Self {
+            vehicle: SimVehicle::new(plant, drive_profile()?, seed, start),
+            engine,
+            config,
+            t: start,
+            queue,
+            outputs: Vec::new(),
+            replies: Vec::new(),
+        })
+    }
+
+    /// The chassisd configuration the engine runs.
+    pub fn config(&self) -> &VehicleConfig {
+        &self.config
+    }
+
+    /// The simulated vehicle.
+    pub fn vehicle(&self) -> &SimVehicle {
+        &self.vehicle
+    }
+
+    /// The simulated vehicle, to disturb it.
+    pub fn vehicle_mut(&mut self) -> &mut SimVehicle {
+        &mut self.vehicle
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &Engine {
+        &self.engine
+    }
+
+    /// Simulated time.
+    pub fn time(&self) -> Timestamp {
+        self.t
+    }
+
+    /// A `TOPIC JSON` command on the local command channel, now.
+    pub fn command(&mut self, topic: &str, payload: &str, sink: &mut impl Sink) {
+        self.queue.push_back(Record {
+            t: self.t,
+            source: LOCAL_COMMANDS.into(),
+            payload: Payload::Command {
+                topic: topic.to_owned(),
+                payload: Bytes::copy_from_slice(payload.as_bytes()),
+            },
+        });
+        self.drain(sink);
+    }
+
+    /// Advances one plant step under `gnss`.
+    pub fn step(&mut self, gnss: GnssCondition, sink: &mut impl Sink) {
+        self.t = self.t.saturating_add(PLANT_STEP);
+        let mut produced = Vec::new();
+        self.vehicle.step(self.t, gnss, &mut produced);
+        self.queue.extend(produced);
+        self.drain(sink);
+        self.engine.advance_to(self.t, &mut self.outputs);
+        self.dispatch(self.t, sink);
+        self.drain(sink);
+    }
+
+    /// Feeds queued records to the engine, and the drives' replies to what it sends.
+    fn drain(&mut self, sink: &mut impl Sink) {
+        while let Some(mut record) = self.queue.pop_front() {
+            record.t = self.engine.handle(&record, &mut self.outputs);
+            sink.record(&record);
+            self.dispatch(record.t, sink);
+        }
+    }
+
+    /// Routes the engine's outputs: frames to the drives (and the sink), the rest to the sink.
+    fn dispatch(&mut self, t: Timestamp, sink: &mut impl Sink) {
+        for output in std::mem::take(&mut self.outputs) {
+            match output {
+                EngineOutput::CanTx { bus, frame } => {
+                    sink.record(&Record {
+                        t,
+                        source: bus,
+                        payload: Payload::CanTx(frame.into()),
+                    });
+                    self.vehicle.on_can(t, &frame, &mut self.replies);
+                    self.queue.extend(self.replies.drain(..));
+                }
+                other => sink.output(other),
+            }
+        }
+    }
+}
