@@ -11,6 +11,7 @@ use chassisd::bench::fusion;
 use chassisd::config::VehicleConfig;
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
+use chassisd::runtime::sim::{self, SimOptions};
 use chassisd::sim::plant::PlantConfig;
 use chassisd::sim::scenario::Scenario;
 
@@ -44,6 +45,28 @@ enum Command {
         /// (e.g. `cmd_vel {"linear":{"x":0.2},"angular":{"z":0}}`).
         #[arg(long)]
         commands_stdin: bool,
+    },
+    /// Run the simulated vehicle in real time through the live engine (no hardware): print
+    /// base_status JSON lines at 10 Hz.
+    Sim {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Record the session (every frame, command and transmission) into this new folder.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Read commands from standard input, one `TOPIC JSON` per line.
+        #[arg(long)]
+        commands_stdin: bool,
+        /// Drive a scripted scenario of `chassisd bench fusion` and stop at its end.
+        #[arg(long)]
+        scenario: Option<String>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -156,6 +179,41 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             runtime.shutdown_background();
             result.map(|()| true)
         }
+        Command::Sim {
+            plant,
+            seed,
+            record,
+            commands_stdin,
+            scenario,
+            duration,
+        } => {
+            let plant = load_plant(plant)?;
+            let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
+            let duration = match duration {
+                Some(d) if !(d > 0.0 && d.is_finite()) => {
+                    anyhow::bail!("--duration must be a positive number of seconds")
+                }
+                d => d.map(std::time::Duration::from_secs_f64),
+            };
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(1)
+                .enable_all()
+                .build()
+                .context("cannot start the async runtime")?;
+            let result = runtime.block_on(sim::run(
+                SimOptions {
+                    plant,
+                    seed,
+                    record,
+                    commands_stdin,
+                    scenario,
+                    duration,
+                },
+                std::io::stdout(),
+            ));
+            runtime.shutdown_background();
+            result.map(|()| true)
+        }
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
             let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -170,36 +228,39 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
     }
 }
 
-fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::Result<bool> {
-    let plant = match plant {
+fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {
+    Ok(match path {
         Some(path) => PlantConfig::load(&path)?,
         None => PlantConfig::builtin()?,
+    })
+}
+
+fn find_scenario(name: &str) -> anyhow::Result<Scenario> {
+    Scenario::named(name).ok_or_else(|| {
+        let names: Vec<&str> = Scenario::all().iter().map(|s| s.name).collect();
+        anyhow::anyhow!("no scenario {name:?}; there are {}", names.join(", "))
+    })
+}
+
+fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::Result<bool> {
+    let plant = load_plant(plant)?;
+    let scenarios = if names.is_empty() {
+        Scenario::all()
+    } else {
+        names
+            .iter()
+            .map(|n| find_scenario(n))
+            .collect::<anyhow::Result<Vec<_>>>()?
     };
-    let mut scenarios = Scenario::all();
-    if !names.is_empty() {
-        for name in names {
-            if !scenarios.iter().any(|s| s.name == name) {
-                anyhow::bail!(
-                    "no scenario {name:?}; there are {}",
-                    scenarios
-                        .iter()
-                        .map(|s| s.name)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                );
-            }
-        }
-        scenarios.retain(|s| names.iter().any(|n| n == s.name));
-    }
     let started = std::time::Instant::now();
     let report = fusion::run(&plant, &scenarios, seed)?;
     let elapsed = started.elapsed();
+    let simulated = fusion::simulated_time(&scenarios).as_secs_f64();
     print!("{}", report.table());
     println!(
-        "simulated {:.0} s in {:.1} s of wall time ({:.0}x real time)",
-        fusion::simulated_time(&scenarios).as_secs_f64(),
+        "simulated {simulated:.0} s in {:.1} s of wall time ({:.0}x real time)",
         elapsed.as_secs_f64(),
-        fusion::simulated_time(&scenarios).as_secs_f64() / elapsed.as_secs_f64().max(1e-9),
+        simulated / elapsed.as_secs_f64().max(1e-9),
     );
     println!("{}", report.json());
     Ok(report.pass)

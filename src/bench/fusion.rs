@@ -236,24 +236,13 @@ pub fn run_scenario(
 ) -> Result<ScenarioFigures, ConfigError> {
     let mut sim = Lockstep::new(plant.clone(), seed, START)?;
     let mut sink = Collector::default();
-    let step_s = PLANT_STEP.as_secs_f64();
-    let steps = (scenario.duration_s() / step_s).round() as u64;
-    let command_every = (0.1 / step_s).round() as u64;
+    let steps = (scenario.duration_s() / PLANT_STEP.as_secs_f64()).round() as u64;
     let mut truth = TruthLog {
         steps: Vec::with_capacity(steps as usize + 1),
     };
     truth.steps.push(sim.vehicle().truth());
-    for k in 0..steps {
-        let s = k as f64 * step_s;
-        // Commands start once the drives have had a second to boot.
-        if k % command_every == 0 && s >= 1.0 {
-            let (v, w) = scenario.command_at(s);
-            let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
-            sim.command("cmd_vel", &twist, &mut sink);
-        }
-        sim.vehicle_mut()
-            .add_gyro_bias(scenario.gyro_bias_ramp * step_s);
-        sim.step(scenario.gnss_at(s), &mut sink);
+    while sim.steps() < steps {
+        sim.step_scripted(scenario, &mut sink);
         truth.steps.push(sim.vehicle().truth());
     }
     if sink.rejected_commands > 0 {

@@ -234,7 +234,7 @@ fn dispatch(
 }
 
 /// Reads `TOPIC JSON` lines from standard input as commands.
-async fn read_commands(clock: RecordClock, tx: mpsc::Sender<Record>) {
+pub(crate) async fn read_commands(clock: RecordClock, tx: mpsc::Sender<Record>) {
     let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
     loop {
         match lines.next_line().await {

@@ -6,3 +6,4 @@ pub mod clock;
 pub mod live;
 pub mod recorder;
 pub mod serial;
+pub mod sim;

@@ -10,6 +10,7 @@ use std::time::Duration;
 use bytes::Bytes;
 
 use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
+use super::scenario::Scenario;
 use crate::config::chassis::ProfileRef;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
@@ -20,6 +21,10 @@ use crate::time::Timestamp;
 
 /// The plant's time step.
 pub const PLANT_STEP: Duration = Duration::from_millis(1);
+/// A scripted drive sends its velocity command every this many steps (100 ms) ...
+const SCRIPT_COMMAND_EVERY: u64 = 100;
+/// ... from this time on, s.
+const SCRIPT_COMMANDS_FROM_S: f64 = 1.0;
 /// Source name of the simulated GNSS receiver.
 pub const GNSS_SOURCE: &str = "gnss";
 /// Source name of the simulated IMU.
@@ -164,6 +169,7 @@ pub struct Lockstep {
     engine: Engine,
     config: VehicleConfig,
     t: Timestamp,
+    steps: u64,
     queue: VecDeque<Record>,
     outputs: Vec<EngineOutput>,
     replies: Vec<Record>,
@@ -193,6 +199,7 @@ impl Lockstep {
             engine,
             config,
             t: start,
+            steps: 0,
             queue,
             outputs: Vec::new(),
             replies: Vec::new(),
@@ -237,9 +244,29 @@ impl Lockstep {
         self.drain(sink);
     }
 
+    /// Plant steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Advances one plant step of `scenario`: its velocity command every 100 ms (once the
+    /// drives have had a second to boot), its gyro drift and its GNSS condition.
+    pub fn step_scripted(&mut self, scenario: &Scenario, sink: &mut impl Sink) {
+        let s = self.steps as f64 * PLANT_STEP.as_secs_f64();
+        if self.steps % SCRIPT_COMMAND_EVERY == 0 && s >= SCRIPT_COMMANDS_FROM_S {
+            let (v, w) = scenario.command_at(s);
+            let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
+            self.command("cmd_vel", &twist, sink);
+        }
+        self.vehicle
+            .add_gyro_bias(scenario.gyro_bias_ramp * PLANT_STEP.as_secs_f64());
+        self.step(scenario.gnss_at(s), sink);
+    }
+
     /// Advances one plant step under `gnss`.
     pub fn step(&mut self, gnss: GnssCondition, sink: &mut impl Sink) {
         self.t = self.t.saturating_add(PLANT_STEP);
+        self.steps += 1;
         let mut produced = Vec::new();
         self.vehicle.step(self.t, gnss, &mut produced);
         self.queue.extend(produced);

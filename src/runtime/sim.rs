@@ -1,0 +1,179 @@
+//! `chassisd sim`: the simulated vehicle in real time through the live engine. The plant and
+//! the engine run in lockstep (see [`crate::sim::lockstep`]), paced by the wall clock;
+//! base_status lines go to standard output at 10 Hz, and the session can be recorded, so a
+//! simulated drive becomes a replay fixture.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use tokio::sync::mpsc;
+
+use super::clock::RecordClock;
+use super::live::read_commands;
+use super::recorder::Recorder;
+use crate::api::rtk::BaseStatus;
+use crate::devices::gnss::FixQuality;
+use crate::engine::EngineOutput;
+use crate::record::{Payload, Record, RecordingWriter};
+use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
+use crate::sim::plant::{GnssCondition, PlantConfig};
+use crate::sim::scenario::Scenario;
+use crate::time::Timestamp;
+
+/// How often the simulation catches up with the wall clock.
+const PACE: Duration = Duration::from_millis(10);
+/// Without a scenario, the receiver keeps an RTK-fixed solution.
+const RTK_FIXED: GnssCondition = GnssCondition {
+    quality: Some(FixQuality::RtkFixed),
+    offset: (0.0, 0.0),
+};
+/// Commands waiting for the simulation.
+const COMMAND_QUEUE: usize = 256;
+
+/// Options of `chassisd sim`.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// The vehicle.
+    pub plant: PlantConfig,
+    /// Noise seed.
+    pub seed: u64,
+    /// Record the session into this new folder.
+    pub record: Option<PathBuf>,
+    /// Read `TOPIC JSON` commands from standard input.
+    pub commands_stdin: bool,
+    /// Drive this scripted scenario (commands and GNSS conditions) and stop at its end.
+    pub scenario: Option<Scenario>,
+    /// Stop after this much simulated time.
+    pub duration: Option<Duration>,
+}
+
+/// Status lines to `out`, records to the recorder.
+struct Output<W: Write> {
+    out: W,
+    recorder: Option<Recorder>,
+    error: Option<std::io::Error>,
+}
+
+impl<W: Write> Sink for Output<W> {
+    fn record(&mut self, record: &Record) {
+        if let Some(r) = self.recorder.as_mut() {
+            r.record(record.clone());
+        }
+    }
+
+    fn output(&mut self, output: EngineOutput) {
+        match output {
+            EngineOutput::Status(status) => {
+                let mut line = BaseStatus::from_status(&status).to_json();
+                line.push('\n');
+                if let Err(e) = self
+                    .out
+                    .write_all(line.as_bytes())
+                    .and_then(|()| self.out.flush())
+                {
+                    self.error.get_or_insert(e);
+                }
+            }
+            EngineOutput::Event(event) => tracing::info!("{event}"),
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                result,
+            } => match result {
+                Ok(()) => tracing::info!(%source, %topic, "command accepted"),
+                Err(reason) => tracing::warn!(%source, %topic, %reason, "command refused"),
+            },
+            EngineOutput::CanTx { .. } => {}
+        }
+    }
+}
+
+/// Runs until the scenario or duration ends, or SIGINT or SIGTERM.
+pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
+    let clock = RecordClock::start();
+    let start = clock.now();
+    let mut sim = Lockstep::new(options.plant.clone(), options.seed, start)?;
+    let recorder = match &options.record {
+        Some(dir) => {
+            let writer = RecordingWriter::create(
+                dir,
+                &sim.config().vehicle.name,
+                start,
+                Some(&sim.config().to_effective_toml()),
+                lockstep::sources(&options.plant),
+            )
+            .with_context(|| format!("cannot start recording in {}", dir.display()))?;
+            tracing::info!(folder = %dir.display(), "recording");
+            Some(Recorder::start(writer))
+        }
+        None => None,
+    };
+    let mut sink = Output {
+        out,
+        recorder,
+        error: None,
+    };
+    let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
+    let mut commands_open = options.commands_stdin;
+    if commands_open {
+        tokio::spawn(read_commands(clock, tx));
+    } else {
+        drop(tx);
+    }
+    let end = options
+        .duration
+        .or(options
+            .scenario
+            .as_ref()
+            .map(|s| Duration::from_secs_f64(s.duration_s())))
+        .map(|d| start.saturating_add(d));
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .context("cannot install the SIGTERM handler")?;
+    let mut pace = tokio::time::interval(PACE);
+    pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    'run: loop {
+        tokio::select! {
+            _ = pace.tick() => {
+                let now = clock.now();
+                while sim.time().saturating_add(PLANT_STEP) <= now {
+                    if end.is_some_and(|end| sim.time() >= end) {
+                        break 'run;
+                    }
+                    match &options.scenario {
+                        Some(scenario) => sim.step_scripted(scenario, &mut sink),
+                        None => sim.step(RTK_FIXED, &mut sink),
+                    }
+                }
+            }
+            command = commands.recv(), if commands_open => match command {
+                Some(Record { payload: Payload::Command { topic, payload }, .. }) => {
+                    match std::str::from_utf8(&payload) {
+                        Ok(text) => sim.command(&topic, text, &mut sink),
+                        Err(_) => tracing::warn!(%topic, "command is not UTF-8; ignored"),
+                    }
+                }
+                Some(_) => {}
+                None => commands_open = false,
+            },
+            _ = tokio::signal::ctrl_c() => break,
+            _ = sigterm.recv() => break,
+        }
+        if let Some(e) = sink.error.take() {
+            finish(sink.recorder.take(), sim.time());
+            return Err(e).context("cannot write status output");
+        }
+    }
+    finish(sink.recorder.take(), sim.time());
+    Ok(())
+}
+
+fn finish(recorder: Option<Recorder>, end: Timestamp) {
+    if let Some(r) = recorder {
+        if r.dropped() > 0 {
+            tracing::error!(dropped = r.dropped(), "recording is incomplete");
+        }
+        r.finish(end);
+    }
+}

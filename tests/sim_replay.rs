@@ -1,0 +1,120 @@
+//! `chassisd sim`: the simulated vehicle in real time through the live engine. Its recording
+//! replays to exactly the status bytes it printed, whether a scenario or standard input
+//! drove it, and it stops cleanly on SIGTERM.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use common::process::Proc;
+
+fn replay(dir: &Path) -> (Vec<u8>, String) {
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(dir)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (
+        out.stdout,
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn last_status(stdout: &[u8]) -> serde_json::Value {
+    let text = String::from_utf8_lossy(stdout);
+    serde_json::from_str(text.lines().last().expect("status lines")).expect("JSON")
+}
+
+#[test]
+fn a_scripted_session_replays_to_the_same_bytes() {
+    let dir = common::tempdir("sim-scenario").join("rec");
+    let out = Command::new(common::chassisd())
+        .args(["sim", "--scenario", "turns", "--duration", "15", "--record"])
+        .arg(&dir)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 150);
+    let (replayed, summary) = replay(&dir);
+    assert!(
+        replayed == out.stdout,
+        "replay differs from the live output"
+    );
+    assert!(summary.contains("0 differ"), "{summary}");
+    assert!(summary.contains("0 refused"), "{summary}");
+    // The whole path ran: drives up and moving, IMU and RTK fixed, localised.
+    let status = last_status(&out.stdout);
+    assert_eq!(status["sensor"]["robot"], true, "{status}");
+    assert_eq!(status["sensor"]["imu"], true, "{status}");
+    assert_eq!(status["sensor"]["gnss"], true, "{status}");
+    assert_eq!(status["rtk"]["status"], 4, "{status}");
+    assert_eq!(status["nav"]["locate"], "LOCATE_TRUE", "{status}");
+    assert!(status["robot"]["vx"].as_f64() > Some(0.5), "{status}");
+}
+
+#[test]
+fn a_session_driven_from_stdin_replays_to_the_same_bytes() {
+    let dir = common::tempdir("sim-stdin").join("rec");
+    let mut sim = Proc::start(&[
+        "sim".as_ref(),
+        "--plant".as_ref(),
+        common::repo()
+            .join("devices/plant.delivery.toml")
+            .as_os_str(),
+        "--commands-stdin".as_ref(),
+        "--record".as_ref(),
+        dir.as_os_str(),
+    ]);
+    sim.wait_log(Duration::from_secs(10), "drive right: running");
+    for _ in 0..20 {
+        sim.send(r#"cmd_vel {"linear":{"x":0.5},"angular":{"z":0.2}}"#);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    sim.send(r#"cmd_vel {"linear":{"y":1.0}}"#);
+    sim.wait_log(Duration::from_secs(5), "command refused");
+    std::thread::sleep(Duration::from_millis(1500));
+    let lines = sim.stop();
+    let live: Vec<u8> = lines
+        .iter()
+        .flat_map(|l| format!("{l}\n").into_bytes())
+        .collect();
+    let (replayed, summary) = replay(&dir);
+    assert!(replayed == live, "replay differs from the live output");
+    assert!(summary.contains("1 refused"), "{summary}");
+    // It moved while commanded, and the watchdog stopped it after the last command.
+    let moved = lines.iter().any(|l| {
+        serde_json::from_str::<serde_json::Value>(l)
+            .is_ok_and(|s| s["robot"]["vx"].as_f64() > Some(0.4))
+    });
+    assert!(moved, "never moved");
+    assert_eq!(last_status(&replayed)["robot"]["vx"].as_f64(), Some(0.0));
+}
+
+#[test]
+fn a_bad_plant_file_is_refused_with_the_key() {
+    let dir = common::tempdir("sim-bad-plant");
+    let plant = dir.join("plant.toml");
+    let text = std::fs::read_to_string(common::repo().join("devices/plant.mower.toml"))
+        .expect("plant file")
+        .replace("track_m = 0.42", "track_m = -1.0");
+    std::fs::write(&plant, text).expect("write");
+    let out = Command::new(common::chassisd())
+        .args(["sim", "--duration", "1", "--plant"])
+        .arg(&plant)
+        .output()
+        .expect("chassisd runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("geometry.track_m"), "{stderr}");
+}
