@@ -253,7 +253,7 @@ impl Lockstep {
     /// drives have had a second to boot), its gyro drift and its GNSS condition.
     pub fn step_scripted(&mut self, scenario: &Scenario, sink: &mut impl Sink) {
         let s = self.steps as f64 * PLANT_STEP.as_secs_f64();
-        if self.steps % SCRIPT_COMMAND_EVERY == 0 && s >= SCRIPT_COMMANDS_FROM_S {
+        if self.steps.is_multiple_of(SCRIPT_COMMAND_EVERY) && s >= SCRIPT_COMMANDS_FROM_S {
             let (v, w) = scenario.command_at(s);
             let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
             self.command("cmd_vel", &twist, sink);
