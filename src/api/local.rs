@@ -4,13 +4,27 @@
 //! `cmd_vel {"linear":{"x":0.3},"angular":{"z":0.1}}` is a velocity command in the shape
 //! of ROS `geometry_msgs/Twist` (the `/cmd_vel` of ros1-navigation-interface.txt): `linear.x`
 //! m/s forward, `angular.z` rad/s counter-clockwise; other components must be zero or absent.
+//!
+//! The local frame can be set as the network protocols set it:
+//! - `init_rtk_data {}` re-zeroes the local frame at the vehicle (rtk-mqtt-protocol.md);
+//! - `init_position {"x":1.0,"y":2.0,"yaw":0.5}` makes the vehicle read this pose, metres and
+//!   radians (INIT_POSITION of root-mqtt-api.rst);
+//! - `set_lng_lat [113.0196, 23.1496, 12.3]` moves the datum to this longitude, latitude
+//!   (degrees) and height (m), in SET_LNG_LAT's order.
 
 use serde::Deserialize;
 
 use crate::core::Command;
+use crate::fusion::geodesy::Geodetic;
 
 /// Topic of velocity commands.
 pub const CMD_VEL: &str = "cmd_vel";
+/// Topic that re-zeroes the local frame.
+pub const INIT_RTK_DATA: &str = "init_rtk_data";
+/// Topic that sets the pose.
+pub const INIT_POSITION: &str = "init_position";
+/// Topic that sets the datum.
+pub const SET_LNG_LAT: &str = "set_lng_lat";
 /// Largest payload accepted, bytes.
 pub const MAX_PAYLOAD: usize = 4096;
 
@@ -34,9 +48,17 @@ struct Twist {
     angular: Vector3,
 }
 
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Pose {
+    x: f64,
+    y: f64,
+    yaw: f64,
+}
+
 /// Decodes a command; `Ok(None)` for topics this channel does not know.
 pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
-    if topic != CMD_VEL {
+    if ![CMD_VEL, INIT_RTK_DATA, INIT_POSITION, SET_LNG_LAT].contains(&topic) {
         return Ok(None);
     }
     if payload.len() > MAX_PAYLOAD {
@@ -45,7 +67,42 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
             payload.len()
         ));
     }
-    let twist: Twist = serde_json::from_slice(payload).map_err(|e| format!("cmd_vel: {e}"))?;
+    let parse_error = |e: serde_json::Error| format!("{topic}: {e}");
+    match topic {
+        CMD_VEL => velocity(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
+        INIT_RTK_DATA => Ok(Some(Command::ZeroLocalFrame)),
+        INIT_POSITION => {
+            let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;
+            if ![p.x, p.y, p.yaw].iter().all(|v| v.is_finite()) {
+                return Err(format!("{topic}: x, y and yaw must be finite"));
+            }
+            Ok(Some(Command::SetPose {
+                x: p.x,
+                y: p.y,
+                yaw: p.yaw,
+            }))
+        }
+        _ => {
+            let [lon_deg, lat_deg, h_m]: [f64; 3] =
+                serde_json::from_slice(payload).map_err(parse_error)?;
+            if !(-90.0..=90.0).contains(&lat_deg)
+                || !(-180.0..=180.0).contains(&lon_deg)
+                || !h_m.is_finite()
+            {
+                return Err(format!(
+                    "{topic}: [longitude, latitude, height] must be within ±180°, ±90° and finite"
+                ));
+            }
+            Ok(Some(Command::SetDatum(Geodetic {
+                lat_deg,
+                lon_deg,
+                h_m,
+            })))
+        }
+    }
+}
+
+fn velocity(twist: Twist) -> Result<Command, String> {
     if twist.linear.y != 0.0
         || twist.linear.z != 0.0
         || twist.angular.x != 0.0
@@ -59,10 +116,10 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     if !twist.linear.x.is_finite() || !twist.angular.z.is_finite() {
         return Err("cmd_vel: velocities must be finite".into());
     }
-    Ok(Some(Command::Velocity {
+    Ok(Command::Velocity {
         vx: twist.linear.x,
         wz: twist.angular.z,
-    }))
+    })
 }
 
 /// Splits a console line `TOPIC JSON` into topic and payload.
@@ -100,6 +157,35 @@ mod tests {
         assert!(decode("cmd_vel", br#"{"linear":{"x":"fast"}}"#).is_err());
         assert!(decode("cmd_vel", br#"{"linear":{"x":1},"extra":1}"#).is_err());
         assert!(decode("cmd_vel", &vec![b' '; 5000]).is_err());
+    }
+
+    #[test]
+    fn decodes_frame_commands() {
+        assert_eq!(
+            decode("init_rtk_data", b"{}"),
+            Ok(Some(Command::ZeroLocalFrame))
+        );
+        assert_eq!(
+            decode("init_position", br#"{"x":1,"y":-2.5,"yaw":0.5}"#),
+            Ok(Some(Command::SetPose {
+                x: 1.0,
+                y: -2.5,
+                yaw: 0.5
+            }))
+        );
+        assert!(decode("init_position", br#"{"x":1,"y":2}"#).is_err());
+        assert_eq!(
+            decode("set_lng_lat", b"[123.0145612, 23.41576123, 34]"),
+            Ok(Some(Command::SetDatum(Geodetic {
+                lat_deg: 23.41576123,
+                lon_deg: 123.0145612,
+                h_m: 34.0
+            })))
+        );
+        // Latitude first by mistake: 123° is no latitude.
+        assert!(decode("set_lng_lat", b"[23.4, 123.0, 34]").is_err());
+        assert!(decode("set_lng_lat", b"[123.0, 95.0, 34]").is_err());
+        assert!(decode("set_lng_lat", b"[123.0, 23.0]").is_err());
     }
 
     #[test]

@@ -12,7 +12,6 @@ use crate::config::localization::localizer_config;
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
-use crate::fusion;
 use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
@@ -240,7 +239,7 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::ZeroLocalFrame) => {
-                let result = if self.localizer.zero_here() {
+                let result = if self.localizer.zero_here(t) {
                     Ok(())
                 } else {
                     Err(CommandRejected::NoPosition)
@@ -297,12 +296,8 @@ impl Vehicle {
         };
         let pose = self
             .localizer
-            .predicted(t)
-            .map_or_else(Pose2D::default, |e| Pose2D {
-                x: e.x[fusion::ekf::X],
-                y: e.x[fusion::ekf::Y],
-                yaw: e.x[fusion::ekf::YAW],
-            });
+            .map_pose(t)
+            .map_or_else(Pose2D::default, |(x, y, yaw)| Pose2D { x, y, yaw });
         VehicleStatus {
             time: t,
             imu_ok,

@@ -187,6 +187,8 @@ pub struct Localizer {
     last_heading: Option<(Timestamp, f64)>,
     last_speed: f64,
     converged: bool,
+    /// The frame poses are published in.
+    map: MapFrame,
     stats: LocalizerStats,
 }
 
@@ -201,6 +203,7 @@ impl Localizer {
             last_heading: None,
             last_speed: 0.0,
             converged: false,
+            map: MapFrame::default(),
             stats: LocalizerStats::default(),
         }
     }
@@ -239,6 +242,13 @@ impl Localizer {
     /// Pose of the vehicle reference point: x, y (m, ENU), yaw (rad).
     pub fn pose(&self) -> Option<(f64, f64, f64)> {
         self.ekf().map(|e| (e.x[X], e.x[Y], e.x[YAW]))
+    }
+
+    /// The published pose at `t`: the filter predicted to `t`, in the map frame
+    /// (INIT_POSITION's frame; the ENU frame of the datum until then): x, y (m), yaw (rad).
+    pub fn map_pose(&self, t: Timestamp) -> Option<(f64, f64, f64)> {
+        let e = self.predicted(t)?;
+        Some(self.map.pose_of(e.x[X], e.x[Y], e.x[YAW]))
     }
 
     /// The filter predicted to `t` (no measurement since then), without changing it.
@@ -531,19 +541,22 @@ impl Localizer {
         }
     }
 
-    /// Re-zeroes the local frame at the current position (`init_rtk_data`). Returns false
-    /// when there is no position yet.
-    pub fn zero_here(&mut self) -> bool {
-        let (Some(frame), Some((x, y, _))) = (self.frame, self.pose()) else {
+    /// Re-zeroes the local frame at the position at `t` (`init_rtk_data`): the datum moves
+    /// there and the map frame becomes its ENU frame. Returns false when there is no
+    /// position yet.
+    pub fn zero_here(&mut self, t: Timestamp) -> bool {
+        let (Some(frame), Some(e)) = (self.frame, self.predicted(t)) else {
             return false;
         };
-        let here = frame.to_geodetic(&Vector3::new(x, y, 0.0));
+        let here = frame.to_geodetic(&Vector3::new(e.x[X], e.x[Y], 0.0));
         self.set_datum(here);
         true
     }
 
-    /// Moves the local frame to `datum`, keeping the vehicle where it is on the ground.
+    /// Moves the local frame to `datum`, keeping the vehicle where it is on the ground. The
+    /// map frame becomes that ENU frame again.
     pub fn set_datum(&mut self, datum: Geodetic) {
+        self.map = MapFrame::default();
         let old = self.frame.replace(Enu::new(datum));
         let (Some(old), Some(new)) = (old, self.frame) else {
             return;
@@ -562,8 +575,17 @@ impl Localizer {
         }
     }
 
-    /// Sets the pose (INIT_POSITION): x, y (m), yaw (rad), with a small uncertainty.
+    /// Sets the pose (INIT_POSITION): x, y (m), yaw (rad). Once GNSS places the vehicle, the
+    /// filter keeps following GNSS in its ENU frame and the map frame is moved and turned
+    /// so that the vehicle reads this pose there. Before that, the filter starts from it.
     pub fn set_pose(&mut self, t: Timestamp, x: f64, y: f64, yaw: f64) {
+        if self.frame.is_some()
+            && let Some(e) = self.predicted(t)
+        {
+            self.map = MapFrame::placing(e.x[X], e.x[Y], e.x[YAW], x, y, yaw);
+            return;
+        }
+        self.map = MapFrame::default();
         let mut state = self.ekf().map_or_else(State::zeros, |e| e.x);
         state[X] = x;
         state[Y] = y;
@@ -587,6 +609,32 @@ impl Localizer {
             last_position_sigma: None,
         });
         self.buffer.clear();
+    }
+}
+
+/// The map frame in the filter's ENU frame: its origin and its x axis's angle from east.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct MapFrame {
+    origin: (f64, f64),
+    rotation: f64,
+}
+
+impl MapFrame {
+    /// The frame in which the ENU pose (ex, ey, eyaw) reads (x, y, yaw).
+    fn placing(ex: f64, ey: f64, eyaw: f64, x: f64, y: f64, yaw: f64) -> Self {
+        let rotation = wrap(eyaw - yaw);
+        let (s, c) = rotation.sin_cos();
+        Self {
+            origin: (ex - (c * x - s * y), ey - (s * x + c * y)),
+            rotation,
+        }
+    }
+
+    /// An ENU pose in this frame.
+    fn pose_of(&self, x: f64, y: f64, yaw: f64) -> (f64, f64, f64) {
+        let (dx, dy) = (x - self.origin.0, y - self.origin.1);
+        let (s, c) = self.rotation.sin_cos();
+        (c * dx + s * dy, -s * dx + c * dy, wrap(yaw - self.rotation))
     }
 }
 
