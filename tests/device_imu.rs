@@ -141,3 +141,48 @@ fn mounting_rotates_into_the_vehicle_frame_and_removes_bias() {
     };
     assert!(!dead.is_plausible(), "no gravity: a dead accelerometer");
 }
+
+#[test]
+fn the_calibration_file_replaces_the_configured_bias() {
+    let dir = std::env::temp_dir().join(format!("chassisd-imu-calib-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("calib")).unwrap();
+    let config = r#"
+[imu]
+port = "/dev/ttyUSB1"
+protocol = "hipnuc"
+gyro_bias_rps = [0.1, 0.1, 0.1]
+calibration = "calib/imu.toml"
+"#;
+    std::fs::write(dir.join("vehicle.toml"), config).unwrap();
+    std::fs::write(
+        dir.join("calib/imu.toml"),
+        "date = \"2026-11-22\"\nmethod = \"60 s at rest\"\ngyro_bias_rps = [0.001, -0.002, 0.003]\n",
+    )
+    .unwrap();
+    let loaded = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml")).unwrap();
+    let imu = loaded.imu.expect("imu section");
+    assert_eq!(imu.gyro_bias_rps, [0.001, -0.002, 0.003]);
+    // The effective configuration carries the bias, not the file name.
+    assert!(!loaded_text(&dir).contains("calibration"));
+
+    std::fs::write(
+        dir.join("calib/imu.toml"),
+        "date = \"2026-11-22\"\nmethod = \"x\"\ngyro_bias_rps = [0.0, 0.0, 9.0]\n",
+    )
+    .unwrap();
+    let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("imu.toml") && err.contains("gyro_bias_rps[2]"), "{err}");
+    std::fs::remove_file(dir.join("calib/imu.toml")).unwrap();
+    let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("imu.toml"), "{err}");
+}
+
+fn loaded_text(dir: &std::path::Path) -> String {
+    chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
+        .unwrap()
+        .to_effective_toml()
+}
