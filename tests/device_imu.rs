@@ -173,7 +173,10 @@ calibration = "calib/imu.toml"
     let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
         .unwrap_err()
         .to_string();
-    assert!(err.contains("imu.toml") && err.contains("gyro_bias_rps[2]"), "{err}");
+    assert!(
+        err.contains("imu.toml") && err.contains("gyro_bias_rps[2]"),
+        "{err}"
+    );
     std::fs::remove_file(dir.join("calib/imu.toml")).unwrap();
     let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
         .unwrap_err()
