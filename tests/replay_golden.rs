@@ -113,6 +113,39 @@ fn rtk_drive_status_follows_the_script() {
     assert!((lat - 23.14965).abs() < 1e-3 && (lon - 113.01964).abs() < 1e-3);
 }
 
+/// `fixtures/sim-drive` was recorded by `chassisd sim --plant devices/plant.delivery.toml
+/// --scenario turns --duration 25 --record ...`, and its expected output is what that live
+/// simulation printed: the replay must reproduce the simulator's status bytes exactly. It
+/// runs the WitMotion decoder, the generic drives over PDO and the fusion filter.
+#[test]
+fn sim_drive_replays_to_the_simulators_live_output() {
+    let fixture = common::repo().join("fixtures/sim-drive");
+    let out = replay(&fixture);
+    let expected = std::fs::read(fixture.join("expected/base_status.jsonl")).expect("expected");
+    assert!(
+        out.stdout == expected,
+        "replay differs from the live simulation"
+    );
+    let summary = String::from_utf8_lossy(&out.stderr);
+    for part in [
+        "250 status lines",
+        "0 refused",
+        "0 differ",
+        "checksum errors 0",
+    ] {
+        assert!(summary.contains(part), "summary lacks {part:?}: {summary}");
+    }
+    let rows = statuses(&out.stdout);
+    let last = &rows[rows.len() - 1];
+    assert_eq!(last["sensor"]["imu"], true);
+    assert_eq!(last["sensor"]["robot"], true);
+    assert_eq!(last["nav"]["locate"], "LOCATE_TRUE");
+    // The turns scenario: 10 s straight east from 5 s, then an 8 m leg and a left turn on
+    // the spot; by 25 s the vehicle is well away from the origin.
+    let x = last["pose"]["x"].as_f64().unwrap();
+    assert!(x > 10.0, "{last}");
+}
+
 #[test]
 fn shared_logs_replay_to_status_lines() {
     for log in common::shared_gnss_logs() {
