@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 
 use chassisd::bench::fusion;
 use chassisd::config::VehicleConfig;
+use chassisd::config::mqtt::{MqttConfig, RtkDialectConfig};
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
 use chassisd::runtime::sim::{self, SimOptions};
@@ -67,6 +68,12 @@ enum Command {
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
+        /// Use the MQTT broker at HOST:PORT instead of starting one on 127.0.0.1:1883.
+        #[arg(long, value_name = "HOST:PORT", conflicts_with = "no_mqtt")]
+        mqtt: Option<String>,
+        /// No MQTT at all.
+        #[arg(long)]
+        no_mqtt: bool,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -107,7 +114,7 @@ fn main() -> ExitCode {
         .with_ansi(std::io::stderr().is_terminal())
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rumqttd=off")),
         )
         .init();
     match run(Cli::parse()) {
@@ -186,8 +193,11 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             commands_stdin,
             scenario,
             duration,
+            mqtt,
+            no_mqtt,
         } => {
             let plant = load_plant(plant)?;
+            let mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
             let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
             let duration = match duration {
                 Some(d) if !(d > 0.0 && d.is_finite()) => {
@@ -208,6 +218,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     commands_stdin,
                     scenario,
                     duration,
+                    mqtt,
                 },
                 std::io::stdout(),
             ));
@@ -226,6 +237,25 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             result.map(|()| true)
         }
     }
+}
+
+/// The MQTT settings of `chassisd sim`: every dialect, on the broker at `external`, or on an
+/// embedded one at 127.0.0.1:1883.
+fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
+    let mut config = MqttConfig {
+        embedded_broker: external.is_none(),
+        rtk: Some(RtkDialectConfig::default()),
+        ..MqttConfig::default()
+    };
+    if let Some(address) = external {
+        let (host, port) = address
+            .rsplit_once(':')
+            .and_then(|(h, p)| Some((h, p.parse::<u16>().ok()?)))
+            .with_context(|| format!("--mqtt {address:?}: expected HOST:PORT"))?;
+        config.host = host.to_owned();
+        config.port = port;
+    }
+    Ok(config)
 }
 
 fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {

@@ -6,6 +6,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::api::rtk::BaseStatus;
+use crate::api::rtk::trajectory::{MemoryStore, Trajectory, TrajectoryStore};
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::GnssStats;
 use crate::engine::EngineOutput;
@@ -57,8 +58,12 @@ pub fn replay(
 ) -> Result<ReplaySummary, ReplayError> {
     let mut summary = ReplaySummary::default();
     let mut span = SessionSpan::default();
+    let mut trajectories = Vec::new();
     let (reader, vehicle, sources) = if path.is_dir() {
         let (meta, reader) = RecordingReader::open(path)?;
+        if let Some(file) = &meta.trajectories {
+            trajectories = read_trajectories(&path.join(file))?;
+        }
         span = SessionSpan {
             start: meta.start_us.map(Timestamp::from_micros),
             end: meta.end_us.map(Timestamp::from_micros),
@@ -103,8 +108,23 @@ pub fn replay(
             vec![(IMPORT_SOURCE.to_owned(), Decoder::Nmea)],
         )
     };
-    run(reader, &vehicle, &sources, span, out, &mut summary)?;
+    let store = Box::new(MemoryStore::with(trajectories));
+    run(reader, &vehicle, &sources, store, span, out, &mut summary)?;
     Ok(summary)
+}
+
+/// The trajectories a recording stored at its start.
+fn read_trajectories(path: &Path) -> Result<Vec<Trajectory>, ReplayError> {
+    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    serde_json::from_slice(&bytes).map_err(|e| {
+        ReplayError::Recording(RecordError::Meta {
+            path: path.to_owned(),
+            message: format!("trajectories: {e}"),
+        })
+    })
 }
 
 /// Start and end of a live session, as its recording's meta stores them.
@@ -118,11 +138,12 @@ fn run(
     mut reader: RecordingReader,
     vehicle: &VehicleConfig,
     sources: &[(String, Decoder)],
+    trajectories: Box<dyn TrajectoryStore>,
     session: SessionSpan,
     out: &mut impl Write,
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
-    let mut engine = Engine::new(vehicle, sources);
+    let mut engine = Engine::with_trajectories(vehicle, sources, trajectories);
     engine.check_recorded_transmissions();
     if let Some(start) = session.start {
         engine.start_at(start);

@@ -36,7 +36,7 @@ fn last_status(stdout: &[u8]) -> serde_json::Value {
 fn a_scripted_session_replays_to_the_same_bytes() {
     let dir = common::tempdir("sim-scenario").join("rec");
     let out = Command::new(common::chassisd())
-        .args(["sim", "--scenario", "turns", "--duration", "15", "--record"])
+        .args(["sim", "--no-mqtt", "--scenario", "turns", "--duration", "15", "--record"])
         .arg(&dir)
         .output()
         .expect("chassisd runs");
@@ -68,6 +68,7 @@ fn a_session_driven_from_stdin_replays_to_the_same_bytes() {
     let dir = common::tempdir("sim-stdin").join("rec");
     let mut sim = Proc::start(&[
         "sim".as_ref(),
+        "--no-mqtt".as_ref(),
         "--plant".as_ref(),
         common::repo()
             .join("devices/plant.delivery.toml")
@@ -110,7 +111,7 @@ fn a_bad_plant_file_is_refused_with_the_key() {
         .replace("track_m = 0.42", "track_m = -1.0");
     std::fs::write(&plant, text).expect("write");
     let out = Command::new(common::chassisd())
-        .args(["sim", "--duration", "1", "--plant"])
+        .args(["sim", "--no-mqtt", "--duration", "1", "--plant"])
         .arg(&plant)
         .output()
         .expect("chassisd runs");

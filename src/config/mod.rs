@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 pub mod chassis;
 pub mod imu;
 pub mod localization;
+pub mod mqtt;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -85,6 +86,9 @@ pub struct VehicleConfig {
     /// The battery management system.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bms: Option<chassis::BmsConfig>,
+    /// The MQTT broker and the protocol dialects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mqtt: Option<mqtt::MqttConfig>,
 }
 
 /// `[vehicle]`
@@ -215,6 +219,9 @@ impl VehicleConfig {
         if let Some(imu) = &mut config.imu {
             imu.resolve(base)?;
         }
+        if let Some(mqtt) = &mut config.mqtt {
+            mqtt.resolve(base);
+        }
         config.validate(file)?;
         Ok(config)
     }
@@ -243,6 +250,9 @@ impl VehicleConfig {
         }
         if let Some(l) = &self.localization {
             l.validate(file)?;
+        }
+        if let Some(m) = &self.mqtt {
+            m.validate(file)?;
         }
         let Some(gnss) = &self.gnss else {
             return Ok(());

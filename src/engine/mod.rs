@@ -17,6 +17,9 @@ use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
 use crate::api::local;
+use crate::api::mqtt::{CoreAccess, Dialect, Dialects, MQTT_SOURCE, Publish};
+use crate::api::rtk::RtkDialect;
+use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
 use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
@@ -82,6 +85,8 @@ pub enum EngineOutput {
     },
     /// A notable change: a drive set up and running, a drive fault raised or cleared.
     Event(String),
+    /// A message for the MQTT broker (a dialect's report or reply).
+    Publish(Publish),
     /// The answer to a command record.
     CommandResult {
         /// The channel it came on.
@@ -134,12 +139,55 @@ pub struct Engine {
     recorded_tx: VecDeque<(String, Received)>,
     /// The drives as last reported, to announce changes.
     drive_states: Vec<(bool, Option<String>)>,
+    /// The MQTT protocol dialects.
+    dialects: Dialects,
     stats: EngineStats,
 }
 
+/// The core as the dialects reach it, at one time.
+struct CoreAt<'a> {
+    vehicle: &'a mut Vehicle,
+    t: Timestamp,
+}
+
+impl CoreAccess for CoreAt<'_> {
+    fn command(&mut self, command: crate::core::Command) -> Result<(), CommandRejected> {
+        self.vehicle
+            .handle(self.t, Input::Command(command))
+            .into_iter()
+            .find_map(|o| match o {
+                Output::CommandResult(r) => Some(r),
+                _ => None,
+            })
+            .unwrap_or(Ok(()))
+    }
+}
+
+/// The dialects a configuration turns on, trajectories kept in `trajectories`.
+fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> Dialects {
+    let Some(mqtt) = &config.mqtt else {
+        return Dialects::default();
+    };
+    let mut list: Vec<Box<dyn Dialect>> = Vec::new();
+    if mqtt.rtk.is_some() {
+        list.push(Box::new(RtkDialect::new(trajectories, mqtt.max_payload)));
+    }
+    Dialects::new(list, mqtt.max_payload)
+}
+
 impl Engine {
-    /// An engine for `config` whose serial `sources` (name and decoder) feed a core.
+    /// An engine for `config` whose serial `sources` (name and decoder) feed a core;
+    /// trajectories are kept in memory.
     pub fn new(config: &VehicleConfig, sources: &[(String, Decoder)]) -> Self {
+        Self::with_trajectories(config, sources, Box::new(MemoryStore::default()))
+    }
+
+    /// [`Engine::new`], with trajectories kept in `trajectories` (a folder, live).
+    pub fn with_trajectories(
+        config: &VehicleConfig,
+        sources: &[(String, Decoder)],
+        trajectories: Box<dyn TrajectoryStore>,
+    ) -> Self {
         let nmea = sources
             .iter()
             .filter(|(_, d)| *d == Decoder::Nmea)
@@ -174,6 +222,7 @@ impl Engine {
             sent: None,
             recorded_tx: VecDeque::new(),
             drive_states: Vec::new(),
+            dialects: dialects(config, trajectories),
             stats: EngineStats::default(),
         }
     }
@@ -240,6 +289,8 @@ impl Engine {
             Payload::Link(state) if self.imu.contains_key(&record.source) => {
                 self.vehicle.handle(t, Input::Link(Device::Imu, *state));
             }
+            // The control link's state is recorded; the dialects do not act on it yet.
+            Payload::Link(_) if record.source == MQTT_SOURCE => {}
             Payload::Link(state) if self.drivetrain.has_bus(&record.source) => {
                 self.drivetrain
                     .link(t, &record.source, *state == LinkState::Up, &mut tx);
@@ -251,9 +302,22 @@ impl Engine {
             Payload::CanTx(frame) if self.drivetrain.is_listen_only(&record.source) => {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
+            Payload::Command { topic, payload } if record.source == MQTT_SOURCE => {
+                self.stats.commands += 1;
+                let mut replies = Vec::new();
+                let mut core = CoreAt {
+                    vehicle: &mut self.vehicle,
+                    t,
+                };
+                if !self
+                    .dialects
+                    .on_message(t, topic, payload, &mut core, &mut replies)
+                {
+                    self.stats.commands_without_dialect += 1;
+                }
+                out.extend(replies.into_iter().map(EngineOutput::Publish));
+            }
             Payload::Command { .. } if record.source != LOCAL_COMMANDS => {
-                // MQTT dialects come with their own issue; until then such records are
-                // counted, not acted on.
                 self.stats.commands_without_dialect += 1;
             }
             Payload::Command { topic, payload } => {
@@ -363,7 +427,10 @@ impl Engine {
             if tick.as_nanos() % STATUS_PERIOD.as_nanos() as u64 == 0 {
                 for output in self.vehicle.handle(tick, Input::Tick) {
                     if let Output::Status(s) = output {
+                        let mut reports = Vec::new();
+                        self.dialects.on_status(&s, &mut reports);
                         out.push(EngineOutput::Status(s));
+                        out.extend(reports.into_iter().map(EngineOutput::Publish));
                         self.stats.ticks += 1;
                     }
                 }
@@ -435,6 +502,11 @@ impl Engine {
             self.stats.reordered += 1;
         }
         t
+    }
+
+    /// The topic filters the configured dialects subscribe to.
+    pub fn subscriptions(&self) -> Vec<String> {
+        self.dialects.subscriptions()
     }
 
     /// Engine counters.

@@ -57,6 +57,10 @@ pub struct Meta {
     /// File (inside the folder) holding a copy of the vehicle configuration in force.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vehicle_config: Option<String>,
+    /// File (inside the folder) holding the stored trajectories at the session's start, so
+    /// a replay answers trajectory commands as the live session did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectories: Option<String>,
     /// The sources.
     #[serde(default, rename = "source")]
     pub sources: Vec<SourceMeta>,
@@ -91,7 +95,8 @@ impl Meta {
             .sources
             .iter()
             .map(|s| ("source.file", &s.file))
-            .chain(self.vehicle_config.iter().map(|f| ("vehicle_config", f)));
+            .chain(self.vehicle_config.iter().map(|f| ("vehicle_config", f)))
+            .chain(self.trajectories.iter().map(|f| ("trajectories", f)));
         for (key, file) in files {
             if !is_plain_file_name(file) {
                 return Err(format!(
@@ -141,6 +146,7 @@ mod tests {
             start_us: Some(1_700_000_000_000_000),
             end_us: None,
             vehicle_config: Some("vehicle.toml".into()),
+            trajectories: None,
             sources: vec![SourceMeta {
                 name: "gnss".into(),
                 kind: SourceKind::Serial,

@@ -16,6 +16,8 @@ use crate::time::Timestamp;
 
 /// File name of the vehicle configuration copy.
 pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";
+/// The file holding the trajectories at a session's start.
+pub const TRAJECTORIES_FILE: &str = "trajectories.json";
 
 /// An open recording folder.
 pub struct RecordingWriter {
@@ -57,6 +59,7 @@ impl RecordingWriter {
             start_us: Some(start.as_micros()),
             end_us: None,
             vehicle_config: vehicle_config_toml.map(|_| VEHICLE_CONFIG_FILE.to_owned()),
+            trajectories: None,
             sources: sources.clone(),
         };
         meta.check().map_err(|message| RecordError::Meta {
@@ -79,6 +82,20 @@ impl RecordingWriter {
             meta,
             sources: files,
         })
+    }
+
+    /// Stores the trajectories as they are at the session's start (a JSON array).
+    pub fn attach_trajectories(&mut self, json: &[u8]) -> Result<(), RecordError> {
+        let path = self.dir.join(TRAJECTORIES_FILE);
+        std::fs::write(&path, json).map_err(|source| RecordError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        self.meta.trajectories = Some(TRAJECTORIES_FILE.to_owned());
+        let meta = self.dir.join(META_FILE);
+        self.meta
+            .store(&self.dir)
+            .map_err(|source| RecordError::Io { path: meta, source })
     }
 
     /// Appends one record to its source's file.

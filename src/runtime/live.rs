@@ -11,12 +11,16 @@ use bytes::Bytes;
 use tokio::io::AsyncBufReadExt;
 use tokio::sync::mpsc;
 
+use super::broker;
 use super::can::{self, CanSpec, CanTx};
 use super::clock::RecordClock;
+use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use super::serial::{self, SerialSpec};
 use crate::api::local;
+use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
+use crate::api::rtk::trajectory::{DirStore, TrajectoryStore, Unconfigured};
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{Decoder, Engine, EngineOutput};
@@ -112,6 +116,29 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
         });
         tokio::spawn(read_commands(clock, tx.clone()));
     }
+    let mut trajectories = trajectory_store(config)?;
+    let mut engine = Engine::with_trajectories(config, &sources, trajectories.0);
+    engine.start_at(start);
+    let mqtt = match &config.mqtt {
+        Some(m) => {
+            if m.embedded_broker {
+                broker::start(&m.host, m.port, m.max_payload)?;
+            }
+            source_meta.push(SourceMeta {
+                name: MQTT_SOURCE.into(),
+                kind: SourceKind::Commands,
+                file: format!("{MQTT_SOURCE}.log"),
+                protocol: None,
+            });
+            let spec = MqttSpec {
+                config: m.clone(),
+                vehicle: config.vehicle.name.clone(),
+                subscriptions: engine.subscriptions(),
+            };
+            Some(mqtt::spawn(spec, clock, tx.clone())?)
+        }
+        None => None,
+    };
     if source_meta.is_empty() {
         tracing::warn!("no devices configured; status will show every sensor absent");
     }
@@ -120,7 +147,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
 
     let mut recorder = match &options.record {
         Some(dir) => {
-            let writer = RecordingWriter::create(
+            let mut writer = RecordingWriter::create(
                 dir,
                 &config.vehicle.name,
                 start,
@@ -128,14 +155,17 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
                 source_meta,
             )
             .with_context(|| format!("cannot start recording in {}", dir.display()))?;
+            if let Some(snapshot) = trajectories.1.take() {
+                writer
+                    .attach_trajectories(&snapshot)
+                    .context("cannot record the stored trajectories")?;
+            }
             tracing::info!(folder = %dir.display(), "recording");
             Some(Recorder::start(writer))
         }
         None => None,
     };
 
-    let mut engine = Engine::new(config, &sources);
-    engine.start_at(start);
     let mut outputs = Vec::new();
     let mut summary = tokio::time::interval(SUMMARY_EVERY);
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
@@ -168,14 +198,28 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             _ = sigterm.recv() => break Ok(()),
         }
         let t = now.unwrap_or_else(|| clock.now());
-        if let Err(e) = dispatch(&mut outputs, t, &can_tx, recorder.as_mut(), &mut out) {
+        if let Err(e) = dispatch(
+            &mut outputs,
+            t,
+            &can_tx,
+            mqtt.as_ref(),
+            recorder.as_mut(),
+            &mut out,
+        ) {
             break Err(e).context("cannot write status output");
         }
     };
     // The ticks up to the stop, so a replay of the recording ends where this run ended.
     let end = clock.now();
     engine.advance_to(end, &mut outputs);
-    let flushed = dispatch(&mut outputs, end, &can_tx, recorder.as_mut(), &mut out);
+    let flushed = dispatch(
+        &mut outputs,
+        end,
+        &can_tx,
+        mqtt.as_ref(),
+        recorder.as_mut(),
+        &mut out,
+    );
     if let Some(r) = recorder {
         if r.dropped() > 0 {
             tracing::error!(dropped = r.dropped(), "recording is incomplete");
@@ -192,6 +236,7 @@ fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
     can_tx: &BTreeMap<String, CanTx>,
+    mqtt: Option<&MqttSender>,
     mut recorder: Option<&mut Recorder>,
     out: &mut impl Write,
 ) -> std::io::Result<()> {
@@ -216,6 +261,11 @@ fn dispatch(
                     q.send(frame);
                 }
             }
+            EngineOutput::Publish(message) => {
+                if let Some(link) = mqtt {
+                    link.send(message);
+                }
+            }
             EngineOutput::Event(event) => tracing::info!("{event}"),
             EngineOutput::CommandResult {
                 source,
@@ -231,6 +281,24 @@ fn dispatch(
         out.flush()?;
     }
     Ok(())
+}
+
+/// The trajectory store of the `rtk` dialect (a folder when configured), and, when it has
+/// any, its contents as JSON for the recording.
+type StoreAndSnapshot = (Box<dyn TrajectoryStore>, Option<Vec<u8>>);
+
+fn trajectory_store(config: &VehicleConfig) -> anyhow::Result<StoreAndSnapshot> {
+    let Some(rtk) = config.mqtt.as_ref().and_then(|m| m.rtk.as_ref()) else {
+        return Ok((Box::new(Unconfigured), None));
+    };
+    let Some(dir) = &rtk.trajectory_dir else {
+        tracing::warn!("mqtt.rtk.trajectory_dir is not set: trajectory commands will be refused");
+        return Ok((Box::new(Unconfigured), None));
+    };
+    let mut store = DirStore::open(std::path::Path::new(dir))
+        .with_context(|| format!("trajectory folder {dir}"))?;
+    let snapshot = serde_json::to_vec(&store.all().unwrap_or_default()).ok();
+    Ok((Box::new(store), snapshot))
 }
 
 /// Reads `TOPIC JSON` lines from standard input as commands.

@@ -10,13 +10,16 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::mpsc;
 
+use super::broker;
 use super::clock::RecordClock;
 use super::live::read_commands;
+use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use crate::api::rtk::BaseStatus;
+use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
 use crate::engine::EngineOutput;
-use crate::record::{Payload, Record, RecordingWriter};
+use crate::record::{Record, RecordingWriter};
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig};
 use crate::sim::scenario::Scenario;
@@ -47,12 +50,15 @@ pub struct SimOptions {
     pub scenario: Option<Scenario>,
     /// Stop after this much simulated time.
     pub duration: Option<Duration>,
+    /// Speak the MQTT dialects of this configuration (its broker embedded or not).
+    pub mqtt: Option<MqttConfig>,
 }
 
 /// Status lines to `out`, records to the recorder.
 struct Output<W: Write> {
     out: W,
     recorder: Option<Recorder>,
+    mqtt: Option<MqttSender>,
     error: Option<std::io::Error>,
 }
 
@@ -76,6 +82,11 @@ impl<W: Write> Sink for Output<W> {
                     self.error.get_or_insert(e);
                 }
             }
+            EngineOutput::Publish(message) => {
+                if let Some(link) = &self.mqtt {
+                    link.send(message);
+                }
+            }
             EngineOutput::Event(event) => tracing::info!("{event}"),
             EngineOutput::CommandResult {
                 source,
@@ -94,7 +105,12 @@ impl<W: Write> Sink for Output<W> {
 pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
     let clock = RecordClock::start();
     let start = clock.now();
-    let mut sim = Lockstep::new(options.plant.clone(), options.seed, start)?;
+    let mut sim = Lockstep::with_mqtt(
+        options.plant.clone(),
+        options.seed,
+        start,
+        options.mqtt.clone(),
+    )?;
     let recorder = match &options.record {
         Some(dir) => {
             let writer = RecordingWriter::create(
@@ -110,18 +126,33 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
         }
         None => None,
     };
+    let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
+    let mqtt = match &options.mqtt {
+        Some(m) => {
+            if m.embedded_broker {
+                broker::start(&m.host, m.port, m.max_payload)?;
+            }
+            let spec = MqttSpec {
+                config: m.clone(),
+                vehicle: sim.config().vehicle.name.clone(),
+                subscriptions: sim.engine().subscriptions(),
+            };
+            Some(mqtt::spawn(spec, clock, tx.clone())?)
+        }
+        None => None,
+    };
     let mut sink = Output {
         out,
         recorder,
+        mqtt,
         error: None,
     };
-    let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
-    let mut commands_open = options.commands_stdin;
-    if commands_open {
+    if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
     } else {
         drop(tx);
     }
+    let mut commands_open = options.commands_stdin || options.mqtt.is_some();
     let end = options
         .duration
         .or(options
@@ -148,13 +179,8 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
                 }
             }
             command = commands.recv(), if commands_open => match command {
-                Some(Record { payload: Payload::Command { topic, payload }, .. }) => {
-                    match std::str::from_utf8(&payload) {
-                        Ok(text) => sim.command(&topic, text, &mut sink),
-                        Err(_) => tracing::warn!(%topic, "command is not UTF-8; ignored"),
-                    }
-                }
-                Some(_) => {}
+                // Commands and link events take the simulation's time.
+                Some(record) => sim.input(&record.source, record.payload, &mut sink),
                 None => commands_open = false,
             },
             _ = tokio::signal::ctrl_c() => break,

@@ -11,7 +11,9 @@ use bytes::Bytes;
 
 use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
 use super::scenario::Scenario;
+use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::chassis::ProfileRef;
+use crate::config::mqtt::MqttConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
 use crate::devices::cia402::DriveProfile;
@@ -160,6 +162,12 @@ pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
             file: "commands.log".into(),
             protocol: None,
         },
+        SourceMeta {
+            name: MQTT_SOURCE.into(),
+            kind: SourceKind::Commands,
+            file: format!("{MQTT_SOURCE}.log"),
+            protocol: None,
+        },
     ]
 }
 
@@ -178,7 +186,21 @@ pub struct Lockstep {
 impl Lockstep {
     /// A vehicle on `plant` with noise from `seed`, at rest at the datum at `start`.
     pub fn new(plant: PlantConfig, seed: u64, start: Timestamp) -> Result<Self, ConfigError> {
-        let config = vehicle_config(&plant)?;
+        Self::with_mqtt(plant, seed, start, None)
+    }
+
+    /// [`Lockstep::new`], speaking the dialects of `mqtt` (trajectories kept in memory).
+    pub fn with_mqtt(
+        plant: PlantConfig,
+        seed: u64,
+        start: Timestamp,
+        mqtt: Option<MqttConfig>,
+    ) -> Result<Self, ConfigError> {
+        let mut config = vehicle_config(&plant)?;
+        if let Some(m) = mqtt {
+            m.validate(Path::new(SIM_CONFIG_NAME))?;
+            config.mqtt = Some(m);
+        }
         let decoders = [
             (GNSS_SOURCE.to_owned(), Decoder::Nmea),
             (IMU_SOURCE.to_owned(), Decoder::Imu(plant.imu.protocol)),
@@ -233,13 +255,19 @@ impl Lockstep {
 
     /// A `TOPIC JSON` command on the local command channel, now.
     pub fn command(&mut self, topic: &str, payload: &str, sink: &mut impl Sink) {
+        let payload = Payload::Command {
+            topic: topic.to_owned(),
+            payload: Bytes::copy_from_slice(payload.as_bytes()),
+        };
+        self.input(LOCAL_COMMANDS, payload, sink);
+    }
+
+    /// Any record from `source` (a command, a link event), now.
+    pub fn input(&mut self, source: &str, payload: Payload, sink: &mut impl Sink) {
         self.queue.push_back(Record {
             t: self.t,
-            source: LOCAL_COMMANDS.into(),
-            payload: Payload::Command {
-                topic: topic.to_owned(),
-                payload: Bytes::copy_from_slice(payload.as_bytes()),
-            },
+            source: source.into(),
+            payload,
         });
         self.drain(sink);
     }

@@ -1,0 +1,138 @@
+//! What the MQTT dialects share: the messages they publish, the trait each dialect
+//! implements, and the router that hands an incoming message to the dialect owning its topic.
+//! Dialects are sans-IO like the core: messages in, messages out; the runtime moves them.
+
+use bytes::Bytes;
+
+use crate::core::{Command, VehicleStatus, chassis::CommandRejected};
+use crate::time::Timestamp;
+
+/// Source name of MQTT messages in recordings and the engine.
+pub const MQTT_SOURCE: &str = "mqtt";
+
+/// Delivery guarantee of a publication.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Qos {
+    /// Telemetry: at most once; dropped first when the broker is away.
+    AtMostOnce,
+    /// Replies and events: at least once; kept while the broker is away.
+    AtLeastOnce,
+}
+
+/// One message to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Publish {
+    /// Topic.
+    pub topic: String,
+    /// Payload (JSON).
+    pub payload: Bytes,
+    /// Delivery guarantee.
+    pub qos: Qos,
+    /// Retained by the broker.
+    pub retain: bool,
+}
+
+impl Publish {
+    /// Telemetry: QoS 0, not retained.
+    pub fn telemetry(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
+        Self {
+            topic: topic.into(),
+            payload: payload.into(),
+            qos: Qos::AtMostOnce,
+            retain: false,
+        }
+    }
+
+    /// A reply or event: QoS 1, not retained.
+    pub fn reply(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
+        Self {
+            qos: Qos::AtLeastOnce,
+            ..Self::telemetry(topic, payload)
+        }
+    }
+}
+
+/// The core, as a dialect sees it: commands in, acceptance or a reason out.
+pub trait CoreAccess {
+    /// Hands `command` to the core at the current time.
+    fn command(&mut self, command: Command) -> Result<(), CommandRejected>;
+}
+
+/// One protocol dialect.
+pub trait Dialect: Send {
+    /// Its name in logs (`rtk`, `root`, `device`).
+    fn name(&self) -> &'static str;
+    /// Topic filters to subscribe to.
+    fn subscriptions(&self) -> Vec<String>;
+    /// Whether an incoming message on `topic` is for this dialect.
+    fn owns(&self, topic: &str) -> bool;
+    /// Handles an incoming message at `t`; replies go to `out`.
+    fn on_message(
+        &mut self,
+        t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    );
+    /// Publishes what is due at a status tick.
+    fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>);
+}
+
+/// The dialects in force, in the order they were configured.
+#[derive(Default)]
+pub struct Dialects {
+    dialects: Vec<Box<dyn Dialect>>,
+    max_payload: usize,
+}
+
+impl Dialects {
+    /// `dialects`, refusing incoming payloads above `max_payload` bytes.
+    pub fn new(dialects: Vec<Box<dyn Dialect>>, max_payload: usize) -> Self {
+        Self {
+            dialects,
+            max_payload,
+        }
+    }
+
+    /// Whether any dialect is configured.
+    pub fn is_empty(&self) -> bool {
+        self.dialects.is_empty()
+    }
+
+    /// Every dialect's topic filters.
+    pub fn subscriptions(&self) -> Vec<String> {
+        self.dialects
+            .iter()
+            .flat_map(|d| d.subscriptions())
+            .collect()
+    }
+
+    /// The largest payload a dialect is given, bytes.
+    pub fn max_payload(&self) -> usize {
+        self.max_payload
+    }
+
+    /// Routes an incoming message; returns false when no dialect owns its topic.
+    pub fn on_message(
+        &mut self,
+        t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) -> bool {
+        let Some(d) = self.dialects.iter_mut().find(|d| d.owns(topic)) else {
+            return false;
+        };
+        d.on_message(t, topic, payload, core, out);
+        true
+    }
+
+    /// Every dialect's publications at a status tick.
+    pub fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>) {
+        for d in &mut self.dialects {
+            d.on_status(status, out);
+        }
+    }
+}

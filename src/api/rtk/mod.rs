@@ -1,0 +1,217 @@
+//! Dialect `rtk` (rtk-mqtt-protocol.md, bare topics): `base_status` at 10 Hz, the
+//! `mqtt_control` commands, their answers on `feedback`, and `trajectory_data`.
+//!
+//! Answers use the protocol's exact `cmd` strings (`<command>_success`, and its spelling
+//! `<command>_failse`), with an added `message` key giving the reason of a failure. A message
+//! whose command cannot be read is answered `mqtt_control_failse`; an unknown command
+//! `<cmd>_failse`. `get_all_trajectory` answers with `trajectory_data` (an array, possibly
+//! empty); the protocol has no success feedback for it.
+
+pub mod status;
+pub mod trajectory;
+
+use serde::Serialize;
+use serde_json::Value;
+
+pub use status::BaseStatus;
+use trajectory::{Trajectory, TrajectoryError, TrajectoryStore};
+
+use super::mqtt::{CoreAccess, Dialect, Publish};
+use crate::core::{Command, VehicleStatus};
+use crate::time::Timestamp;
+
+/// Status topic.
+pub const BASE_STATUS: &str = "base_status";
+/// Command topic.
+pub const MQTT_CONTROL: &str = "mqtt_control";
+/// Answers.
+pub const FEEDBACK: &str = "feedback";
+/// Trajectory listing.
+pub const TRAJECTORY_DATA: &str = "trajectory_data";
+
+/// Why tasks are refused until trajectory following exists.
+const NO_TASKS: &str =
+    "not available: trajectory following is not implemented in this chassisd version";
+
+#[derive(Serialize)]
+struct Feedback<'a> {
+    cmd: String,
+    cmd_type: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    message: Option<&'a str>,
+}
+
+/// The `rtk` dialect.
+pub struct RtkDialect {
+    store: Box<dyn TrajectoryStore>,
+    max_payload: usize,
+}
+
+impl RtkDialect {
+    /// A dialect keeping trajectories in `store`, refusing messages above `max_payload`.
+    pub fn new(store: Box<dyn TrajectoryStore>, max_payload: usize) -> Self {
+        Self { store, max_payload }
+    }
+
+    /// Replaces the trajectory store.
+    pub fn set_store(&mut self, store: Box<dyn TrajectoryStore>) {
+        self.store = store;
+    }
+
+    fn feedback(cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) {
+        let (suffix, message) = match &result {
+            Ok(()) => ("success", None),
+            Err(m) => ("failse", Some(m.as_str())),
+        };
+        let body = Feedback {
+            cmd: format!("{cmd}_{suffix}"),
+            cmd_type: "feedback",
+            message,
+        };
+        let json = serde_json::to_string(&body).unwrap_or_default();
+        if let Err(reason) = &result {
+            tracing::warn!(dialect = "rtk", %cmd, %reason, "command refused");
+        }
+        out.push(Publish::reply(FEEDBACK, json));
+    }
+
+    fn control(&mut self, payload: &[u8], core: &mut dyn CoreAccess, out: &mut Vec<Publish>) {
+        if payload.len() > self.max_payload {
+            let reason = format!(
+                "payload of {} bytes exceeds {}",
+                payload.len(),
+                self.max_payload
+            );
+            return Self::feedback(MQTT_CONTROL, Err(reason), out);
+        }
+        let message: Value = match serde_json::from_slice(payload) {
+            Ok(v) => v,
+            Err(e) => {
+                return Self::feedback(MQTT_CONTROL, Err(format!("malformed JSON: {e}")), out);
+            }
+        };
+        let Some(cmd) = message.get("cmd").and_then(Value::as_str) else {
+            return Self::feedback(
+                MQTT_CONTROL,
+                Err("no \"cmd\" string in the message".into()),
+                out,
+            );
+        };
+        let cmd = cmd.to_owned();
+        let expected_type = match cmd.as_str() {
+            "get_all_trajectory"
+            | "save_trajectory"
+            | "delete_trajectory"
+            | "delete_all_trajectory" => "trajectory_control",
+            "start_task" | "cancel_task" | "init_rtk_data" => "task_control",
+            _ => {
+                let reason = format!("unknown command {cmd:?}");
+                return Self::feedback(&safe_cmd(&cmd), Err(reason), out);
+            }
+        };
+        match message.get("cmd_type").and_then(Value::as_str) {
+            Some(t) if t == expected_type => {}
+            other => {
+                let reason = format!(
+                    "cmd_type must be {expected_type:?} for {cmd}, not {}",
+                    other.map_or("absent".to_owned(), |t| format!("{t:?}"))
+                );
+                return Self::feedback(&cmd, Err(reason), out);
+            }
+        }
+        match cmd.as_str() {
+            "get_all_trajectory" => match self.store.all() {
+                Ok(all) => {
+                    let json = serde_json::to_string(&all).unwrap_or_default();
+                    out.push(Publish::reply(TRAJECTORY_DATA, json));
+                }
+                Err(e) => Self::feedback(&cmd, Err(e.to_string()), out),
+            },
+            "save_trajectory" => {
+                let result = message
+                    .get("data")
+                    .ok_or_else(|| "no \"data\" object".to_owned())
+                    .and_then(|d| {
+                        Trajectory::deserialize_value(d).map_err(|e| format!("data: {e}"))
+                    })
+                    .and_then(|t| {
+                        t.check().map_err(|e| e.to_string())?;
+                        self.store.save(&t).map_err(|e| e.to_string())
+                    });
+                Self::feedback(&cmd, result, out);
+            }
+            "delete_trajectory" => {
+                let result = match message.get("name").and_then(Value::as_str) {
+                    None => Err("no \"name\" string".to_owned()),
+                    Some(name) => trajectory::check_name(name)
+                        .and_then(|()| self.store.delete(name))
+                        .map_err(|e: TrajectoryError| e.to_string()),
+                };
+                Self::feedback(&cmd, result, out);
+            }
+            "delete_all_trajectory" => {
+                let result = self
+                    .store
+                    .delete_all()
+                    .map(|_| ())
+                    .map_err(|e| e.to_string());
+                Self::feedback(&cmd, result, out);
+            }
+            "start_task" => Self::feedback(&cmd, Err(NO_TASKS.into()), out),
+            // No task can be running, so there is nothing to cancel: done.
+            "cancel_task" => Self::feedback(&cmd, Ok(()), out),
+            _ => {
+                let result = core
+                    .command(Command::ZeroLocalFrame)
+                    .map_err(|e| e.to_string());
+                Self::feedback(&cmd, result, out);
+            }
+        }
+    }
+}
+
+/// A command name fit to echo back in a feedback `cmd`: printable and short.
+fn safe_cmd(cmd: &str) -> String {
+    cmd.chars()
+        .filter(|c| c.is_ascii_alphanumeric() || *c == '_')
+        .take(64)
+        .collect()
+}
+
+impl Trajectory {
+    fn deserialize_value(v: &Value) -> Result<Self, serde_json::Error> {
+        serde::Deserialize::deserialize(v)
+    }
+}
+
+impl Dialect for RtkDialect {
+    fn name(&self) -> &'static str {
+        "rtk"
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        vec![MQTT_CONTROL.to_owned()]
+    }
+
+    fn owns(&self, topic: &str) -> bool {
+        topic == MQTT_CONTROL
+    }
+
+    fn on_message(
+        &mut self,
+        _t: Timestamp,
+        _topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
+        self.control(payload, core, out);
+    }
+
+    fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>) {
+        out.push(Publish::telemetry(
+            BASE_STATUS,
+            BaseStatus::from_status(status).to_json(),
+        ));
+    }
+}

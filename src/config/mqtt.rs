@@ -1,0 +1,245 @@
+//! `[mqtt]`: the broker connection and which protocol dialects speak over it.
+
+use std::path::Path;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use super::{ConfigError, check_range};
+
+/// `[mqtt]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MqttConfig {
+    /// Broker host. The protocols expect the robot's own broker.
+    #[serde(default = "default_host")]
+    pub host: String,
+    /// Broker port.
+    #[serde(default = "default_port")]
+    pub port: u16,
+    /// Client id; default `chassisd-<vehicle name>`.
+    #[serde(default)]
+    pub client_id: Option<String>,
+    /// User name, if the broker wants one.
+    #[serde(default)]
+    pub username: Option<String>,
+    /// Password (with `username`).
+    #[serde(default)]
+    pub password: Option<String>,
+    /// Keep-alive interval, s.
+    #[serde(default = "default_keep_alive_s")]
+    pub keep_alive_s: f64,
+    /// Longest wait between reconnect attempts, s.
+    #[serde(default = "default_reconnect_max_s")]
+    pub reconnect_max_s: f64,
+    /// Telemetry messages kept while the broker is away; the oldest go first.
+    #[serde(default = "default_telemetry_queue")]
+    pub telemetry_queue: usize,
+    /// Command replies kept while the broker is away.
+    #[serde(default = "default_reply_queue")]
+    pub reply_queue: usize,
+    /// Incoming messages larger than this are refused, bytes.
+    #[serde(default = "default_max_payload")]
+    pub max_payload: usize,
+    /// Retained `online` / `offline` (last will) topic; `{name}` is the vehicle name.
+    #[serde(default = "default_status_topic")]
+    pub status_topic: String,
+    /// Start an MQTT broker inside chassisd on `host:port` (the no-hardware default).
+    #[serde(default)]
+    pub embedded_broker: bool,
+    /// TLS to the broker.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tls: Option<TlsConfig>,
+    /// Dialect `rtk` (rtk-mqtt-protocol.md): bare topics.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rtk: Option<RtkDialectConfig>,
+}
+
+/// `[mqtt.tls]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsConfig {
+    /// CA certificates (PEM) that sign the broker's certificate.
+    pub ca_file: String,
+    /// Client certificate chain (PEM), for brokers that authenticate clients.
+    #[serde(default)]
+    pub client_cert_file: Option<String>,
+    /// The client certificate's private key (PEM).
+    #[serde(default)]
+    pub client_key_file: Option<String>,
+}
+
+/// `[mqtt.rtk]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RtkDialectConfig {
+    /// Where trajectories are kept; none: trajectory commands are refused.
+    #[serde(default)]
+    pub trajectory_dir: Option<String>,
+}
+
+fn default_host() -> String {
+    "127.0.0.1".into()
+}
+fn default_port() -> u16 {
+    1883
+}
+fn default_keep_alive_s() -> f64 {
+    5.0
+}
+fn default_reconnect_max_s() -> f64 {
+    5.0
+}
+fn default_telemetry_queue() -> usize {
+    64
+}
+fn default_reply_queue() -> usize {
+    1024
+}
+fn default_max_payload() -> usize {
+    1 << 20
+}
+fn default_status_topic() -> String {
+    "chassisd/{name}/status".into()
+}
+
+impl Default for MqttConfig {
+    fn default() -> Self {
+        Self {
+            host: default_host(),
+            port: default_port(),
+            client_id: None,
+            username: None,
+            password: None,
+            keep_alive_s: default_keep_alive_s(),
+            reconnect_max_s: default_reconnect_max_s(),
+            telemetry_queue: default_telemetry_queue(),
+            reply_queue: default_reply_queue(),
+            max_payload: default_max_payload(),
+            status_topic: default_status_topic(),
+            embedded_broker: false,
+            tls: None,
+            rtk: None,
+        }
+    }
+}
+
+impl MqttConfig {
+    /// The keep-alive interval.
+    pub fn keep_alive(&self) -> Duration {
+        Duration::from_secs_f64(self.keep_alive_s)
+    }
+
+    /// The longest reconnect back-off.
+    pub fn reconnect_max(&self) -> Duration {
+        Duration::from_secs_f64(self.reconnect_max_s)
+    }
+
+    /// The client id for a vehicle called `name`.
+    pub fn client_id(&self, name: &str) -> String {
+        self.client_id
+            .clone()
+            .unwrap_or_else(|| format!("chassisd-{name}"))
+    }
+
+    /// The online/offline topic for a vehicle called `name`.
+    pub fn status_topic(&self, name: &str) -> String {
+        self.status_topic.replace("{name}", name)
+    }
+
+    /// Makes the file paths relative to `base` (the configuration's folder) absolute.
+    pub fn resolve(&mut self, base: &Path) {
+        let absolute = |p: &mut String| {
+            if Path::new(p.as_str()).is_relative() {
+                *p = base.join(p.as_str()).to_string_lossy().into_owned();
+            }
+        };
+        if let Some(tls) = &mut self.tls {
+            absolute(&mut tls.ca_file);
+            tls.client_cert_file.as_mut().map(absolute);
+            tls.client_key_file.as_mut().map(absolute);
+        }
+        if let Some(dir) = self.rtk.as_mut().and_then(|r| r.trajectory_dir.as_mut()) {
+            absolute(dir);
+        }
+    }
+
+    /// Checks ranges and consistency.
+    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        let invalid = |key: &str, problem: &str, fix: &str| {
+            ConfigError::invalid(file, &format!("mqtt.{key}"), problem, fix)
+        };
+        if self.host.trim().is_empty() {
+            return Err(invalid(
+                "host",
+                "is empty",
+                "set the broker's address, e.g. \"127.0.0.1\"",
+            ));
+        }
+        if self.port == 0 {
+            return Err(invalid("port", "is 0", "set the broker's port, e.g. 1883"));
+        }
+        if self.password.is_some() && self.username.is_none() {
+            return Err(invalid(
+                "password",
+                "is set without a username",
+                "set mqtt.username too",
+            ));
+        }
+        if self
+            .client_id
+            .as_ref()
+            .is_some_and(|c| c.is_empty() || c.len() > 128)
+        {
+            return Err(invalid(
+                "client_id",
+                "must be 1 to 128 characters",
+                "choose a shorter, non-empty id",
+            ));
+        }
+        if self.status_topic.is_empty() || self.status_topic.contains(['+', '#']) {
+            return Err(invalid(
+                "status_topic",
+                "must be a non-empty topic without wildcards",
+                "use e.g. \"chassisd/{name}/status\"",
+            ));
+        }
+        check_range(
+            file,
+            "mqtt.keep_alive_s",
+            self.keep_alive_s,
+            1.0..=600.0,
+            "s",
+        )?;
+        check_range(
+            file,
+            "mqtt.reconnect_max_s",
+            self.reconnect_max_s,
+            0.1..=300.0,
+            "s",
+        )?;
+        for (key, n, max) in [
+            ("telemetry_queue", self.telemetry_queue, 100_000),
+            ("reply_queue", self.reply_queue, 100_000),
+            ("max_payload", self.max_payload, 64 << 20),
+        ] {
+            if n == 0 || n > max {
+                return Err(invalid(
+                    key,
+                    &format!("{n} is outside 1..={max}"),
+                    "choose a value in range",
+                ));
+            }
+        }
+        if let Some(tls) = &self.tls
+            && tls.client_cert_file.is_some() != tls.client_key_file.is_some()
+        {
+            return Err(invalid(
+                "tls.client_key_file",
+                "a client certificate needs its key and the other way round",
+                "set both client_cert_file and client_key_file, or neither",
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,266 @@
+//! The MQTT link (rumqttc): connects to the broker, reconnects with back-off and subscribes
+//! again, keeps a retained `online` message with an `offline` last will, forwards incoming
+//! commands to the engine as records, and publishes the engine's messages.
+//!
+//! Outgoing messages wait in two bounded queues while the broker is away: telemetry (QoS 0;
+//! the oldest is dropped first) and replies and events (QoS 1; kept up to their own bound).
+//! The session is clean, so the broker keeps nothing for chassisd while it is away: a command
+//! published during an outage is never executed later. Retained messages on command topics
+//! are ignored for the same reason.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use anyhow::Context;
+use bytes::Bytes;
+use rumqttc::{
+    AsyncClient, Event, EventLoop, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport,
+};
+use tokio::sync::mpsc;
+
+use super::clock::RecordClock;
+use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
+use crate::config::mqtt::MqttConfig;
+use crate::core::LinkState;
+use crate::record::{Payload, Record};
+
+/// Messages from the engine waiting for the link task.
+const HANDOFF: usize = 4096;
+/// Requests rumqttc queues between the client handle and its event loop.
+const CLIENT_QUEUE: usize = 256;
+/// First reconnect delay.
+const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+
+/// Hands messages to the link task.
+#[derive(Clone)]
+pub struct MqttSender {
+    tx: mpsc::Sender<Publish>,
+}
+
+impl MqttSender {
+    /// Queues a message; never blocks. Only a stalled link task can refuse one (logged).
+    pub fn send(&self, message: Publish) {
+        if let Err(e) = self.tx.try_send(message) {
+            tracing::error!(error = %e, "MQTT link task is not keeping up; message dropped");
+        }
+    }
+}
+
+/// Counters of the link.
+#[derive(Debug, Default, Clone, Copy)]
+struct Dropped {
+    telemetry: u64,
+    replies: u64,
+    retained_commands: u64,
+}
+
+/// The two outgoing queues.
+struct Outbox {
+    telemetry: VecDeque<Publish>,
+    replies: VecDeque<Publish>,
+    telemetry_max: usize,
+    replies_max: usize,
+    dropped: Dropped,
+}
+
+impl Outbox {
+    fn push(&mut self, message: Publish) {
+        let (queue, max, dropped) = match message.qos {
+            Qos::AtMostOnce => (
+                &mut self.telemetry,
+                self.telemetry_max,
+                &mut self.dropped.telemetry,
+            ),
+            Qos::AtLeastOnce => (
+                &mut self.replies,
+                self.replies_max,
+                &mut self.dropped.replies,
+            ),
+        };
+        if queue.len() >= max {
+            queue.pop_front();
+            *dropped += 1;
+            if dropped.is_power_of_two() {
+                tracing::warn!(
+                    telemetry = self.dropped.telemetry,
+                    replies = self.dropped.replies,
+                    "MQTT broker away: oldest queued messages dropped"
+                );
+            }
+        }
+        queue.push_back(message);
+    }
+
+    /// Hands queued messages to rumqttc, replies first, while it takes them.
+    fn flush(&mut self, client: &AsyncClient) {
+        for queue in [&mut self.replies, &mut self.telemetry] {
+            while let Some(m) = queue.pop_front() {
+                let qos = match m.qos {
+                    Qos::AtMostOnce => QoS::AtMostOnce,
+                    Qos::AtLeastOnce => QoS::AtLeastOnce,
+                };
+                if client
+                    .try_publish(m.topic.clone(), qos, m.retain, m.payload.clone())
+                    .is_err()
+                {
+                    queue.push_front(m);
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// What the link needs to start.
+pub struct MqttSpec {
+    /// Broker and queues.
+    pub config: MqttConfig,
+    /// Vehicle name (client id and status topic).
+    pub vehicle: String,
+    /// Topic filters to subscribe to.
+    pub subscriptions: Vec<String>,
+}
+
+/// Starts the link task; incoming commands go to `records`.
+pub fn spawn(
+    spec: MqttSpec,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+) -> anyhow::Result<MqttSender> {
+    let options = options(&spec)?;
+    let (client, eventloop) = AsyncClient::new(options, CLIENT_QUEUE);
+    let (tx, rx) = mpsc::channel(HANDOFF);
+    tokio::spawn(run(spec, client, eventloop, rx, clock, records));
+    Ok(MqttSender { tx })
+}
+
+fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
+    let c = &spec.config;
+    let mut o = MqttOptions::new(c.client_id(&spec.vehicle), c.host.clone(), c.port);
+    o.set_keep_alive(c.keep_alive());
+    o.set_clean_session(true);
+    // Oversized commands get an error reply from their dialect; only far larger packets
+    // are refused by the client itself (and cost a reconnect).
+    o.set_max_packet_size(c.max_payload.saturating_mul(4).max(1 << 20), 64 << 20);
+    o.set_last_will(LastWill::new(
+        c.status_topic(&spec.vehicle),
+        "offline",
+        QoS::AtLeastOnce,
+        true,
+    ));
+    if let (Some(user), password) = (&c.username, &c.password) {
+        o.set_credentials(user.clone(), password.clone().unwrap_or_default());
+    }
+    if let Some(tls) = &c.tls {
+        // rustls needs a process-wide crypto provider; ring is the one compiled in. A second
+        // install (another link) is refused harmlessly.
+        let _ = rustls::crypto::ring::default_provider().install_default();
+        let read = |p: &str| std::fs::read(p).with_context(|| format!("mqtt.tls: cannot read {p}"));
+        let client_auth = match (&tls.client_cert_file, &tls.client_key_file) {
+            (Some(cert), Some(key)) => Some((read(cert)?, read(key)?)),
+            _ => None,
+        };
+        o.set_transport(Transport::tls_with_config(TlsConfiguration::Simple {
+            ca: read(&tls.ca_file)?,
+            alpn: None,
+            client_auth,
+        }));
+    }
+    Ok(o)
+}
+
+async fn run(
+    spec: MqttSpec,
+    client: AsyncClient,
+    mut eventloop: EventLoop,
+    mut rx: mpsc::Receiver<Publish>,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+) {
+    let c = &spec.config;
+    let broker = format!("{}:{}", c.host, c.port);
+    let status_topic = c.status_topic(&spec.vehicle);
+    let mut outbox = Outbox {
+        telemetry: VecDeque::new(),
+        replies: VecDeque::new(),
+        telemetry_max: c.telemetry_queue,
+        replies_max: c.reply_queue,
+        dropped: Dropped::default(),
+    };
+    let mut connected = false;
+    let mut backoff = FIRST_BACKOFF;
+    let link = |state| Record {
+        t: clock.now(),
+        source: MQTT_SOURCE.into(),
+        payload: Payload::Link(state),
+    };
+    loop {
+        tokio::select! {
+            event = eventloop.poll() => match event {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    connected = true;
+                    backoff = FIRST_BACKOFF;
+                    tracing::info!(%broker, "MQTT connected");
+                    let filters = spec
+                        .subscriptions
+                        .iter()
+                        .map(|f| rumqttc::SubscribeFilter::new(f.clone(), QoS::AtLeastOnce));
+                    if !spec.subscriptions.is_empty()
+                        && let Err(e) = client.try_subscribe_many(filters)
+                    {
+                        tracing::error!(error = %e, "MQTT subscribe failed");
+                    }
+                    if let Err(e) = client.try_publish(
+                        status_topic.clone(),
+                        QoS::AtLeastOnce,
+                        true,
+                        Bytes::from_static(b"online"),
+                    ) {
+                        tracing::error!(error = %e, "MQTT online message failed");
+                    }
+                    outbox.flush(&client);
+                    if records.send(link(LinkState::Up)).await.is_err() {
+                        return;
+                    }
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    if p.retain {
+                        outbox.dropped.retained_commands += 1;
+                        tracing::warn!(topic = %p.topic, "retained command ignored: commands must be live");
+                        continue;
+                    }
+                    let record = Record {
+                        t: clock.now(),
+                        source: MQTT_SOURCE.into(),
+                        payload: Payload::Command { topic: p.topic, payload: p.payload },
+                    };
+                    if records.send(record).await.is_err() {
+                        return;
+                    }
+                }
+                Ok(Event::Outgoing(_)) => outbox.flush(&client),
+                Ok(_) => {}
+                Err(e) => {
+                    if connected {
+                        connected = false;
+                        tracing::warn!(%broker, error = %e, "MQTT connection lost; reconnecting");
+                        if records.send(link(LinkState::Down)).await.is_err() {
+                            return;
+                        }
+                    } else {
+                        tracing::debug!(%broker, error = %e, "MQTT connect failed");
+                    }
+                    tokio::time::sleep(backoff).await;
+                    backoff = (backoff * 2).min(c.reconnect_max());
+                }
+            },
+            message = rx.recv() => {
+                let Some(message) = message else { return };
+                outbox.push(message);
+                if connected {
+                    outbox.flush(&client);
+                }
+            }
+        }
+    }
+}
