@@ -74,6 +74,9 @@ enum Command {
         /// No MQTT at all.
         #[arg(long)]
         no_mqtt: bool,
+        /// Keep the rtk dialect's trajectories in this folder (default: in memory).
+        #[arg(long, conflicts_with = "no_mqtt")]
+        trajectory_dir: Option<PathBuf>,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -195,9 +198,13 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             duration,
             mqtt,
             no_mqtt,
+            trajectory_dir,
         } => {
             let plant = load_plant(plant)?;
-            let mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
+            let mut mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
+            if let Some(rtk) = mqtt.as_mut().and_then(|m| m.rtk.as_mut()) {
+                rtk.trajectory_dir = trajectory_dir.map(|d| d.to_string_lossy().into_owned());
+            }
             let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
             let duration = match duration {
                 Some(d) if !(d > 0.0 && d.is_finite()) => {

@@ -36,7 +36,15 @@ fn last_status(stdout: &[u8]) -> serde_json::Value {
 fn a_scripted_session_replays_to_the_same_bytes() {
     let dir = common::tempdir("sim-scenario").join("rec");
     let out = Command::new(common::chassisd())
-        .args(["sim", "--no-mqtt", "--scenario", "turns", "--duration", "15", "--record"])
+        .args([
+            "sim",
+            "--no-mqtt",
+            "--scenario",
+            "turns",
+            "--duration",
+            "15",
+            "--record",
+        ])
         .arg(&dir)
         .output()
         .expect("chassisd runs");

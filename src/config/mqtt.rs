@@ -88,7 +88,7 @@ fn default_keep_alive_s() -> f64 {
     5.0
 }
 fn default_reconnect_max_s() -> f64 {
-    5.0
+    2.0
 }
 fn default_telemetry_queue() -> usize {
     64

@@ -116,7 +116,14 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
         });
         tokio::spawn(read_commands(clock, tx.clone()));
     }
-    let mut trajectories = trajectory_store(config)?;
+    if config
+        .mqtt
+        .as_ref()
+        .is_some_and(|m| m.rtk.as_ref().is_some_and(|r| r.trajectory_dir.is_none()))
+    {
+        tracing::warn!("mqtt.rtk.trajectory_dir is not set: trajectory commands will be refused");
+    }
+    let mut trajectories = trajectory_store(config, Box::new(Unconfigured))?;
     let mut engine = Engine::with_trajectories(config, &sources, trajectories.0);
     engine.start_at(start);
     let mqtt = match &config.mqtt {
@@ -283,17 +290,21 @@ fn dispatch(
     Ok(())
 }
 
-/// The trajectory store of the `rtk` dialect (a folder when configured), and, when it has
-/// any, its contents as JSON for the recording.
-type StoreAndSnapshot = (Box<dyn TrajectoryStore>, Option<Vec<u8>>);
+/// The trajectory store of the `rtk` dialect, and its contents as JSON for a recording.
+pub(crate) type StoreAndSnapshot = (Box<dyn TrajectoryStore>, Option<Vec<u8>>);
 
-fn trajectory_store(config: &VehicleConfig) -> anyhow::Result<StoreAndSnapshot> {
-    let Some(rtk) = config.mqtt.as_ref().and_then(|m| m.rtk.as_ref()) else {
-        return Ok((Box::new(Unconfigured), None));
-    };
-    let Some(dir) = &rtk.trajectory_dir else {
-        tracing::warn!("mqtt.rtk.trajectory_dir is not set: trajectory commands will be refused");
-        return Ok((Box::new(Unconfigured), None));
+/// The `rtk` dialect's trajectory folder when one is configured; otherwise `fallback`.
+pub(crate) fn trajectory_store(
+    config: &VehicleConfig,
+    fallback: Box<dyn TrajectoryStore>,
+) -> anyhow::Result<StoreAndSnapshot> {
+    let Some(dir) = config
+        .mqtt
+        .as_ref()
+        .and_then(|m| m.rtk.as_ref())
+        .and_then(|r| r.trajectory_dir.as_ref())
+    else {
+        return Ok((fallback, None));
     };
     let mut store = DirStore::open(std::path::Path::new(dir))
         .with_context(|| format!("trajectory folder {dir}"))?;

@@ -238,6 +238,18 @@ async fn run(
                         return;
                     }
                 }
+                Ok(Event::Incoming(Packet::SubAck(ack))) => {
+                    let refused = ack
+                        .return_codes
+                        .iter()
+                        .filter(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
+                        .count();
+                    if refused > 0 {
+                        tracing::error!(refused, "MQTT broker refused subscriptions");
+                    } else {
+                        tracing::info!(topics = ?spec.subscriptions, "MQTT subscribed");
+                    }
+                }
                 Ok(Event::Outgoing(_)) => outbox.flush(&client),
                 Ok(_) => {}
                 Err(e) => {

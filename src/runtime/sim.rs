@@ -12,10 +12,11 @@ use tokio::sync::mpsc;
 
 use super::broker;
 use super::clock::RecordClock;
-use super::live::read_commands;
+use super::live::{read_commands, trajectory_store};
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use crate::api::rtk::BaseStatus;
+use crate::api::rtk::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
 use crate::engine::EngineOutput;
@@ -105,15 +106,22 @@ impl<W: Write> Sink for Output<W> {
 pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
     let clock = RecordClock::start();
     let start = clock.now();
+    let config = crate::config::VehicleConfig {
+        mqtt: options.mqtt.clone(),
+        ..Default::default()
+    };
+    // A simulated session keeps trajectories in memory unless a folder is configured.
+    let (store, snapshot) = trajectory_store(&config, Box::new(MemoryStore::default()))?;
     let mut sim = Lockstep::with_mqtt(
         options.plant.clone(),
         options.seed,
         start,
         options.mqtt.clone(),
+        store,
     )?;
     let recorder = match &options.record {
         Some(dir) => {
-            let writer = RecordingWriter::create(
+            let mut writer = RecordingWriter::create(
                 dir,
                 &sim.config().vehicle.name,
                 start,
@@ -121,6 +129,11 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
                 lockstep::sources(&options.plant),
             )
             .with_context(|| format!("cannot start recording in {}", dir.display()))?;
+            if let Some(snapshot) = &snapshot {
+                writer
+                    .attach_trajectories(snapshot)
+                    .context("cannot record the stored trajectories")?;
+            }
             tracing::info!(folder = %dir.display(), "recording");
             Some(Recorder::start(writer))
         }

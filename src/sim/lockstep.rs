@@ -12,6 +12,7 @@ use bytes::Bytes;
 use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
 use super::scenario::Scenario;
 use crate::api::mqtt::MQTT_SOURCE;
+use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::chassis::ProfileRef;
 use crate::config::mqtt::MqttConfig;
 use crate::config::{ConfigError, VehicleConfig};
@@ -186,15 +187,17 @@ pub struct Lockstep {
 impl Lockstep {
     /// A vehicle on `plant` with noise from `seed`, at rest at the datum at `start`.
     pub fn new(plant: PlantConfig, seed: u64, start: Timestamp) -> Result<Self, ConfigError> {
-        Self::with_mqtt(plant, seed, start, None)
+        Self::with_mqtt(plant, seed, start, None, Box::new(MemoryStore::default()))
     }
 
-    /// [`Lockstep::new`], speaking the dialects of `mqtt` (trajectories kept in memory).
+    /// [`Lockstep::new`], speaking the dialects of `mqtt`, trajectories kept in
+    /// `trajectories`.
     pub fn with_mqtt(
         plant: PlantConfig,
         seed: u64,
         start: Timestamp,
         mqtt: Option<MqttConfig>,
+        trajectories: Box<dyn TrajectoryStore>,
     ) -> Result<Self, ConfigError> {
         let mut config = vehicle_config(&plant)?;
         if let Some(m) = mqtt {
@@ -205,7 +208,7 @@ impl Lockstep {
             (GNSS_SOURCE.to_owned(), Decoder::Nmea),
             (IMU_SOURCE.to_owned(), Decoder::Imu(plant.imu.protocol)),
         ];
-        let mut engine = Engine::new(&config, &decoders);
+        let mut engine = Engine::with_trajectories(&config, &decoders, trajectories);
         engine.start_at(start);
         // The devices are connected from the start, as live drivers report them.
         let queue = [GNSS_SOURCE, IMU_SOURCE, SIM_BUS]

@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 pub mod canbus;
+pub mod mqtt;
 pub mod process;
 
 use std::path::PathBuf;
@@ -91,4 +92,74 @@ pub fn replay_odometry(dir: &std::path::Path) -> chassisd::core::chassis::WheelO
             _ => None,
         })
         .expect("a status with the drive train")
+}
+
+/// A protocol document of `../shared/spec/` (or `$CHASSISD_SHARED_SPEC`).
+pub fn shared_spec(file: &str) -> String {
+    let base = std::env::var_os("CHASSISD_SHARED_SPEC")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/spec"));
+    let path = base.join(file);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e}; the protocol tests need the shared specs (set CHASSISD_SHARED_SPEC)",
+            path.display()
+        )
+    })
+}
+
+/// Removes `//` comments outside strings, so a spec's annotated JSON parses.
+pub fn strip_json_comments(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.lines() {
+        let mut in_string = false;
+        let mut escaped = false;
+        let mut cut = line.len();
+        let bytes = line.as_bytes();
+        for (i, &b) in bytes.iter().enumerate() {
+            match b {
+                _ if escaped => escaped = false,
+                b'\\' if in_string => escaped = true,
+                b'"' => in_string = !in_string,
+                b'/' if !in_string && bytes.get(i + 1) == Some(&b'/') => {
+                    cut = i;
+                    break;
+                }
+                _ => {}
+            }
+        }
+        out.push_str(&line[..cut]);
+        out.push('\n');
+    }
+    out
+}
+
+/// Every ```json block of a Markdown spec, comments removed, with the heading above it.
+pub fn markdown_json_examples(text: &str) -> Vec<(String, serde_json::Value)> {
+    let mut out = Vec::new();
+    let mut heading = String::new();
+    let mut block: Option<String> = None;
+    for line in text.lines() {
+        let trimmed = line.trim();
+        match &mut block {
+            Some(b) if trimmed.starts_with("```") => {
+                let json = strip_json_comments(b);
+                let value = serde_json::from_str(&json).unwrap_or_else(|e| {
+                    panic!("example under {heading:?} does not parse: {e}\n{json}")
+                });
+                out.push((heading.clone(), value));
+                block = None;
+            }
+            Some(b) => {
+                b.push_str(line);
+                b.push('\n');
+            }
+            None if trimmed.starts_with("```json") => block = Some(String::new()),
+            None if trimmed.starts_with('#') => {
+                heading = trimmed.trim_start_matches('#').trim().to_owned()
+            }
+            None => {}
+        }
+    }
+    out
 }

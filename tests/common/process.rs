@@ -70,7 +70,20 @@ pub struct Proc {
 impl Proc {
     /// Starts `chassisd ARGS`.
     pub fn start<S: AsRef<OsStr>>(args: &[S]) -> Proc {
-        let mut child = Command::new(super::chassisd())
+        Self::start_under(&[], args)
+    }
+
+    /// Starts `WRAPPER... chassisd ARGS` (e.g. under strace).
+    pub fn start_under<S: AsRef<OsStr>>(wrapper: &[&str], args: &[S]) -> Proc {
+        let mut command = match wrapper.split_first() {
+            Some((program, rest)) => {
+                let mut c = Command::new(program);
+                c.args(rest).arg(super::chassisd());
+                c
+            }
+            None => Command::new(super::chassisd()),
+        };
+        let mut child = command
             .args(args)
             .env("RUST_LOG", "info")
             .stdin(Stdio::piped())

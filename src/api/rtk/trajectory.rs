@@ -14,6 +14,8 @@ pub const MAX_NAME_BYTES: usize = 64;
 pub const MAX_POINTS: usize = 100_000;
 /// Suffix of trajectory files.
 const SUFFIX: &str = ".json";
+/// Marks a temporary file of an atomic write (followed by the writer's process id).
+const TEMP_MARK: &str = ".tmp-";
 
 /// One point, as `save_trajectory` sends it and `trajectory_data` returns it.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
@@ -212,9 +214,17 @@ pub struct DirStore {
 }
 
 impl DirStore {
-    /// A store in `dir`, created if missing.
+    /// A store in `dir`, created if missing. Temporary files a crash left behind are removed.
     pub fn open(dir: &Path) -> Result<Self, TrajectoryError> {
         std::fs::create_dir_all(dir)?;
+        for entry in std::fs::read_dir(dir)?.filter_map(Result::ok) {
+            let name = entry.file_name();
+            let name = name.to_string_lossy();
+            if name.starts_with('.') && name.contains(TEMP_MARK) {
+                tracing::info!(file = %name, "removing a trajectory write interrupted by a crash");
+                std::fs::remove_file(entry.path())?;
+            }
+        }
         Ok(Self {
             dir: dir.to_owned(),
             corrupt_reported: Default::default(),
@@ -307,7 +317,7 @@ pub fn write_atomically(dir: &Path, path: &Path, bytes: &[u8]) -> std::io::Resul
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let temp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let temp = dir.join(format!(".{name}{TEMP_MARK}{}", std::process::id()));
     let result = (|| {
         let mut file = std::fs::File::create(&temp)?;
         file.write_all(bytes)?;

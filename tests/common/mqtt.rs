@@ -1,0 +1,163 @@
+//! A real mosquitto broker and the real mosquitto_pub / mosquitto_sub clients for tests.
+
+use std::net::{TcpListener, TcpStream};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use super::process::lines_of;
+
+/// A mosquitto process on a port of its own.
+pub struct Mosquitto {
+    child: Option<Child>,
+    /// Its port on 127.0.0.1.
+    pub port: u16,
+}
+
+/// A port nobody listens on right now.
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+impl Mosquitto {
+    /// Starts mosquitto on a free port and waits until it accepts connections.
+    pub fn start() -> Mosquitto {
+        let mut m = Mosquitto {
+            child: None,
+            port: free_port(),
+        };
+        m.restart();
+        m
+    }
+
+    /// (Re)starts it on its port.
+    pub fn restart(&mut self) {
+        let child = Command::new("mosquitto")
+            .args(["-p", &self.port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto starts (apt-get install mosquitto)");
+        self.child = Some(child);
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            assert!(Instant::now() < deadline, "mosquitto did not listen");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Kills it (SIGKILL) and waits for it to go.
+    pub fn kill(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    /// `host:port` for `chassisd sim --mqtt`.
+    pub fn address(&self) -> String {
+        format!("127.0.0.1:{}", self.port)
+    }
+
+    /// Publishes one message at QoS 1 with mosquitto_pub.
+    pub fn publish(&self, topic: &str, payload: &str) {
+        self.publish_with(topic, payload, &[]);
+    }
+
+    /// Publishes with extra mosquitto_pub arguments (e.g. `-r` for retained).
+    pub fn publish_with(&self, topic: &str, payload: &str, extra: &[&str]) {
+        let status = Command::new("mosquitto_pub")
+            .args(["-h", "127.0.0.1", "-p", &self.port.to_string(), "-q", "1"])
+            .args(["-t", topic, "-m", payload])
+            .args(extra)
+            .status()
+            .expect("mosquitto_pub runs");
+        assert!(status.success(), "mosquitto_pub failed");
+    }
+
+    /// Publishes the contents of a file (large payloads).
+    pub fn publish_file(&self, topic: &str, file: &std::path::Path) {
+        let status = Command::new("mosquitto_pub")
+            .args(["-h", "127.0.0.1", "-p", &self.port.to_string(), "-q", "1"])
+            .args(["-t", topic, "-f"])
+            .arg(file)
+            .status()
+            .expect("mosquitto_pub runs");
+        assert!(status.success(), "mosquitto_pub failed");
+    }
+
+    /// Subscribes with mosquitto_sub to `topics`; lines are `topic payload`.
+    pub fn subscribe(&self, topics: &[&str]) -> Subscriber {
+        let mut cmd = Command::new("mosquitto_sub");
+        cmd.args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &self.port.to_string(),
+            "-v",
+            "-q",
+            "1",
+        ]);
+        for t in topics {
+            cmd.args(["-t", t]);
+        }
+        let mut child = cmd
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto_sub runs");
+        let lines = lines_of(child.stdout.take().expect("piped"));
+        // mosquitto_sub prints nothing once subscribed; give it a moment to subscribe.
+        std::thread::sleep(Duration::from_millis(300));
+        Subscriber { child, lines }
+    }
+}
+
+impl Drop for Mosquitto {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+/// A running mosquitto_sub.
+pub struct Subscriber {
+    child: Child,
+    lines: Receiver<String>,
+}
+
+impl Subscriber {
+    /// The next message within `wait`: (topic, payload).
+    pub fn next(&self, wait: Duration) -> Option<(String, String)> {
+        let line = self.lines.recv_timeout(wait).ok()?;
+        let (topic, payload) = line.split_once(' ').unwrap_or((line.as_str(), ""));
+        Some((topic.to_owned(), payload.to_owned()))
+    }
+
+    /// The next message on `topic` within `wait`, skipping others.
+    pub fn next_on(&self, topic: &str, wait: Duration) -> Option<String> {
+        let deadline = Instant::now() + wait;
+        while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+            match self.next(left) {
+                Some((t, p)) if t == topic => return Some(p),
+                Some(_) => {}
+                None => return None,
+            }
+        }
+        None
+    }
+
+    /// Drops everything received so far.
+    pub fn clear(&self) {
+        while self.lines.try_recv().is_ok() {}
+    }
+}
+
+impl Drop for Subscriber {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

@@ -1,0 +1,359 @@
+//! Dialect `rtk` over a real mosquitto with real clients (mosquitto_pub / mosquitto_sub), the
+//! daemon running the simulated vehicle: every example of rtk-mqtt-protocol.md sent as written
+//! gets its documented answer, base_status matches the spec key by key, bad messages get
+//! `_failse` answers and change nothing, and a broker restart is survived without executing a
+//! command published while chassisd was away.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::mqtt::{Mosquitto, Subscriber};
+use common::process::Proc;
+use serde_json::Value;
+
+const WAIT: Duration = Duration::from_secs(10);
+const STATUS_TOPIC: &str = "chassisd/sim-mower/status";
+
+fn daemon(broker: &Mosquitto) -> Proc {
+    let mut p = Proc::start(&["sim", "--mqtt", &broker.address()]);
+    p.wait_log(WAIT, "MQTT subscribed");
+    p
+}
+
+fn json(text: &str) -> Value {
+    serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
+}
+
+/// Waits until base_status says the vehicle is localised (init_rtk_data needs a position).
+fn wait_localised(status: &Subscriber) {
+    let deadline = Instant::now() + WAIT;
+    while Instant::now() < deadline {
+        if let Some(s) = status.next_on("base_status", WAIT)
+            && json(&s)["nav"]["locate"] == "LOCATE_TRUE"
+        {
+            return;
+        }
+    }
+    panic!("never localised");
+}
+
+/// Sends `payload` on mqtt_control and returns the answer (topic, JSON).
+fn ask(broker: &Mosquitto, answers: &Subscriber, payload: &str) -> (String, Value) {
+    answers.clear();
+    broker.publish("mqtt_control", payload);
+    let (topic, body) = answers
+        .next(WAIT)
+        .unwrap_or_else(|| panic!("no answer to {payload}"));
+    (topic, json(&body))
+}
+
+fn feedback(broker: &Mosquitto, answers: &Subscriber, payload: &str) -> Value {
+    let (topic, body) = ask(broker, answers, payload);
+    assert_eq!(topic, "feedback", "{body}");
+    assert_eq!(body["cmd_type"], "feedback");
+    body
+}
+
+/// Same keys at every level, the same JSON kind of value (numbers as numbers).
+fn same_shape(spec: &Value, ours: &Value, path: &str) {
+    match (spec, ours) {
+        (Value::Object(a), Value::Object(b)) => {
+            let ka: Vec<_> = a.keys().collect();
+            let kb: Vec<_> = b
+                .keys()
+                .filter(|k| *k != "gnss" || path != ".sensor")
+                .collect();
+            assert_eq!(ka, kb, "keys of {path}");
+            for (k, v) in a {
+                same_shape(v, &b[k], &format!("{path}.{k}"));
+            }
+        }
+        (Value::Array(a), Value::Array(b)) => {
+            assert!(!b.is_empty() || a.is_empty(), "{path}: empty");
+            if let (Some(x), Some(y)) = (a.first(), b.first()) {
+                same_shape(x, y, &format!("{path}[0]"));
+            }
+        }
+        (Value::Number(_), Value::Number(_))
+        | (Value::Bool(_), Value::Bool(_))
+        | (Value::String(_), Value::String(_)) => {}
+        _ => panic!("{path}: spec has {spec}, chassisd sends {ours}"),
+    }
+}
+
+#[test]
+fn base_status_matches_the_spec_key_by_key() {
+    let broker = Mosquitto::start();
+    let status = broker.subscribe(&["base_status"]);
+    let _d = daemon(&broker);
+    let spec = common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"));
+    let example = &spec
+        .iter()
+        .find(|(h, _)| h.contains("base_status"))
+        .expect("the base_status example")
+        .1;
+    let sample = json(&status.next_on("base_status", WAIT).expect("a base_status"));
+    same_shape(example, &sample, "");
+    // The one addition, documented in the README.
+    assert!(sample["sensor"]["gnss"].is_boolean());
+    let locate = sample["nav"]["locate"].as_str().unwrap_or_default();
+    assert!(["LOCATE_UNINIT", "LOCATE_TRUE", "LOCATE_FALSE"].contains(&locate));
+    assert!([0, 1, 2, 4, 5].contains(&sample["rtk"]["status"].as_u64().unwrap_or(9)));
+    // 10 Hz: 20 messages take about 2 s.
+    let started = Instant::now();
+    for _ in 0..20 {
+        status.next_on("base_status", WAIT).expect("base_status");
+    }
+    let took = started.elapsed();
+    assert!(
+        took > Duration::from_millis(1700) && took < Duration::from_millis(2600),
+        "{took:?}"
+    );
+}
+
+#[test]
+fn every_spec_example_gets_its_documented_answer() {
+    let broker = Mosquitto::start();
+    let status = broker.subscribe(&["base_status"]);
+    let answers = broker.subscribe(&["feedback", "trajectory_data"]);
+    let _d = daemon(&broker);
+    wait_localised(&status);
+    let examples: Vec<(String, Value)> =
+        common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
+            .into_iter()
+            .filter(|(_, v)| {
+                ["trajectory_control", "task_control"]
+                    .contains(&v["cmd_type"].as_str().unwrap_or(""))
+            })
+            .collect();
+    let cmds: Vec<&str> = examples
+        .iter()
+        .map(|(_, v)| v["cmd"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        cmds,
+        [
+            "get_all_trajectory",
+            "save_trajectory",
+            "delete_trajectory",
+            "delete_all_trajectory",
+            "start_task",
+            "cancel_task",
+            "init_rtk_data"
+        ]
+    );
+    for (heading, example) in &examples {
+        let cmd = example["cmd"].as_str().unwrap();
+        let (topic, answer) = ask(&broker, &answers, &example.to_string());
+        match cmd {
+            "get_all_trajectory" => {
+                assert_eq!(topic, "trajectory_data", "{heading}");
+                assert_eq!(answer, Value::Array(vec![]), "nothing saved yet");
+            }
+            // The example's longitude, 188.2222333°, is not a longitude.
+            "save_trajectory" => {
+                assert_eq!(answer["cmd"], "save_trajectory_failse", "{answer}");
+                assert!(
+                    answer["message"].as_str().unwrap().contains("longitude"),
+                    "{answer}"
+                );
+            }
+            "delete_trajectory" => {
+                assert_eq!(answer["cmd"], "delete_trajectory_failse", "{answer}");
+                assert!(
+                    answer["message"].as_str().unwrap().contains("test5"),
+                    "{answer}"
+                );
+            }
+            "start_task" => {
+                assert_eq!(answer["cmd"], "start_task_failse", "{answer}");
+                assert!(
+                    answer["message"]
+                        .as_str()
+                        .unwrap()
+                        .contains("not available")
+                );
+            }
+            _ => {
+                assert_eq!(topic, "feedback");
+                assert_eq!(answer["cmd"], format!("{cmd}_success"), "{answer}");
+                assert!(answer.get("message").is_none(), "{answer}");
+            }
+        }
+    }
+    // The save example with a real longitude is stored, listed in the documented shape and
+    // deleted again.
+    let mut save = examples[1].1.clone();
+    for p in save["data"]["data"].as_array_mut().unwrap() {
+        p["longitude"] = 113.2222333.into();
+    }
+    let answer = feedback(&broker, &answers, &save.to_string());
+    assert_eq!(answer["cmd"], "save_trajectory_success", "{answer}");
+    let (topic, list) = ask(&broker, &answers, &examples[0].1.to_string());
+    assert_eq!(topic, "trajectory_data");
+    let spec_listing =
+        &common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
+            .into_iter()
+            .find(|(h, _)| h.contains("trajectory_data"))
+            .expect("the trajectory_data example")
+            .1;
+    same_shape(spec_listing, &list, "trajectory_data");
+    assert_eq!(list[0]["name"], "test1");
+    assert_eq!(list[0]["data"][0]["longitude"], 113.2222333);
+    let delete = r#"{"cmd_type":"trajectory_control","cmd":"delete_trajectory","name":"test1"}"#;
+    assert_eq!(
+        feedback(&broker, &answers, delete)["cmd"],
+        "delete_trajectory_success"
+    );
+}
+
+#[test]
+fn bad_messages_get_failse_answers_and_change_nothing() {
+    let broker = Mosquitto::start();
+    // A retained command left on the broker is stale by definition: chassisd, subscribing,
+    // receives it flagged retained and ignores it.
+    broker.publish_with(
+        "mqtt_control",
+        r#"{"cmd_type":"trajectory_control","cmd":"save_trajectory","data":{"name":"stale","data":[{"longitude":1,"latitude":1,"angle":0,"x":0,"y":0,"yaw":0}]}}"#,
+        &["-r"],
+    );
+    let answers = broker.subscribe(&["feedback", "trajectory_data"]);
+    answers.clear();
+    let mut d = daemon(&broker);
+    assert!(
+        answers.next(Duration::from_secs(1)).is_none(),
+        "the retained command was answered"
+    );
+    d.wait_log(WAIT, "retained command ignored");
+    // Clearing it is an empty message, which reaches chassisd live: refused as malformed.
+    broker.publish_with("mqtt_control", "", &["-r"]);
+    let (_, cleared) = answers.next(WAIT).expect("an answer to the empty message");
+    assert_eq!(json(&cleared)["cmd"], "mqtt_control_failse");
+    let cases = [
+        ("{not json", "mqtt_control_failse", "malformed JSON"),
+        ("[1, 2]", "mqtt_control_failse", "cmd"),
+        (
+            r#"{"cmd_type":"task_control","cmd":"fly"}"#,
+            "fly_failse",
+            "unknown command",
+        ),
+        (
+            r#"{"cmd_type":"task_control","cmd":"save_trajectory","data":{}}"#,
+            "save_trajectory_failse",
+            "cmd_type",
+        ),
+        (
+            r#"{"cmd_type":"trajectory_control","cmd":"save_trajectory","data":{"name":"x","data":"many"}}"#,
+            "save_trajectory_failse",
+            "data",
+        ),
+        (
+            r#"{"cmd_type":"trajectory_control","cmd":"save_trajectory","data":{"name":"../etc/passwd","data":[{"longitude":1,"latitude":1,"angle":0,"x":0,"y":0,"yaw":0}]}}"#,
+            "save_trajectory_failse",
+            "not allowed",
+        ),
+        (
+            r#"{"cmd_type":"trajectory_control","cmd":"delete_trajectory","name":5}"#,
+            "delete_trajectory_failse",
+            "name",
+        ),
+    ];
+    for (payload, cmd, reason) in cases {
+        let answer = feedback(&broker, &answers, payload);
+        assert_eq!(answer["cmd"], cmd, "{payload} → {answer}");
+        let message = answer["message"].as_str().unwrap_or_default();
+        assert!(message.contains(reason), "{payload} → {message}");
+    }
+    // Oversized: 2 MiB of JSON.
+    let big = format!(
+        r#"{{"cmd_type":"trajectory_control","cmd":"save_trajectory","pad":"{}"}}"#,
+        "x".repeat(2 << 20)
+    );
+    let file = common::tempdir("mqtt-big").join("big.json");
+    std::fs::write(&file, big).unwrap();
+    answers.clear();
+    broker.publish_file("mqtt_control", &file);
+    let (_, body) = answers
+        .next(WAIT)
+        .expect("an answer to the oversized message");
+    let answer = json(&body);
+    assert_eq!(answer["cmd"], "mqtt_control_failse");
+    assert!(
+        answer["message"].as_str().unwrap().contains("exceeds"),
+        "{answer}"
+    );
+    // Nothing was stored by any of it.
+    let (_, list) = ask(
+        &broker,
+        &answers,
+        r#"{"cmd_type":"trajectory_control","cmd":"get_all_trajectory"}"#,
+    );
+    assert_eq!(list, Value::Array(vec![]));
+}
+
+#[test]
+fn a_broker_restart_is_survived_and_commands_sent_meanwhile_are_not_run() {
+    let mut broker = Mosquitto::start();
+    let _d = daemon(&broker);
+    {
+        let status = broker.subscribe(&["base_status"]);
+        status
+            .next_on("base_status", WAIT)
+            .expect("status before the outage");
+    }
+    broker.kill();
+    // Long enough for the daemon's reconnect back-off to reach its 2 s ceiling.
+    std::thread::sleep(Duration::from_secs(4));
+    broker.restart();
+    let restarted = Instant::now();
+    let online = broker.subscribe(&[STATUS_TOPIC]);
+    // Published before chassisd is back: with a clean session the broker keeps nothing for
+    // it. (If chassisd already reconnected, the test would prove nothing: it says so.)
+    let early = online.next(Duration::from_millis(0));
+    broker.publish(
+        "mqtt_control",
+        r#"{"cmd_type":"trajectory_control","cmd":"save_trajectory","data":{"name":"outage","data":[{"longitude":113.2,"latitude":23.1,"angle":0,"x":0,"y":0,"yaw":0}]}}"#,
+    );
+    assert!(
+        early.is_none(),
+        "chassisd reconnected before the command was sent"
+    );
+    let back = online.next_on(STATUS_TOPIC, WAIT).expect("online again");
+    assert_eq!(back, "online");
+    let status = broker.subscribe(&["base_status"]);
+    status
+        .next_on("base_status", WAIT)
+        .expect("status after the restart");
+    assert!(
+        restarted.elapsed() < Duration::from_secs(5),
+        "{:?}",
+        restarted.elapsed()
+    );
+    // Subscriptions work again, and the command from the outage was never executed.
+    let answers = broker.subscribe(&["feedback", "trajectory_data"]);
+    let (topic, list) = ask(
+        &broker,
+        &answers,
+        r#"{"cmd_type":"trajectory_control","cmd":"get_all_trajectory"}"#,
+    );
+    assert_eq!(topic, "trajectory_data");
+    assert_eq!(list, Value::Array(vec![]), "the outage command ran: {list}");
+}
+
+#[test]
+fn the_last_will_says_offline_when_chassisd_dies() {
+    let broker = Mosquitto::start();
+    let online = broker.subscribe(&[STATUS_TOPIC]);
+    let mut d = daemon(&broker);
+    assert_eq!(
+        online.next_on(STATUS_TOPIC, WAIT).as_deref(),
+        Some("online")
+    );
+    let _ = d.child.kill();
+    // The broker notices the dropped connection at once (socket closed) and sends the will.
+    assert_eq!(
+        online.next_on(STATUS_TOPIC, WAIT).as_deref(),
+        Some("offline")
+    );
+}
