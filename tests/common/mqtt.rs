@@ -23,18 +23,32 @@ pub fn free_port() -> u16 {
 }
 
 impl Mosquitto {
-    /// Starts mosquitto on a free port and waits until it accepts connections.
+    /// Starts mosquitto on a free port and waits until it accepts connections. Tests run in
+    /// parallel, so another test may take the same free port first: then it tries another.
     pub fn start() -> Mosquitto {
-        let mut m = Mosquitto {
-            child: None,
-            port: free_port(),
-        };
-        m.restart();
-        m
+        for _ in 0..20 {
+            let mut m = Mosquitto {
+                child: None,
+                port: free_port(),
+            };
+            if m.try_start() {
+                return m;
+            }
+        }
+        panic!("mosquitto could not get a port");
     }
 
     /// (Re)starts it on its port.
     pub fn restart(&mut self) {
+        assert!(
+            self.try_start(),
+            "mosquitto could not listen on {} again",
+            self.port
+        );
+    }
+
+    /// Starts it on its port; false if the port is taken (mosquitto exits).
+    fn try_start(&mut self) -> bool {
         let child = Command::new("mosquitto")
             .args(["-p", &self.port.to_string()])
             .stdout(Stdio::null())
@@ -43,7 +57,25 @@ impl Mosquitto {
             .expect("mosquitto starts (apt-get install mosquitto)");
         self.child = Some(child);
         let deadline = Instant::now() + Duration::from_secs(10);
-        while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+        loop {
+            // Our own mosquitto must be the one listening: if it exited, the port was taken.
+            if let Some(c) = &mut self.child
+                && c.try_wait().expect("mosquitto status").is_some()
+            {
+                self.child = None;
+                return false;
+            }
+            if TcpStream::connect(("127.0.0.1", self.port)).is_ok() {
+                std::thread::sleep(Duration::from_millis(50));
+                let alive = self
+                    .child
+                    .as_mut()
+                    .is_some_and(|c| c.try_wait().ok().flatten().is_none());
+                if !alive {
+                    self.child = None;
+                }
+                return alive;
+            }
             assert!(Instant::now() < deadline, "mosquitto did not listen");
             std::thread::sleep(Duration::from_millis(20));
         }
