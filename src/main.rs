@@ -9,7 +9,9 @@ use clap::{Parser, Subcommand};
 
 use chassisd::bench::fusion;
 use chassisd::config::VehicleConfig;
-use chassisd::config::mqtt::{MqttConfig, RtkDialectConfig};
+use chassisd::config::mqtt::{
+    DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
+};
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
 use chassisd::runtime::sim::{self, SimOptions};
@@ -246,12 +248,25 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
     }
 }
 
+/// The `{vehicleId}` of the simulated vehicle's root dialect.
+const SIM_VEHICLE_ID: &str = "sim";
+/// The `{serial_number}` of the simulated vehicle's device dialect.
+const SIM_SERIAL_NUMBER: &str = "SIM0001";
+
 /// The MQTT settings of `chassisd sim`: every dialect, on the broker at `external`, or on an
 /// embedded one at 127.0.0.1:1883.
 fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
     let mut config = MqttConfig {
         embedded_broker: external.is_none(),
         rtk: Some(RtkDialectConfig::default()),
+        root: Some(RootDialectConfig {
+            vehicle_id: SIM_VEHICLE_ID.into(),
+            heartbeat_timeout_s: 3.0,
+        }),
+        device: Some(DeviceDialectConfig {
+            serial_number: SIM_SERIAL_NUMBER.into(),
+            mapping_forward: None,
+        }),
         ..MqttConfig::default()
     };
     if let Some(address) = external {

@@ -75,8 +75,14 @@ pub trait Dialect: Send {
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     );
-    /// Publishes what is due at a status tick.
-    fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>);
+    /// Publishes what is due at a status tick, and acts on what the time says (a
+    /// heartbeat that stopped).
+    fn on_status(
+        &mut self,
+        status: &VehicleStatus,
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    );
 }
 
 /// The dialects in force, in the order they were configured.
@@ -130,9 +136,14 @@ impl Dialects {
     }
 
     /// Every dialect's publications at a status tick.
-    pub fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>) {
+    pub fn on_status(
+        &mut self,
+        status: &VehicleStatus,
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
         for d in &mut self.dialects {
-            d.on_status(status, out);
+            d.on_status(status, core, out);
         }
     }
 }

@@ -53,6 +53,46 @@ pub struct MqttConfig {
     /// Dialect `rtk` (rtk-mqtt-protocol.md): bare topics.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rtk: Option<RtkDialectConfig>,
+    /// Dialect `root` (root-mqtt-api.rst): `/root/{vehicle_id}/...`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub root: Option<RootDialectConfig>,
+    /// Dialect `device` (device-mqtt-api.md): `device/{serial_number}/...`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<DeviceDialectConfig>,
+}
+
+/// `[mqtt.root]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RootDialectConfig {
+    /// The `{vehicleId}` of the topics.
+    pub vehicle_id: String,
+    /// Once a client sends heartbeats, silence for this long stops the vehicle, s.
+    #[serde(default = "default_heartbeat_timeout_s")]
+    pub heartbeat_timeout_s: f64,
+}
+
+fn default_heartbeat_timeout_s() -> f64 {
+    3.0
+}
+
+impl RootDialectConfig {
+    /// The heartbeat timeout.
+    pub fn heartbeat_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.heartbeat_timeout_s)
+    }
+}
+
+/// `[mqtt.device]`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceDialectConfig {
+    /// The `{serial_number}` of the topics.
+    pub serial_number: String,
+    /// Topic prefix where the navigation stack takes mapping requests (`<prefix>/start_mapping`
+    /// …) and answers them (`<prefix>/start_mapping/ack` …); none: they are refused.
+    #[serde(default)]
+    pub mapping_forward: Option<String>,
 }
 
 /// `[mqtt.tls]`
@@ -120,6 +160,8 @@ impl Default for MqttConfig {
             embedded_broker: false,
             tls: None,
             rtk: None,
+            root: None,
+            device: None,
         }
     }
 }
@@ -231,6 +273,41 @@ impl MqttConfig {
                 ));
             }
         }
+        if let Some(r) = &self.root {
+            if !is_topic_level(&r.vehicle_id) {
+                return Err(invalid(
+                    "root.vehicle_id",
+                    "must be one non-empty topic level (no '/', '+' or '#')",
+                    "use the vehicle's id, e.g. \"robot1\"",
+                ));
+            }
+            check_range(
+                file,
+                "mqtt.root.heartbeat_timeout_s",
+                r.heartbeat_timeout_s,
+                0.3..=600.0,
+                "s",
+            )?;
+        }
+        if let Some(d) = &self.device {
+            if !is_topic_level(&d.serial_number) {
+                return Err(invalid(
+                    "device.serial_number",
+                    "must be one non-empty topic level (no '/', '+' or '#')",
+                    "use the serial number as printed, e.g. \"SN20260001\"",
+                ));
+            }
+            if d.mapping_forward
+                .as_ref()
+                .is_some_and(|f| f.is_empty() || f.contains(['+', '#']))
+            {
+                return Err(invalid(
+                    "device.mapping_forward",
+                    "must be a non-empty topic prefix without wildcards",
+                    "use e.g. \"nav/SN20260001\"",
+                ));
+            }
+        }
         if let Some(tls) = &self.tls
             && tls.client_cert_file.is_some() != tls.client_key_file.is_some()
         {
@@ -242,4 +319,9 @@ impl MqttConfig {
         }
         Ok(())
     }
+}
+
+/// Whether `s` can stand as one level of a topic: non-empty, no separator or wildcard.
+pub fn is_topic_level(s: &str) -> bool {
+    !s.is_empty() && !s.contains(['/', '+', '#']) && !s.chars().any(char::is_control)
 }

@@ -94,6 +94,10 @@ pub enum StopReason {
     Drive(String),
     /// A CAN interface with drives went down.
     BusDown,
+    /// The controlling client's heartbeat stopped.
+    ControlLinkLost,
+    /// An operator asked for a stop (PAUSE).
+    Operator,
 }
 
 impl fmt::Display for StopReason {
@@ -101,6 +105,8 @@ impl fmt::Display for StopReason {
         match self {
             Self::Drive(d) => write!(f, "{d}"),
             Self::BusDown => write!(f, "CAN interface down"),
+            Self::ControlLinkLost => write!(f, "control link heartbeat lost"),
+            Self::Operator => write!(f, "stopped by the operator"),
         }
     }
 }
@@ -120,6 +126,38 @@ pub enum CommandRejected {
     /// The command needs a position, and there is none yet.
     #[error("no position yet")]
     NoPosition,
+    /// Manual velocity commands are refused in navigation mode.
+    #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
+    NavigationMode,
+}
+
+/// A stop asked for by a command (rather than by a fault).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopRequest {
+    /// The controlling client's heartbeat stopped.
+    ControlLinkLost,
+    /// An operator asked for a stop (PAUSE).
+    Operator,
+}
+
+impl From<StopRequest> for StopReason {
+    fn from(r: StopRequest) -> Self {
+        match r {
+            StopRequest::ControlLinkLost => Self::ControlLinkLost,
+            StopRequest::Operator => Self::Operator,
+        }
+    }
+}
+
+/// Who may drive: the operator by velocity commands (manual), or autonomous moves
+/// (navigation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DriveMode {
+    /// Velocity commands (DRIVE, cmd_vel) drive.
+    #[default]
+    Manual,
+    /// Only autonomous moves drive; velocity commands are refused.
+    Navigation,
 }
 
 /// Travelled distance and speed of each wheel.
@@ -156,6 +194,7 @@ pub struct ChassisStatus {
 #[derive(Debug, Clone)]
 pub struct Chassis {
     config: ChassisConfig,
+    mode: DriveMode,
     armed: bool,
     latch: Option<StopReason>,
     reset_pending: bool,
@@ -173,6 +212,7 @@ impl Chassis {
     pub fn new(config: ChassisConfig) -> Self {
         Self {
             armed: config.enable_on_start,
+            mode: DriveMode::default(),
             config,
             latch: None,
             reset_pending: false,
@@ -218,11 +258,35 @@ impl Chassis {
         self.feedback = feedback;
     }
 
+    /// Stops now for `reason`: the wheels decelerate to zero and stay there until a fresh
+    /// command.
+    pub fn stop(&mut self, reason: StopReason) {
+        self.latch = Some(reason);
+        self.armed = false;
+        self.command = None;
+    }
+
+    /// Switches who may drive; switching stops any motion under way.
+    pub fn set_mode(&mut self, mode: DriveMode) {
+        if mode != self.mode {
+            self.mode = mode;
+            self.command = None;
+        }
+    }
+
+    /// Who may drive.
+    pub fn mode(&self) -> DriveMode {
+        self.mode
+    }
+
     /// A velocity command: forward speed (m/s) and yaw rate (rad/s). A command after a
     /// safety stop is the "fresh command" that resets faults and re-arms.
     pub fn command(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), CommandRejected> {
         if !vx.is_finite() || !wz.is_finite() {
             return Err(CommandRejected::NotFinite);
+        }
+        if self.mode == DriveMode::Navigation {
+            return Err(CommandRejected::NavigationMode);
         }
         if self.feedback.drives.is_empty() {
             return Err(CommandRejected::NoDrives);

@@ -18,7 +18,10 @@ use crate::fusion::localizer::{
 };
 use crate::time::Timestamp;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
-pub use status::{BatteryStatus, GnssStatus, Localization, Navigation, Pose2D, VehicleStatus};
+pub use chassis::{DriveMode, StopReason, StopRequest};
+pub use status::{
+    BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, VehicleStatus,
+};
 
 /// Core settings, taken from the vehicle configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -116,6 +119,10 @@ pub enum Command {
     },
     /// Move the datum of the local frame (SET_LNG_LAT).
     SetDatum(Geodetic),
+    /// Stop now and wait for a fresh command.
+    Stop(StopRequest),
+    /// Switch who may drive (SWITCH_MODE).
+    SetMode(DriveMode),
 }
 
 /// One input to the core.
@@ -131,6 +138,8 @@ pub enum Input<'a> {
     Bms(&'a BmsReading),
     /// An IMU sample, in the vehicle frame.
     Imu(&'a ImuSample),
+    /// The host computer's load.
+    Host(HostUsage),
     /// A command.
     Command(Command),
     /// The control period elapsed: produce the wheel command.
@@ -166,6 +175,8 @@ pub struct Vehicle {
     localizer: Localizer,
     /// Receive times of the GNSS data already given to the localiser.
     fed_gnss: (Option<Timestamp>, Option<Timestamp>, Option<Timestamp>),
+    /// The host's load, when sampled.
+    host: Option<HostUsage>,
 }
 
 impl Vehicle {
@@ -182,6 +193,7 @@ impl Vehicle {
             imu_link_down: false,
             localizer: Localizer::new(config.localizer),
             fed_gnss: (None, None, None),
+            host: None,
         }
     }
 
@@ -238,6 +250,26 @@ impl Vehicle {
                 };
                 vec![Output::CommandResult(result)]
             }
+            Input::Command(Command::Stop(reason)) => {
+                let result = match &mut self.chassis {
+                    Some(c) => {
+                        c.stop(reason.into());
+                        Ok(())
+                    }
+                    None => Err(CommandRejected::NoDrives),
+                };
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::SetMode(mode)) => {
+                let result = match &mut self.chassis {
+                    Some(c) => {
+                        c.set_mode(mode);
+                        Ok(())
+                    }
+                    None => Err(CommandRejected::NoDrives),
+                };
+                vec![Output::CommandResult(result)]
+            }
             Input::Command(Command::ZeroLocalFrame) => {
                 let result = if self.localizer.zero_here(t) {
                     Ok(())
@@ -271,6 +303,10 @@ impl Vehicle {
                 Some(c) => vec![Output::Wheels(c.tick(t))],
                 None => Vec::new(),
             },
+            Input::Host(usage) => {
+                self.host = Some(usage);
+                Vec::new()
+            }
             Input::Tick => vec![Output::Status(Box::new(self.status(t)))],
         }
     }
@@ -308,6 +344,8 @@ impl Vehicle {
             localization,
             navigation: Navigation::Idle,
             obstacle_stop: false,
+            host: self.host,
+            mode: self.chassis.as_ref().map(Chassis::mode),
         }
     }
 

@@ -1,6 +1,6 @@
 //! The vehicle status snapshot the core hands to the dialects, in SI units.
 
-use super::chassis::ChassisStatus;
+use super::chassis::{ChassisStatus, DriveMode};
 use crate::devices::bms::BmsReading;
 use crate::devices::gnss::FixQuality;
 use crate::time::Timestamp;
@@ -26,6 +26,19 @@ pub struct VehicleStatus {
     pub navigation: Navigation,
     /// Whether an obstacle has stopped the vehicle.
     pub obstacle_stop: bool,
+    /// The host computer's load, once sampled.
+    pub host: Option<HostUsage>,
+    /// Who may drive; `None` without drives.
+    pub mode: Option<DriveMode>,
+}
+
+/// The host computer's load.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct HostUsage {
+    /// CPU busy over the last sample period, % of all cores.
+    pub cpu: f64,
+    /// Memory in use, % of the total.
+    pub memory: f64,
 }
 
 /// The battery at a tick.

@@ -16,14 +16,18 @@ pub mod drivetrain;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
+use crate::api::device::DeviceDialect;
 use crate::api::local;
 use crate::api::mqtt::{CoreAccess, Dialect, Dialects, MQTT_SOURCE, Publish};
+use crate::api::root::RootDialect;
 use crate::api::rtk::RtkDialect;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
 use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
-use crate::core::{CoreConfig, Device, Input, LinkState, Output, Vehicle, VehicleStatus};
+use crate::core::{
+    CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
+};
 use crate::devices::can::{Frame, Received};
 use crate::devices::gnss::{GnssStats, NmeaReceiver};
 use crate::devices::imu::hipnuc::HiPnuc;
@@ -35,6 +39,9 @@ use drivetrain::{BusStats, Drivetrain};
 
 /// The status period of base_status (10 Hz).
 pub const STATUS_PERIOD: Duration = Duration::from_millis(100);
+
+/// Source name of the host load samples (topic `usage`, payload [`HostUsage`] JSON).
+pub const HOST_SOURCE: &str = "host";
 
 /// Source name of the local command channel (`chassisd run --commands-stdin`).
 pub const LOCAL_COMMANDS: &str = "stdin";
@@ -171,6 +178,20 @@ fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> D
     let mut list: Vec<Box<dyn Dialect>> = Vec::new();
     if mqtt.rtk.is_some() {
         list.push(Box::new(RtkDialect::new(trajectories, mqtt.max_payload)));
+    }
+    if let Some(r) = &mqtt.root {
+        list.push(Box::new(RootDialect::new(
+            &r.vehicle_id,
+            r.heartbeat_timeout(),
+            mqtt.max_payload,
+        )));
+    }
+    if let Some(d) = &mqtt.device {
+        list.push(Box::new(DeviceDialect::new(
+            &d.serial_number,
+            d.mapping_forward.clone(),
+            mqtt.max_payload,
+        )));
     }
     Dialects::new(list, mqtt.max_payload)
 }
@@ -317,6 +338,14 @@ impl Engine {
                 }
                 out.extend(replies.into_iter().map(EngineOutput::Publish));
             }
+            Payload::Command { payload, .. } if record.source == HOST_SOURCE => {
+                match serde_json::from_slice::<HostUsage>(payload) {
+                    Ok(usage) => {
+                        self.vehicle.handle(t, Input::Host(usage));
+                    }
+                    Err(_) => self.stats.undecoded += 1,
+                }
+            }
             Payload::Command { .. } if record.source != LOCAL_COMMANDS => {
                 self.stats.commands_without_dialect += 1;
             }
@@ -428,7 +457,11 @@ impl Engine {
                 for output in self.vehicle.handle(tick, Input::Tick) {
                     if let Output::Status(s) = output {
                         let mut reports = Vec::new();
-                        self.dialects.on_status(&s, &mut reports);
+                        let mut core = CoreAt {
+                            vehicle: &mut self.vehicle,
+                            t: tick,
+                        };
+                        self.dialects.on_status(&s, &mut core, &mut reports);
                         out.push(EngineOutput::Status(s));
                         out.extend(reports.into_iter().map(EngineOutput::Publish));
                         self.stats.ticks += 1;

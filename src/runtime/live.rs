@@ -14,6 +14,7 @@ use tokio::sync::mpsc;
 use super::broker;
 use super::can::{self, CanSpec, CanTx};
 use super::clock::RecordClock;
+use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use super::serial::{self, SerialSpec};
@@ -23,7 +24,7 @@ use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::{DirStore, TrajectoryStore, Unconfigured};
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
-use crate::engine::{Decoder, Engine, EngineOutput};
+use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE};
 use crate::record::{Payload, Record, RecordingWriter, SourceKind, SourceMeta};
 use crate::time::Timestamp;
 
@@ -142,6 +143,15 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
                 vehicle: config.vehicle.name.clone(),
                 subscriptions: engine.subscriptions(),
             };
+            if m.root.is_some() {
+                source_meta.push(SourceMeta {
+                    name: HOST_SOURCE.into(),
+                    kind: SourceKind::Commands,
+                    file: format!("{HOST_SOURCE}.log"),
+                    protocol: None,
+                });
+                host::spawn(clock, tx.clone());
+            }
             Some(mqtt::spawn(spec, clock, tx.clone())?)
         }
         None => None,

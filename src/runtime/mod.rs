@@ -4,6 +4,7 @@ pub mod broker;
 pub mod can;
 pub mod can_sim;
 pub mod clock;
+pub mod host;
 pub mod live;
 pub mod mqtt;
 pub mod recorder;

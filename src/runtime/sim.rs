@@ -12,6 +12,7 @@ use tokio::sync::mpsc;
 
 use super::broker;
 use super::clock::RecordClock;
+use super::host;
 use super::live::{read_commands, trajectory_store};
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
@@ -150,6 +151,9 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
                 vehicle: sim.config().vehicle.name.clone(),
                 subscriptions: sim.engine().subscriptions(),
             };
+            if m.root.is_some() {
+                host::spawn(clock, tx.clone());
+            }
             Some(mqtt::spawn(spec, clock, tx.clone())?)
         }
         None => None,

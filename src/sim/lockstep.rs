@@ -18,7 +18,7 @@ use crate::config::mqtt::MqttConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
 use crate::devices::cia402::DriveProfile;
-use crate::engine::{Decoder, Engine, EngineOutput, LOCAL_COMMANDS};
+use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
 use crate::record::{Payload, Record, SourceKind, SourceMeta};
 use crate::time::Timestamp;
 
@@ -167,6 +167,12 @@ pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
             name: MQTT_SOURCE.into(),
             kind: SourceKind::Commands,
             file: format!("{MQTT_SOURCE}.log"),
+            protocol: None,
+        },
+        SourceMeta {
+            name: HOST_SOURCE.into(),
+            kind: SourceKind::Commands,
+            file: format!("{HOST_SOURCE}.log"),
             protocol: None,
         },
     ]

@@ -163,3 +163,50 @@ pub fn markdown_json_examples(text: &str) -> Vec<(String, serde_json::Value)> {
     }
     out
 }
+
+/// A JSON example of a reStructuredText spec, with the topic named above it.
+#[derive(Debug, Clone)]
+pub struct RstExample {
+    /// The last `Topic` line before it, `${vehicleId}` replaced.
+    pub topic: String,
+    /// The block as written.
+    pub text: String,
+}
+
+/// Every `.. code-block:: json` of root-mqtt-api.rst with its topic (`${vehicleId}` →
+/// `vehicle_id`).
+pub fn rst_json_examples(text: &str, vehicle_id: &str) -> Vec<RstExample> {
+    let mut out = Vec::new();
+    let mut topic = String::new();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut i = 0;
+    while i < lines.len() {
+        let line = lines[i].trim();
+        if line.starts_with("/root/") {
+            topic = line.replace("**", "").replace("${vehicleId}", vehicle_id);
+        }
+        if line.starts_with(".. code-block:: json") {
+            let mut block = Vec::new();
+            i += 1;
+            // Blank lines, then the indented block.
+            while i < lines.len() && lines[i].trim().is_empty() {
+                i += 1;
+            }
+            let indent = lines.get(i).map_or(0, |l| l.len() - l.trim_start().len());
+            while i < lines.len()
+                && (lines[i].trim().is_empty()
+                    || lines[i].len() - lines[i].trim_start().len() >= indent)
+            {
+                block.push(lines[i].trim_end());
+                i += 1;
+            }
+            out.push(RstExample {
+                topic: topic.clone(),
+                text: block.join("\n").trim().to_owned(),
+            });
+            continue;
+        }
+        i += 1;
+    }
+    out
+}

@@ -208,7 +208,12 @@ impl Dialect for RtkDialect {
         self.control(payload, core, out);
     }
 
-    fn on_status(&mut self, status: &VehicleStatus, out: &mut Vec<Publish>) {
+    fn on_status(
+        &mut self,
+        status: &VehicleStatus,
+        _core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
         out.push(Publish::telemetry(
             BASE_STATUS,
             BaseStatus::from_status(status).to_json(),

@@ -1,0 +1,265 @@
+//! Dialect `device` (device-mqtt-api.md, `device/{serial_number}/...`): `goal`,
+//! `start_mapping`, `stop_mapping` and `use_map`, each answered on `<topic>/ack` as
+//! `{"msg_id", "timestamp" (Unix s), "success", "code"?, "message"?, "data"?}`.
+//!
+//! Codes: 3001 goal cancelled (and, for start_mapping, already mapping), 3002 goal failed,
+//! 3003 not available in this driver, 4000 a malformed or invalid request, 4004 an unknown
+//! command, 4013 a payload over the size limit. Mapping belongs to the navigation stack above
+//! this driver: unless `mapping_forward` names where that stack listens, mapping requests are
+//! refused with 3003; with it, they are passed on as they came and its acks relayed back.
+
+use serde::Serialize;
+use serde_json::Value;
+
+use super::mqtt::{CoreAccess, Dialect, Publish};
+use crate::core::VehicleStatus;
+use crate::time::Timestamp;
+
+/// Goal cancelled (or: already mapping).
+pub const CANCELLED: u32 = 3001;
+/// Goal failed.
+pub const FAILED: u32 = 3002;
+/// Not available in this driver.
+pub const NOT_AVAILABLE: u32 = 3003;
+/// Malformed or invalid request.
+pub const BAD_REQUEST: u32 = 4000;
+/// Unknown command.
+pub const UNKNOWN: u32 = 4004;
+/// Payload too large.
+pub const TOO_LARGE: u32 = 4013;
+
+/// Commands that go to the navigation stack when one is configured.
+const MAPPING: [&str; 3] = ["start_mapping", "stop_mapping", "use_map"];
+
+#[derive(Serialize)]
+struct Ack<'a> {
+    msg_id: &'a Value,
+    timestamp: u64,
+    success: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    code: Option<u32>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    message: Option<&'a str>,
+}
+
+/// The `device` dialect.
+pub struct DeviceDialect {
+    prefix: String,
+    forward: Option<String>,
+    max_payload: usize,
+}
+
+impl DeviceDialect {
+    /// The dialect of `serial_number`; mapping requests go to `forward` when set.
+    pub fn new(serial_number: &str, forward: Option<String>, max_payload: usize) -> Self {
+        Self {
+            prefix: format!("device/{serial_number}/"),
+            forward,
+            max_payload,
+        }
+    }
+
+    fn ack(
+        &self,
+        t: Timestamp,
+        command: &str,
+        msg_id: &Value,
+        failure: Option<(u32, &str)>,
+        out: &mut Vec<Publish>,
+    ) {
+        let body = Ack {
+            msg_id,
+            timestamp: t.as_micros() / 1_000_000,
+            success: failure.is_none(),
+            code: failure.map(|f| f.0),
+            message: failure.map(|f| f.1),
+        };
+        if let Some((code, reason)) = failure {
+            tracing::warn!(dialect = "device", %command, code, %reason, "request refused");
+        }
+        let json = serde_json::to_string(&body).unwrap_or_default();
+        out.push(Publish::reply(
+            format!("{}{command}/ack", self.prefix),
+            json,
+        ));
+    }
+}
+
+impl Dialect for DeviceDialect {
+    fn name(&self) -> &'static str {
+        "device"
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        let mut topics = vec![format!("{}+", self.prefix)];
+        if let Some(f) = &self.forward {
+            topics.extend(MAPPING.iter().map(|c| format!("{f}/{c}/ack")));
+        }
+        topics
+    }
+
+    fn owns(&self, topic: &str) -> bool {
+        let own = topic
+            .strip_prefix(&self.prefix)
+            .is_some_and(|rest| !rest.is_empty() && !rest.contains('/'));
+        own || self.forwarded_ack(topic).is_some()
+    }
+
+    fn on_message(
+        &mut self,
+        t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        _core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
+        // The navigation stack's answer to a forwarded request: relayed as it is.
+        if let Some(command) = self.forwarded_ack(topic) {
+            out.push(Publish::reply(
+                format!("{}{command}/ack", self.prefix),
+                payload.to_vec(),
+            ));
+            return;
+        }
+        let command = topic.strip_prefix(&self.prefix).unwrap_or(topic).to_owned();
+        if payload.len() > self.max_payload {
+            let reason = format!(
+                "payload of {} bytes exceeds {}",
+                payload.len(),
+                self.max_payload
+            );
+            return self.ack(t, &command, &Value::Null, Some((TOO_LARGE, &reason)), out);
+        }
+        let request: Value = match serde_json::from_slice(payload) {
+            Ok(v @ Value::Object(_)) => v,
+            Ok(_) => {
+                let reason = "the request must be a JSON object";
+                return self.ack(t, &command, &Value::Null, Some((BAD_REQUEST, reason)), out);
+            }
+            Err(e) => {
+                let reason = format!("malformed JSON: {e}");
+                return self.ack(t, &command, &Value::Null, Some((BAD_REQUEST, &reason)), out);
+            }
+        };
+        let msg_id = request.get("msg_id").cloned().unwrap_or(Value::Null);
+        if !msg_id.is_string() {
+            let reason = "msg_id must be a string";
+            return self.ack(t, &command, &msg_id, Some((BAD_REQUEST, reason)), out);
+        }
+        match command.as_str() {
+            "goal" => {
+                let data = &request["data"];
+                let numbers = ["x", "y", "z"].map(|k| data.get(k).and_then(Value::as_f64));
+                let failure = if numbers.iter().any(|n| !n.is_some_and(f64::is_finite)) {
+                    (BAD_REQUEST, "data needs finite numbers x, y and z (yaw)")
+                } else {
+                    (
+                        FAILED,
+                        "not available: navigation to a goal is not implemented in this chassisd version",
+                    )
+                };
+                self.ack(t, &command, &msg_id, Some(failure), out);
+            }
+            c if MAPPING.contains(&c) => match &self.forward {
+                Some(f) => out.push(Publish::reply(format!("{f}/{c}"), payload.to_vec())),
+                None => self.ack(
+                    t,
+                    &command,
+                    &msg_id,
+                    Some((
+                        NOT_AVAILABLE,
+                        "not available: mapping belongs to the navigation stack, and no \
+                         mqtt.device.mapping_forward is configured",
+                    )),
+                    out,
+                ),
+            },
+            _ => {
+                let reason = format!("unknown command {command:?}");
+                self.ack(t, &command, &msg_id, Some((UNKNOWN, &reason)), out);
+            }
+        }
+    }
+
+    fn on_status(
+        &mut self,
+        _status: &VehicleStatus,
+        _core: &mut dyn CoreAccess,
+        _out: &mut Vec<Publish>,
+    ) {
+    }
+}
+
+impl DeviceDialect {
+    /// The mapping command whose forwarded ack arrives on `topic`.
+    fn forwarded_ack(&self, topic: &str) -> Option<&'static str> {
+        let rest = topic
+            .strip_prefix(self.forward.as_deref()?)?
+            .strip_prefix('/')?;
+        let command = rest.strip_suffix("/ack")?;
+        MAPPING.into_iter().find(|c| *c == command)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::Command;
+    use crate::core::chassis::CommandRejected;
+
+    struct NoCore;
+    impl CoreAccess for NoCore {
+        fn command(&mut self, _: Command) -> Result<(), CommandRejected> {
+            Ok(())
+        }
+    }
+
+    fn send(d: &mut DeviceDialect, topic: &str, payload: &str) -> Vec<Publish> {
+        let mut out = Vec::new();
+        let t = Timestamp::from_micros(1_757_403_776_000_000);
+        assert!(d.owns(topic), "{topic}");
+        d.on_message(t, topic, payload.as_bytes(), &mut NoCore, &mut out);
+        out
+    }
+
+    #[test]
+    fn mapping_is_forwarded_and_its_acks_relayed_when_configured() {
+        let mut d = DeviceDialect::new("SN1", Some("nav/SN1".into()), 1 << 20);
+        assert_eq!(
+            d.subscriptions(),
+            [
+                "device/SN1/+",
+                "nav/SN1/start_mapping/ack",
+                "nav/SN1/stop_mapping/ack",
+                "nav/SN1/use_map/ack"
+            ]
+        );
+        let request = r#"{"msg_id":"uuid-789","timestamp":1757403776,"data":{}}"#;
+        let out = send(&mut d, "device/SN1/start_mapping", request);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].topic, "nav/SN1/start_mapping");
+        assert_eq!(out[0].payload, request.as_bytes());
+        let ack = r#"{"msg_id":"uuid-789","timestamp":1757403777,"success":true,"data":{}}"#;
+        let out = send(&mut d, "nav/SN1/start_mapping/ack", ack);
+        assert_eq!(out[0].topic, "device/SN1/start_mapping/ack");
+        assert_eq!(out[0].payload, ack.as_bytes());
+        // Its own ack topics are not commands.
+        assert!(!d.owns("device/SN1/start_mapping/ack"));
+    }
+
+    #[test]
+    fn without_a_navigation_stack_mapping_is_refused_with_3003() {
+        let mut d = DeviceDialect::new("SN1", None, 1 << 20);
+        let out = send(
+            &mut d,
+            "device/SN1/use_map",
+            r#"{"msg_id":"m1","timestamp":1,"data":{"filename":"uuid-3301.yaml"}}"#,
+        );
+        let ack: Value = serde_json::from_slice(&out[0].payload).unwrap();
+        assert_eq!(out[0].topic, "device/SN1/use_map/ack");
+        assert_eq!(ack["success"], false);
+        assert_eq!(ack["code"], NOT_AVAILABLE);
+        assert_eq!(ack["msg_id"], "m1");
+        assert_eq!(ack["timestamp"], 1_757_403_776);
+    }
+}

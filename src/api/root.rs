@@ -1,0 +1,698 @@
+//! Dialect `root` (root-mqtt-api.rst, `/root/{vehicleId}/...`).
+//!
+//! Commands arrive on `.../set` topics and are answered on the matching `.../ack` with the same
+//! `messageId` and `messageType`: `"data": {"code": 0}` when done, else a non-zero code and a
+//! `message`. Codes: 1 invalid request (malformed JSON, wrong types, out-of-range values,
+//! oversized payload), 2 unknown `messageType` (or one sent on the wrong topic), 3 not
+//! available in this driver, 4 refused by the vehicle (the reason says why). An action that
+//! takes effect later ends with a `.../notify` in the ack's shape.
+//!
+//! Resolutions of the spec's gaps (documented in the README):
+//! - navigation general is published on `report/navigation/general` (the spec reuses
+//!   `report/chassis/general`, the chassis report's topic);
+//! - the `/log` codes that share 200 become LOW_BATTERY 200, FULL_BATTERY 201,
+//!   RECHARGE_ERROR 202, and the unnumbered ones get 300, 400, 401, 500–503 and 600; events go
+//!   to `log/notify`;
+//! - timestamps are UTC, `%Y-%m-%d %H:%M:%S`;
+//! - INIT_POSITION's seven numbers are x, y, z and the orientation quaternion x, y, z, w.
+
+use std::time::Duration;
+
+use serde::Serialize;
+use serde_json::{Value, json};
+
+use super::mqtt::{CoreAccess, Dialect, Publish};
+use crate::core::{
+    Command, DriveMode, Localization, StopRequest, VehicleStatus, chassis::status_bits,
+};
+use crate::devices::bms::ChargeState;
+use crate::fusion::geodesy::Geodetic;
+use crate::time::Timestamp;
+
+/// Done.
+pub const OK: u32 = 0;
+/// Invalid request.
+pub const INVALID: u32 = 1;
+/// Unknown messageType.
+pub const UNKNOWN_TYPE: u32 = 2;
+/// Not available in this driver.
+pub const NOT_AVAILABLE: u32 = 3;
+/// Refused by the vehicle.
+pub const REFUSED: u32 = 4;
+
+/// A `/log` event code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LogCode {
+    /// Key.
+    pub key: &'static str,
+    /// Value.
+    pub code: u32,
+    /// ERROR, WARNING or NOTIFY.
+    pub level: &'static str,
+    /// Module.
+    pub module: &'static str,
+    /// What it means.
+    pub text: &'static str,
+}
+
+const fn log(
+    key: &'static str,
+    code: u32,
+    level: &'static str,
+    module: &'static str,
+    text: &'static str,
+) -> LogCode {
+    LogCode {
+        key,
+        code,
+        level,
+        module,
+        text,
+    }
+}
+
+/// Every `/log` code, with the numbers the spec left out or repeated resolved.
+pub const LOG_CODES: [LogCode; 15] = [
+    log(
+        "LOCALIZATION_ERROR",
+        100,
+        "ERROR",
+        "localization",
+        "localization lost",
+    ),
+    log("GPS_ERROR", 101, "ERROR", "localization", "GNSS fix lost"),
+    log("LOW_BATTERY", 200, "WARNING", "battery", "battery low"),
+    log("FULL_BATTERY", 201, "NOTIFY", "battery", "battery full"),
+    log(
+        "RECHARGE_ERROR",
+        202,
+        "ERROR",
+        "battery",
+        "recharging failed",
+    ),
+    log(
+        "VIRTUAL_WALL",
+        300,
+        "WARNING",
+        "navigation",
+        "entered a virtual wall",
+    ),
+    log(
+        "NO_CHASSIS_FEEDBACK",
+        400,
+        "ERROR",
+        "chassis",
+        "no feedback from the chassis",
+    ),
+    log(
+        "NODE_NOT_RESPONDING",
+        401,
+        "ERROR",
+        "chassis",
+        "a drive node does not respond",
+    ),
+    log(
+        "CONTROL_LINK_LOST",
+        402,
+        "ERROR",
+        "chassis",
+        "control heartbeat lost: stopped",
+    ),
+    log(
+        "OBSTACLE_DETECTED",
+        500,
+        "WARNING",
+        "obstacle",
+        "obstacle detected",
+    ),
+    log(
+        "OBSTACLE_STOP",
+        501,
+        "WARNING",
+        "obstacle",
+        "stopped for an obstacle",
+    ),
+    log(
+        "OBSTACLE_DETOUR",
+        502,
+        "NOTIFY",
+        "obstacle",
+        "going around an obstacle",
+    ),
+    log(
+        "OBSTACLE_AVOIDANCE_FAILED",
+        503,
+        "ERROR",
+        "obstacle",
+        "obstacle avoidance failed",
+    ),
+    log(
+        "MAP_LOAD_FAILED",
+        600,
+        "ERROR",
+        "navigation",
+        "navigation map failed to load",
+    ),
+    log(
+        "SAFETY_STOP",
+        403,
+        "ERROR",
+        "chassis",
+        "drive fault: stopped",
+    ),
+];
+
+fn log_code(key: &str) -> Option<&'static LogCode> {
+    LOG_CODES.iter().find(|c| c.key == key)
+}
+
+/// Report periods, in status ticks (100 ms).
+const LOCALIZATION_EVERY: u64 = 2;
+const CHASSIS_EVERY: u64 = 2;
+const BATTERY_EVERY: u64 = 10;
+const USAGE_EVERY: u64 = 10;
+const OBSTACLE_EVERY: u64 = 10;
+const NAVIGATION_EVERY: u64 = 10;
+/// Below this state of charge LOW_BATTERY is raised, %.
+const LOW_BATTERY_PERCENT: f64 = 20.0;
+
+/// Whom an answer goes to: the request's topic base, messageId and messageType.
+struct Request<'a> {
+    base: &'a str,
+    id: &'a Value,
+    kind: &'a Value,
+}
+
+#[derive(Serialize)]
+struct AckData<'a> {
+    code: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    message: Option<&'a str>,
+}
+
+/// The `root` dialect.
+pub struct RootDialect {
+    prefix: String,
+    max_payload: usize,
+    heartbeat_timeout: Duration,
+    /// The last heartbeat, once one came.
+    last_heartbeat: Option<Timestamp>,
+    /// Whether the lost heartbeat has been acted on.
+    heartbeat_lost: bool,
+    ticks: u64,
+    previous: Option<VehicleStatus>,
+}
+
+impl RootDialect {
+    /// The dialect of vehicle `vehicle_id`; a heartbeat silent for `heartbeat_timeout` stops
+    /// the vehicle.
+    pub fn new(vehicle_id: &str, heartbeat_timeout: Duration, max_payload: usize) -> Self {
+        Self {
+            prefix: format!("/root/{vehicle_id}/"),
+            max_payload,
+            heartbeat_timeout,
+            last_heartbeat: None,
+            heartbeat_lost: false,
+            ticks: 0,
+            previous: None,
+        }
+    }
+
+    fn topic(&self, rest: &str) -> String {
+        format!("{}{rest}", self.prefix)
+    }
+
+    fn answer(
+        &self,
+        t: Timestamp,
+        to: &Request<'_>,
+        suffix: &str,
+        outcome: Result<(), (u32, &str)>,
+        out: &mut Vec<Publish>,
+    ) {
+        let (code, message) = match outcome {
+            Ok(()) => (OK, None),
+            Err((code, reason)) => {
+                tracing::warn!(dialect = "root", topic = %to.base, code, %reason, "request refused");
+                (code, Some(reason))
+            }
+        };
+        let body = json!({
+            "messageId": to.id,
+            "timestamp": timestamp(t),
+            "messageType": to.kind,
+            "data": AckData { code, message },
+        });
+        out.push(Publish::reply(
+            self.topic(&format!("{}/{suffix}", to.base)),
+            body.to_string(),
+        ));
+    }
+
+    fn event(&self, t: Timestamp, key: &str, detail: &str, out: &mut Vec<Publish>) {
+        let Some(code) = log_code(key) else { return };
+        tracing::warn!(dialect = "root", key, code = code.code, %detail, "event");
+        let body = json!({
+            "timestamp": timestamp(t),
+            "data": {
+                "code": code.code,
+                "key": code.key,
+                "level": code.level,
+                "module": code.module,
+                "message": if detail.is_empty() { code.text.to_owned() } else { format!("{}: {detail}", code.text) },
+            }
+        });
+        out.push(Publish::reply(self.topic("log/notify"), body.to_string()));
+    }
+
+    /// A `.../set` message on `base` (e.g. `cmd/navigation`).
+    fn set(
+        &mut self,
+        t: Timestamp,
+        base: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
+        let null = Value::Null;
+        let unknown = Request {
+            base,
+            id: &null,
+            kind: &null,
+        };
+        if payload.len() > self.max_payload {
+            let reason = format!(
+                "payload of {} bytes exceeds {}",
+                payload.len(),
+                self.max_payload
+            );
+            return self.answer(t, &unknown, "ack", Err((INVALID, &reason)), out);
+        }
+        let request: Value = match serde_json::from_slice(payload) {
+            Ok(v @ Value::Object(_)) => v,
+            Ok(_) => {
+                let reason = "the request must be a JSON object";
+                return self.answer(t, &unknown, "ack", Err((INVALID, reason)), out);
+            }
+            Err(e) => {
+                let reason = format!("malformed JSON: {e}");
+                return self.answer(t, &unknown, "ack", Err((INVALID, &reason)), out);
+            }
+        };
+        let id = request.get("messageId").cloned().unwrap_or(Value::Null);
+        let kind = request.get("messageType").cloned().unwrap_or(Value::Null);
+        let data = request.get("data").unwrap_or(&null);
+        let outcome = match (base, kind.as_u64()) {
+            (_, None) => Err((INVALID, "messageType must be a number".to_owned())),
+            ("cmd/navigation", Some(0)) => self.init_position(t, data, core),
+            ("cmd/navigation", Some(1)) => core
+                .command(Command::Stop(StopRequest::Operator))
+                .map_err(|e| (REFUSED, e.to_string())),
+            ("cmd/navigation", Some(2)) => Err((
+                NOT_AVAILABLE,
+                "not available: no task is paused (navigation tasks are not implemented in \
+                 this chassisd version; send DRIVE to move again)"
+                    .to_owned(),
+            )),
+            ("cmd/navigation", Some(5)) => mission(data).and(Err((
+                NOT_AVAILABLE,
+                "not available: missions are not implemented in this chassisd version".to_owned(),
+            ))),
+            ("cmd/navigation", Some(6)) => match data.as_u64() {
+                Some(0) => core
+                    .command(Command::SetMode(DriveMode::Navigation))
+                    .map_err(|e| (REFUSED, e.to_string())),
+                Some(1) => core
+                    .command(Command::SetMode(DriveMode::Manual))
+                    .map_err(|e| (REFUSED, e.to_string())),
+                _ => Err((
+                    INVALID,
+                    "data must be 0 (navigation) or 1 (manual)".to_owned(),
+                )),
+            },
+            ("cmd/map", Some(3 | 4)) => match data.get("name").and_then(Value::as_str) {
+                Some(_) => Err((
+                    NOT_AVAILABLE,
+                    "not available: mapping belongs to the navigation stack above this driver"
+                        .to_owned(),
+                )),
+                None => Err((INVALID, "data.name must be a string".to_owned())),
+            },
+            // Manual driving needs a live control link once a client has sent heartbeats.
+            ("cmd/chassis", Some(100)) if self.heartbeat_lost => Err((
+                REFUSED,
+                "the control heartbeat stopped: send heartbeats again before driving".to_owned(),
+            )),
+            ("cmd/chassis", Some(100)) => drive(data, core),
+            ("setting/map", Some(0)) => match data.as_str() {
+                Some(_) => Err((
+                    NOT_AVAILABLE,
+                    "not available: maps belong to the navigation stack above this driver"
+                        .to_owned(),
+                )),
+                None => Err((INVALID, "data must be the map's name".to_owned())),
+            },
+            ("setting/navigation", Some(100)) => set_lng_lat(data, core),
+            (_, Some(n)) => Err((
+                UNKNOWN_TYPE,
+                format!("messageType {n} is not taken on {base}/set"),
+            )),
+        };
+        let to = Request {
+            base,
+            id: &id,
+            kind: &kind,
+        };
+        match outcome {
+            Ok(()) => {
+                self.answer(t, &to, "ack", Ok(()), out);
+                // INIT_POSITION is an action the protocol reports the end of.
+                if base == "cmd/navigation" && kind.as_u64() == Some(0) {
+                    self.answer(t, &to, "notify", Ok(()), out);
+                }
+            }
+            Err((code, reason)) => self.answer(t, &to, "ack", Err((code, &reason)), out),
+        }
+    }
+
+    fn init_position(
+        &self,
+        _t: Timestamp,
+        data: &Value,
+        core: &mut dyn CoreAccess,
+    ) -> Result<(), (u32, String)> {
+        let numbers: Option<Vec<f64>> = data
+            .as_array()
+            .map(|a| a.iter().filter_map(Value::as_f64).collect());
+        let Some([x, y, _z, qx, qy, qz, qw]) = numbers
+            .filter(|n| data.as_array().is_some_and(|a| a.len() == n.len()))
+            .and_then(|n| <[f64; 7]>::try_from(n).ok())
+        else {
+            return Err((
+                INVALID,
+                "data must be [x, y, z, qx, qy, qz, qw]: a position and an orientation quaternion"
+                    .to_owned(),
+            ));
+        };
+        let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+        if ![x, y, qx, qy, qz, qw].iter().all(|v| v.is_finite()) || !(0.5..=1.5).contains(&norm) {
+            return Err((
+                INVALID,
+                "values must be finite, the quaternion of unit length".to_owned(),
+            ));
+        }
+        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        core.command(Command::SetPose { x, y, yaw })
+            .map_err(|e| (REFUSED, e.to_string()))
+    }
+
+    fn reports(&mut self, s: &VehicleStatus, out: &mut Vec<Publish>) {
+        let t = s.time;
+        let stamp = timestamp(t);
+        let tick = self.ticks;
+        let publish = |topic: &str, data: Value, out: &mut Vec<Publish>| {
+            out.push(Publish::telemetry(
+                self.topic(topic),
+                json!({ "timestamp": stamp, "data": data }).to_string(),
+            ));
+        };
+        if tick.is_multiple_of(LOCALIZATION_EVERY) {
+            let (sin, cos) = (s.pose.yaw / 2.0).sin_cos();
+            let status = match s.localization {
+                Localization::Good => 0,
+                Localization::Uninitialized => 1,
+                Localization::Lost => 2,
+            };
+            publish(
+                "report/navigation/localization",
+                json!({
+                    "pose": [[s.pose.x, s.pose.y, 0.0], [0.0, 0.0, sin, cos]],
+                    "scan": [],
+                    "status": status,
+                }),
+                out,
+            );
+        }
+        if tick.is_multiple_of(OBSTACLE_EVERY) {
+            // No obstacle sensor is driven: nothing seen, at no distance.
+            publish(
+                "report/navigation/obstacle",
+                json!({ "obstacle": [], "distance": -1.0, "angle": 0.0 }),
+                out,
+            );
+        }
+        if tick.is_multiple_of(BATTERY_EVERY)
+            && let Some(b) = &s.battery
+        {
+            let r = &b.reading;
+            publish(
+                "report/chassis/battery",
+                json!({
+                    "charged": r.charge_state == Some(ChargeState::Charging),
+                    "percentage": r.soc_pct.unwrap_or(0.0),
+                    "voltage": r.voltage_v.unwrap_or(0.0),
+                    "current": r.current_a.unwrap_or(0.0),
+                    "temperature": r.temperature_c.unwrap_or(0.0),
+                }),
+                out,
+            );
+        }
+        if tick.is_multiple_of(USAGE_EVERY)
+            && let Some(h) = &s.host
+        {
+            publish(
+                "report/navigation/usage",
+                json!({ "cpu": round1(h.cpu), "memory": round1(h.memory) }),
+                out,
+            );
+        }
+        if tick.is_multiple_of(CHASSIS_EVERY) {
+            let (linear, angular) = s.chassis.as_ref().map_or((0.0, 0.0), |c| (c.vx, c.wz));
+            publish(
+                "report/chassis/general",
+                json!({ "linear": linear, "angular": angular }),
+                out,
+            );
+        }
+        if tick.is_multiple_of(NAVIGATION_EVERY) {
+            let moving = s
+                .chassis
+                .as_ref()
+                .is_some_and(|c| c.status_bits & status_bits::MOVING != 0);
+            publish(
+                "report/navigation/general",
+                json!({
+                    "mapping": false,
+                    "moving": moving,
+                    "mode": match s.mode {
+                        Some(DriveMode::Navigation) => "navigation",
+                        Some(DriveMode::Manual) => "manual",
+                        None => "none",
+                    },
+                }),
+                out,
+            );
+        }
+    }
+
+    /// `/log` events for what changed since the last status.
+    fn events(&mut self, s: &VehicleStatus, out: &mut Vec<Publish>) {
+        let Some(p) = self.previous.take() else {
+            self.previous = Some(s.clone());
+            return;
+        };
+        let t = s.time;
+        if p.localization == Localization::Good && s.localization == Localization::Lost {
+            self.event(t, "LOCALIZATION_ERROR", "", out);
+        }
+        if p.gnss.ok && !s.gnss.ok {
+            self.event(t, "GPS_ERROR", "", out);
+        }
+        let soc = |st: &VehicleStatus| {
+            st.battery
+                .as_ref()
+                .filter(|b| !b.stale)
+                .and_then(|b| b.reading.soc_pct)
+        };
+        if let (Some(before), Some(now)) = (soc(&p), soc(s)) {
+            if before >= LOW_BATTERY_PERCENT && now < LOW_BATTERY_PERCENT {
+                self.event(t, "LOW_BATTERY", &format!("{now:.0} %"), out);
+            }
+            if before < 100.0 && now >= 100.0 {
+                self.event(t, "FULL_BATTERY", "", out);
+            }
+        }
+        let bits = |st: &VehicleStatus| st.chassis.as_ref().map_or(0, |c| c.status_bits);
+        let rose = |bit: u32| bits(&p) & bit == 0 && bits(s) & bit != 0;
+        if rose(status_bits::BUS_DOWN) {
+            self.event(t, "NO_CHASSIS_FEEDBACK", "CAN interface down", out);
+        }
+        if rose(status_bits::HEARTBEAT_LOST) {
+            self.event(t, "NODE_NOT_RESPONDING", "drive heartbeat lost", out);
+        }
+        if rose(status_bits::FAULT) {
+            let reason = s
+                .chassis
+                .as_ref()
+                .and_then(|c| c.stop_reason.clone())
+                .unwrap_or_default();
+            self.event(t, "SAFETY_STOP", &reason, out);
+        }
+        self.previous = Some(s.clone());
+    }
+}
+
+/// `MISSION` data: an array of `{action, parameters}` steps.
+fn mission(data: &Value) -> Result<(), (u32, String)> {
+    const ACTIONS: [&str; 6] = [
+        "MOVE_TO_POSITION",
+        "WAIT",
+        "OPEN_CUTTER",
+        "CLOSE_CUTTER",
+        "COVERAGE",
+        "CHARGING",
+    ];
+    let Some(steps) = data.as_array() else {
+        return Err((INVALID, "data must be an array of steps".to_owned()));
+    };
+    for (i, step) in steps.iter().enumerate() {
+        let action = step.get("action").and_then(Value::as_str).unwrap_or("");
+        if !ACTIONS.contains(&action) || !step.get("parameters").is_some_and(Value::is_object) {
+            return Err((
+                INVALID,
+                format!(
+                    "step {i}: needs an action (one of {}) and parameters",
+                    ACTIONS.join(", ")
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `DRIVE`: `{"linear": m/s, "angular": rad/s}`.
+fn drive(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, String)> {
+    let (Some(linear), Some(angular)) = (
+        data.get("linear").and_then(Value::as_f64),
+        data.get("angular").and_then(Value::as_f64),
+    ) else {
+        return Err((
+            INVALID,
+            "data needs numbers linear (m/s) and angular (rad/s)".to_owned(),
+        ));
+    };
+    core.command(Command::Velocity {
+        vx: linear,
+        wz: angular,
+    })
+    .map_err(|e| match e {
+        crate::core::chassis::CommandRejected::NotFinite => (INVALID, e.to_string()),
+        _ => (REFUSED, e.to_string()),
+    })
+}
+
+/// `SET_LNG_LAT`: `[longitude, latitude, height]`, degrees and metres.
+fn set_lng_lat(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, String)> {
+    let values: Option<Vec<f64>> = data
+        .as_array()
+        .filter(|a| a.len() == 3)
+        .and_then(|a| a.iter().map(Value::as_f64).collect());
+    let Some([lon_deg, lat_deg, h_m]) = values.and_then(|v| <[f64; 3]>::try_from(v).ok()) else {
+        return Err((
+            INVALID,
+            "data must be [longitude, latitude, height]".to_owned(),
+        ));
+    };
+    if !(-180.0..=180.0).contains(&lon_deg)
+        || !(-90.0..=90.0).contains(&lat_deg)
+        || !h_m.is_finite()
+    {
+        return Err((
+            INVALID,
+            "longitude must be within ±180°, latitude within ±90°, height finite".to_owned(),
+        ));
+    }
+    core.command(Command::SetDatum(Geodetic {
+        lat_deg,
+        lon_deg,
+        h_m,
+    }))
+    .map_err(|e| (REFUSED, e.to_string()))
+}
+
+fn round1(v: f64) -> f64 {
+    (v * 10.0).round() / 10.0
+}
+
+/// `%Y-%m-%d %H:%M:%S`, UTC.
+pub fn timestamp(t: Timestamp) -> String {
+    chrono::DateTime::from_timestamp_micros(t.as_micros() as i64)
+        .map(|d| d.format("%Y-%m-%d %H:%M:%S").to_string())
+        .unwrap_or_default()
+}
+
+impl Dialect for RootDialect {
+    fn name(&self) -> &'static str {
+        "root"
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        vec![self.topic("+/+/set"), self.topic("heartbeat/set")]
+    }
+
+    fn owns(&self, topic: &str) -> bool {
+        topic
+            .strip_prefix(&self.prefix)
+            .and_then(|rest| rest.strip_suffix("/set"))
+            .is_some_and(|base| base == "heartbeat" || base.split('/').count() == 2)
+    }
+
+    fn on_message(
+        &mut self,
+        t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
+        let base = topic
+            .strip_prefix(&self.prefix)
+            .and_then(|rest| rest.strip_suffix("/set"))
+            .unwrap_or_default()
+            .to_owned();
+        if base == "heartbeat" {
+            // Any message on the heartbeat topic counts: the link is alive.
+            self.last_heartbeat = Some(t);
+            if std::mem::take(&mut self.heartbeat_lost) {
+                tracing::info!(dialect = "root", "control heartbeat back");
+            }
+            out.push(Publish::reply(
+                self.topic("heartbeat/notify"),
+                json!({ "timestamp": timestamp(t) }).to_string(),
+            ));
+            return;
+        }
+        self.set(t, &base, payload, core, out);
+    }
+
+    fn on_status(
+        &mut self,
+        status: &VehicleStatus,
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) {
+        let t = status.time;
+        if let Some(last) = self.last_heartbeat
+            && !self.heartbeat_lost
+            && t.saturating_since(last) > self.heartbeat_timeout
+        {
+            // The controlling client went quiet: stop, and say why.
+            self.heartbeat_lost = true;
+            let _ = core.command(Command::Stop(StopRequest::ControlLinkLost));
+            self.event(t, "CONTROL_LINK_LOST", "", out);
+        }
+        self.reports(status, out);
+        self.events(status, out);
+        self.ticks += 1;
+    }
+}

@@ -1,0 +1,115 @@
+//! Samples the host computer's CPU and memory use once a second (from /proc) and hands the
+//! figures to the engine as records, so the root dialect can report them and recordings
+//! replay them.
+
+use std::time::Duration;
+
+use bytes::Bytes;
+use tokio::sync::mpsc;
+
+use super::clock::RecordClock;
+use crate::core::HostUsage;
+use crate::engine::HOST_SOURCE;
+use crate::record::{Payload, Record};
+
+/// How often the load is sampled.
+const PERIOD: Duration = Duration::from_secs(1);
+
+/// CPU time counters of /proc/stat's first line: (busy, total), in ticks.
+fn cpu_ticks(stat: &str) -> Option<(u64, u64)> {
+    let line = stat.lines().find(|l| l.starts_with("cpu "))?;
+    let fields: Vec<u64> = line
+        .split_whitespace()
+        .skip(1)
+        .map(|f| f.parse().ok())
+        .collect::<Option<_>>()?;
+    let total: u64 = fields.iter().take(8).sum();
+    // idle and iowait are not busy.
+    let idle = fields.get(3)? + fields.get(4).copied().unwrap_or(0);
+    Some((total.saturating_sub(idle), total))
+}
+
+/// Memory in use from /proc/meminfo, % of the total.
+fn memory_percent(meminfo: &str) -> Option<f64> {
+    let field = |name: &str| -> Option<f64> {
+        meminfo
+            .lines()
+            .find(|l| l.starts_with(name))?
+            .split_whitespace()
+            .nth(1)?
+            .parse()
+            .ok()
+    };
+    let total = field("MemTotal:")?;
+    let available = field("MemAvailable:")?;
+    (total > 0.0).then(|| (total - available) / total * 100.0)
+}
+
+/// CPU busy between two samples, %.
+fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
+    let total = now.1.checked_sub(before.1)?;
+    let busy = now.0.checked_sub(before.0)?;
+    (total > 0).then(|| busy as f64 / total as f64 * 100.0)
+}
+
+/// Starts the sampler; it stops when the engine goes.
+pub fn spawn(clock: RecordClock, tx: mpsc::Sender<Record>) {
+    tokio::spawn(async move {
+        let mut interval = tokio::time::interval(PERIOD);
+        let mut before = None;
+        loop {
+            interval.tick().await;
+            // /proc is served from memory: a plain read does not block the runtime.
+            let stat = std::fs::read_to_string("/proc/stat").ok();
+            let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
+            let now = stat.as_deref().and_then(cpu_ticks);
+            let cpu = before.zip(now).and_then(|(b, n)| cpu_percent(b, n));
+            before = now;
+            let (Some(cpu), Some(memory)) = (cpu, meminfo.as_deref().and_then(memory_percent))
+            else {
+                continue;
+            };
+            let usage = HostUsage { cpu, memory };
+            let Ok(json) = serde_json::to_vec(&usage) else {
+                continue;
+            };
+            let record = Record {
+                t: clock.now(),
+                source: HOST_SOURCE.into(),
+                payload: Payload::Command {
+                    topic: "usage".into(),
+                    payload: Bytes::from(json),
+                },
+            };
+            if tx.send(record).await.is_err() {
+                return;
+            }
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn proc_figures_are_read() {
+        let a = cpu_ticks("cpu  100 0 50 800 50 0 0 0 0 0\ncpu0 1 2 3 4\n").unwrap();
+        let b = cpu_ticks("cpu  150 0 100 850 50 0 0 0 0 0\n").unwrap();
+        let cpu = cpu_percent(a, b).unwrap();
+        assert!((cpu - 200.0 / 3.0).abs() < 1e-9, "{cpu}");
+        let m = "MemTotal:       1000 kB\nMemFree: 1 kB\nMemAvailable:    250 kB\n";
+        assert_eq!(memory_percent(m), Some(75.0));
+        assert_eq!(cpu_ticks("garbage"), None);
+        assert_eq!(memory_percent("MemTotal: 0 kB\nMemAvailable: 0 kB"), None);
+    }
+
+    #[test]
+    fn this_machine_reports_plausible_figures() {
+        let stat = std::fs::read_to_string("/proc/stat").unwrap();
+        let (busy, total) = cpu_ticks(&stat).unwrap();
+        assert!(busy <= total && total > 0);
+        let m = memory_percent(&std::fs::read_to_string("/proc/meminfo").unwrap()).unwrap();
+        assert!((0.0..=100.0).contains(&m));
+    }
+}

@@ -1,0 +1,398 @@
+//! Dialect `root` over a real mosquitto with real clients, the daemon running the simulated
+//! vehicle: every command example of root-mqtt-api.rst sent as written gets an ack of the
+//! documented shape with its messageId and the documented outcome; DRIVE moves the vehicle;
+//! the reports arrive with the spec's keys; the heartbeat is answered and its loss stops the
+//! vehicle; bad requests get error acks and change nothing.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::mqtt::{Mosquitto, Subscriber};
+use common::process::Proc;
+use serde_json::Value;
+
+const WAIT: Duration = Duration::from_secs(10);
+const ID: &str = "sim";
+
+fn daemon(broker: &Mosquitto) -> Proc {
+    let mut p = Proc::start(&["sim", "--mqtt", &broker.address()]);
+    p.wait_log(WAIT, "MQTT subscribed");
+    p
+}
+
+fn json(text: &str) -> Value {
+    serde_json::from_str(text).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"))
+}
+
+fn topic(rest: &str) -> String {
+    format!("/root/{ID}/{rest}")
+}
+
+/// Publishes on `set_topic` and returns the ack (and the notify, when `notify`).
+fn request(broker: &Mosquitto, acks: &Subscriber, set_topic: &str, payload: &str) -> Value {
+    acks.clear();
+    broker.publish(set_topic, payload);
+    let ack_topic = sibling(set_topic, "ack");
+    json(
+        &acks
+            .next_on(&ack_topic, WAIT)
+            .unwrap_or_else(|| panic!("no ack on {ack_topic}")),
+    )
+}
+
+/// `.../set` → `.../<suffix>`.
+fn sibling(set_topic: &str, suffix: &str) -> String {
+    let base = set_topic.strip_suffix("/set").expect("a set topic");
+    format!("{base}/{suffix}")
+}
+
+fn is_timestamp(v: &Value) -> bool {
+    v.as_str().is_some_and(|s| {
+        s.len() == 19 && chrono::NaiveDateTime::parse_from_str(s, "%Y-%m-%d %H:%M:%S").is_ok()
+    })
+}
+
+/// The spec's keys, at every level, are in ours (we may add keys); kinds match.
+fn has_spec_keys(spec: &Value, ours: &Value, path: &str) {
+    match (spec, ours) {
+        (Value::Object(a), Value::Object(b)) => {
+            for (k, v) in a {
+                let o = b
+                    .get(k)
+                    .unwrap_or_else(|| panic!("{path}.{k} missing in {ours}"));
+                has_spec_keys(v, o, &format!("{path}.{k}"));
+            }
+        }
+        (Value::Array(_), Value::Array(_))
+        | (Value::Number(_), Value::Number(_))
+        | (Value::Bool(_), Value::Bool(_)) => {}
+        (Value::String(s), v) if s.starts_with('%') => assert!(is_timestamp(v), "{path}: {v}"),
+        (Value::String(_), Value::String(_)) => {}
+        _ => panic!("{path}: spec has {spec}, chassisd sends {ours}"),
+    }
+}
+
+fn wait_for_speed(status: &Subscriber, want: impl Fn(f64) -> bool, what: &str) {
+    let deadline = Instant::now() + WAIT;
+    while Instant::now() < deadline {
+        if let Some(s) = status.next_on("base_status", WAIT)
+            && want(json(&s)["robot"]["vx"].as_f64().unwrap_or(f64::NAN))
+        {
+            return;
+        }
+    }
+    panic!("never {what}");
+}
+
+#[test]
+fn every_command_example_gets_its_documented_ack() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[
+        &topic("+/+/ack"),
+        &topic("+/+/notify"),
+        &topic("heartbeat/notify"),
+    ]);
+    let status = broker.subscribe(&["base_status"]);
+    let _d = daemon(&broker);
+    let spec = common::shared_spec("root-mqtt-api.rst");
+    let examples = common::rst_json_examples(&spec, ID);
+    let ack_example = json(
+        &examples
+            .iter()
+            .find(|e| e.topic.ends_with("/cmd/navigation/ack"))
+            .expect("the ack example")
+            .text,
+    );
+    let sets: Vec<_> = examples
+        .iter()
+        .filter(|e| e.topic.ends_with("/set"))
+        .collect();
+    let kinds: Vec<(String, Option<u64>)> = sets
+        .iter()
+        .map(|e| {
+            let v: Value = serde_json::from_str(&e.text).unwrap_or(Value::Null);
+            (e.topic.clone(), v["messageType"].as_u64())
+        })
+        .collect();
+    assert_eq!(
+        kinds.iter().map(|(_, k)| *k).collect::<Vec<_>>(),
+        [
+            Some(0),
+            Some(1),
+            Some(2),
+            Some(3),
+            Some(4),
+            Some(5),
+            Some(6),
+            Some(100),
+            Some(0),
+            Some(100),
+            None
+        ],
+        "{kinds:?}"
+    );
+    // What each example must get: (ack code, notify too).
+    let expected = [
+        (0, true),  // INIT_POSITION
+        (0, false), // PAUSE: stops the vehicle
+        (3, false), // CONTINUE: no task to continue
+        (3, false), // MAPPING_START: the navigation stack's job
+        (3, false), // MAPPING_STOP
+        (3, false), // MISSION: not implemented yet
+        (0, false), // SWITCH_MODE 0: navigation mode
+        (4, false), // DRIVE: refused in navigation mode
+        (3, false), // SET_MAP
+        (0, false), // SET_LNG_LAT
+    ];
+    wait_for_speed(&status, |v| v.is_finite(), "a status");
+    for (example, (code, notify)) in sets.iter().zip(expected) {
+        let sent: Value = json(&example.text);
+        let ack = request(&broker, &acks, &example.topic, &example.text);
+        has_spec_keys(&ack_example, &ack, &example.topic);
+        assert_eq!(ack["messageId"], sent["messageId"], "{ack}");
+        assert_eq!(ack["messageType"], sent["messageType"], "{ack}");
+        assert_eq!(ack["data"]["code"], code, "{} → {ack}", example.topic);
+        assert_eq!(ack["data"].get("message").is_some(), code != 0, "{ack}");
+        if notify {
+            let n = acks
+                .next_on(&sibling(&example.topic, "notify"), WAIT)
+                .expect("a notify");
+            assert_eq!(json(&n)["data"]["code"], 0);
+        }
+    }
+    // The heartbeat example (a trailing comma and all) is answered on notify.
+    let heartbeat = sets.last().expect("heartbeat");
+    acks.clear();
+    broker.publish(&heartbeat.topic, &heartbeat.text);
+    let beat = json(
+        &acks
+            .next_on(&topic("heartbeat/notify"), WAIT)
+            .expect("heartbeat notify"),
+    );
+    assert!(is_timestamp(&beat["timestamp"]), "{beat}");
+    // Back to manual: the DRIVE example now moves the vehicle.
+    let manual =
+        r#"{"messageId": 9, "timestamp": "2026-11-22 03:00:00", "messageType": 6, "data": 1}"#;
+    assert_eq!(
+        request(&broker, &acks, &topic("cmd/navigation/set"), manual)["data"]["code"],
+        0
+    );
+    let drive = &sets[7];
+    for _ in 0..20 {
+        broker.publish(&drive.topic, &drive.text);
+        broker.publish(&heartbeat.topic, &heartbeat.text);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for_speed(&status, |v| v > 0.3, "moving under DRIVE");
+}
+
+#[test]
+fn reports_arrive_with_the_spec_keys() {
+    let broker = Mosquitto::start();
+    let reports = broker.subscribe(&[&topic("report/#")]);
+    let _d = daemon(&broker);
+    let spec = common::shared_spec("root-mqtt-api.rst");
+    let examples = common::rst_json_examples(&spec, ID);
+    let mut seen = std::collections::BTreeMap::new();
+    let deadline = Instant::now() + Duration::from_secs(4);
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        let Some((t, p)) = reports.next(left) else {
+            break;
+        };
+        seen.entry(t).or_insert_with(Vec::new).push(json(&p));
+    }
+    for rest in [
+        "report/navigation/localization",
+        "report/navigation/obstacle",
+        "report/navigation/usage",
+        "report/chassis/general",
+        "report/navigation/general",
+    ] {
+        let ours = seen
+            .get(&topic(rest))
+            .unwrap_or_else(|| panic!("no {rest}: {:?}", seen.keys()));
+        // The spec's example for it; navigation general's example sits under the chassis
+        // topic in the spec (documented).
+        let example = examples
+            .iter()
+            .filter(|e| {
+                e.topic
+                    == topic(if rest == "report/navigation/general" {
+                        "report/chassis/general"
+                    } else {
+                        rest
+                    })
+            })
+            .map(|e| {
+                common::strip_json_comments(&e.text)
+                    .replace(",\n}", "\n}")
+                    .replace(",\n    }", "\n    }")
+            })
+            .filter_map(|t| serde_json::from_str::<Value>(&fix_trailing_commas(&t)).ok())
+            .find(|v| rest != "report/navigation/general" || v["data"].get("mapping").is_some())
+            .unwrap_or_else(|| panic!("no example for {rest}"));
+        has_spec_keys(&example, &ours[0], rest);
+    }
+    // Rates: localization and chassis at 5 Hz, the others at 1 Hz (4 s observed).
+    let count = |rest: &str| seen.get(&topic(rest)).map_or(0, Vec::len);
+    assert!((17..=22).contains(&count("report/navigation/localization")));
+    assert!((3..=5).contains(&count("report/navigation/usage")));
+    let usage = &seen[&topic("report/navigation/usage")][0]["data"];
+    assert!(
+        usage["cpu"]
+            .as_f64()
+            .is_some_and(|c| (0.0..=100.0).contains(&c))
+    );
+    assert!(
+        usage["memory"]
+            .as_f64()
+            .is_some_and(|m| m > 0.0 && m <= 100.0)
+    );
+}
+
+/// The spec's examples carry trailing commas (`"memory": 5.76,` before `}`); JSON does not.
+fn fix_trailing_commas(text: &str) -> String {
+    let mut out = String::new();
+    let chars: Vec<char> = text.chars().collect();
+    for (i, c) in chars.iter().enumerate() {
+        if *c == ',' {
+            let next = chars[i + 1..].iter().find(|c| !c.is_whitespace());
+            if matches!(next, Some('}') | Some(']')) {
+                continue;
+            }
+        }
+        out.push(*c);
+    }
+    out
+}
+
+#[test]
+fn a_silent_heartbeat_stops_the_vehicle_until_it_beats_again() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[&topic("+/+/ack")]);
+    let log = broker.subscribe(&[&topic("log/notify")]);
+    let status = broker.subscribe(&["base_status"]);
+    let _d = daemon(&broker);
+    let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
+    let beat = r#"{"timestamp": "x"}"#;
+    for _ in 0..20 {
+        broker.publish(&topic("heartbeat/set"), beat);
+        broker.publish(&topic("cmd/chassis/set"), drive);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for_speed(&status, |v| v > 0.3, "moving");
+    // DRIVE goes on, heartbeats stop: after the 3 s timeout the vehicle stops, says why, and
+    // refuses DRIVE.
+    let silent_since = Instant::now();
+    let mut refused = None;
+    while silent_since.elapsed() < Duration::from_secs(5) {
+        let ack = request(&broker, &acks, &topic("cmd/chassis/set"), drive);
+        if ack["data"]["code"] == 4 {
+            refused = Some(ack);
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let refused = refused.expect("DRIVE refused once the heartbeat stopped");
+    assert!(
+        refused["data"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("heartbeat")
+    );
+    let event = json(
+        &log.next_on(&topic("log/notify"), WAIT)
+            .expect("a log event"),
+    );
+    assert_eq!(event["data"]["key"], "CONTROL_LINK_LOST", "{event}");
+    assert_eq!(event["data"]["code"], 402);
+    wait_for_speed(&status, |v| v.abs() < 0.01, "stopped");
+    // Heartbeats again: DRIVE is a fresh command and moves it.
+    for _ in 0..20 {
+        broker.publish(&topic("heartbeat/set"), beat);
+        broker.publish(&topic("cmd/chassis/set"), drive);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for_speed(&status, |v| v > 0.3, "moving again");
+}
+
+#[test]
+fn bad_requests_get_error_acks_and_change_nothing() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[&topic("+/+/ack")]);
+    let _d = daemon(&broker);
+    let cases = [
+        ("cmd/chassis/set", "{oops", 1, "malformed"),
+        ("cmd/chassis/set", "[1]", 1, "object"),
+        (
+            "cmd/chassis/set",
+            r#"{"messageId":1,"messageType":"DRIVE","data":{}}"#,
+            1,
+            "messageType",
+        ),
+        (
+            "cmd/chassis/set",
+            r#"{"messageId":2,"messageType":100,"data":{"linear":"fast","angular":0}}"#,
+            1,
+            "linear",
+        ),
+        (
+            "cmd/navigation/set",
+            r#"{"messageId":3,"messageType":100,"data":{"linear":1,"angular":0}}"#,
+            2,
+            "messageType 100",
+        ),
+        (
+            "cmd/navigation/set",
+            r#"{"messageId":4,"messageType":42,"data":null}"#,
+            2,
+            "42",
+        ),
+        (
+            "cmd/navigation/set",
+            r#"{"messageId":5,"messageType":6,"data":7}"#,
+            1,
+            "manual",
+        ),
+        (
+            "cmd/navigation/set",
+            r#"{"messageId":6,"messageType":0,"data":[1,1,0]}"#,
+            1,
+            "quaternion",
+        ),
+        (
+            "cmd/navigation/set",
+            r#"{"messageId":7,"messageType":5,"data":[{"action":"FLY","parameters":{}}]}"#,
+            1,
+            "step 0",
+        ),
+        (
+            "setting/navigation/set",
+            r#"{"messageId":8,"messageType":100,"data":[123.0, 95.0, 0]}"#,
+            1,
+            "latitude",
+        ),
+    ];
+    for (rest, payload, code, reason) in cases {
+        let ack = request(&broker, &acks, &topic(rest), payload);
+        assert_eq!(ack["data"]["code"], code, "{payload} → {ack}");
+        let message = ack["data"]["message"].as_str().unwrap_or_default();
+        assert!(message.contains(reason), "{payload} → {message}");
+    }
+    let big = format!(
+        r#"{{"messageId":9,"messageType":100,"pad":"{}"}}"#,
+        "x".repeat(2 << 20)
+    );
+    let file = common::tempdir("root-big").join("big.json");
+    std::fs::write(&file, big).unwrap();
+    acks.clear();
+    broker.publish_file(&topic("cmd/chassis/set"), &file);
+    let ack = json(
+        &acks
+            .next_on(&topic("cmd/chassis/ack"), WAIT)
+            .expect("an ack"),
+    );
+    assert_eq!(ack["data"]["code"], 1);
+    assert!(ack["data"]["message"].as_str().unwrap().contains("exceeds"));
+}
