@@ -89,7 +89,7 @@ impl Rig {
     fn report(&mut self) -> Value {
         self.sim.send("report");
         self.sim.wait_out(WAIT, "a simulator report", |l| {
-            l.starts_with("{\"battery\"")
+            serde_json::from_str::<Value>(l).is_ok_and(|v| v.get("drives").is_some())
         });
         serde_json::from_str(self.sim.out.last().expect("report")).expect("JSON report")
     }
