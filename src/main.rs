@@ -111,6 +111,19 @@ enum BenchCommand {
         #[arg(long)]
         scenario: Vec<String>,
     },
+    /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
+    /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
+    Mqtt {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// How long to measure, s.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        /// Use the MQTT broker at HOST:PORT (default: an embedded one on a free port).
+        #[arg(long, value_name = "HOST:PORT")]
+        mqtt: Option<String>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -144,6 +157,14 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     scenario,
                 },
         } => bench_fusion(plant, seed, &scenario),
+        Command::Bench {
+            which:
+                BenchCommand::Mqtt {
+                    plant,
+                    seconds,
+                    mqtt,
+                },
+        } => bench_mqtt(plant, seconds, mqtt.as_deref()),
         Command::Replay { path, config } => {
             let config = config.map(|p| VehicleConfig::load(&p)).transpose()?;
             let stdout = std::io::stdout();
@@ -316,4 +337,36 @@ fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::
     );
     println!("{}", report.json());
     Ok(report.pass)
+}
+
+fn bench_mqtt(plant: Option<PathBuf>, seconds: f64, broker: Option<&str>) -> anyhow::Result<bool> {
+    if !(seconds > 0.0 && seconds.is_finite()) {
+        anyhow::bail!("--seconds must be a positive number");
+    }
+    let plant = load_plant(plant)?;
+    let mut mqtt = sim_mqtt(broker)?;
+    if broker.is_none() {
+        // A port of its own, so a broker already on 1883 is no obstacle.
+        mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("no free port for the embedded broker")?
+            .port();
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    let report = runtime.block_on(chassisd::bench::mqtt::run(
+        chassisd::bench::mqtt::MqttBenchOptions {
+            plant,
+            duration: std::time::Duration::from_secs_f64(seconds),
+            mqtt,
+        },
+    ));
+    runtime.shutdown_background();
+    let report = report?;
+    print!("{}", report.table());
+    println!("{}", report.json());
+    Ok(true)
 }

@@ -18,18 +18,21 @@ fn sources() -> Vec<SourceMeta> {
             kind: SourceKind::Serial,
             file: "gnss.log".into(),
             protocol: Some("nmea0183".into()),
+            events: None,
         },
         SourceMeta {
             name: "can0".into(),
             kind: SourceKind::Can,
             file: "can0.log".into(),
             protocol: None,
+            events: None,
         },
         SourceMeta {
             name: "mqtt".into(),
             kind: SourceKind::Commands,
             file: "commands.log".into(),
             protocol: None,
+            events: None,
         },
     ]
 }
@@ -80,9 +83,24 @@ fn records() -> Vec<Record> {
             payload: Payload::Can(CanAnyFrame::Normal(ext)),
         },
         Record {
+            t: at(1_700_000_000_550_000),
+            source: "can0".into(),
+            payload: Payload::Link(LinkState::Down),
+        },
+        Record {
+            t: at(1_700_000_000_560_000),
+            source: "can0".into(),
+            payload: Payload::Link(LinkState::Up),
+        },
+        Record {
             t: at(1_700_000_000_600_000),
             source: "can0".into(),
             payload: Payload::Can(CanAnyFrame::Remote(remote)),
+        },
+        Record {
+            t: at(1_700_000_000_650_000),
+            source: "mqtt".into(),
+            payload: Payload::Link(LinkState::Up),
         },
         Record {
             t: at(1_700_000_000_700_000),
@@ -91,6 +109,11 @@ fn records() -> Vec<Record> {
                 topic: "/root/robot 1/cmd#x".into(),
                 payload: Bytes::from_static(br#"{"messageType":"DRIVE"}"#),
             },
+        },
+        Record {
+            t: at(1_700_000_000_800_000),
+            source: "mqtt".into(),
+            payload: Payload::Link(LinkState::Down),
         },
         Record {
             t: at(1_700_000_001_000_000),
@@ -146,6 +169,15 @@ fn can_files_are_candump_lines() {
          (1700000000.500000) can0 18904001#0102030405060708\n\
          (1700000000.600000) can0 181#R4\n"
     );
+    // Link events of a CAN source live beside its candump file, which canplayer must read.
+    let events = std::fs::read_to_string(dir.join("can0.events.log")).unwrap();
+    assert_eq!(
+        events,
+        "(1700000000.550000) can0 !link-down\n\
+         (1700000000.560000) can0 !link-up\n"
+    );
+    let meta = std::fs::read_to_string(dir.join("meta.toml")).unwrap();
+    assert!(meta.contains("events = \"can0.events.log\""), "{meta}");
     let serial = std::fs::read_to_string(dir.join("gnss.log")).unwrap();
     assert_eq!(
         serial,
@@ -154,10 +186,14 @@ fn can_files_are_candump_lines() {
          (1700000001.000000) gnss !link-down\n"
     );
     let commands = std::fs::read_to_string(dir.join("commands.log")).unwrap();
+    let lines: Vec<&str> = commands.lines().collect();
+    assert_eq!(lines.len(), 3, "{commands}");
+    assert_eq!(lines[0], "(1700000000.650000) mqtt !link-up");
     assert!(
-        commands.starts_with("(1700000000.700000) mqtt /root/robot%201/cmd%23x#7B22"),
+        lines[1].starts_with("(1700000000.700000) mqtt /root/robot%201/cmd%23x#7B22"),
         "{commands}"
     );
+    assert_eq!(lines[2], "(1700000000.800000) mqtt !link-down");
 }
 
 #[test]
@@ -176,11 +212,17 @@ fn malformed_lines_are_skipped_and_reported() {
     text.push_str("(1700000003.000000) can0 7FF#0102030405060708090A\n");
     std::fs::write(&can, text).unwrap();
 
+    let events = dir.join("can0.events.log");
+    let mut text = std::fs::read_to_string(&events).unwrap();
+    text.push_str("(1700000003.000000) can0 7FF#01\n");
+    std::fs::write(&events, text).unwrap();
+
     let (_, mut reader) = RecordingReader::open(&dir).unwrap();
     let count = reader.by_ref().count();
     assert_eq!(count, records().len());
     let (skipped, total) = reader.skipped();
-    assert_eq!(total, 4);
+    assert_eq!(total, 5);
+    assert!(skipped.iter().any(|s| s.file == "can0.events.log"));
     let lines: Vec<(String, u64)> = skipped.iter().map(|s| (s.file.clone(), s.line)).collect();
     assert!(lines.contains(&("gnss.log".into(), 1)));
     assert!(lines.contains(&("gnss.log".into(), 2)));

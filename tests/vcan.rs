@@ -272,7 +272,9 @@ fn lost_heartbeat_stops_and_needs_a_fresh_command() {
 #[ignore = "needs vcan0: run by tests/vm/can-tests"]
 fn interface_down_and_up_reconnects_and_waits_for_a_command() {
     let _turn = one_at_a_time();
-    let mut rig = Rig::start(None);
+    let dir = common::tempdir("vcan-down-up");
+    let recording = dir.join("session");
+    let mut rig = Rig::start(Some(&recording));
     rig.wait_enabled();
     rig.drive(0.2, 0.0, Duration::from_secs(1));
     ip_link("down");
@@ -303,6 +305,23 @@ fn interface_down_and_up_reconnects_and_waits_for_a_command() {
                 && bits & FAULT == 0
                 && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
         });
+
+    // The bus's link events are recorded beside its candump file, so the replay sees the
+    // outage too and prints exactly what the live daemon printed.
+    let live = rig.daemon.stop();
+    let events = std::fs::read_to_string(recording.join("vcan0.events.log")).expect("events file");
+    assert!(events.contains("vcan0 !link-down"), "{events}");
+    let replay = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&recording)
+        .output()
+        .expect("replay runs");
+    let summary = String::from_utf8_lossy(&replay.stderr);
+    assert!(summary.contains(" 0 differ"), "{summary}");
+    assert_eq!(
+        String::from_utf8_lossy(&replay.stdout),
+        live.join("\n") + "\n"
+    );
 }
 
 #[test]

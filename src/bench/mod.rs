@@ -2,3 +2,4 @@
 //! micro-benchmarks under `benches/`.
 
 pub mod fusion;
+pub mod mqtt;

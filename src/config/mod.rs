@@ -351,6 +351,8 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
         let c = VehicleConfig::load(&path).unwrap();
         assert!(c.gnss.is_some());
+        let mqtt = c.mqtt.expect("[mqtt]");
+        assert!(mqtt.rtk.is_some() && mqtt.root.is_some() && mqtt.device.is_some());
     }
 
     #[test]

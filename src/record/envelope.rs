@@ -6,6 +6,8 @@
 //! - serial link event: `(1700000000.123456) gnss !link-down` (or `!link-up`);
 //! - command: `(1700000000.123456) mqtt mqtt_control#7B22636D64...` — topic, `#`, payload in
 //!   hex. The topic is percent-escaped where it holds `%`, `#`, spaces or non-printable bytes.
+//! - command link event: `(1700000000.123456) mqtt !link-up` (or `!link-down`): a command line
+//!   always holds `#`, so the two never meet.
 
 use crate::time::Timestamp;
 

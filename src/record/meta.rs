@@ -36,6 +36,21 @@ pub struct SourceMeta {
     /// Wire protocol, e.g. `nmea0183`, so replay picks the right decoder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub protocol: Option<String>,
+    /// File (inside the folder) of the source's link events (`!link-up`, `!link-down` in the
+    /// envelope), for CAN sources: their `candump -L` file has no way to hold them. The
+    /// writer names it when the source is created.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub events: Option<String>,
+}
+
+impl SourceMeta {
+    /// The events file a CAN source gets: `can0.log` → `can0.events.log`.
+    pub fn default_events_file(&self) -> Option<String> {
+        (self.kind == SourceKind::Can).then(|| {
+            let stem = self.file.strip_suffix(".log").unwrap_or(&self.file);
+            format!("{stem}.events.log")
+        })
+    }
 }
 
 /// The contents of `meta.toml`.
@@ -95,6 +110,11 @@ impl Meta {
             .sources
             .iter()
             .map(|s| ("source.file", &s.file))
+            .chain(
+                self.sources
+                    .iter()
+                    .filter_map(|s| s.events.as_ref().map(|f| ("source.events", f))),
+            )
             .chain(self.vehicle_config.iter().map(|f| ("vehicle_config", f)))
             .chain(self.trajectories.iter().map(|f| ("trajectories", f)));
         for (key, file) in files {
@@ -152,6 +172,7 @@ mod tests {
                 kind: SourceKind::Serial,
                 file: "gnss.log".into(),
                 protocol: Some("nmea0183".into()),
+                events: None,
             }],
         }
     }

@@ -66,6 +66,20 @@ impl RecordingReader {
                 path: path.clone(),
                 source: e,
             })?;
+            if let Some(events) = &source.events {
+                let path = dir.join(events);
+                let file = File::open(&path).map_err(|e| RecordError::Io {
+                    path: path.clone(),
+                    source: e,
+                })?;
+                sources.push(SourceReader::Envelope {
+                    file: events.clone(),
+                    kind: source.kind,
+                    reader: BufReader::new(file),
+                    line_no: 0,
+                    buf: Vec::with_capacity(64),
+                });
+            }
             sources.push(match source.kind {
                 SourceKind::Can => SourceReader::Candump {
                     file: source.file.clone(),
@@ -225,21 +239,29 @@ fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeE
             "" => return Err(EnvelopeError::Payload("empty chunk".into())),
             hex => Payload::Serial(Bytes::from(envelope::from_hex(hex)?)),
         },
-        SourceKind::Commands => {
-            let (topic, hex) = env
-                .payload
-                .split_once('#')
-                .ok_or_else(|| EnvelopeError::Payload("expected topic#hex".into()))?;
-            Payload::Command {
-                topic: envelope::unescape_topic(topic)?,
-                payload: Bytes::from(envelope::from_hex(hex)?),
+        SourceKind::Commands => match env.payload {
+            "!link-up" => Payload::Link(LinkState::Up),
+            "!link-down" => Payload::Link(LinkState::Down),
+            command => {
+                let (topic, hex) = command
+                    .split_once('#')
+                    .ok_or_else(|| EnvelopeError::Payload("expected topic#hex".into()))?;
+                Payload::Command {
+                    topic: envelope::unescape_topic(topic)?,
+                    payload: Bytes::from(envelope::from_hex(hex)?),
+                }
             }
-        }
-        SourceKind::Can => {
-            return Err(EnvelopeError::Payload(
-                "CAN lines are read as candump".into(),
-            ));
-        }
+        },
+        // A CAN source's envelope file is its events file: link events only.
+        SourceKind::Can => match env.payload {
+            "!link-up" => Payload::Link(LinkState::Up),
+            "!link-down" => Payload::Link(LinkState::Down),
+            other => {
+                return Err(EnvelopeError::Payload(format!(
+                    "expected a link event, found {other:?}"
+                )));
+            }
+        },
     };
     Ok(Record {
         t: env.t,

@@ -23,7 +23,7 @@ pub const TRAJECTORIES_FILE: &str = "trajectories.json";
 pub struct RecordingWriter {
     dir: PathBuf,
     meta: Meta,
-    sources: BTreeMap<String, (SourceKind, BufWriter<File>)>,
+    sources: BTreeMap<String, SourceFiles>,
 }
 
 impl RecordingWriter {
@@ -34,8 +34,13 @@ impl RecordingWriter {
         vehicle: &str,
         start: Timestamp,
         vehicle_config_toml: Option<&str>,
-        sources: Vec<SourceMeta>,
+        mut sources: Vec<SourceMeta>,
     ) -> Result<Self, RecordError> {
+        for s in &mut sources {
+            if s.events.is_none() {
+                s.events = s.default_events_file();
+            }
+        }
         let io = |path: &Path| {
             let path = path.to_owned();
             move |source| RecordError::Io { path, source }
@@ -75,7 +80,21 @@ impl RecordingWriter {
         for s in sources {
             let path = dir.join(&s.file);
             let file = File::create(&path).map_err(io(&path))?;
-            files.insert(s.name, (s.kind, BufWriter::new(file)));
+            let events = match &s.events {
+                Some(name) => {
+                    let path = dir.join(name);
+                    Some(BufWriter::new(File::create(&path).map_err(io(&path))?))
+                }
+                None => None,
+            };
+            files.insert(
+                s.name,
+                SourceFiles {
+                    kind: s.kind,
+                    out: BufWriter::new(file),
+                    events,
+                },
+            );
         }
         Ok(Self {
             dir: dir.to_owned(),
@@ -98,30 +117,40 @@ impl RecordingWriter {
             .map_err(|source| RecordError::Io { path: meta, source })
     }
 
-    /// Appends one record to its source's file.
+    /// Appends one record to its source's file (a CAN source's link events to its events
+    /// file).
     pub fn write(&mut self, record: &Record) -> Result<(), RecordError> {
-        let Some((kind, out)) = self.sources.get_mut(&record.source) else {
+        let Some(files) = self.sources.get_mut(&record.source) else {
             return Err(RecordError::Meta {
                 path: self.dir.join(META_FILE),
                 message: format!("source {:?} is not declared", record.source),
             });
         };
-        let line = match (&record.payload, kind) {
-            (Payload::Serial(bytes), SourceKind::Serial) => {
+        let kind = files.kind;
+        let (line, out) = match (&record.payload, kind) {
+            (Payload::Serial(bytes), SourceKind::Serial) => (
                 format!(
                     "({}) {} {}\n",
                     record.t,
                     record.source,
                     envelope::to_hex(bytes)
-                )
+                ),
+                &mut files.out,
+            ),
+            // A command channel's link (the MQTT connection) has events as a port does; a
+            // CAN source keeps them beside its candump file.
+            (Payload::Link(state), SourceKind::Serial | SourceKind::Commands) => {
+                (link_line(record, *state), &mut files.out)
             }
-            (Payload::Link(state), SourceKind::Serial) => {
-                let event = match state {
-                    LinkState::Up => "!link-up",
-                    LinkState::Down => "!link-down",
-                };
-                format!("({}) {} {event}\n", record.t, record.source)
-            }
+            (Payload::Link(state), SourceKind::Can) => match files.events.as_mut() {
+                Some(events) => (link_line(record, *state), events),
+                None => {
+                    return Err(RecordError::Meta {
+                        path: self.dir.join(META_FILE),
+                        message: format!("source {:?} has no events file", record.source),
+                    });
+                }
+            },
             (Payload::Can(frame), SourceKind::Can) | (Payload::CanTx(frame), SourceKind::Can) => {
                 let rec = CanDumpRecord {
                     t_us: record.t.as_micros(),
@@ -131,14 +160,17 @@ impl RecordingWriter {
                     direction: matches!(record.payload, Payload::CanTx(_))
                         .then_some(Direction::Transmitted),
                 };
-                format!("{rec}\n")
+                (format!("{rec}\n"), &mut files.out)
             }
-            (Payload::Command { topic, payload }, SourceKind::Commands) => format!(
-                "({}) {} {}#{}\n",
-                record.t,
-                record.source,
-                envelope::escape_topic(topic),
-                envelope::to_hex(payload)
+            (Payload::Command { topic, payload }, SourceKind::Commands) => (
+                format!(
+                    "({}) {} {}#{}\n",
+                    record.t,
+                    record.source,
+                    envelope::escape_topic(topic),
+                    envelope::to_hex(payload)
+                ),
+                &mut files.out,
             ),
             (_, kind) => {
                 return Err(RecordError::Meta {
@@ -159,11 +191,13 @@ impl RecordingWriter {
 
     /// Flushes every file to the operating system.
     pub fn flush(&mut self) -> Result<(), RecordError> {
-        for (_, out) in self.sources.values_mut() {
-            out.flush().map_err(|source| RecordError::Io {
-                path: self.dir.clone(),
-                source,
-            })?;
+        for files in self.sources.values_mut() {
+            for out in files.all() {
+                out.flush().map_err(|source| RecordError::Io {
+                    path: self.dir.clone(),
+                    source,
+                })?;
+            }
         }
         Ok(())
     }
@@ -173,11 +207,13 @@ impl RecordingWriter {
     /// Flushes everything and records the session's clean end in `meta.toml`.
     pub fn finish(mut self, end: Timestamp) -> Result<(), RecordError> {
         self.flush()?;
-        for (_, out) in self.sources.values_mut() {
-            out.get_ref().sync_all().map_err(|source| RecordError::Io {
-                path: self.dir.clone(),
-                source,
-            })?;
+        for files in self.sources.values_mut() {
+            for out in files.all() {
+                out.get_ref().sync_all().map_err(|source| RecordError::Io {
+                    path: self.dir.clone(),
+                    source,
+                })?;
+            }
         }
         self.meta.end_us = Some(end.as_micros());
         self.meta
@@ -187,6 +223,29 @@ impl RecordingWriter {
                 source,
             })
     }
+}
+
+/// The open files of one source.
+struct SourceFiles {
+    kind: SourceKind,
+    out: BufWriter<File>,
+    /// A CAN source's link events.
+    events: Option<BufWriter<File>>,
+}
+
+impl SourceFiles {
+    fn all(&mut self) -> impl Iterator<Item = &mut BufWriter<File>> {
+        std::iter::once(&mut self.out).chain(self.events.as_mut())
+    }
+}
+
+/// `(t) source !link-up` or `!link-down`.
+fn link_line(record: &Record, state: LinkState) -> String {
+    let event = match state {
+        LinkState::Up => "!link-up",
+        LinkState::Down => "!link-down",
+    };
+    format!("({}) {} {event}\n", record.t, record.source)
 }
 
 impl Drop for RecordingWriter {

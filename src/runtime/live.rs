@@ -65,6 +65,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             kind: SourceKind::Serial,
             file: format!("{GNSS_SOURCE}.log"),
             protocol: Some(Decoder::Nmea.protocol().into()),
+            events: None,
         });
         let spec = SerialSpec {
             source: GNSS_SOURCE.into(),
@@ -82,6 +83,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             kind: SourceKind::Serial,
             file: format!("{IMU_SOURCE}.log"),
             protocol: Some(decoder.protocol().into()),
+            events: None,
         });
         let spec = SerialSpec {
             source: IMU_SOURCE.into(),
@@ -98,6 +100,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             kind: SourceKind::Can,
             file: format!("{}.log", bus.interface),
             protocol: None,
+            events: None,
         });
         let spec = CanSpec {
             interface: bus.interface.clone(),
@@ -114,6 +117,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             kind: SourceKind::Commands,
             file: "commands.log".into(),
             protocol: None,
+            events: None,
         });
         tokio::spawn(read_commands(clock, tx.clone()));
     }
@@ -137,6 +141,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
                 kind: SourceKind::Commands,
                 file: format!("{MQTT_SOURCE}.log"),
                 protocol: None,
+                events: None,
             });
             let spec = MqttSpec {
                 config: m.clone(),
@@ -149,6 +154,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
                     kind: SourceKind::Commands,
                     file: format!("{HOST_SOURCE}.log"),
                     protocol: None,
+                    events: None,
                 });
                 host::spawn(clock, tx.clone());
             }

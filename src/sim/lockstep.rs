@@ -147,6 +147,7 @@ pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
         kind: SourceKind::Serial,
         file: format!("{name}.log"),
         protocol: Some(decoder.protocol().into()),
+        events: None,
     };
     vec![
         serial(GNSS_SOURCE, Decoder::Nmea),
@@ -156,24 +157,28 @@ pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
             kind: SourceKind::Can,
             file: format!("{SIM_BUS}.log"),
             protocol: None,
+            events: None,
         },
         SourceMeta {
             name: LOCAL_COMMANDS.into(),
             kind: SourceKind::Commands,
             file: "commands.log".into(),
             protocol: None,
+            events: None,
         },
         SourceMeta {
             name: MQTT_SOURCE.into(),
             kind: SourceKind::Commands,
             file: format!("{MQTT_SOURCE}.log"),
             protocol: None,
+            events: None,
         },
         SourceMeta {
             name: HOST_SOURCE.into(),
             kind: SourceKind::Commands,
             file: format!("{HOST_SOURCE}.log"),
             protocol: None,
+            events: None,
         },
     ]
 }
