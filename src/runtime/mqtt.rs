@@ -198,6 +198,7 @@ async fn run(
         dropped: Dropped::default(),
     };
     let mut connected = false;
+    let mut last_failure: Option<String> = None;
     let mut backoff = FIRST_BACKOFF;
     let link = |state| Record {
         t: clock.now(),
@@ -209,6 +210,7 @@ async fn run(
             event = eventloop.poll() => match event {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     connected = true;
+                    last_failure = None;
                     backoff = FIRST_BACKOFF;
                     tracing::info!(%broker, "MQTT connected");
                     let filters = spec
@@ -270,7 +272,15 @@ async fn run(
                             return;
                         }
                     } else {
-                        tracing::debug!(%broker, error = %e, "MQTT connect failed");
+                        // Say why once per cause (a wrong password or CA stays wrong), not
+                        // on every retry.
+                        let cause = e.to_string();
+                        if last_failure.as_deref() != Some(cause.as_str()) {
+                            tracing::warn!(%broker, error = %cause, "MQTT connect failed; retrying");
+                            last_failure = Some(cause);
+                        } else {
+                            tracing::debug!(%broker, error = %cause, "MQTT connect failed");
+                        }
                     }
                     tokio::time::sleep(backoff).await;
                     backoff = (backoff * 2).min(c.reconnect_max());

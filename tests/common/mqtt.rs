@@ -1,6 +1,7 @@
 //! A real mosquitto broker and the real mosquitto_pub / mosquitto_sub clients for tests.
 
 use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
@@ -12,6 +13,96 @@ pub struct Mosquitto {
     child: Option<Child>,
     /// Its port on 127.0.0.1.
     pub port: u16,
+    /// Listener settings (mosquitto.conf lines) and the folder its config goes in, if any.
+    settings: Option<(String, PathBuf)>,
+    /// Arguments every mosquitto_pub / mosquitto_sub needs (CA file, credentials).
+    client_args: Vec<String>,
+}
+
+/// A certificate authority and a broker certificate for 127.0.0.1, made with openssl.
+pub struct TestPki {
+    /// The CA certificate (PEM).
+    pub ca: PathBuf,
+    /// The broker's certificate (PEM), for 127.0.0.1 and localhost.
+    pub cert: PathBuf,
+    /// The broker's key (PEM).
+    pub key: PathBuf,
+}
+
+impl TestPki {
+    /// Makes a CA called `name` and a broker certificate it signs, in `dir`.
+    pub fn create(dir: &Path, name: &str) -> TestPki {
+        let openssl = |args: &[&str]| {
+            let out = Command::new("openssl")
+                .args(args)
+                .current_dir(dir)
+                .output()
+                .expect("openssl runs");
+            assert!(
+                out.status.success(),
+                "openssl {args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        };
+        let file = |what: &str| format!("{name}-{what}");
+        let (ca, ca_key) = (file("ca.pem"), file("ca.key"));
+        let (cert, key, csr) = (file("broker.pem"), file("broker.key"), file("broker.csr"));
+        let ext = file("broker.ext");
+        openssl(&[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            &format!("/CN={name} test CA"),
+            "-keyout",
+            &ca_key,
+            "-out",
+            &ca,
+        ]);
+        openssl(&[
+            "req",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-subj",
+            "/CN=localhost",
+            "-keyout",
+            &key,
+            "-out",
+            &csr,
+        ]);
+        std::fs::write(
+            dir.join(&ext),
+            "subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n",
+        )
+        .expect("extensions file");
+        openssl(&[
+            "x509",
+            "-req",
+            "-in",
+            &csr,
+            "-CA",
+            &ca,
+            "-CAkey",
+            &ca_key,
+            "-CAcreateserial",
+            "-days",
+            "2",
+            "-extfile",
+            &ext,
+            "-out",
+            &cert,
+        ]);
+        TestPki {
+            ca: dir.join(ca),
+            cert: dir.join(cert),
+            key: dir.join(key),
+        }
+    }
 }
 
 /// A port nobody listens on right now.
@@ -26,10 +117,48 @@ impl Mosquitto {
     /// Starts mosquitto on a free port and waits until it accepts connections. Tests run in
     /// parallel, so another test may take the same free port first: then it tries another.
     pub fn start() -> Mosquitto {
+        Self::start_with(None, Vec::new())
+    }
+
+    /// Starts mosquitto with TLS (the certificate of `pki`) and a password file holding
+    /// `user` / `password`; anonymous clients are refused. Files go in `dir`.
+    pub fn start_secured(dir: &Path, pki: &TestPki, user: &str, password: &str) -> Mosquitto {
+        let passwd = dir.join("passwd");
+        let status = Command::new("mosquitto_passwd")
+            .args(["-c", "-b"])
+            .arg(&passwd)
+            .args([user, password])
+            .stderr(Stdio::null())
+            .status()
+            .expect("mosquitto_passwd runs");
+        assert!(status.success(), "mosquitto_passwd failed");
+        let settings = format!(
+            "allow_anonymous false\npassword_file {}\ncafile {}\ncertfile {}\nkeyfile {}\n\
+             # Started as root, mosquitto would drop to its own user, who cannot read the key.\n\
+             user root\n",
+            passwd.display(),
+            pki.ca.display(),
+            pki.cert.display(),
+            pki.key.display()
+        );
+        let client_args = vec![
+            "--cafile".to_owned(),
+            pki.ca.display().to_string(),
+            "-u".to_owned(),
+            user.to_owned(),
+            "-P".to_owned(),
+            password.to_owned(),
+        ];
+        Self::start_with(Some((settings, dir.to_owned())), client_args)
+    }
+
+    fn start_with(settings: Option<(String, PathBuf)>, client_args: Vec<String>) -> Mosquitto {
         for _ in 0..20 {
             let mut m = Mosquitto {
                 child: None,
                 port: free_port(),
+                settings: settings.clone(),
+                client_args: client_args.clone(),
             };
             if m.try_start() {
                 return m;
@@ -49,8 +178,19 @@ impl Mosquitto {
 
     /// Starts it on its port; false if the port is taken (mosquitto exits).
     fn try_start(&mut self) -> bool {
-        let child = Command::new("mosquitto")
-            .args(["-p", &self.port.to_string()])
+        let mut cmd = Command::new("mosquitto");
+        match &self.settings {
+            Some((settings, dir)) => {
+                let conf = dir.join(format!("mosquitto-{}.conf", self.port));
+                let text = format!("listener {} 127.0.0.1\n{settings}", self.port);
+                std::fs::write(&conf, text).expect("mosquitto.conf");
+                cmd.arg("-c").arg(conf);
+            }
+            None => {
+                cmd.args(["-p", &self.port.to_string()]);
+            }
+        }
+        let child = cmd
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -103,6 +243,7 @@ impl Mosquitto {
     pub fn publish_with(&self, topic: &str, payload: &str, extra: &[&str]) {
         let status = Command::new("mosquitto_pub")
             .args(["-h", "127.0.0.1", "-p", &self.port.to_string(), "-q", "1"])
+            .args(&self.client_args)
             .args(["-t", topic, "-m", payload])
             .args(extra)
             .status()
@@ -114,6 +255,7 @@ impl Mosquitto {
     pub fn publish_file(&self, topic: &str, file: &std::path::Path) {
         let status = Command::new("mosquitto_pub")
             .args(["-h", "127.0.0.1", "-p", &self.port.to_string(), "-q", "1"])
+            .args(&self.client_args)
             .args(["-t", topic, "-f"])
             .arg(file)
             .status()
@@ -133,6 +275,7 @@ impl Mosquitto {
             "-q",
             "1",
         ]);
+        cmd.args(&self.client_args);
         for t in topics {
             cmd.args(["-t", t]);
         }
