@@ -440,3 +440,72 @@ fn bench_mqtt_measures_every_drive_end_to_end() {
         "{stdout}"
     );
 }
+
+/// The daemon alone loses the network (a relay between it and mosquitto is cut) while a
+/// client drives it: the vehicle stops by itself, the CONTROL_LINK_LOST event raised during
+/// the outage is kept and delivered once the link is back, and the telemetry that piled up
+/// meanwhile is bounded by the queue (the oldest dropped).
+#[test]
+fn a_network_outage_stops_the_vehicle_keeps_events_and_drops_old_telemetry() {
+    let broker = Mosquitto::start();
+    let relay = common::netcut::Relay::to(broker.port);
+    let log = broker.subscribe(&[&topic("log/notify")]);
+    let status = broker.subscribe(&["base_status"]);
+    let mut d = Proc::start(&["sim", "--mqtt", &format!("127.0.0.1:{}", relay.port)]);
+    d.wait_log(WAIT, "MQTT subscribed");
+    let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
+    let beat = r#"{"timestamp": "x"}"#;
+    for _ in 0..20 {
+        broker.publish(&topic("heartbeat/set"), beat);
+        broker.publish(&topic("cmd/chassis/set"), drive);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    wait_for_speed(&status, |v| v > 0.3, "moving");
+
+    relay.cut();
+    let cut_at = Instant::now();
+    d.wait_log(WAIT, "MQTT connection lost");
+    // The client keeps commanding, but nothing reaches the daemon: it stops on its own (its
+    // own stdout is the witness), and the heartbeat watchdog raises the event.
+    for _ in 0..10 {
+        broker.publish(&topic("heartbeat/set"), beat);
+        broker.publish(&topic("cmd/chassis/set"), drive);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    d.wait_out(WAIT, "stopped while cut off", |l| {
+        serde_json::from_str::<Value>(l)
+            .is_ok_and(|s| s["robot"]["vx"].as_f64().is_some_and(|v| v.abs() < 0.01))
+    });
+    d.wait_log(WAIT, "CONTROL_LINK_LOST");
+    // Long enough for more telemetry than the queue holds (64): base_status alone is 10/s.
+    std::thread::sleep(Duration::from_secs(8).saturating_sub(cut_at.elapsed()));
+    let produced_during_cut = cut_at.elapsed().as_secs_f64() * 10.0;
+    status.clear();
+
+    relay.restore();
+    let event = json(
+        &log.next_on(&topic("log/notify"), Duration::from_secs(10))
+            .expect("the event raised offline is delivered"),
+    );
+    assert_eq!(event["data"]["key"], "CONTROL_LINK_LOST", "{event}");
+    // What arrives within a second of reconnecting: the queued burst plus about 10 live ones.
+    let mut received = 0;
+    let until = Instant::now() + Duration::from_secs(1);
+    while let Some(left) = until.checked_duration_since(Instant::now()) {
+        if status.next_on("base_status", left).is_none() {
+            break;
+        }
+        received += 1;
+    }
+    eprintln!(
+        "{received} base_status within 1 s of reconnecting; {produced_during_cut:.0} produced while cut off"
+    );
+    assert!(
+        received > 0 && received <= 64 + 15,
+        "{received} base_status after the outage ({produced_during_cut:.0} produced during it)"
+    );
+    assert!(
+        (received as f64) < produced_during_cut,
+        "old telemetry dropped: {received} of {produced_during_cut:.0}"
+    );
+}

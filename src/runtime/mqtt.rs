@@ -296,3 +296,64 @@ async fn run(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn outbox(telemetry_max: usize, replies_max: usize) -> Outbox {
+        Outbox {
+            telemetry: VecDeque::new(),
+            replies: VecDeque::new(),
+            telemetry_max,
+            replies_max,
+            dropped: Dropped::default(),
+        }
+    }
+
+    fn topics(queue: &VecDeque<Publish>) -> Vec<&str> {
+        queue.iter().map(|m| m.topic.as_str()).collect()
+    }
+
+    #[test]
+    fn while_the_broker_is_away_old_telemetry_goes_and_replies_stay() {
+        let mut o = outbox(3, 100);
+        for i in 0..10 {
+            o.push(Publish::telemetry(format!("status{i}"), "{}"));
+            if i % 3 == 0 {
+                o.push(Publish::reply(format!("ack{i}"), "{}"));
+            }
+        }
+        assert_eq!(topics(&o.telemetry), ["status7", "status8", "status9"]);
+        assert_eq!(topics(&o.replies), ["ack0", "ack3", "ack6", "ack9"]);
+        assert_eq!((o.dropped.telemetry, o.dropped.replies), (7, 0));
+    }
+
+    #[test]
+    fn replies_are_bounded_too_and_counted_when_dropped() {
+        let mut o = outbox(1, 2);
+        for i in 0..5 {
+            o.push(Publish::reply(format!("ack{i}"), "{}"));
+        }
+        assert_eq!(topics(&o.replies), ["ack3", "ack4"]);
+        assert_eq!(o.dropped.replies, 3);
+    }
+
+    #[tokio::test]
+    async fn flushing_sends_replies_first_and_keeps_what_the_client_cannot_take() {
+        // A client whose event loop never runs takes exactly its queue's capacity.
+        let (client, _eventloop) = AsyncClient::new(MqttOptions::new("t", "127.0.0.1", 1), 3);
+        let mut o = outbox(10, 10);
+        o.push(Publish::telemetry("status1", "{}"));
+        o.push(Publish::reply("ack1", "{}"));
+        o.push(Publish::telemetry("status2", "{}"));
+        o.push(Publish::reply("ack2", "{}"));
+        o.flush(&client);
+        assert!(o.replies.is_empty());
+        assert_eq!(
+            topics(&o.telemetry),
+            ["status2"],
+            "status1 went after the replies"
+        );
+    }
+}

@@ -3,6 +3,7 @@
 
 pub mod canbus;
 pub mod mqtt;
+pub mod netcut;
 pub mod process;
 
 use std::path::PathBuf;
