@@ -73,6 +73,9 @@ enum Command {
         /// Use the MQTT broker at HOST:PORT instead of starting one on 127.0.0.1:1883.
         #[arg(long, value_name = "HOST:PORT", conflicts_with = "no_mqtt")]
         mqtt: Option<String>,
+        /// Port of the embedded broker on 127.0.0.1 (default 1883).
+        #[arg(long, conflicts_with_all = ["mqtt", "no_mqtt"])]
+        broker_port: Option<u16>,
         /// No MQTT at all.
         #[arg(long)]
         no_mqtt: bool,
@@ -220,11 +223,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             scenario,
             duration,
             mqtt,
+            broker_port,
             no_mqtt,
             trajectory_dir,
         } => {
             let plant = load_plant(plant)?;
             let mut mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
+            if let (Some(m), Some(port)) = (mqtt.as_mut(), broker_port) {
+                m.port = port;
+            }
             if let Some(rtk) = mqtt.as_mut().and_then(|m| m.rtk.as_mut()) {
                 rtk.trajectory_dir = trajectory_dir.map(|d| d.to_string_lossy().into_owned());
             }

@@ -120,6 +120,17 @@ impl Mosquitto {
         Self::start_with(None, Vec::new())
     }
 
+    /// The mosquitto_pub / mosquitto_sub helpers for a broker someone else runs on `port`
+    /// (chassisd's embedded one).
+    pub fn clients_for(port: u16) -> Mosquitto {
+        Mosquitto {
+            child: None,
+            port,
+            settings: None,
+            client_args: Vec::new(),
+        }
+    }
+
     /// Starts mosquitto with TLS (the certificate of `pki`) and a password file holding
     /// `user` / `password`; anonymous clients are refused. Files go in `dir`.
     pub fn start_secured(dir: &Path, pki: &TestPki, user: &str, password: &str) -> Mosquitto {
