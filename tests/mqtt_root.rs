@@ -267,6 +267,15 @@ fn fix_trailing_commas(text: &str) -> String {
     out
 }
 
+/// `n` rounds, 100 ms apart, of a heartbeat and the DRIVE request `drive`.
+fn drive_with_heartbeats(broker: &Mosquitto, drive: &str, n: usize) {
+    for _ in 0..n {
+        broker.publish(&topic("heartbeat/set"), r#"{"timestamp": "x"}"#);
+        broker.publish(&topic("cmd/chassis/set"), drive);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 #[test]
 fn a_silent_heartbeat_stops_the_vehicle_until_it_beats_again() {
     let broker = Mosquitto::start();
@@ -275,12 +284,7 @@ fn a_silent_heartbeat_stops_the_vehicle_until_it_beats_again() {
     let status = broker.subscribe(&["base_status"]);
     let _d = daemon(&broker);
     let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
-    let beat = r#"{"timestamp": "x"}"#;
-    for _ in 0..20 {
-        broker.publish(&topic("heartbeat/set"), beat);
-        broker.publish(&topic("cmd/chassis/set"), drive);
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    drive_with_heartbeats(&broker, drive, 20);
     wait_for_speed(&status, |v| v > 0.3, "moving");
     // DRIVE goes on, heartbeats stop: after the 3 s timeout the vehicle stops, says why, and
     // refuses DRIVE.
@@ -309,11 +313,7 @@ fn a_silent_heartbeat_stops_the_vehicle_until_it_beats_again() {
     assert_eq!(event["data"]["code"], 402);
     wait_for_speed(&status, |v| v.abs() < 0.01, "stopped");
     // Heartbeats again: DRIVE is a fresh command and moves it.
-    for _ in 0..20 {
-        broker.publish(&topic("heartbeat/set"), beat);
-        broker.publish(&topic("cmd/chassis/set"), drive);
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    drive_with_heartbeats(&broker, drive, 20);
     wait_for_speed(&status, |v| v > 0.3, "moving again");
 }
 
@@ -454,12 +454,7 @@ fn a_network_outage_stops_the_vehicle_keeps_events_and_drops_old_telemetry() {
     let mut d = Proc::start(&["sim", "--mqtt", &format!("127.0.0.1:{}", relay.port)]);
     d.wait_log(WAIT, "MQTT subscribed");
     let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
-    let beat = r#"{"timestamp": "x"}"#;
-    for _ in 0..20 {
-        broker.publish(&topic("heartbeat/set"), beat);
-        broker.publish(&topic("cmd/chassis/set"), drive);
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    drive_with_heartbeats(&broker, drive, 20);
     wait_for_speed(&status, |v| v > 0.3, "moving");
 
     relay.cut();
@@ -467,11 +462,7 @@ fn a_network_outage_stops_the_vehicle_keeps_events_and_drops_old_telemetry() {
     d.wait_log(WAIT, "MQTT connection lost");
     // The client keeps commanding, but nothing reaches the daemon: it stops on its own (its
     // own stdout is the witness), and the heartbeat watchdog raises the event.
-    for _ in 0..10 {
-        broker.publish(&topic("heartbeat/set"), beat);
-        broker.publish(&topic("cmd/chassis/set"), drive);
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    drive_with_heartbeats(&broker, drive, 10);
     d.wait_out(WAIT, "stopped while cut off", |l| {
         serde_json::from_str::<Value>(l)
             .is_ok_and(|s| s["robot"]["vx"].as_f64().is_some_and(|v| v.abs() < 0.01))

@@ -104,6 +104,22 @@ impl Rig {
     }
 }
 
+/// `chassisd replay` of `recording` prints exactly the `live` lines and regenerates every
+/// recorded transmission.
+fn assert_replays_as_live(recording: &Path, live: &[String]) {
+    let replay = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(recording)
+        .output()
+        .expect("replay runs");
+    let summary = String::from_utf8_lossy(&replay.stderr);
+    assert!(summary.contains(" 0 differ"), "{summary}");
+    assert_eq!(
+        String::from_utf8_lossy(&replay.stdout),
+        live.join("\n") + "\n"
+    );
+}
+
 fn axis(report: &Value, drive: &str) -> Value {
     report["drives"]
         .as_array()
@@ -184,17 +200,7 @@ fn two_drives_enable_follow_velocity_and_report_odometry() {
     );
 
     // The recording replays to exactly the live output, reproducing every transmission.
-    let replay = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(&recording)
-        .output()
-        .expect("replay runs");
-    let summary = String::from_utf8_lossy(&replay.stderr);
-    assert!(summary.contains(" 0 differ"), "{summary}");
-    assert_eq!(
-        String::from_utf8_lossy(&replay.stdout),
-        live.join("\n") + "\n"
-    );
+    assert_replays_as_live(&recording, &live);
 
     // Wheel odometry from the encoders matches the simulated motors' travel.
     let odometry = common::replay_odometry(&recording);
@@ -311,17 +317,7 @@ fn interface_down_and_up_reconnects_and_waits_for_a_command() {
     let live = rig.daemon.stop();
     let events = std::fs::read_to_string(recording.join("vcan0.events.log")).expect("events file");
     assert!(events.contains("vcan0 !link-down"), "{events}");
-    let replay = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(&recording)
-        .output()
-        .expect("replay runs");
-    let summary = String::from_utf8_lossy(&replay.stderr);
-    assert!(summary.contains(" 0 differ"), "{summary}");
-    assert_eq!(
-        String::from_utf8_lossy(&replay.stdout),
-        live.join("\n") + "\n"
-    );
+    assert_replays_as_live(&recording, &live);
 }
 
 #[test]

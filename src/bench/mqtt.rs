@@ -147,14 +147,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
                 let drive = format!(
                     r#"{{"messageId":{id},"timestamp":"bench","messageType":100,"data":{{"linear":{linear},"angular":0.0}}}}"#
                 );
-                client
-                    .publish(
-                        &heartbeat,
-                        QoS::AtLeastOnce,
-                        false,
-                        r#"{"timestamp":"bench"}"#,
-                    )
-                    .await?;
+                beat(&client, &heartbeat).await?;
                 sent.push((id, Instant::now()));
                 client
                     .publish(&chassis_set, QoS::AtLeastOnce, false, drive)
@@ -185,14 +178,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     }
     // Heartbeats go on until the simulation ends, so its end is not a lost control link.
     while !sim.is_finished() {
-        client
-            .publish(
-                &heartbeat,
-                QoS::AtLeastOnce,
-                false,
-                r#"{"timestamp":"bench"}"#,
-            )
-            .await?;
+        beat(&client, &heartbeat).await?;
         let until = Instant::now() + DRIVE_EVERY;
         while Instant::now() < until && !sim.is_finished() {
             let _ = tokio::time::timeout(Duration::from_millis(50), events.poll()).await;
@@ -218,6 +204,14 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
         command_to_rpdo_ms: Spread::of(to_rpdo?),
         drives: (sent.len(), acked),
     })
+}
+
+/// One control-link heartbeat of the root dialect.
+async fn beat(client: &AsyncClient, topic: &str) -> anyhow::Result<()> {
+    client
+        .publish(topic, QoS::AtLeastOnce, false, r#"{"timestamp":"bench"}"#)
+        .await
+        .context("publish a heartbeat")
 }
 
 /// From the recording: for each DRIVE chassisd took, how long until the left drive's RPDO
