@@ -284,6 +284,20 @@ impl Drivetrain {
         }
     }
 
+    /// Sends the wheel command just given to [`Self::command`] in the same control tick.
+    pub fn flush_commands(&mut self, t: Timestamp, tx: &mut Vec<(String, Frame)>) {
+        for bus in &mut self.buses {
+            if bus.link == BusLink::Down {
+                continue;
+            }
+            let mut out = Vec::new();
+            for d in &mut bus.drives {
+                d.node.flush_command(t, &mut out);
+            }
+            bus.emit(out, tx);
+        }
+    }
+
     /// The drive train's feedback, in wheel terms.
     pub fn feedback(&mut self) -> ChassisFeedback {
         let mut fb = ChassisFeedback::default();

@@ -489,6 +489,8 @@ impl Engine {
                     self.drivetrain.command(t, &command);
                 }
             }
+            // The new command leaves in this tick, not with the next poll.
+            self.drivetrain.flush_commands(t, &mut tx);
         }
         self.transmit(tx, out);
     }

@@ -635,6 +635,15 @@ impl DriveNode {
         self.poll_sdo(t, out);
     }
 
+    /// Sends a command set by [`Self::command`] since the last poll now, rather than at the
+    /// next poll a control period later. Timers are not advanced twice: at the poll's own
+    /// time everything but a changed command is a no-op.
+    pub fn flush_command(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+        if self.phase == Phase::Running {
+            self.run(t, out);
+        }
+    }
+
     fn poll_sdo(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         if let Some(outcome) = self.sdo.poll(t, out) {
             self.on_sdo(t, outcome, out);
