@@ -1,10 +1,10 @@
 //! `chassisd bench mqtt`: the MQTT surface under a stopwatch. The simulated vehicle runs in
-//! real time with its MQTT dialects (and records its session); a client subscribes to
-//! base_status and measures its period on its own clock, and sends root DRIVE commands (with
-//! heartbeats), timing each from publish to its ack (broker → chassisd → broker → client).
-//! The rest of a command's way, from chassisd taking it to the first drive RPDO that carries
-//! the new target, is read from the recording: both are stamped there on the simulation's
-//! clock, the one the engine runs on.
+//! real time with its MQTT dialects (and records its session). A client subscribes to
+//! base_status and, once the drives are enabled, measures its period on its own clock and sends
+//! root DRIVE commands (with heartbeats), timing each from publish to its ack (broker →
+//! chassisd → broker → client). The rest of a command's way, from chassisd taking it to the
+//! first drive RPDO that carries the new target, is read from the recording: both are stamped
+//! there on the simulation's clock, the one the engine runs on.
 
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -16,6 +16,7 @@ use serde_json::Value;
 
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::mqtt::MqttConfig;
+use crate::core::chassis::status_bits;
 use crate::record::{Payload, RecordingReader};
 use crate::runtime::sim::{self, SimOptions};
 use crate::sim::plant::{LEFT_NODE, PlantConfig, SIM_BUS};
@@ -154,11 +155,22 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
                     .await?;
             }
         } else if now > give_up {
-            anyhow::bail!("no base_status within 20 s: is the broker reachable?");
+            anyhow::bail!(
+                "no base_status with the drives enabled within 20 s: is the broker reachable?"
+            );
         }
         let event = tokio::time::timeout(Duration::from_millis(50), events.poll()).await;
         match event {
             Ok(Ok(Event::Incoming(Packet::Publish(p)))) if p.topic == "base_status" => {
+                // Measuring starts once the drives are enabled, so the first DRIVE does not
+                // time their enable sequence.
+                if measuring_since.is_none() {
+                    let status: Value = serde_json::from_slice(&p.payload).unwrap_or_default();
+                    let bits = status["robot"]["robot_status"].as_u64().unwrap_or(0);
+                    if bits & u64::from(status_bits::ENABLED) == 0 {
+                        continue;
+                    }
+                }
                 measuring_since.get_or_insert(Instant::now());
                 arrivals.push(Instant::now());
             }
