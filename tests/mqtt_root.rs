@@ -474,10 +474,11 @@ fn a_network_outage_stops_the_vehicle_keeps_events_and_drops_old_telemetry() {
     status.clear();
 
     relay.restore();
-    let event = json(
-        &log.next_on(&topic("log/notify"), Duration::from_secs(10))
-            .expect("the event raised offline is delivered"),
-    );
+    let Some(event) = log.next_on(&topic("log/notify"), Duration::from_secs(10)) else {
+        d.log.extend(d.stderr.try_iter());
+        panic!("the event raised offline was not delivered: {:#?}", d.log);
+    };
+    let event = json(&event);
     assert_eq!(event["data"]["key"], "CONTROL_LINK_LOST", "{event}");
     // What arrives within a second of reconnecting: the queued burst plus about 10 live ones.
     let mut received = 0;

@@ -4,6 +4,8 @@
 //!
 //! Outgoing messages wait in two bounded queues while the broker is away: telemetry (QoS 0;
 //! the oldest is dropped first) and replies and events (QoS 1; kept up to their own bound).
+//! A reply stays ours until the broker acknowledges it: on a clean-session reconnect rumqttc
+//! drops whatever it had not delivered, so the link queues those replies again itself.
 //! The session is clean, so the broker keeps nothing for chassisd while it is away: a command
 //! published during an outage is never executed later. Retained messages on command topics
 //! are ignored for the same reason.
@@ -14,7 +16,7 @@ use std::time::Duration;
 use anyhow::Context;
 use bytes::Bytes;
 use rumqttc::{
-    AsyncClient, Event, EventLoop, LastWill, MqttOptions, NetworkOptions, Packet, QoS,
+    AsyncClient, Event, EventLoop, LastWill, MqttOptions, NetworkOptions, Outgoing, Packet, QoS,
     TlsConfiguration, Transport,
 };
 use tokio::sync::mpsc;
@@ -55,10 +57,14 @@ struct Dropped {
     retained_commands: u64,
 }
 
-/// The two outgoing queues.
+/// The two outgoing queues, and the replies handed to rumqttc but not yet acknowledged.
 struct Outbox {
     telemetry: VecDeque<Publish>,
     replies: VecDeque<Publish>,
+    /// QoS 1 messages in rumqttc's request queue, in the order it will write them.
+    handed: VecDeque<Publish>,
+    /// QoS 1 messages written, by packet id, in the order written, awaiting their PubAck.
+    unacked: VecDeque<(u16, Publish)>,
     telemetry_max: usize,
     replies_max: usize,
     dropped: Dropped,
@@ -107,7 +113,41 @@ impl Outbox {
                     queue.push_front(m);
                     return;
                 }
+                if m.qos == Qos::AtLeastOnce {
+                    self.handed.push_back(m);
+                }
             }
+        }
+    }
+
+    /// rumqttc wrote a publish with packet id `pkid` (0 for QoS 0).
+    fn written(&mut self, pkid: u16) {
+        if pkid != 0
+            && let Some(m) = self.handed.pop_front()
+        {
+            self.unacked.push_back((pkid, m));
+        }
+    }
+
+    /// The broker acknowledged packet `pkid`.
+    fn acknowledged(&mut self, pkid: u16) {
+        self.unacked.retain(|(id, _)| *id != pkid);
+    }
+
+    /// The connection broke: every reply not acknowledged goes back to the front of the
+    /// queue, in its order (rumqttc forgets them on the clean-session reconnect).
+    fn requeue_unacknowledged(&mut self) {
+        let again: Vec<Publish> = self
+            .unacked
+            .drain(..)
+            .map(|(_, m)| m)
+            .chain(self.handed.drain(..))
+            .collect();
+        if !again.is_empty() {
+            tracing::debug!(replies = again.len(), "unacknowledged replies queued again");
+        }
+        for m in again.into_iter().rev() {
+            self.replies.push_front(m);
         }
     }
 }
@@ -193,6 +233,8 @@ async fn run(
     let mut outbox = Outbox {
         telemetry: VecDeque::new(),
         replies: VecDeque::new(),
+        handed: VecDeque::new(),
+        unacked: VecDeque::new(),
         telemetry_max: c.telemetry_queue,
         replies_max: c.reply_queue,
         dropped: Dropped::default(),
@@ -222,14 +264,11 @@ async fn run(
                     {
                         tracing::error!(error = %e, "MQTT subscribe failed");
                     }
-                    if let Err(e) = client.try_publish(
-                        status_topic.clone(),
-                        QoS::AtLeastOnce,
-                        true,
-                        Bytes::from_static(b"online"),
-                    ) {
-                        tracing::error!(error = %e, "MQTT online message failed");
-                    }
+                    // `online` goes first, tracked like a reply.
+                    outbox.replies.push_front(Publish {
+                        retain: true,
+                        ..Publish::reply(status_topic.clone(), Bytes::from_static(b"online"))
+                    });
                     outbox.flush(&client);
                     if records.send(link(LinkState::Up)).await.is_err() {
                         return;
@@ -262,9 +301,16 @@ async fn run(
                         tracing::info!(topics = ?spec.subscriptions, "MQTT subscribed");
                     }
                 }
-                Ok(Event::Outgoing(_)) => outbox.flush(&client),
+                Ok(Event::Outgoing(outgoing)) => {
+                    if let Outgoing::Publish(pkid) = outgoing {
+                        outbox.written(pkid);
+                    }
+                    outbox.flush(&client);
+                }
+                Ok(Event::Incoming(Packet::PubAck(ack))) => outbox.acknowledged(ack.pkid),
                 Ok(_) => {}
                 Err(e) => {
+                    outbox.requeue_unacknowledged();
                     if connected {
                         connected = false;
                         tracing::warn!(%broker, error = %e, "MQTT connection lost; reconnecting");
@@ -305,6 +351,8 @@ mod tests {
         Outbox {
             telemetry: VecDeque::new(),
             replies: VecDeque::new(),
+            handed: VecDeque::new(),
+            unacked: VecDeque::new(),
             telemetry_max,
             replies_max,
             dropped: Dropped::default(),
@@ -337,6 +385,26 @@ mod tests {
         }
         assert_eq!(topics(&o.replies), ["ack3", "ack4"]);
         assert_eq!(o.dropped.replies, 3);
+    }
+
+    #[tokio::test]
+    async fn replies_not_acknowledged_when_the_link_breaks_are_queued_again_in_order() {
+        let (client, _eventloop) = AsyncClient::new(MqttOptions::new("t", "127.0.0.1", 1), 10);
+        let mut o = outbox(10, 10);
+        for topic in ["ack1", "ack2", "ack3"] {
+            o.push(Publish::reply(topic, "{}"));
+        }
+        o.push(Publish::telemetry("status", "{}"));
+        o.flush(&client);
+        // ack1 and ack2 are written (packet ids 1 and 2), the status too (id 0); only ack1
+        // is acknowledged before the connection breaks; ack3 never left the request queue.
+        o.written(1);
+        o.written(0);
+        o.written(2);
+        o.acknowledged(1);
+        o.requeue_unacknowledged();
+        assert_eq!(topics(&o.replies), ["ack2", "ack3"]);
+        assert!(o.handed.is_empty() && o.unacked.is_empty());
     }
 
     #[tokio::test]
