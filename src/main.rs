@@ -197,11 +197,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             commands_stdin,
         } => {
             let vehicle = VehicleConfig::load(&config)?;
-            let runtime = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .context("cannot start the async runtime")?;
+            let runtime = async_runtime(2)?;
             let result = runtime.block_on(live::run(
                 LiveOptions {
                     config: vehicle,
@@ -242,11 +238,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 }
                 d => d.map(std::time::Duration::from_secs_f64),
             };
-            let runtime = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(1)
-                .enable_all()
-                .build()
-                .context("cannot start the async runtime")?;
+            let runtime = async_runtime(1)?;
             let result = runtime.block_on(sim::run(
                 SimOptions {
                     plant,
@@ -264,11 +256,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         }
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
-            let runtime = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(1)
-                .enable_all()
-                .build()
-                .context("cannot start the async runtime")?;
+            let runtime = async_runtime(1)?;
             let result = runtime.block_on(chassisd::runtime::can_sim::run(vehicle));
             runtime.shutdown_background();
             result.map(|()| true)
@@ -359,11 +347,7 @@ fn bench_mqtt(plant: Option<PathBuf>, seconds: f64, broker: Option<&str>) -> any
             .context("no free port for the embedded broker")?
             .port();
     }
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
+    let runtime = async_runtime(2)?;
     let report = runtime.block_on(chassisd::bench::mqtt::run(
         chassisd::bench::mqtt::MqttBenchOptions {
             plant,
@@ -376,4 +360,13 @@ fn bench_mqtt(plant: Option<PathBuf>, seconds: f64, broker: Option<&str>) -> any
     print!("{}", report.table());
     println!("{}", report.json());
     Ok(true)
+}
+
+/// A multi-threaded tokio runtime with `threads` workers, timers and I/O enabled.
+fn async_runtime(threads: usize) -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(threads)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
 }

@@ -6,22 +6,9 @@
 
 mod common;
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn replay(path: &Path) -> Output {
-    let out = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(path)
-        .output()
-        .expect("chassisd runs");
-    assert!(
-        out.status.success(),
-        "replay failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+use common::replay;
 
 fn statuses(stdout: &[u8]) -> Vec<serde_json::Value> {
     String::from_utf8(stdout.to_vec())

@@ -166,12 +166,7 @@ fn decodes_reconnects_and_records_for_an_identical_replay() {
         "non-JSON on stdout"
     );
 
-    let replayed = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(&record)
-        .output()
-        .expect("replay runs");
-    assert!(replayed.status.success());
+    let replayed = common::replay(&record);
     let live = out.join("\n") + "\n";
     assert!(
         String::from_utf8_lossy(&replayed.stdout) == live,

@@ -10,21 +10,11 @@ use std::time::Duration;
 
 use common::process::Proc;
 
+/// The replay's stdout and its stderr summary.
 fn replay(dir: &Path) -> (Vec<u8>, String) {
-    let out = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(dir)
-        .output()
-        .expect("chassisd runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (
-        out.stdout,
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let out = common::replay(dir);
+    let summary = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.stdout, summary)
 }
 
 fn last_status(stdout: &[u8]) -> serde_json::Value {

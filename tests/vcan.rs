@@ -107,11 +107,7 @@ impl Rig {
 /// `chassisd replay` of `recording` prints exactly the `live` lines and regenerates every
 /// recorded transmission.
 fn assert_replays_as_live(recording: &Path, live: &[String]) {
-    let replay = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(recording)
-        .output()
-        .expect("replay runs");
+    let replay = common::replay(recording);
     let summary = String::from_utf8_lossy(&replay.stderr);
     assert!(summary.contains(" 0 differ"), "{summary}");
     assert_eq!(

@@ -89,21 +89,12 @@ pub trait Dialect: Send {
 #[derive(Default)]
 pub struct Dialects {
     dialects: Vec<Box<dyn Dialect>>,
-    max_payload: usize,
 }
 
 impl Dialects {
-    /// `dialects`, refusing incoming payloads above `max_payload` bytes.
-    pub fn new(dialects: Vec<Box<dyn Dialect>>, max_payload: usize) -> Self {
-        Self {
-            dialects,
-            max_payload,
-        }
-    }
-
-    /// Whether any dialect is configured.
-    pub fn is_empty(&self) -> bool {
-        self.dialects.is_empty()
+    /// `dialects`; each checks its own payload size limit.
+    pub fn new(dialects: Vec<Box<dyn Dialect>>) -> Self {
+        Self { dialects }
     }
 
     /// Every dialect's topic filters.
@@ -112,11 +103,6 @@ impl Dialects {
             .iter()
             .flat_map(|d| d.subscriptions())
             .collect()
-    }
-
-    /// The largest payload a dialect is given, bytes.
-    pub fn max_payload(&self) -> usize {
-        self.max_payload
     }
 
     /// Routes an incoming message; returns false when no dialect owns its topic.

@@ -81,13 +81,6 @@ pub struct MqttReport {
     pub drives: (usize, usize),
 }
 
-fn wall_now() -> Timestamp {
-    let since = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap_or_default();
-    Timestamp::from_micros(since.as_micros() as u64)
-}
-
 /// Runs the benchmark.
 pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     let vehicle_id = options
@@ -99,7 +92,10 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     let dir = std::env::temp_dir().join(format!(
         "chassisd-bench-mqtt-{}-{}",
         std::process::id(),
-        wall_now().as_micros()
+        SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .unwrap_or_default()
+            .as_micros()
     ));
     let (host, port) = (options.mqtt.host.clone(), options.mqtt.port);
     let sim = tokio::spawn(sim::run(

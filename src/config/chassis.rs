@@ -150,10 +150,7 @@ pub trait LoadProfile: Sized {
 
 impl LoadProfile for DriveProfile {
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_owned(),
-            source,
-        })?;
+        let text = super::read_text(path)?;
         DriveProfile::from_toml(&text, path)
     }
 

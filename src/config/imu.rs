@@ -96,10 +96,7 @@ impl ImuConfig {
             return Ok(());
         };
         let path = base.join(&name);
-        let text = std::fs::read_to_string(&path).map_err(|source| ConfigError::Read {
-            file: path.clone(),
-            source,
-        })?;
+        let text = super::read_text(&path)?;
         let calib: ImuCalibration = toml::from_str(&text).map_err(|e| ConfigError::Parse {
             file: path.clone(),
             message: e.to_string(),

@@ -43,6 +43,14 @@ pub enum ConfigError {
     },
 }
 
+/// Reads a configuration-type file (vehicle, profile, plant, calibration, DBC) as text.
+pub fn read_text(path: &Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        file: path.to_owned(),
+        source,
+    })
+}
+
 impl ConfigError {
     /// An invalid value in `file` at `key`, with what is wrong and how to fix it.
     pub fn invalid(file: &Path, key: &str, problem: impl Into<String>, fix: &str) -> Self {
@@ -195,10 +203,7 @@ impl GnssConfig {
 impl VehicleConfig {
     /// Reads and validates a TOML file. Device profiles it names are read relative to it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_owned(),
-            source,
-        })?;
+        let text = read_text(path)?;
         Self::from_toml(&text, path)
     }
 

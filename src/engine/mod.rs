@@ -193,7 +193,7 @@ fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> D
             mqtt.max_payload,
         )));
     }
-    Dialects::new(list, mqtt.max_payload)
+    Dialects::new(list)
 }
 
 impl Engine {

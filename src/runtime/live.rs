@@ -265,6 +265,9 @@ fn dispatch(
 ) -> std::io::Result<()> {
     let mut wrote = false;
     for output in outputs.drain(..) {
+        let Some(output) = super::forward_common(output, mqtt) else {
+            continue;
+        };
         match output {
             EngineOutput::Status(status) => {
                 let mut line = BaseStatus::from_status(&status).to_json();
@@ -284,20 +287,7 @@ fn dispatch(
                     q.send(frame);
                 }
             }
-            EngineOutput::Publish(message) => {
-                if let Some(link) = mqtt {
-                    link.send(message);
-                }
-            }
-            EngineOutput::Event(event) => tracing::info!("{event}"),
-            EngineOutput::CommandResult {
-                source,
-                topic,
-                result,
-            } => match result {
-                Ok(()) => tracing::info!(%source, %topic, "command accepted"),
-                Err(reason) => tracing::warn!(%source, %topic, %reason, "command refused"),
-            },
+            _ => {}
         }
     }
     if wrote {

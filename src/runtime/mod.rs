@@ -10,3 +10,31 @@ pub mod mqtt;
 pub mod recorder;
 pub mod serial;
 pub mod sim;
+
+use crate::engine::EngineOutput;
+
+/// Handles the engine outputs that go the same way in live mode and in the simulation:
+/// messages to the MQTT link, events and command answers to the log. Returns the others
+/// (status lines and frames), which each mode routes itself.
+fn forward_common(output: EngineOutput, mqtt: Option<&mqtt::MqttSender>) -> Option<EngineOutput> {
+    match output {
+        EngineOutput::Publish(message) => {
+            if let Some(link) = mqtt {
+                link.send(message);
+            }
+        }
+        EngineOutput::Event(event) => tracing::info!("{event}"),
+        EngineOutput::CommandResult {
+            source,
+            topic,
+            result: Ok(()),
+        } => tracing::info!(%source, %topic, "command accepted"),
+        EngineOutput::CommandResult {
+            source,
+            topic,
+            result: Err(reason),
+        } => tracing::warn!(%source, %topic, %reason, "command refused"),
+        other => return Some(other),
+    }
+    None
+}

@@ -72,33 +72,19 @@ impl<W: Write> Sink for Output<W> {
     }
 
     fn output(&mut self, output: EngineOutput) {
-        match output {
-            EngineOutput::Status(status) => {
-                let mut line = BaseStatus::from_status(&status).to_json();
-                line.push('\n');
-                if let Err(e) = self
-                    .out
-                    .write_all(line.as_bytes())
-                    .and_then(|()| self.out.flush())
-                {
-                    self.error.get_or_insert(e);
-                }
+        // Frames go to the simulated drives inside the lockstep, not here.
+        if let Some(EngineOutput::Status(status)) =
+            super::forward_common(output, self.mqtt.as_ref())
+        {
+            let mut line = BaseStatus::from_status(&status).to_json();
+            line.push('\n');
+            if let Err(e) = self
+                .out
+                .write_all(line.as_bytes())
+                .and_then(|()| self.out.flush())
+            {
+                self.error.get_or_insert(e);
             }
-            EngineOutput::Publish(message) => {
-                if let Some(link) = &self.mqtt {
-                    link.send(message);
-                }
-            }
-            EngineOutput::Event(event) => tracing::info!("{event}"),
-            EngineOutput::CommandResult {
-                source,
-                topic,
-                result,
-            } => match result {
-                Ok(()) => tracing::info!(%source, %topic, "command accepted"),
-                Err(reason) => tracing::warn!(%source, %topic, %reason, "command refused"),
-            },
-            EngineOutput::CanTx { .. } => {}
         }
     }
 }

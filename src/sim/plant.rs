@@ -150,10 +150,7 @@ impl PlantConfig {
 
     /// Reads and checks a plant file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_owned(),
-            source,
-        })?;
+        let text = crate::config::read_text(path)?;
         Self::from_toml(&text, path)
     }
 

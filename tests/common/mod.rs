@@ -6,7 +6,23 @@ pub mod mqtt;
 pub mod netcut;
 pub mod process;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// `chassisd replay PATH`, which must succeed.
+pub fn replay(path: &Path) -> Output {
+    let out = Command::new(chassisd())
+        .arg("replay")
+        .arg(path)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "replay failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
 
 /// The shared receiver logs (`../shared/data/gnss` beside the checkout, or
 /// `$CHASSISD_SHARED_DATA/gnss`). Panics when missing: CI must fail, not skip.

@@ -110,10 +110,7 @@ pub struct DbcAlarm {
 impl BmsProfile {
     /// Reads and checks a profile file; a DBC file it names is read relative to it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_owned(),
-            source,
-        })?;
+        let text = crate::config::read_text(path)?;
         let mut profile: Self = toml::from_str(&text).map_err(|e| ConfigError::Parse {
             file: path.to_owned(),
             message: e.to_string(),
@@ -122,11 +119,7 @@ impl BmsProfile {
             && let Some(file) = &p.dbc
         {
             let dbc_path = path.parent().unwrap_or(Path::new(".")).join(file);
-            p.dbc_text =
-                std::fs::read_to_string(&dbc_path).map_err(|source| ConfigError::Read {
-                    file: dbc_path.clone(),
-                    source,
-                })?;
+            p.dbc_text = crate::config::read_text(&dbc_path)?;
         }
         profile.validate(path)?;
         Ok(profile)
