@@ -278,6 +278,8 @@ fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
         root: Some(RootDialectConfig {
             vehicle_id: SIM_VEHICLE_ID.into(),
             heartbeat_timeout_s: 3.0,
+            require_heartbeat: false,
+            heartbeat_client_id: None,
         }),
         device: Some(DeviceDialectConfig {
             serial_number: SIM_SERIAL_NUMBER.into(),

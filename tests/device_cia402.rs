@@ -18,12 +18,14 @@ fn boot_and_sdo_setup_sequence() {
     rig.run(200, false, &[0.0]);
     let sent = rig.sent();
     // NMT reset communication, then the set-up writes in order, then NMT start.
-    let setup: Vec<&str> = sent.iter().map(String::as_str).take(26).collect();
+    let setup: Vec<&str> = sent.iter().map(String::as_str).take(28).collect();
     assert_eq!(
         setup,
         [
             "000#8201",             // NMT reset communication, node 1
             "601#2B17100064000000", // 0x1017 heartbeat producer 100 ms
+            "601#23161001FA007F00", // 0x1016:1 consume node 0x7F's heartbeat, 250 ms
+            "601#2B07600003000000", // 0x6007 abort connection: quick stop
             "601#2F60600003000000", // 0x6060 mode of operation 3: profile velocity
             "601#23FF600000000000", // 0x60FF target velocity 0
             "601#2300180181010080", // TPDO1 off
@@ -50,10 +52,9 @@ fn boot_and_sdo_setup_sequence() {
             "601#2300140101020000", // RPDO1 on, COB-ID 0x201
         ]
     );
-    assert_eq!(sent[26], "601#23836000B80B0000"); // 0x6083 acceleration 3000 r/min/s
-    assert_eq!(sent[27], "601#2384600070170000"); // 0x6084 deceleration 6000 r/min/s
-    assert_eq!(sent[28], "601#2B07600003000000"); // 0x6007 abort connection: quick stop
-    assert_eq!(sent[29], "000#0101"); // NMT start node 1
+    assert_eq!(sent[28], "601#23836000B80B0000"); // 0x6083 acceleration 3000 r/min/s
+    assert_eq!(sent[29], "601#2384600070170000"); // 0x6084 deceleration 6000 r/min/s
+    assert_eq!(sent[30], "000#0101"); // NMT start node 1
     assert_eq!(rig.node.phase(), Phase::Running);
     assert_eq!(rig.sim.nmt_state(), NmtState::Operational);
     // Not asked to enable: the drive is switched on, not enabled.
@@ -134,13 +135,13 @@ fn lost_heartbeat_faults_within_timeout_and_commands_zero() {
         "{}",
         faulted_at - silent_from
     );
-    // The stop went out at once: zero target, disable operation.
+    // The stop went out at once: zero target, quick stop.
     let stop = rig
         .log
         .iter()
         .find(|(t, mine, f)| *t == faulted_at && *mine && f.id() == 0x201)
         .map(|(_, _, f)| f.to_string());
-    assert_eq!(stop.as_deref(), Some("201#070000000000"));
+    assert_eq!(stop.as_deref(), Some("201#020000000000"));
     rig.run(200, true, &[200.0]);
     assert_eq!(rig.sim.report()[0].target, 0);
     assert!(rig.sim.report()[0].rpm.abs() < 1e-9);
@@ -163,13 +164,150 @@ fn emcy_faults_and_needs_a_reset() {
     // Still asked to move, but nothing happens until the fault is reset.
     rig.run(200, true, &[50.0]);
     assert!(!rig.node.is_enabled());
-    assert!(rig.node.reset_fault());
+    assert!(rig.node.reset_fault(ms(rig.now_ms)));
     rig.run(300, true, &[50.0]);
     assert!(rig.node.is_enabled(), "{:?}", rig.node.drive_state());
     assert!(
         rig.sent().iter().any(|f| f == "201#800000000000"),
         "fault reset sent"
     );
+}
+
+/// The controlwords chassisd sent in RPDO1 (node 1), in order.
+fn controlwords(rig: &Rig) -> Vec<u16> {
+    rig.log
+        .iter()
+        .filter(|(_, mine, f)| *mine && f.id() == 0x201)
+        .map(|(_, _, f)| u16::from_le_bytes([f.data()[0], f.data()[1]]))
+        .collect()
+}
+
+/// Rising edges of bit 7 in a controlword sequence.
+fn rising_edges(words: &[u16]) -> usize {
+    words
+        .windows(2)
+        .filter(|w| w[0] & 0x80 == 0 && w[1] & 0x80 != 0)
+        .count()
+}
+
+#[test]
+fn fault_reset_makes_a_new_edge_each_attempt_and_keeps_the_fault_until_it_clears() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(400, true, &[50.0]);
+    let mut out = Vec::new();
+    rig.sim.refuse_resets(2);
+    rig.sim.inject_fault(0, 0x2310, &mut out);
+    rig.deliver(out, Vec::new());
+    rig.run(50, true, &[50.0]);
+    assert_eq!(rig.node.drive_state(), Some(DriveState::Fault));
+    let before = controlwords(&rig).len();
+    assert!(rig.node.reset_fault(ms(rig.now_ms)));
+    // The fault stays reported while the drive is in Fault, through the failed attempts.
+    while rig.node.is_resetting() {
+        assert!(
+            rig.node.fault().is_some(),
+            "fault hidden at {} ms",
+            rig.now_ms
+        );
+        assert!(!rig.node.is_ready());
+        rig.run(10, true, &[50.0]);
+        assert!(rig.now_ms < 5_000, "the reset never ended");
+    }
+    assert_eq!(rig.node.fault(), None, "the third attempt clears it");
+    assert_eq!(rig.sim.reset_edges(), 3);
+    let words = controlwords(&rig)[before - 1..].to_vec();
+    assert_eq!(rising_edges(&words), 3, "{words:04X?}");
+    // Bit 7 is low for at least one frame before every edge.
+    for w in words
+        .windows(2)
+        .filter(|w| w[1] & 0x80 != 0 && w[0] & 0x80 == 0)
+    {
+        assert_eq!(w[0], 0x0000);
+    }
+    rig.run(300, true, &[50.0]);
+    assert!(rig.node.is_enabled(), "{:?}", rig.node.drive_state());
+}
+
+#[test]
+fn a_drive_stuck_in_fault_gives_up_after_the_attempts_and_can_be_retried() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(400, true, &[50.0]);
+    let mut out = Vec::new();
+    rig.sim.refuse_resets(4);
+    rig.sim.inject_fault(0, 0x2310, &mut out);
+    rig.deliver(out, Vec::new());
+    rig.run(50, true, &[50.0]);
+    assert!(rig.node.reset_fault(ms(rig.now_ms)));
+    rig.run(2_000, true, &[50.0]);
+    assert!(!rig.node.is_resetting(), "bounded attempts");
+    assert_eq!(rig.sim.reset_edges(), 3);
+    assert!(matches!(rig.node.fault(), Some(DriveFault::Emcy(_))));
+    // A later deliberate reset starts over with new edges; the fourth refusal and then it
+    // clears.
+    assert!(rig.node.reset_fault(ms(rig.now_ms)));
+    rig.run(2_000, true, &[50.0]);
+    assert_eq!(rig.sim.reset_edges(), 5);
+    assert_eq!(rig.node.fault(), None);
+}
+
+#[test]
+fn the_drive_quick_stops_by_itself_when_chassisd_is_gone() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(500, true, &[300.0]);
+    assert!((rig.sim.report()[0].rpm - 300.0).abs() < 1e-6);
+    // chassisd dies: no heartbeat, no frames at all.
+    rig.master_alive = false;
+    let gone = rig.now_ms;
+    let mut stopped_braking = None;
+    let mut first_quick_stop = None;
+    for _ in 0..100 {
+        rig.run(5, true, &[300.0]);
+        let axis = &rig.sim.report()[0];
+        if axis.state == "quick stop active" && first_quick_stop.is_none() {
+            first_quick_stop = Some(rig.now_ms - gone);
+        }
+        if axis.rpm == 0.0 {
+            stopped_braking = Some(rig.now_ms - gone);
+            break;
+        }
+    }
+    let reacted = first_quick_stop.expect("quick stop on the lost heartbeat");
+    // The last heartbeat came up to 50 ms before; the consumer time is 250 ms.
+    assert!((200..=260).contains(&reacted), "reacted after {reacted} ms");
+    assert!(stopped_braking.is_some(), "the motor came to rest");
+    assert_eq!(rig.sim.report()[0].state, "switch on disabled");
+    assert_eq!(rig.sim.master_losses(), 1);
+}
+
+#[test]
+fn stale_feedback_faults_while_the_heartbeat_goes_on() {
+    let mut rig = Rig::new("cia402-generic.toml", 1);
+    rig.start();
+    rig.run(500, true, &[100.0]);
+    assert!(rig.node.is_enabled());
+    rig.sim.set_tpdos(false);
+    let silent = rig.now_ms;
+    while rig.node.fault().is_none() {
+        rig.run(10, true, &[100.0]);
+        assert!(rig.now_ms - silent < 1_000, "stale feedback not noticed");
+    }
+    assert_eq!(
+        rig.node.fault(),
+        Some(DriveFault::FeedbackStale { axis: 0 })
+    );
+    // Last TPDO up to 20 ms before; timeout 250 ms; checked every 10 ms.
+    assert!(rig.now_ms - silent <= 250 + 10, "{}", rig.now_ms - silent);
+    assert!(rig.node.stats().heartbeats > 0);
+    // A reset does not clear it while the feedback is still missing...
+    assert!(!rig.node.reset_fault(ms(rig.now_ms)));
+    // ...and does once it flows again.
+    rig.sim.set_tpdos(true);
+    rig.run(50, false, &[0.0]);
+    assert!(rig.node.reset_fault(ms(rig.now_ms)));
+    assert_eq!(rig.node.fault(), None);
 }
 
 #[test]

@@ -18,10 +18,11 @@ fn setup_writes_vendor_objects() {
     rig.run(200, false, &[0.0, 0.0]);
     let sent = rig.sent();
     assert_eq!(
-        &sent[..10],
+        &sent[..11],
         [
             "000#8201",             // NMT reset communication
             "601#2B17100064000000", // heartbeat producer 100 ms
+            "601#2B002000FA000000", // 0x2000 communication offline time 250 ms
             "601#2F60600003000000", // profile velocity mode
             "601#23FF600300000000", // 0x60FF:3 both targets 0
             "601#2B0F200001000000", // 0x200F = 1: synchronous control
@@ -99,4 +100,21 @@ fn decodes_packed_statusword_and_tenths() {
         panic!()
     };
     assert_eq!(data.as_i32(), -1000);
+}
+
+#[test]
+fn the_vendor_timeout_stops_both_motors_when_chassisd_is_gone() {
+    let mut rig = Rig::new("zlac8015d.toml", 1);
+    rig.start();
+    rig.run(800, true, &[200.0, -200.0]);
+    assert!(rig.sim.report().iter().all(|a| a.rpm.abs() > 199.0));
+    // chassisd dies: its SDO commands and polls stop.
+    rig.master_alive = false;
+    rig.run(250 + 20, true, &[200.0, -200.0]);
+    assert_eq!(rig.sim.master_losses(), 1, "offline time 250 ms reached");
+    rig.run(500, true, &[200.0, -200.0]);
+    for axis in rig.sim.report() {
+        assert_eq!(axis.rpm, 0.0, "{axis:?}");
+        assert_eq!(axis.target, 0);
+    }
 }

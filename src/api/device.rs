@@ -7,12 +7,16 @@
 //! command, 4013 a payload over the size limit. Mapping belongs to the navigation stack above
 //! this driver: unless `mapping_forward` names where that stack listens, mapping requests are
 //! refused with 3003; with it, they are passed on as they came and its acks relayed back.
+//!
+//! Two safety commands extend the spec in its own shape: `estop` (`data: {"engaged": bool}`)
+//! engages or releases the software emergency stop, and `reset` (`data: {}`) re-arms a latched
+//! stop once its cause has cleared; a refusal answers 3002 with the reason.
 
 use serde::Serialize;
 use serde_json::Value;
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
-use crate::core::VehicleStatus;
+use crate::core::{Command, VehicleStatus};
 use crate::time::Timestamp;
 
 /// Goal cancelled (or: already mapping).
@@ -110,7 +114,7 @@ impl Dialect for DeviceDialect {
         t: Timestamp,
         topic: &str,
         payload: &[u8],
-        _core: &mut dyn CoreAccess,
+        core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     ) {
         // The navigation stack's answer to a forwarded request: relayed as it is.
@@ -160,6 +164,25 @@ impl Dialect for DeviceDialect {
                 };
                 self.ack(t, &command, &msg_id, Some(failure), out);
             }
+            "estop" => {
+                let failure = match request["data"].get("engaged").and_then(Value::as_bool) {
+                    None => Some((BAD_REQUEST, "data needs a boolean engaged".to_owned())),
+                    Some(engaged) => core
+                        .command(Command::EmergencyStop { engaged })
+                        .err()
+                        .map(|e| (FAILED, e.to_string())),
+                };
+                let failure = failure.as_ref().map(|(c, m)| (*c, m.as_str()));
+                self.ack(t, &command, &msg_id, failure, out);
+            }
+            "reset" => {
+                let failure = core
+                    .command(Command::Reset)
+                    .err()
+                    .map(|e| (FAILED, e.to_string()));
+                let failure = failure.as_ref().map(|(c, m)| (*c, m.as_str()));
+                self.ack(t, &command, &msg_id, failure, out);
+            }
             c if MAPPING.contains(&c) => match &self.forward {
                 Some(f) => out.push(Publish::reply(format!("{f}/{c}"), payload.to_vec())),
                 None => self.ack(
@@ -204,7 +227,6 @@ impl DeviceDialect {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::Command;
     use crate::core::chassis::CommandRejected;
 
     struct NoCore;

@@ -11,6 +11,13 @@
 //!   radians (INIT_POSITION of root-mqtt-api.rst);
 //! - `set_lng_lat [113.0196, 23.1496, 12.3]` moves the datum to this longitude, latitude
 //!   (degrees) and height (m), in SET_LNG_LAT's order.
+//!
+//! Safety:
+//! - `stop {}` stops and latches, as an operator's stop;
+//! - `estop {"engaged":true}` engages the software emergency stop (latches), `{"engaged":false}`
+//!   releases it (which does not re-arm);
+//! - `reset {}` re-arms a latched stop once its cause has cleared, resetting drive faults (a
+//!   zero `cmd_vel` does the same).
 
 use serde::Deserialize;
 
@@ -25,6 +32,12 @@ pub const INIT_RTK_DATA: &str = "init_rtk_data";
 pub const INIT_POSITION: &str = "init_position";
 /// Topic that sets the datum.
 pub const SET_LNG_LAT: &str = "set_lng_lat";
+/// Topic of the operator's stop.
+pub const STOP: &str = "stop";
+/// Topic of the software emergency stop.
+pub const ESTOP: &str = "estop";
+/// Topic that re-arms a latched stop.
+pub const RESET: &str = "reset";
 /// Largest payload accepted, bytes.
 pub const MAX_PAYLOAD: usize = 4096;
 
@@ -50,6 +63,17 @@ struct Twist {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct EStop {
+    engaged: bool,
+}
+
+/// An empty JSON object (or nothing at all).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Empty {}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct Pose {
     x: f64,
     y: f64,
@@ -58,7 +82,17 @@ struct Pose {
 
 /// Decodes a command; `Ok(None)` for topics this channel does not know.
 pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
-    if ![CMD_VEL, INIT_RTK_DATA, INIT_POSITION, SET_LNG_LAT].contains(&topic) {
+    if ![
+        CMD_VEL,
+        INIT_RTK_DATA,
+        INIT_POSITION,
+        SET_LNG_LAT,
+        STOP,
+        ESTOP,
+        RESET,
+    ]
+    .contains(&topic)
+    {
         return Ok(None);
     }
     if payload.len() > MAX_PAYLOAD {
@@ -71,6 +105,20 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     match topic {
         CMD_VEL => velocity(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
         INIT_RTK_DATA => Ok(Some(Command::ZeroLocalFrame)),
+        STOP | RESET => {
+            if !payload.iter().all(u8::is_ascii_whitespace) {
+                serde_json::from_slice::<Empty>(payload).map_err(parse_error)?;
+            }
+            Ok(Some(if topic == STOP {
+                Command::Stop
+            } else {
+                Command::Reset
+            }))
+        }
+        ESTOP => {
+            let e: EStop = serde_json::from_slice(payload).map_err(parse_error)?;
+            Ok(Some(Command::EmergencyStop { engaged: e.engaged }))
+        }
         INIT_POSITION => {
             let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;
             if ![p.x, p.y, p.yaw].iter().all(|v| v.is_finite()) {
@@ -186,6 +234,20 @@ mod tests {
         assert!(decode("set_lng_lat", b"[23.4, 123.0, 34]").is_err());
         assert!(decode("set_lng_lat", b"[123.0, 95.0, 34]").is_err());
         assert!(decode("set_lng_lat", b"[123.0, 23.0]").is_err());
+    }
+
+    #[test]
+    fn decodes_safety_commands() {
+        assert_eq!(decode("reset", b"{}"), Ok(Some(Command::Reset)));
+        assert_eq!(decode("reset", b""), Ok(Some(Command::Reset)));
+        assert_eq!(decode("stop", b" {} "), Ok(Some(Command::Stop)));
+        assert!(decode("reset", br#"{"now":1}"#).is_err());
+        assert_eq!(
+            decode("estop", br#"{"engaged":true}"#),
+            Ok(Some(Command::EmergencyStop { engaged: true }))
+        );
+        assert!(decode("estop", b"{}").is_err());
+        assert!(decode("estop", br#"{"engaged":"yes"}"#).is_err());
     }
 
     #[test]

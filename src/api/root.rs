@@ -16,15 +16,11 @@
 //! - timestamps are UTC, `%Y-%m-%d %H:%M:%S`;
 //! - INIT_POSITION's seven numbers are x, y, z and the orientation quaternion x, y, z, w.
 
-use std::time::Duration;
-
 use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
-use crate::core::{
-    Command, DriveMode, Localization, StopRequest, VehicleStatus, chassis::status_bits,
-};
+use crate::core::{Command, DriveMode, Localization, VehicleStatus, chassis::status_bits};
 use crate::devices::bms::ChargeState;
 use crate::fusion::geodesy::Geodetic;
 use crate::time::Timestamp;
@@ -190,29 +186,29 @@ struct AckData<'a> {
     message: Option<&'a str>,
 }
 
+/// `cmd/chassis` ESTOP (an extension): `data` 1 engages the software e-stop, 0 releases it.
+pub const ESTOP: u64 = 101;
+/// `cmd/chassis` RESET (an extension): re-arms a latched stop once its cause has cleared.
+pub const RESET: u64 = 102;
+
 /// The `root` dialect.
 pub struct RootDialect {
     prefix: String,
     max_payload: usize,
-    heartbeat_timeout: Duration,
-    /// The last heartbeat, once one came.
-    last_heartbeat: Option<Timestamp>,
-    /// Whether the lost heartbeat has been acted on.
-    heartbeat_lost: bool,
+    /// Only heartbeats naming this `clientId` feed the control-link watchdog.
+    heartbeat_client: Option<String>,
     ticks: u64,
     previous: Option<VehicleStatus>,
 }
 
 impl RootDialect {
-    /// The dialect of vehicle `vehicle_id`; a heartbeat silent for `heartbeat_timeout` stops
-    /// the vehicle.
-    pub fn new(vehicle_id: &str, heartbeat_timeout: Duration, max_payload: usize) -> Self {
+    /// The dialect of vehicle `vehicle_id`. Heartbeats feed the core's control-link
+    /// watchdog; with `heartbeat_client`, only those whose `clientId` is that.
+    pub fn new(vehicle_id: &str, heartbeat_client: Option<String>, max_payload: usize) -> Self {
         Self {
             prefix: format!("/root/{vehicle_id}/"),
             max_payload,
-            heartbeat_timeout,
-            last_heartbeat: None,
-            heartbeat_lost: false,
+            heartbeat_client,
             ticks: 0,
             previous: None,
         }
@@ -306,7 +302,7 @@ impl RootDialect {
             (_, None) => Err((INVALID, "messageType must be a number".to_owned())),
             ("cmd/navigation", Some(0)) => self.init_position(t, data, core),
             ("cmd/navigation", Some(1)) => core
-                .command(Command::Stop(StopRequest::Operator))
+                .command(Command::Stop)
                 .map_err(|e| (REFUSED, e.to_string())),
             ("cmd/navigation", Some(2)) => Err((
                 NOT_AVAILABLE,
@@ -338,12 +334,16 @@ impl RootDialect {
                 )),
                 None => Err((INVALID, "data.name must be a string".to_owned())),
             },
-            // Manual driving needs a live control link once a client has sent heartbeats.
-            ("cmd/chassis", Some(100)) if self.heartbeat_lost => Err((
-                REFUSED,
-                "the control heartbeat stopped: send heartbeats again before driving".to_owned(),
-            )),
             ("cmd/chassis", Some(100)) => drive(data, core),
+            ("cmd/chassis", Some(ESTOP)) => match data.as_u64() {
+                Some(n @ (0 | 1)) => core
+                    .command(Command::EmergencyStop { engaged: n == 1 })
+                    .map_err(|e| (REFUSED, e.to_string())),
+                _ => Err((INVALID, "data must be 1 (engage) or 0 (release)".to_owned())),
+            },
+            ("cmd/chassis", Some(RESET)) => core
+                .command(Command::Reset)
+                .map_err(|e| (REFUSED, e.to_string())),
             ("setting/map", Some(0)) => match data.as_str() {
                 Some(_) => Err((
                     NOT_AVAILABLE,
@@ -530,6 +530,9 @@ impl RootDialect {
         if rose(status_bits::HEARTBEAT_LOST) {
             self.event(t, "NODE_NOT_RESPONDING", "drive heartbeat lost", out);
         }
+        if rose(status_bits::CONTROL_LINK_LOST) {
+            self.event(t, "CONTROL_LINK_LOST", "", out);
+        }
         if rose(status_bits::FAULT) {
             let reason = s
                 .chassis
@@ -661,10 +664,17 @@ impl Dialect for RootDialect {
             .unwrap_or_default()
             .to_owned();
         if base == "heartbeat" {
-            // Any message on the heartbeat topic counts: the link is alive.
-            self.last_heartbeat = Some(t);
-            if std::mem::take(&mut self.heartbeat_lost) {
-                tracing::info!(dialect = "root", "control heartbeat back");
+            // Any heartbeat is answered; it feeds the watchdog when it comes from the client
+            // followed (or from anyone, when none is named).
+            let sender = serde_json::from_slice::<Value>(payload)
+                .ok()
+                .and_then(|v| v.get("clientId").and_then(Value::as_str).map(str::to_owned));
+            if self
+                .heartbeat_client
+                .as_ref()
+                .is_none_or(|c| sender.as_ref() == Some(c))
+            {
+                let _ = core.command(Command::ControlHeartbeat);
             }
             out.push(Publish::reply(
                 self.topic("heartbeat/notify"),
@@ -678,19 +688,9 @@ impl Dialect for RootDialect {
     fn on_status(
         &mut self,
         status: &VehicleStatus,
-        core: &mut dyn CoreAccess,
+        _core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     ) {
-        let t = status.time;
-        if let Some(last) = self.last_heartbeat
-            && !self.heartbeat_lost
-            && t.saturating_since(last) > self.heartbeat_timeout
-        {
-            // The controlling client went quiet: stop, and say why.
-            self.heartbeat_lost = true;
-            let _ = core.command(Command::Stop(StopRequest::ControlLinkLost));
-            self.event(t, "CONTROL_LINK_LOST", "", out);
-        }
         self.reports(status, out);
         self.events(status, out);
         self.ticks += 1;

@@ -39,6 +39,13 @@ pub struct ChassisConfig {
     /// Enable the drives (holding zero) as soon as they are ready, without a command.
     #[serde(default = "default_true")]
     pub enable_on_start: bool,
+    /// After a latched stop the drives brake on their quick-stop ramp this long (while the
+    /// wheels still turn), then are disabled, s.
+    #[serde(default = "default_quick_stop")]
+    pub quick_stop_s: f64,
+    /// A fault reset that has not cleared every drive fault by then has failed, s.
+    #[serde(default = "default_reset_timeout")]
+    pub reset_timeout_s: f64,
 }
 
 fn default_max_speed() -> f64 {
@@ -62,11 +69,27 @@ fn default_cmd_timeout() -> f64 {
 fn default_true() -> bool {
     true
 }
+fn default_quick_stop() -> f64 {
+    1.0
+}
+fn default_reset_timeout() -> f64 {
+    3.0
+}
 
 impl ChassisConfig {
     /// The command watchdog period.
     pub fn cmd_timeout(&self) -> Duration {
         Duration::from_secs_f64(self.cmd_timeout_s)
+    }
+
+    /// How long a latched stop quick-stops before disabling the drives.
+    pub fn quick_stop(&self) -> Duration {
+        Duration::from_secs_f64(self.quick_stop_s)
+    }
+
+    /// How long a fault reset may take.
+    pub fn reset_timeout(&self) -> Duration {
+        Duration::from_secs_f64(self.reset_timeout_s)
     }
 }
 
@@ -120,6 +143,16 @@ pub struct CanBusConfig {
     /// Frames waiting to be written before new ones are dropped (and counted).
     #[serde(default = "default_tx_queue")]
     pub tx_queue: usize,
+    /// chassisd's own CANopen node id on this interface: it produces a heartbeat with it,
+    /// which the drives consume.
+    #[serde(default = "default_master_node")]
+    pub master_node: u8,
+    /// chassisd's heartbeat period, ms.
+    #[serde(default = "default_master_heartbeat_ms")]
+    pub master_heartbeat_ms: u64,
+    /// The SYNC period, ms, produced when a drive's profile watches SYNC.
+    #[serde(default = "default_sync_ms")]
+    pub sync_ms: u64,
 }
 
 fn default_reconnect_max() -> f64 {
@@ -127,6 +160,15 @@ fn default_reconnect_max() -> f64 {
 }
 fn default_tx_queue() -> usize {
     256
+}
+fn default_master_node() -> u8 {
+    0x7F
+}
+fn default_master_heartbeat_ms() -> u64 {
+    50
+}
+fn default_sync_ms() -> u64 {
+    20
 }
 
 /// A device profile: a file name (relative to the configuration) or, in effective
@@ -225,6 +267,45 @@ pub struct DriveConfig {
     /// Time the enable sequence may take, ms.
     #[serde(default = "default_enable_timeout_ms")]
     pub enable_timeout_ms: u64,
+    /// No feedback from an axis for this long is a fault, ms (default: three feedback
+    /// periods of the profile, at least 250 ms).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub feedback_timeout_ms: Option<u64>,
+    /// Fault reset attempts (rising edges of controlword bit 7) before giving up.
+    #[serde(default = "default_reset_attempts")]
+    pub reset_attempts: u8,
+    /// How long each attempt waits for the drive to leave Fault, ms.
+    #[serde(default = "default_reset_wait_ms")]
+    pub reset_wait_ms: u64,
+    /// Silence from chassisd after which the drive stops its motors by itself, ms (written
+    /// to the drive's consumer heartbeat or vendor timeout).
+    #[serde(default = "default_master_timeout_ms")]
+    pub master_timeout_ms: u64,
+}
+
+impl DriveConfig {
+    /// The feedback staleness timeout with `profile`.
+    pub fn feedback_timeout(&self, profile: &DriveProfile) -> Duration {
+        Duration::from_millis(
+            self.feedback_timeout_ms
+                .unwrap_or_else(|| (3 * feedback_period_ms(profile)).max(250)),
+        )
+    }
+}
+
+/// The longest gap between two feedback messages of a drive with `profile`, ms: the poll
+/// period, or the slowest TPDO event timer.
+pub fn feedback_period_ms(profile: &DriveProfile) -> u64 {
+    use crate::devices::cia402::profile::Transport;
+    match profile.feedback.mode {
+        Transport::Sdo => (1000.0 / profile.feedback.poll_hz).ceil() as u64,
+        Transport::Pdo => profile
+            .tpdo
+            .iter()
+            .map(|t| u64::from(t.event_timer_ms))
+            .max()
+            .unwrap_or(0),
+    }
 }
 
 fn default_heartbeat_ms() -> u16 {
@@ -244,6 +325,15 @@ fn default_boot_timeout_ms() -> u64 {
 }
 fn default_enable_timeout_ms() -> u64 {
     1000
+}
+fn default_reset_attempts() -> u8 {
+    3
+}
+fn default_reset_wait_ms() -> u64 {
+    200
+}
+fn default_master_timeout_ms() -> u64 {
+    250
 }
 
 /// `[bms]`
@@ -273,6 +363,36 @@ fn default_poll_hz() -> f64 {
 }
 fn default_stale_s() -> f64 {
     3.0
+}
+
+/// Checks that a drive's loss-of-master timeout leaves room for what feeds it.
+fn check_master_timeout(
+    d: &DriveConfig,
+    profile: &DriveProfile,
+    bus: &CanBusConfig,
+) -> Result<(), (String, String)> {
+    use crate::devices::cia402::profile::MasterLoss;
+    let timeout = d.master_timeout_ms;
+    if !(20..=u64::from(u16::MAX)).contains(&timeout) {
+        return Err((format!("{timeout} ms"), "use 20 to 65535 ms".into()));
+    }
+    // What keeps the drive's watchdog fed, and how often.
+    let (fed_by, period) = match profile.master_loss {
+        Some(MasterLoss::Heartbeat { .. }) => ("chassisd's heartbeat", bus.master_heartbeat_ms),
+        Some(MasterLoss::Sync { .. }) => return Ok(()),
+        Some(MasterLoss::VendorTimeout { .. }) => (
+            "the command stream",
+            (1000.0 / profile.command.rate_hz).ceil() as u64,
+        ),
+        None => return Ok(()),
+    };
+    if timeout < 2 * period {
+        return Err((
+            format!("{timeout} ms with {fed_by} every {period} ms"),
+            "allow at least two periods".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// Checks the drive train and CAN sections of `config`.
@@ -311,6 +431,27 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
             bus.tx_queue as f64,
             8.0..=65536.0,
             "frames",
+        )?;
+        if !(1..=127).contains(&bus.master_node) {
+            return Err(invalid(
+                &format!("can[{i}].master_node"),
+                format!("{}", bus.master_node),
+                "use a CANopen node id 1 to 127 that no device on the bus has (default 127)",
+            ));
+        }
+        check_range(
+            file,
+            &format!("can[{i}].master_heartbeat_ms"),
+            bus.master_heartbeat_ms as f64,
+            10.0..=1000.0,
+            "ms",
+        )?;
+        check_range(
+            file,
+            &format!("can[{i}].sync_ms"),
+            bus.sync_ms as f64,
+            1.0..=1000.0,
+            "ms",
         )?;
     }
     let bus_known = |name: &str| config.can.iter().any(|b| b.interface == name);
@@ -371,6 +512,18 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
                 "chassis.cmd_timeout_s",
                 chassis.cmd_timeout_s,
                 0.05..=10.0,
+                "s",
+            ),
+            (
+                "chassis.quick_stop_s",
+                chassis.quick_stop_s,
+                0.0..=10.0,
+                "s",
+            ),
+            (
+                "chassis.reset_timeout_s",
+                chassis.reset_timeout_s,
+                0.1..=60.0,
                 "s",
             ),
         ] {
@@ -464,8 +617,50 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
             ("sdo_timeout_ms", d.sdo_timeout_ms),
             ("boot_timeout_ms", d.boot_timeout_ms),
             ("enable_timeout_ms", d.enable_timeout_ms),
+            ("reset_wait_ms", d.reset_wait_ms),
         ] {
             check_range(file, &key(k), v as f64, 1.0..=60_000.0, "ms")?;
+        }
+        check_range(
+            file,
+            &key("reset_attempts"),
+            f64::from(d.reset_attempts),
+            1.0..=10.0,
+            "",
+        )?;
+        if let Some(bus) = config.can.iter().find(|b| b.interface == d.bus) {
+            if bus.master_node == d.node {
+                return Err(invalid(
+                    &key("node"),
+                    format!("{} is chassisd's own node id on {}", d.node, d.bus),
+                    "give the drive another id, or set can[].master_node",
+                ));
+            }
+            check_master_timeout(d, profile, bus)
+                .map_err(|(problem, fix)| invalid(&key("master_timeout_ms"), problem, &fix))?;
+        }
+        let period = feedback_period_ms(profile);
+        if let Some(timeout) = d.feedback_timeout_ms
+            && (timeout < 2 * period || timeout > 60_000)
+        {
+            return Err(invalid(
+                &key("feedback_timeout_ms"),
+                format!("{timeout} ms with feedback every {period} ms"),
+                "allow at least two feedback periods (and at most 60000 ms)",
+            ));
+        }
+        if let Some(chassis) = &config.chassis {
+            let needed = u64::from(d.reset_attempts) * (d.reset_wait_ms + 100);
+            if (chassis.reset_timeout_s * 1000.0) < needed as f64 {
+                return Err(invalid(
+                    "chassis.reset_timeout_s",
+                    format!(
+                        "{} s is shorter than drive {}'s {} reset attempts of {} ms",
+                        chassis.reset_timeout_s, d.name, d.reset_attempts, d.reset_wait_ms
+                    ),
+                    "raise it, or lower drive[].reset_attempts or reset_wait_ms",
+                ));
+            }
         }
     }
     if !config.drive.is_empty() && wheels_seen.len() != 2 {

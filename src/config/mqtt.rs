@@ -70,6 +70,14 @@ pub struct RootDialectConfig {
     /// Once a client sends heartbeats, silence for this long stops the vehicle, s.
     #[serde(default = "default_heartbeat_timeout_s")]
     pub heartbeat_timeout_s: f64,
+    /// Watch the heartbeat from start: no heartbeat within the timeout of start stops the
+    /// vehicle too.
+    #[serde(default)]
+    pub require_heartbeat: bool,
+    /// Follow only heartbeats whose `clientId` member is this (the MQTT client id of the
+    /// controlling client); others are answered but do not feed the watchdog.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heartbeat_client_id: Option<String>,
 }
 
 fn default_heartbeat_timeout_s() -> f64 {
@@ -288,6 +296,13 @@ impl MqttConfig {
                 0.3..=600.0,
                 "s",
             )?;
+            if r.heartbeat_client_id.as_deref().is_some_and(str::is_empty) {
+                return Err(invalid(
+                    "root.heartbeat_client_id",
+                    "is empty",
+                    "name the controlling client's id, or remove the key",
+                ));
+            }
         }
         if let Some(d) = &self.device {
             if !is_topic_level(&d.serial_number) {

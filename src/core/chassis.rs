@@ -1,12 +1,13 @@
-//! The drive train's decisions: who may move the vehicle, velocity limits and ramps, the
-//! command watchdog, the safety latch, wheel odometry and the chassis status bits.
+//! The drive train's arbiter: who may move the vehicle, velocity limits and ramps, wheel
+//! odometry and the chassis status bits. Whether it may move at all is the safety
+//! supervisor's decision ([`super::safety`]).
 //!
 //! Wheel-level only: the engine maps wheels to drive nodes and axes. Speeds here are SI:
 //! m/s and rad/s for the vehicle, rad/s for wheels (positive rolls the vehicle forward).
 
-use std::fmt;
 use std::time::Duration;
 
+use super::safety::{Cause, EStopInput, Power, Refusal, Safety, SafetyConfig, State, StopKind};
 use crate::config::chassis::ChassisConfig;
 use crate::time::Timestamp;
 
@@ -21,18 +22,23 @@ pub mod status_bits {
     pub const FAULT: u32 = 1 << 1;
     /// A drive's heartbeat was lost.
     pub const HEARTBEAT_LOST: u32 = 1 << 2;
-    /// Emergency stop (reserved: no e-stop input is wired yet).
+    /// An emergency stop holds the vehicle: an e-stop input pressed or silent, or the
+    /// software e-stop engaged.
     pub const ESTOP: u32 = 1 << 3;
     /// Motion allowed, but no fresh velocity command: holding zero.
     pub const COMMAND_TIMEOUT: u32 = 1 << 4;
     /// A CAN interface is down.
     pub const BUS_DOWN: u32 = 1 << 5;
-    /// Stopped by a fault; a fresh command is needed to move again.
+    /// Stopped (latched): a zero velocity command or a reset re-arms, once the cause cleared.
     pub const AWAITING_COMMAND: u32 = 1 << 6;
     /// A drive is still booting, being set up, or unreachable.
     pub const NOT_READY: u32 = 1 << 7;
     /// The commanded velocity is not zero.
     pub const MOVING: u32 = 1 << 8;
+    /// A drive fault reset is under way.
+    pub const RESETTING: u32 = 1 << 9;
+    /// The controlling client's heartbeat is lost.
+    pub const CONTROL_LINK_LOST: u32 = 1 << 10;
 }
 
 /// What the engine reports about one drive node.
@@ -50,6 +56,8 @@ pub struct DriveSummary {
     pub fault: Option<String>,
     /// The fault is a lost heartbeat.
     pub heartbeat_lost: bool,
+    /// A fault reset handshake is under way.
+    pub resetting: bool,
 }
 
 /// One wheel's feedback.
@@ -72,43 +80,21 @@ pub struct ChassisFeedback {
     pub drives: Vec<DriveSummary>,
     /// A CAN interface carrying drives is down.
     pub bus_down: bool,
+    /// The e-stop inputs.
+    pub estops: Vec<EStopInput>,
 }
 
 /// What the drives should do until the next tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct WheelCommand {
-    /// Power stages enabled.
-    pub enable: bool,
-    /// Reset latched faults now (a fresh command arrived).
+    /// The power stage wanted.
+    pub power: Power,
+    /// Reset latched faults now (a deliberate act asked for it).
     pub reset_faults: bool,
     /// Left wheel speed, rad/s.
     pub left_rad_s: f64,
     /// Right wheel speed, rad/s.
     pub right_rad_s: f64,
-}
-
-/// Why motion stopped and waits for a fresh command.
-#[derive(Debug, Clone, PartialEq)]
-pub enum StopReason {
-    /// A drive reported a fault.
-    Drive(String),
-    /// A CAN interface with drives went down.
-    BusDown,
-    /// The controlling client's heartbeat stopped.
-    ControlLinkLost,
-    /// An operator asked for a stop (PAUSE).
-    Operator,
-}
-
-impl fmt::Display for StopReason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Drive(d) => write!(f, "{d}"),
-            Self::BusDown => write!(f, "CAN interface down"),
-            Self::ControlLinkLost => write!(f, "control link heartbeat lost"),
-            Self::Operator => write!(f, "stopped by the operator"),
-        }
-    }
 }
 
 /// Why a velocity command was refused.
@@ -129,24 +115,9 @@ pub enum CommandRejected {
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,
-}
-
-/// A stop asked for by a command (rather than by a fault).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StopRequest {
-    /// The controlling client's heartbeat stopped.
-    ControlLinkLost,
-    /// An operator asked for a stop (PAUSE).
-    Operator,
-}
-
-impl From<StopRequest> for StopReason {
-    fn from(r: StopRequest) -> Self {
-        match r {
-            StopRequest::ControlLinkLost => Self::ControlLinkLost,
-            StopRequest::Operator => Self::Operator,
-        }
-    }
+    /// The safety supervisor holds the vehicle.
+    #[error("{0}")]
+    Safety(#[from] Refusal),
 }
 
 /// Who may drive: the operator by velocity commands (manual), or autonomous moves
@@ -190,17 +161,16 @@ pub struct ChassisStatus {
     pub stop_reason: Option<String>,
 }
 
-/// The drive-train decision maker.
+/// The drive-train arbiter.
 #[derive(Debug, Clone)]
 pub struct Chassis {
     config: ChassisConfig,
     mode: DriveMode,
-    armed: bool,
-    latch: Option<StopReason>,
-    reset_pending: bool,
-    command: Option<(Timestamp, f64, f64)>,
+    safety: Safety,
     /// Ramped setpoint (v, w).
     setpoint: (f64, f64),
+    /// Why the wheels hold zero at the last tick.
+    stop: Option<StopKind>,
     feedback: ChassisFeedback,
     last_angles: Option<(f64, f64)>,
     odometry: WheelOdometry,
@@ -208,16 +178,15 @@ pub struct Chassis {
 }
 
 impl Chassis {
-    /// A chassis with `config`, not armed unless it enables on start.
-    pub fn new(config: ChassisConfig) -> Self {
+    /// A chassis with `config`; `safety` adds what the configuration beyond the chassis
+    /// says (the control link).
+    pub fn new(config: ChassisConfig, safety: SafetyConfig) -> Self {
         Self {
-            armed: config.enable_on_start,
+            safety: Safety::new(safety),
             mode: DriveMode::default(),
             config,
-            latch: None,
-            reset_pending: false,
-            command: None,
             setpoint: (0.0, 0.0),
+            stop: None,
             feedback: ChassisFeedback::default(),
             last_angles: None,
             odometry: WheelOdometry::default(),
@@ -225,7 +194,7 @@ impl Chassis {
         }
     }
 
-    /// Takes the drives' feedback; faults latch a stop.
+    /// Takes the drives' feedback; the supervisor judges it at the next tick.
     pub fn feedback(&mut self, feedback: ChassisFeedback) {
         if let Some(angles) = feedback.left.angle_rad.zip(feedback.right.angle_rad) {
             if let Some((l0, r0)) = self.last_angles {
@@ -238,39 +207,40 @@ impl Chassis {
         let r = self.config.wheel_radius_m;
         self.odometry.left_mps = feedback.left.velocity_rad_s.unwrap_or(0.0) * r;
         self.odometry.right_mps = feedback.right.velocity_rad_s.unwrap_or(0.0) * r;
-        // A fault already being reset by a fresh command does not latch again.
-        if self.armed && !self.reset_pending {
-            let reason = if feedback.bus_down {
-                Some(StopReason::BusDown)
-            } else {
-                feedback.drives.iter().find_map(|d| {
-                    d.fault
-                        .as_ref()
-                        .map(|f| StopReason::Drive(format!("{}: {f}", d.name)))
-                })
-            };
-            if let Some(reason) = reason {
-                self.latch = Some(reason);
-                self.armed = false;
-                self.command = None;
-            }
-        }
         self.feedback = feedback;
     }
 
-    /// Stops now for `reason`: the wheels decelerate to zero and stay there until a fresh
-    /// command.
-    pub fn stop(&mut self, reason: StopReason) {
-        self.latch = Some(reason);
-        self.armed = false;
-        self.command = None;
+    /// The safety supervisor.
+    pub fn safety(&self) -> &Safety {
+        &self.safety
+    }
+
+    /// An operator's stop: latches; a zero velocity command or a reset re-arms.
+    pub fn operator_stop(&mut self, t: Timestamp) {
+        self.safety.operator_stop(t);
+    }
+
+    /// Engages or releases the software e-stop.
+    pub fn software_estop(&mut self, t: Timestamp, engaged: bool) {
+        self.safety.set_software_estop(t, engaged);
+    }
+
+    /// An explicit reset: re-arms once every cause has cleared, resetting drive faults.
+    pub fn reset(&mut self, t: Timestamp) -> Result<(), CommandRejected> {
+        self.drives_reachable()?;
+        Ok(self.safety.reset(t)?)
+    }
+
+    /// A heartbeat from the controlling client.
+    pub fn control_heartbeat(&mut self, t: Timestamp) {
+        self.safety.control_heartbeat(t);
     }
 
     /// Switches who may drive; switching stops any motion under way.
     pub fn set_mode(&mut self, mode: DriveMode) {
         if mode != self.mode {
             self.mode = mode;
-            self.command = None;
+            self.safety.clear_command();
         }
     }
 
@@ -279,15 +249,7 @@ impl Chassis {
         self.mode
     }
 
-    /// A velocity command: forward speed (m/s) and yaw rate (rad/s). A command after a
-    /// safety stop is the "fresh command" that resets faults and re-arms.
-    pub fn command(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), CommandRejected> {
-        if !vx.is_finite() || !wz.is_finite() {
-            return Err(CommandRejected::NotFinite);
-        }
-        if self.mode == DriveMode::Navigation {
-            return Err(CommandRejected::NavigationMode);
-        }
+    fn drives_reachable(&self) -> Result<(), CommandRejected> {
         if self.feedback.drives.is_empty() {
             return Err(CommandRejected::NoDrives);
         }
@@ -297,61 +259,69 @@ impl Chassis {
         if let Some(d) = self.feedback.drives.iter().find(|d| !d.running) {
             return Err(CommandRejected::NotReady(d.name.clone()));
         }
-        if self.latch.take().is_some() || self.feedback.drives.iter().any(|d| d.fault.is_some()) {
-            self.reset_pending = true;
-        }
-        self.armed = true;
-        self.command = Some((
-            t,
-            vx.clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
-            wz.clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
-        ));
         Ok(())
     }
 
-    /// One control step at `t`: the wheel speeds to command.
+    /// A velocity command: forward speed (m/s) and yaw rate (rad/s). After a stop only a
+    /// zero command is taken: the deliberate act that re-arms.
+    pub fn command(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), CommandRejected> {
+        if !vx.is_finite() || !wz.is_finite() {
+            return Err(CommandRejected::NotFinite);
+        }
+        if self.mode == DriveMode::Navigation {
+            return Err(CommandRejected::NavigationMode);
+        }
+        self.drives_reachable()?;
+        self.safety.velocity(
+            t,
+            vx.clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
+            wz.clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
+        )?;
+        Ok(())
+    }
+
+    /// One control step at `t`: the wheel speeds to command. A stop (latched, or no fresh
+    /// command) zeroes the targets at once and leaves the braking to the drives' own ramps;
+    /// commanded changes are ramped within the configured limits.
     pub fn tick(&mut self, t: Timestamp) -> WheelCommand {
         let dt = self
             .last_tick
             .map_or(CONTROL_PERIOD, |last| t.saturating_since(last))
             .as_secs_f64();
         self.last_tick = Some(t);
-        let (target_v, target_w) = match self.command {
-            Some((at, v, w))
-                if self.armed && t.saturating_since(at) <= self.config.cmd_timeout() =>
-            {
-                (v, w)
+        let verdict = self.safety.tick(t, &self.feedback);
+        self.stop = verdict.stop.clone();
+        self.setpoint = match verdict.target {
+            Some((target_v, target_w)) if verdict.stop.is_none() => {
+                let (v, w) = self.setpoint;
+                (
+                    self.ramp_speed(v, target_v, dt),
+                    approach(w, target_w, self.config.max_yaw_accel_rps2 * dt),
+                )
             }
             _ => (0.0, 0.0),
         };
         let (v, w) = self.setpoint;
-        // Slowing down (towards zero) may use the stronger deceleration limit.
-        let accel = if target_v.abs() < v.abs() || target_v * v < 0.0 {
-            self.config.max_decel_mps2
-        } else {
-            self.config.max_accel_mps2
-        };
-        let v = approach(v, target_v, accel * dt);
-        let w = approach(w, target_w, self.config.max_yaw_accel_rps2 * dt);
-        let v = if self.armed {
-            v
-        } else {
-            approach(self.setpoint.0, 0.0, self.config.max_decel_mps2 * dt)
-        };
-        let w = if self.armed {
-            w
-        } else {
-            approach(self.setpoint.1, 0.0, self.config.max_yaw_accel_rps2 * dt)
-        };
-        self.setpoint = (v, w);
         let half_track = self.config.track_m / 2.0;
         let r = self.config.wheel_radius_m;
-        let reset_faults = std::mem::take(&mut self.reset_pending);
         WheelCommand {
-            enable: self.armed,
-            reset_faults,
+            power: verdict.power,
+            reset_faults: verdict.reset_faults,
             left_rad_s: (v - w * half_track) / r,
             right_rad_s: (v + w * half_track) / r,
+        }
+    }
+
+    /// One ramp step of the speed from `v` towards `target`: slowing down (towards zero)
+    /// may use the stronger deceleration limit, speeding up only the acceleration limit; a
+    /// reversal brakes to zero first.
+    fn ramp_speed(&self, v: f64, target: f64, dt: f64) -> f64 {
+        let reversing = target * v < 0.0;
+        if reversing || target.abs() < v.abs() {
+            let towards = if reversing { 0.0 } else { target };
+            approach(v, towards, self.config.max_decel_mps2 * dt)
+        } else {
+            approach(v, target, self.config.max_accel_mps2 * dt)
         }
     }
 
@@ -374,17 +344,19 @@ impl Chassis {
         if fb.drives.iter().any(|d| d.heartbeat_lost) {
             bits |= HEARTBEAT_LOST;
         }
-        let fresh = self
-            .command
-            .is_some_and(|(at, _, _)| t.saturating_since(at) <= self.config.cmd_timeout());
-        if self.armed && !fresh {
+        if self.safety.estop_active() {
+            bits |= ESTOP;
+        }
+        if *self.safety.state() == State::Armed && !self.safety.command_fresh(t) {
             bits |= COMMAND_TIMEOUT;
         }
         if fb.bus_down {
             bits |= BUS_DOWN;
         }
-        if self.latch.is_some() {
-            bits |= AWAITING_COMMAND;
+        match self.safety.state() {
+            State::Latched { .. } => bits |= AWAITING_COMMAND,
+            State::Resetting { .. } => bits |= AWAITING_COMMAND | RESETTING,
+            State::Standby | State::Armed => {}
         }
         if fb.drives.iter().any(|d| !d.running) {
             bits |= NOT_READY;
@@ -392,13 +364,21 @@ impl Chassis {
         if self.setpoint != (0.0, 0.0) {
             bits |= MOVING;
         }
+        if self.safety.control_link_lost() {
+            bits |= CONTROL_LINK_LOST;
+        }
         ChassisStatus {
             vx: (vl + vr) / 2.0,
             wz: (vr - vl) / self.config.track_m,
             status_bits: bits,
             ok: !fb.drives.is_empty() && !fb.bus_down && fb.drives.iter().all(|d| d.ready),
             odometry: self.odometry,
-            stop_reason: self.latch.as_ref().map(ToString::to_string),
+            stop_reason: match &self.stop {
+                Some(StopKind::Latched(cause)) => Some(cause.to_string()),
+                Some(StopKind::CommandTimeout) | None => {
+                    self.safety.latched().map(Cause::to_string)
+                }
+            },
         }
     }
 }
@@ -410,6 +390,7 @@ fn approach(from: f64, to: f64, step: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::safety::DEFAULT_QUICK_STOP;
 
     fn config() -> ChassisConfig {
         ChassisConfig {
@@ -422,7 +403,23 @@ mod tests {
             max_yaw_accel_rps2: 2.0,
             cmd_timeout_s: 0.5,
             enable_on_start: true,
+            quick_stop_s: 1.0,
+            reset_timeout_s: 3.0,
         }
+    }
+
+    fn chassis() -> Chassis {
+        let c = config();
+        Chassis::new(
+            c,
+            SafetyConfig {
+                cmd_timeout: c.cmd_timeout(),
+                quick_stop: DEFAULT_QUICK_STOP,
+                reset_timeout: Duration::from_secs(3),
+                control_link: None,
+                enable_on_start: c.enable_on_start,
+            },
+        )
     }
 
     fn drive(fault: Option<&str>) -> DriveSummary {
@@ -433,6 +430,7 @@ mod tests {
             enabled: fault.is_none(),
             fault: fault.map(str::to_owned),
             heartbeat_lost: fault == Some("heartbeat lost"),
+            resetting: false,
         }
     }
 
@@ -449,7 +447,7 @@ mod tests {
 
     #[test]
     fn ramps_within_limits_and_clamps() {
-        let mut c = Chassis::new(config());
+        let mut c = chassis();
         c.feedback(ok_feedback());
         c.command(ms(0), 5.0, 0.0).unwrap();
         let mut last = 0.0;
@@ -466,26 +464,27 @@ mod tests {
     }
 
     #[test]
-    fn command_expires_and_decelerates() {
-        let mut c = Chassis::new(config());
+    fn an_expired_command_zeroes_the_targets_at_once() {
+        let mut c = chassis();
         c.feedback(ok_feedback());
         c.command(ms(0), 0.2, 0.0).unwrap();
         for i in 1..=50 {
             c.tick(ms(i * 10));
         }
         assert!(c.status(ms(500)).status_bits & status_bits::MOVING != 0);
-        let mut cmd = c.tick(ms(510));
-        for i in 52..=100 {
-            cmd = c.tick(ms(i * 10));
-        }
+        let cmd = c.tick(ms(510));
         assert_eq!((cmd.left_rad_s, cmd.right_rad_s), (0.0, 0.0));
-        assert!(c.status(ms(1000)).status_bits & status_bits::COMMAND_TIMEOUT != 0);
-        assert!(cmd.enable, "an expired command is not a fault");
+        assert!(c.status(ms(510)).status_bits & status_bits::COMMAND_TIMEOUT != 0);
+        assert_eq!(
+            cmd.power,
+            Power::Enabled,
+            "an expired command is not a fault"
+        );
     }
 
     #[test]
-    fn a_fault_latches_until_a_fresh_command() {
-        let mut c = Chassis::new(config());
+    fn a_fault_latches_until_a_deliberate_act() {
+        let mut c = chassis();
         c.feedback(ok_feedback());
         c.command(ms(0), 0.3, 0.0).unwrap();
         c.tick(ms(10));
@@ -494,23 +493,36 @@ mod tests {
             ..ChassisFeedback::default()
         });
         let cmd = c.tick(ms(20));
-        assert!(!cmd.enable);
+        assert_ne!(cmd.power, Power::Enabled);
+        assert_eq!((cmd.left_rad_s, cmd.right_rad_s), (0.0, 0.0));
         let s = c.status(ms(20));
         assert!(s.status_bits & status_bits::AWAITING_COMMAND != 0);
         assert!(s.status_bits & status_bits::HEARTBEAT_LOST != 0);
         assert_eq!(s.stop_reason.as_deref(), Some("d: heartbeat lost"));
-        // The drive recovers; nothing moves until a command arrives.
+        // The drive recovers, but its fault stays latched until a reset.
+        let mut recovered = ok_feedback();
+        recovered.drives[0].fault = Some("heartbeat lost".into());
+        c.feedback(recovered);
+        assert_ne!(c.tick(ms(30)).power, Power::Enabled);
+        // A non-zero command does not re-arm.
+        assert!(matches!(
+            c.command(ms(40), 0.1, 0.0),
+            Err(CommandRejected::Safety(Refusal::Latched(_)))
+        ));
+        assert!(!c.tick(ms(50)).reset_faults);
+        // A zero command does: the fault is reset once, then the drive reports it cleared.
+        c.command(ms(60), 0.0, 0.0).unwrap();
+        let cmd = c.tick(ms(70));
+        assert!(cmd.reset_faults);
         c.feedback(ok_feedback());
-        assert!(!c.tick(ms(30)).enable);
-        c.command(ms(40), 0.1, 0.0).unwrap();
-        let cmd = c.tick(ms(50));
-        assert!(cmd.enable && cmd.reset_faults);
-        assert!(!c.tick(ms(60)).reset_faults, "the reset is one-shot");
+        assert_eq!(c.tick(ms(80)).power, Power::Enabled);
+        assert!(!c.tick(ms(90)).reset_faults, "the reset is one-shot");
+        c.command(ms(100), 0.1, 0.0).unwrap();
     }
 
     #[test]
     fn rejects_commands_it_cannot_carry_out() {
-        let mut c = Chassis::new(config());
+        let mut c = chassis();
         assert_eq!(c.command(ms(0), 0.1, 0.0), Err(CommandRejected::NoDrives));
         let mut fb = ok_feedback();
         fb.drives[0].running = false;
@@ -528,7 +540,7 @@ mod tests {
 
     #[test]
     fn turning_splits_wheel_speeds() {
-        let mut c = Chassis::new(config());
+        let mut c = chassis();
         c.feedback(ok_feedback());
         c.command(ms(0), 0.0, 1.0).unwrap();
         let mut cmd = c.tick(ms(10));

@@ -2,6 +2,7 @@
 //! [`Vehicle::handle`], which takes the time as an argument and never reads a clock.
 
 pub mod chassis;
+pub mod safety;
 pub mod status;
 
 use std::time::Duration;
@@ -17,8 +18,9 @@ use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
 };
 use crate::time::Timestamp;
+pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
-pub use chassis::{DriveMode, StopReason, StopRequest};
+use safety::{ControlLinkConfig, SafetyConfig};
 pub use status::{
     BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, VehicleStatus,
 };
@@ -32,6 +34,8 @@ pub struct CoreConfig {
     pub cog_min_speed_mps: f64,
     /// The drive train, when the vehicle has drives.
     pub chassis: Option<ChassisConfig>,
+    /// The controlling client's heartbeat watchdog, when a dialect has one.
+    pub control_link: Option<ControlLinkConfig>,
     /// A BMS reading older than this is stale; `None` without a BMS.
     pub bms_stale_after: Option<Duration>,
     /// No plausible IMU sample for this long: the IMU is not ok; `None` without an IMU.
@@ -46,6 +50,7 @@ impl Default for CoreConfig {
             gnss_fix_timeout: Duration::from_secs(2),
             cog_min_speed_mps: 0.3,
             chassis: None,
+            control_link: None,
             bms_stale_after: None,
             imu_timeout: None,
             localizer: LocalizerConfig::default(),
@@ -67,6 +72,15 @@ impl CoreConfig {
         if !config.drive.is_empty() {
             core.chassis = config.chassis;
         }
+        core.control_link =
+            config
+                .mqtt
+                .as_ref()
+                .and_then(|m| m.root.as_ref())
+                .map(|r| ControlLinkConfig {
+                    timeout: r.heartbeat_timeout(),
+                    required_from_start: r.require_heartbeat,
+                });
         core.bms_stale_after = config
             .bms
             .as_ref()
@@ -119,8 +133,17 @@ pub enum Command {
     },
     /// Move the datum of the local frame (SET_LNG_LAT).
     SetDatum(Geodetic),
-    /// Stop now and wait for a fresh command.
-    Stop(StopRequest),
+    /// An operator's stop: latches until a zero velocity command or a reset.
+    Stop,
+    /// Re-arm a latched stop once its cause has cleared, resetting drive faults.
+    Reset,
+    /// Engage or release the software emergency stop (releasing does not re-arm).
+    EmergencyStop {
+        /// Engage (true) or release.
+        engaged: bool,
+    },
+    /// A heartbeat from the controlling client (the control-link watchdog).
+    ControlHeartbeat,
     /// Switch who may drive (SWITCH_MODE).
     SetMode(DriveMode),
 }
@@ -183,7 +206,18 @@ impl Vehicle {
     /// A core with nothing known yet.
     pub fn new(config: CoreConfig) -> Self {
         Self {
-            chassis: config.chassis.map(Chassis::new),
+            chassis: config.chassis.map(|c| {
+                Chassis::new(
+                    c,
+                    SafetyConfig {
+                        cmd_timeout: c.cmd_timeout(),
+                        quick_stop: c.quick_stop(),
+                        reset_timeout: c.reset_timeout(),
+                        control_link: config.control_link,
+                        enable_on_start: c.enable_on_start,
+                    },
+                )
+            }),
             config,
             gnss_fix: None,
             gnss_link_down: false,
@@ -250,15 +284,29 @@ impl Vehicle {
                 };
                 vec![Output::CommandResult(result)]
             }
-            Input::Command(Command::Stop(reason)) => {
-                let result = match &mut self.chassis {
-                    Some(c) => {
-                        c.stop(reason.into());
-                        Ok(())
-                    }
-                    None => Err(CommandRejected::NoDrives),
-                };
+            Input::Command(Command::Stop) => {
+                let result = self.with_chassis(|c| {
+                    c.operator_stop(t);
+                    Ok(())
+                });
                 vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::Reset) => {
+                let result = self.with_chassis(|c| c.reset(t));
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::EmergencyStop { engaged }) => {
+                let result = self.with_chassis(|c| {
+                    c.software_estop(t, engaged);
+                    Ok(())
+                });
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::ControlHeartbeat) => {
+                if let Some(c) = &mut self.chassis {
+                    c.control_heartbeat(t);
+                }
+                vec![Output::CommandResult(Ok(()))]
             }
             Input::Command(Command::SetMode(mode)) => {
                 let result = match &mut self.chassis {
@@ -308,6 +356,17 @@ impl Vehicle {
                 Vec::new()
             }
             Input::Tick => vec![Output::Status(Box::new(self.status(t)))],
+        }
+    }
+
+    /// Runs `f` on the drive train; refused without one.
+    fn with_chassis(
+        &mut self,
+        f: impl FnOnce(&mut Chassis) -> Result<(), CommandRejected>,
+    ) -> Result<(), CommandRejected> {
+        match &mut self.chassis {
+            Some(c) => f(c),
+            None => Err(CommandRejected::NoDrives),
         }
     }
 

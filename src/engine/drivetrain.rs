@@ -6,13 +6,17 @@ use std::f64::consts::TAU;
 use crate::config::VehicleConfig;
 use crate::config::chassis::{Wheel, WheelConfig};
 use crate::core::chassis::{ChassisFeedback, DriveSummary, WheelCommand, WheelFeedback};
+use crate::core::safety::Power;
 use crate::devices::bms::daly::DalyBms;
 use crate::devices::bms::dbc::DbcBms;
 use crate::devices::bms::profile::CurrentAboveOffset;
 use crate::devices::bms::{BmsDevice, BmsProfile};
 use crate::devices::can::{Frame, Received};
 use crate::devices::canopen::NodeId;
+use crate::devices::canopen::nmt::{NmtState, heartbeat_frame};
 use crate::devices::cia402::node::{DriveFault, DriveNode, NodeSettings, Phase};
+use crate::devices::cia402::profile::MasterLoss;
+use crate::devices::cia402::state::Goal;
 use crate::time::Timestamp;
 use std::time::Duration;
 
@@ -78,6 +82,31 @@ struct Drive {
     started: bool,
 }
 
+/// What chassisd produces on a bus so that its drives notice when it is gone.
+#[derive(Debug, Clone)]
+struct Deadman {
+    /// chassisd's heartbeat: node id, period, next due.
+    heartbeat: (NodeId, Duration, Option<Timestamp>),
+    /// SYNC period and next due, when a drive watches SYNC.
+    sync: Option<(Duration, Option<Timestamp>)>,
+}
+
+impl Deadman {
+    fn poll(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+        let (node, period, next) = &mut self.heartbeat;
+        if next.is_none_or(|n| t >= n) {
+            out.push(heartbeat_frame(*node, NmtState::Operational));
+            *next = Some(t.saturating_add(*period));
+        }
+        if let Some((period, next)) = &mut self.sync
+            && next.is_none_or(|n| t >= n)
+        {
+            out.push(Frame::std(0x080, []));
+            *next = Some(t.saturating_add(*period));
+        }
+    }
+}
+
 /// One CAN interface and its devices.
 #[derive(Debug, Clone)]
 pub struct Bus {
@@ -85,6 +114,7 @@ pub struct Bus {
     listen_only: bool,
     link: BusLink,
     drives: Vec<Drive>,
+    deadman: Option<Deadman>,
     bms: Option<BmsDevice>,
     stats: BusStats,
 }
@@ -120,7 +150,7 @@ impl Drivetrain {
             .can
             .iter()
             .map(|c| {
-                let drives = config
+                let drives: Vec<Drive> = config
                     .drive
                     .iter()
                     .filter(|d| d.bus == c.interface)
@@ -134,6 +164,12 @@ impl Drivetrain {
                             sdo_retries: d.sdo_retries,
                             boot_timeout: Duration::from_millis(d.boot_timeout_ms),
                             enable_timeout: Duration::from_millis(d.enable_timeout_ms),
+                            feedback_timeout: d.feedback_timeout(&profile),
+                            reset_attempts: d.reset_attempts,
+                            reset_wait: Duration::from_millis(d.reset_wait_ms),
+                            master_node: NodeId::new(c.master_node)?,
+                            master_timeout: Duration::from_millis(d.master_timeout_ms),
+                            sync_period: Duration::from_millis(c.sync_ms),
                         };
                         let mut node = DriveNode::new(settings, profile);
                         node.set_monitor(c.listen_only);
@@ -175,11 +211,25 @@ impl Drivetrain {
                             BmsProfile::Dbc(p) => BmsDevice::Dbc(DbcBms::new(p).ok()?),
                         })
                     });
+                let watches_sync = config.drive.iter().any(|d| {
+                    d.bus == c.interface
+                        && matches!(
+                            d.profile.get().and_then(|p| p.master_loss),
+                            Some(MasterLoss::Sync { .. })
+                        )
+                });
+                let deadman = NodeId::new(c.master_node)
+                    .filter(|_| !drives.is_empty() && !c.listen_only)
+                    .map(|node| Deadman {
+                        heartbeat: (node, Duration::from_millis(c.master_heartbeat_ms), None),
+                        sync: watches_sync.then(|| (Duration::from_millis(c.sync_ms), None)),
+                    });
                 Bus {
                     name: c.interface.clone(),
                     listen_only: c.listen_only,
                     link: BusLink::Unknown,
                     drives,
+                    deadman,
                     bms,
                     stats: BusStats::default(),
                 }
@@ -270,6 +320,9 @@ impl Drivetrain {
                 continue;
             }
             let mut out = Vec::new();
+            if let Some(deadman) = &mut bus.deadman {
+                deadman.poll(t, &mut out);
+            }
             for d in &mut bus.drives {
                 if !d.started && !bus.listen_only {
                     d.started = true;
@@ -332,6 +385,7 @@ impl Drivetrain {
                     enabled: d.node.is_enabled(),
                     fault: fault.map(|f| f.to_string()),
                     heartbeat_lost: fault == Some(DriveFault::HeartbeatLost),
+                    resetting: d.node.is_resetting(),
                 });
             }
         }
@@ -340,10 +394,16 @@ impl Drivetrain {
 
     /// Applies the core's wheel command to every drive.
     pub fn command(&mut self, t: Timestamp, command: &WheelCommand) {
+        let goal = match command.power {
+            Power::Standby => Goal::Standby,
+            Power::Enabled => Goal::Enabled,
+            Power::QuickStop => Goal::QuickStop,
+            Power::Disabled => Goal::Disabled,
+        };
         for bus in &mut self.buses {
             for d in &mut bus.drives {
-                if command.reset_faults {
-                    d.node.reset_fault();
+                if command.reset_faults && d.node.fault().is_some() && !d.node.reset_fault(t) {
+                    tracing::warn!(drive = %d.name, "fault cannot be reset yet");
                 }
                 let rpm: Vec<f64> = d
                     .axes
@@ -356,7 +416,7 @@ impl Drivetrain {
                         wheel / TAU * 60.0 * axis.ratio
                     })
                     .collect();
-                d.node.command(t, command.enable, &rpm);
+                d.node.command(t, goal, &rpm);
             }
         }
     }

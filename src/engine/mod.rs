@@ -182,7 +182,7 @@ fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> D
     if let Some(r) = &mqtt.root {
         list.push(Box::new(RootDialect::new(
             &r.vehicle_id,
-            r.heartbeat_timeout(),
+            r.heartbeat_client_id.clone(),
             mqtt.max_payload,
         )));
     }

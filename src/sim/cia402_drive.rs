@@ -1,7 +1,9 @@
 //! A simulated CiA 402 drive node: NMT, heartbeat, an SDO server over its object
 //! dictionary, TPDOs and RPDOs as configured over SDO, the power state machine, a motor that
 //! follows the target velocity with an acceleration limit, encoder counts, EMCY on faults,
-//! and a communication watchdog that quick-stops the motor when the master goes silent.
+//! and the loss-of-master watchdog its profile names: a consumer heartbeat (0x1016:1) or SYNC
+//! (0x1006) with the 0x6007 reaction, or a vendor timeout object fed by frames addressed to
+//! the drive. A fault can be made sticky, so it survives a given number of reset edges.
 //!
 //! It is built from the same drive profile as the real driver, so it offers exactly the
 //! objects the profile names and refuses others with the CiA 301 abort code.
@@ -16,6 +18,9 @@ use crate::devices::canopen::pdo::{PdoEntry, PdoMapping};
 use crate::devices::canopen::sdo::{AbortCode, SdoData, SdoRequest, SdoResponse, decode_request};
 use crate::devices::canopen::{Cob, NodeId, ObjectAddress};
 use crate::devices::cia402::DriveProfile;
+use crate::devices::cia402::profile::{
+    ABORT_CONNECTION_OPTION, COMMUNICATION_CYCLE, CONSUMER_HEARTBEAT, LossReaction, MasterLoss,
+};
 use crate::devices::cia402::state::DriveState;
 use crate::time::Timestamp;
 
@@ -26,8 +31,6 @@ pub struct MotorModel {
     pub accel_rpm_per_s: f64,
     /// First-order lag of the speed loop, s (0: none, only the acceleration limit).
     pub time_constant_s: f64,
-    /// Silence from the master after which an enabled drive quick-stops.
-    pub comm_timeout: Duration,
 }
 
 impl Default for MotorModel {
@@ -35,10 +38,12 @@ impl Default for MotorModel {
         Self {
             accel_rpm_per_s: 3000.0,
             time_constant_s: 0.0,
-            comm_timeout: Duration::from_millis(500),
         }
     }
 }
+
+/// The quick-stop ramp is this many times the normal acceleration limit.
+const QUICK_STOP_FACTOR: f64 = 2.0;
 
 #[derive(Debug, Clone, Copy, Default)]
 struct Axis {
@@ -121,7 +126,23 @@ pub struct SimDrive {
     vendor: BTreeMap<ObjectAddress, u32>,
     tpdo: Vec<PdoSlot>,
     rpdo: Vec<PdoSlot>,
-    last_master_frame: Option<Timestamp>,
+    /// 0x1016:1 as written: the master's node id (bits 16–23) and time in ms (bits 0–15).
+    consumer_heartbeat: u32,
+    /// 0x1006 as written, µs.
+    cycle_period_us: u32,
+    /// 0x6007 as written (CiA 402's default is 1, a fault).
+    abort_option: i16,
+    /// When the watched heartbeat, SYNC or addressed frame last came; monitoring starts with
+    /// the first and stops after a loss until the next.
+    master_heard: Option<Timestamp>,
+    /// Losses of the master detected so far.
+    master_losses: u32,
+    /// Reset edges to ignore before a fault clears.
+    refuse_resets: u32,
+    /// Rising edges of controlword bit 7 received.
+    reset_edges: u32,
+    /// TPDOs are sent (false: they stop while the heartbeat goes on, as a half-failed node).
+    tpdos_on: bool,
     last_step: Option<Timestamp>,
 }
 
@@ -155,7 +176,14 @@ impl SimDrive {
             rpdo: (1..=4)
                 .map(|n| PdoSlot::new(crate::devices::canopen::rpdo_cob_id(n, node)))
                 .collect(),
-            last_master_frame: None,
+            consumer_heartbeat: 0,
+            cycle_period_us: 0,
+            abort_option: 1,
+            master_heard: None,
+            master_losses: 0,
+            refuse_resets: 0,
+            reset_edges: 0,
+            tpdos_on: true,
             last_step: None,
             profile,
         }
@@ -169,6 +197,26 @@ impl SimDrive {
     /// Stops (or resumes) the heartbeat, as a failing node would.
     pub fn set_heartbeat(&mut self, on: bool) {
         self.heartbeat_enabled = on;
+    }
+
+    /// Makes the next fault survive `edges` reset edges (the drive stays in Fault).
+    pub fn refuse_resets(&mut self, edges: u32) {
+        self.refuse_resets = edges;
+    }
+
+    /// Stops (or resumes) the TPDOs while the heartbeat goes on.
+    pub fn set_tpdos(&mut self, on: bool) {
+        self.tpdos_on = on;
+    }
+
+    /// Rising edges of controlword bit 7 received so far.
+    pub fn reset_edges(&self) -> u32 {
+        self.reset_edges
+    }
+
+    /// Losses of the master detected so far.
+    pub fn master_losses(&self) -> u32 {
+        self.master_losses
     }
 
     /// Puts an axis into fault and sends the EMCY `code`.
@@ -216,12 +264,16 @@ impl SimDrive {
             Cob::Nmt => {
                 let d = frame.data();
                 if d.len() == 2 && (d[1] == 0 || d[1] == self.node.get()) {
-                    self.last_master_frame = Some(t);
+                    self.heard(t, Watched::Addressed);
                     self.on_nmt(t, d[0], out);
                 }
             }
+            Cob::Heartbeat(n) if u32::from(n.get()) == (self.consumer_heartbeat >> 16) & 0xFF => {
+                self.heard(t, Watched::Heartbeat);
+            }
+            Cob::Sync => self.heard(t, Watched::Sync),
             Cob::SdoRequest(n) if n == self.node => {
-                self.last_master_frame = Some(t);
+                self.heard(t, Watched::Addressed);
                 let response = match decode_request(frame) {
                     Ok(SdoRequest::Read(addr)) => match self.read(addr) {
                         Ok(data) => SdoResponse::Data(addr, data),
@@ -245,13 +297,75 @@ impl SimDrive {
                     && let Some(mapping) = slot.mapping()
                     && let Some(values) = mapping.unpack(frame.data())
                 {
-                    self.last_master_frame = Some(t);
+                    self.heard(t, Watched::Addressed);
                     for (object, value) in values {
                         let _ = self.write(t, object, SdoData::u32(value as u32));
                     }
                 }
             }
         }
+    }
+
+    /// The master showed life in the way the profile's watchdog looks for.
+    fn heard(&mut self, t: Timestamp, what: Watched) {
+        let watched = match self.profile.master_loss {
+            Some(MasterLoss::Heartbeat { .. }) => Watched::Heartbeat,
+            Some(MasterLoss::Sync { .. }) => Watched::Sync,
+            Some(MasterLoss::VendorTimeout { .. }) => Watched::Addressed,
+            None => return,
+        };
+        if what == watched {
+            self.master_heard = Some(t);
+        }
+    }
+
+    /// The master-loss timeout in force, if the watchdog is configured.
+    fn master_timeout(&self) -> Option<Duration> {
+        let ms = match self.profile.master_loss? {
+            MasterLoss::Heartbeat { .. } => u64::from(self.consumer_heartbeat & 0xFFFF),
+            // Two missed cycles.
+            MasterLoss::Sync { .. } => u64::from(self.cycle_period_us) * 2 / 1000,
+            MasterLoss::VendorTimeout { object, .. } => {
+                u64::from(self.vendor.get(&object).copied().unwrap_or(0))
+            }
+        };
+        (ms > 0).then(|| Duration::from_millis(ms))
+    }
+
+    /// The master went silent: the reaction the profile's objects say.
+    fn on_master_loss(&mut self, out: &mut Vec<Frame>) {
+        self.master_heard = None;
+        self.master_losses += 1;
+        let reaction = match self.profile.master_loss {
+            Some(MasterLoss::VendorTimeout { .. }) => Some(LossReaction::QuickStop),
+            _ => LossReaction::from_code(self.abort_option),
+        };
+        for a in &mut self.axes {
+            let Some(state) = a.state else { continue };
+            let live = matches!(
+                state,
+                DriveState::OperationEnabled | DriveState::SwitchedOn | DriveState::ReadyToSwitchOn
+            );
+            a.state = Some(match reaction {
+                Some(LossReaction::QuickStop) if state == DriveState::OperationEnabled => {
+                    DriveState::QuickStopActive
+                }
+                Some(LossReaction::QuickStop | LossReaction::DisableVoltage) if live => {
+                    DriveState::SwitchOnDisabled
+                }
+                Some(LossReaction::Fault) if live => DriveState::Fault,
+                _ => state,
+            });
+            a.target = 0;
+        }
+        out.push(
+            Emcy {
+                code: 0x8130,
+                register: 0x11,
+                vendor: [0; 5],
+            }
+            .frame(self.node),
+        );
     }
 
     fn on_nmt(&mut self, t: Timestamp, command: u8, out: &mut Vec<Frame>) {
@@ -266,6 +380,9 @@ impl SimDrive {
                     *slot = PdoSlot::new(slot.cob_id & 0x7FF);
                 }
                 self.heartbeat_ms = 0;
+                self.consumer_heartbeat = 0;
+                self.cycle_period_us = 0;
+                self.master_heard = None;
                 for a in &mut self.axes {
                     if command == 0x81 || a.state == Some(DriveState::OperationEnabled) {
                         a.state = Some(DriveState::SwitchOnDisabled);
@@ -314,6 +431,19 @@ impl SimDrive {
         if addr == objects.heartbeat_producer {
             return Ok(SdoData::u16(self.heartbeat_ms));
         }
+        match (addr, self.profile.master_loss) {
+            (CONSUMER_HEARTBEAT, Some(MasterLoss::Heartbeat { .. })) => {
+                return Ok(SdoData::u32(self.consumer_heartbeat));
+            }
+            (COMMUNICATION_CYCLE, Some(MasterLoss::Sync { .. })) => {
+                return Ok(SdoData::u32(self.cycle_period_us));
+            }
+            (
+                ABORT_CONNECTION_OPTION,
+                Some(MasterLoss::Heartbeat { .. } | MasterLoss::Sync { .. }),
+            ) => return Ok(SdoData::u16(self.abort_option as u16)),
+            _ => {}
+        }
         for (a, axis) in self.axes.iter().enumerate() {
             if objects.actual_velocity.get(a) == Some(&addr) {
                 let raw = axis.rpm * self.profile.units.actual_velocity_per_rpm;
@@ -356,6 +486,31 @@ impl SimDrive {
             self.next_heartbeat = t;
             return Ok(());
         }
+        match (addr, self.profile.master_loss) {
+            (CONSUMER_HEARTBEAT, Some(MasterLoss::Heartbeat { .. })) => {
+                self.consumer_heartbeat = data.as_u32();
+                self.master_heard = None;
+                return Ok(());
+            }
+            (COMMUNICATION_CYCLE, Some(MasterLoss::Sync { .. })) => {
+                self.cycle_period_us = data.as_u32();
+                self.master_heard = None;
+                return Ok(());
+            }
+            (
+                ABORT_CONNECTION_OPTION,
+                Some(MasterLoss::Heartbeat { .. } | MasterLoss::Sync { .. }),
+            ) => {
+                self.abort_option = data.as_u32() as u16 as i16;
+                return Ok(());
+            }
+            (object, Some(MasterLoss::VendorTimeout { object: timer, .. })) if object == timer => {
+                self.vendor.insert(object, data.as_u32());
+                self.master_heard = Some(t);
+                return Ok(());
+            }
+            _ => {}
+        }
         if Some(addr) == objects.combined_target_velocity {
             let v = data.as_u32();
             self.set_target(0, i32::from(v as u16 as i16));
@@ -388,7 +543,14 @@ impl SimDrive {
         use DriveState::*;
         let rising_reset = cw & 0x80 != 0 && self.controlword & 0x80 == 0;
         self.controlword = cw;
-        self.last_master_frame = Some(t);
+        let _ = t;
+        if rising_reset {
+            self.reset_edges += 1;
+        }
+        let cleared = rising_reset && self.refuse_resets == 0;
+        if rising_reset && self.axes.iter().any(|a| a.state == Some(DriveState::Fault)) {
+            self.refuse_resets = self.refuse_resets.saturating_sub(1);
+        }
         // The device control commands of CiA 402 §6.3.1.
         let disable_voltage = cw & 0x82 == 0x00;
         let quick_stop = cw & 0x86 == 0x02;
@@ -398,9 +560,11 @@ impl SimDrive {
         for a in &mut self.axes {
             let Some(state) = a.state else { continue };
             a.state = Some(match state {
-                Fault if rising_reset => SwitchOnDisabled,
+                Fault if cleared => SwitchOnDisabled,
                 Fault | FaultReactionActive | NotReadyToSwitchOn => state,
                 OperationEnabled if quick_stop => QuickStopActive,
+                // Braking on the quick-stop ramp; it ends in switch on disabled by itself.
+                QuickStopActive if quick_stop => state,
                 _ if disable_voltage || quick_stop => SwitchOnDisabled,
                 SwitchOnDisabled if shutdown => ReadyToSwitchOn,
                 ReadyToSwitchOn if switch_on => SwitchedOn,
@@ -508,39 +672,28 @@ impl SimDrive {
             .last_step
             .map_or(0.0, |last| t.saturating_since(last).as_secs_f64());
         self.last_step = Some(t);
-        // Communication watchdog: an enabled motor whose master went silent quick-stops.
-        if let Some(last) = self.last_master_frame
-            && t.saturating_since(last) > self.model.comm_timeout
-            && self
-                .axes
-                .iter()
-                .any(|a| a.state == Some(DriveState::OperationEnabled))
+        if let (Some(heard), Some(timeout)) = (self.master_heard, self.master_timeout())
+            && t.saturating_since(heard) > timeout
         {
-            for a in &mut self.axes {
-                if a.state == Some(DriveState::OperationEnabled) {
-                    a.state = Some(DriveState::SwitchOnDisabled);
-                }
-            }
-            out.push(
-                Emcy {
-                    code: 0x8130,
-                    register: 0x11,
-                    vendor: [0; 5],
-                }
-                .frame(self.node),
-            );
+            self.on_master_loss(out);
         }
         let per_rpm = self.profile.units.target_velocity_per_rpm;
         let counts_per_rev = self.profile.units.counts_per_rev;
         let max_step = self.model.accel_rpm_per_s * dt;
         for a in &mut self.axes {
+            let quick_stop = a.state == Some(DriveState::QuickStopActive);
             let wanted = if a.state == Some(DriveState::OperationEnabled) && self.mode == 3 {
                 f64::from(a.target) / per_rpm
             } else {
                 0.0
             };
+            let max_step = if quick_stop {
+                max_step * QUICK_STOP_FACTOR
+            } else {
+                max_step
+            };
             // The speed loop's lag, then the acceleration limit.
-            let lagged = if self.model.time_constant_s > 0.0 {
+            let lagged = if self.model.time_constant_s > 0.0 && !quick_stop {
                 (wanted - a.rpm) * (1.0 - (-dt / self.model.time_constant_s).exp())
             } else {
                 wanted - a.rpm
@@ -550,13 +703,16 @@ impl SimDrive {
             let rpm_before = a.rpm;
             a.rpm += change;
             a.counts += (rpm_before + a.rpm) / 2.0 / 60.0 * dt * counts_per_rev;
+            if quick_stop && a.rpm == 0.0 {
+                a.state = Some(DriveState::SwitchOnDisabled);
+            }
         }
         if self.heartbeat_enabled && self.heartbeat_ms > 0 && t >= self.next_heartbeat {
             out.push(heartbeat_frame(self.node, self.nmt));
             self.next_heartbeat =
                 t.saturating_add(Duration::from_millis(u64::from(self.heartbeat_ms)));
         }
-        if self.nmt == NmtState::Operational {
+        if self.nmt == NmtState::Operational && self.tpdos_on {
             for k in 0..self.tpdo.len() {
                 let slot = &self.tpdo[k];
                 if !slot.enabled() || slot.event_timer_ms == 0 || t < slot.next_send {
@@ -579,4 +735,15 @@ impl SimDrive {
             }
         }
     }
+}
+
+/// What shows the master is alive, for the loss watchdog.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Watched {
+    /// A heartbeat from the consumed node.
+    Heartbeat,
+    /// A SYNC.
+    Sync,
+    /// A frame addressed to this node (SDO request, RPDO, NMT).
+    Addressed,
 }

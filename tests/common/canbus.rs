@@ -3,8 +3,10 @@
 
 use chassisd::devices::can::Frame;
 use chassisd::devices::canopen::NodeId;
+use chassisd::devices::canopen::nmt::{NmtState, heartbeat_frame};
 use chassisd::devices::cia402::DriveProfile;
 use chassisd::devices::cia402::node::{DriveNode, NodeSettings};
+use chassisd::devices::cia402::state::Goal;
 use chassisd::sim::cia402_drive::{MotorModel, SimDrive};
 use chassisd::time::Timestamp;
 use std::path::Path;
@@ -29,8 +31,22 @@ pub fn settings(node: u8) -> NodeSettings {
         sdo_retries: 2,
         boot_timeout: Duration::from_millis(1000),
         enable_timeout: Duration::from_millis(1000),
+        feedback_timeout: Duration::from_millis(250),
+        reset_attempts: 3,
+        reset_wait: Duration::from_millis(200),
+        master_node: MASTER,
+        master_timeout: Duration::from_millis(250),
+        sync_period: Duration::from_millis(20),
     }
 }
+
+/// chassisd's node id in the rig, whose heartbeat the drive consumes.
+pub const MASTER: NodeId = match NodeId::new(0x7F) {
+    Some(n) => n,
+    None => panic!("0x7F is a node id"),
+};
+/// chassisd's heartbeat period in the rig, ms.
+pub const MASTER_HEARTBEAT_MS: u64 = 50;
 
 /// Milliseconds as a timestamp.
 pub fn ms(v: u64) -> Timestamp {
@@ -45,6 +61,8 @@ pub struct Rig {
     /// Every frame, with who sent it (true: chassisd).
     pub log: Vec<(u64, bool, Frame)>,
     pub link_up: bool,
+    /// chassisd produces its heartbeat (as the drive train does); false: chassisd is gone.
+    pub master_alive: bool,
 }
 
 impl Rig {
@@ -56,6 +74,7 @@ impl Rig {
             now_ms: 0,
             log: Vec::new(),
             link_up: true,
+            master_alive: true,
         }
     }
 
@@ -68,14 +87,27 @@ impl Rig {
     }
 
     pub fn run(&mut self, duration_ms: u64, enable: bool, rpm: &[f64]) {
+        let goal = if enable { Goal::Enabled } else { Goal::Standby };
+        self.run_towards(duration_ms, goal, rpm);
+    }
+
+    /// Runs for `duration_ms`, commanding `(goal, rpm)` at each control tick.
+    pub fn run_towards(&mut self, duration_ms: u64, goal: Goal, rpm: &[f64]) {
         for _ in 0..duration_ms {
             self.now_ms += 1;
             let t = ms(self.now_ms);
             let mut from_sim = Vec::new();
             self.sim.step(t, &mut from_sim);
             let mut from_node = Vec::new();
+            if !self.master_alive {
+                self.deliver(from_sim, Vec::new());
+                continue;
+            }
+            if self.now_ms.is_multiple_of(MASTER_HEARTBEAT_MS) {
+                from_node.push(heartbeat_frame(MASTER, NmtState::Operational));
+            }
             if self.now_ms.is_multiple_of(10) {
-                self.node.command(t, enable, rpm);
+                self.node.command(t, goal, rpm);
                 self.node.poll(t, &mut from_node);
             }
             self.deliver(from_sim, from_node);
@@ -105,11 +137,12 @@ impl Rig {
         }
     }
 
-    /// Frames chassisd sent, as candump text.
+    /// Frames chassisd's node sent (not its heartbeat), as candump text.
     pub fn sent(&self) -> Vec<String> {
+        let heartbeat = 0x700 + u32::from(MASTER.get());
         self.log
             .iter()
-            .filter(|(_, mine, _)| *mine)
+            .filter(|(_, mine, f)| *mine && f.id() != heartbeat)
             .map(|(_, _, f)| f.to_string())
             .collect()
     }

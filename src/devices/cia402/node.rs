@@ -2,16 +2,23 @@
 //! the controlword sequence, target velocity out, feedback in, and the watchdogs.
 //!
 //! The node reaches "running" (NMT operational, set up, power stage switched on) by itself
-//! and retries while the node is silent. It enables the power stage only while the owner
-//! asks for it. A fault — a lost heartbeat, a drive fault, an EMCY, a failed SDO — is latched
-//! and reported; the target drops to zero and the drive is not enabled again until the
-//! owner resets the fault, which it does only on a fresh command (DESIGN.md §5).
+//! and retries while the node is silent. It takes the power stage where the owner asks
+//! (enabled, switched on, quick stop, disabled). A fault — a lost heartbeat, stale feedback,
+//! a drive fault, an EMCY, a failed SDO — is latched and reported; the target drops to zero
+//! and the drive is not enabled again until the owner resets the fault, which the safety
+//! supervisor asks for only on a deliberate act (DESIGN.md §5). A drive in Fault is reset by
+//! the CiA 402 handshake: bit 7 of the controlword low for a cycle, then the rising edge, on
+//! every attempt; the fault stays latched until the statusword leaves Fault, and the attempts
+//! are bounded.
 
 use std::fmt;
 use std::time::Duration;
 
-use super::profile::{DriveProfile, Transport};
-use super::state::{DriveState, next_controlword};
+use super::profile::{
+    ABORT_CONNECTION_OPTION, COMMUNICATION_CYCLE, CONSUMER_HEARTBEAT, DriveProfile, MasterLoss,
+    Transport, ValueType,
+};
+use super::state::{DriveState, Goal, controlword, next_controlword};
 use crate::devices::can::Frame;
 use crate::devices::canopen::emcy::Emcy;
 use crate::devices::canopen::nmt::{NmtCommand, NmtState};
@@ -42,6 +49,18 @@ pub struct NodeSettings {
     pub boot_timeout: Duration,
     /// How long the enable sequence may take.
     pub enable_timeout: Duration,
+    /// No feedback (TPDO or SDO poll answer) from an axis for this long is a fault.
+    pub feedback_timeout: Duration,
+    /// Fault reset attempts (rising edges) before giving up.
+    pub reset_attempts: u8,
+    /// How long each attempt waits for the statusword to leave Fault.
+    pub reset_wait: Duration,
+    /// chassisd's own node id: the heartbeat the drive consumes.
+    pub master_node: NodeId,
+    /// Silence from chassisd after which the drive stops by itself (written to the drive).
+    pub master_timeout: Duration,
+    /// The SYNC period chassisd produces (written to drives that watch SYNC).
+    pub sync_period: Duration,
 }
 
 /// Why a drive stopped. Latched until the owner resets it.
@@ -79,6 +98,12 @@ pub enum DriveFault {
         /// Where it stopped.
         state: DriveState,
     },
+    /// No feedback from an axis within the feedback timeout, though the node may still send
+    /// heartbeats.
+    FeedbackStale {
+        /// Axis, 0-based.
+        axis: usize,
+    },
 }
 
 impl DriveFault {
@@ -108,6 +133,7 @@ impl fmt::Display for DriveFault {
             Self::SdoAbort { object, code } => write!(f, "SDO {object} aborted: {code}"),
             Self::SdoTimeout { object } => write!(f, "SDO {object} timed out"),
             Self::EnableTimeout { state } => write!(f, "enable timed out in state {state}"),
+            Self::FeedbackStale { axis } => write!(f, "no feedback from axis {}", axis + 1),
         }
     }
 }
@@ -156,6 +182,25 @@ pub struct NodeStats {
     pub emcys: u64,
     /// Boot attempts (NMT resets sent).
     pub resets: u64,
+    /// Fault reset edges sent.
+    pub fault_resets: u64,
+}
+
+/// A fault reset under way: bit 7 low for at least a cycle, then the rising edge, then the
+/// statusword must leave Fault within the wait; else the next attempt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct FaultReset {
+    /// 1-based.
+    attempt: u8,
+    step: ResetStep,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ResetStep {
+    /// Bit 7 low, since this tick.
+    Low(Timestamp),
+    /// Bit 7 high (the edge) since this tick.
+    Edge(Timestamp),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -178,12 +223,14 @@ pub struct DriveNode {
     sdo: SdoClient<Tag>,
     phase: Phase,
     fault: Option<DriveFault>,
-    /// Set when a fault reset was asked for and the drive's own fault must be cleared.
-    reset_drive: bool,
+    /// The fault reset handshake under way.
+    reset: Option<FaultReset>,
+    /// When the node last became running.
+    running_since: Option<Timestamp>,
     nmt: Option<NmtState>,
     last_heartbeat: Option<Timestamp>,
     axes: Vec<AxisFeedback>,
-    enable: bool,
+    goal: Goal,
     enable_asked_at: Option<Timestamp>,
     targets: Vec<i32>,
     sent_targets: Option<Vec<i32>>,
@@ -227,11 +274,12 @@ impl DriveNode {
             profile,
             phase: Phase::Offline,
             fault: None,
-            reset_drive: false,
+            reset: None,
+            running_since: None,
             nmt: None,
             last_heartbeat: None,
             axes: vec![AxisFeedback::default(); axes],
-            enable: false,
+            goal: Goal::Standby,
             enable_asked_at: None,
             targets: vec![0; axes],
             sent_targets: None,
@@ -313,6 +361,16 @@ impl DriveNode {
         self.phase == Phase::Running && self.fault.is_none()
     }
 
+    /// Whether a fault reset handshake is under way.
+    pub fn is_resetting(&self) -> bool {
+        self.reset.is_some()
+    }
+
+    /// The controlword last set (sent, or queued for sending).
+    pub fn controlword(&self) -> u16 {
+        self.controlword
+    }
+
     /// Counters.
     pub fn stats(&self) -> NodeStats {
         self.stats
@@ -326,6 +384,9 @@ impl DriveNode {
     /// Starts (or restarts) the node: NMT reset communication, then set-up on boot-up.
     pub fn start(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         self.sdo.clear();
+        self.reset = None;
+        self.running_since = None;
+        self.controlword = 0;
         self.nmt = None;
         self.axes
             .iter_mut()
@@ -358,10 +419,15 @@ impl DriveNode {
         }
     }
 
-    /// Sets what the owner wants: the power stage enabled or not, and each axis's target
-    /// in motor r/min. Targets are ignored (zero is sent) unless enabled and fault-free.
-    pub fn command(&mut self, t: Timestamp, enable: bool, motor_rpm: &[f64]) {
-        let enable = enable && self.fault.is_none();
+    /// Sets what the owner wants: where the power stage should go, and each axis's target
+    /// in motor r/min. Targets are ignored (zero is sent) unless enabled and fault-free; a
+    /// latched fault turns an enable into a quick stop.
+    pub fn command(&mut self, t: Timestamp, goal: Goal, motor_rpm: &[f64]) {
+        let goal = match goal {
+            Goal::Enabled if self.fault.is_some() => Goal::QuickStop,
+            other => other,
+        };
+        let enable = goal == Goal::Enabled;
         // The enable sequence is timed from when the node could first carry it out.
         if enable
             && self.enable_asked_at.is_none()
@@ -373,7 +439,7 @@ impl DriveNode {
         if !enable {
             self.enable_asked_at = None;
         }
-        self.enable = enable;
+        self.goal = goal;
         let scale = self.profile.units.target_velocity_per_rpm;
         let combined = self.profile.objects.combined_target_velocity.is_some();
         for (i, target) in self.targets.iter_mut().enumerate() {
@@ -392,15 +458,29 @@ impl DriveNode {
         }
     }
 
-    /// Clears a latched fault on a fresh command. Only a running node can be reset; returns
-    /// whether the fault is cleared.
-    pub fn reset_fault(&mut self) -> bool {
+    /// Resets a latched fault (the owner's deliberate act). A drive in Fault gets the reset
+    /// handshake and its fault stays latched until the statusword leaves Fault; other faults
+    /// clear at once if their condition is gone. Only a running node can be reset; returns
+    /// whether the fault is cleared or being reset.
+    pub fn reset_fault(&mut self, t: Timestamp) -> bool {
         if self.phase != Phase::Running {
             return self.fault.is_none();
         }
-        if self.fault.take().is_some() {
-            self.reset_drive = true;
+        if self.drive_state().is_some_and(DriveState::is_fault) {
+            if self.reset.is_none() {
+                self.reset = Some(FaultReset {
+                    attempt: 1,
+                    step: ResetStep::Low(t),
+                });
+            }
+            return true;
         }
+        if let Some(DriveFault::FeedbackStale { axis }) = self.fault
+            && self.feedback_age(t, axis) > self.settings.feedback_timeout
+        {
+            return false;
+        }
+        self.fault = None;
         true
     }
 
@@ -538,6 +618,7 @@ impl DriveNode {
     fn finish_setup(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         out.push(NmtCommand::Start.frame(Some(self.settings.node)));
         self.phase = Phase::Running;
+        self.running_since = Some(t);
         self.next_poll = t;
         self.next_command = t;
         // Feedback first, so the controlword follows the drive's real state.
@@ -549,7 +630,7 @@ impl DriveNode {
             a.statusword = Some(sw);
             a.rx = Some(t);
         }
-        if DriveState::from_statusword(sw).is_fault() && !self.reset_drive {
+        if DriveState::from_statusword(sw).is_fault() {
             self.raise(DriveFault::Drive {
                 axis,
                 statusword: sw,
@@ -593,7 +674,9 @@ impl DriveNode {
         if self.fault.is_none() {
             self.fault = Some(fault);
         }
-        self.enable = false;
+        if self.goal == Goal::Enabled {
+            self.goal = Goal::QuickStop;
+        }
         self.enable_asked_at = None;
         self.targets.iter_mut().for_each(|t| *t = 0);
     }
@@ -650,7 +733,24 @@ impl DriveNode {
         }
     }
 
+    /// How long since `axis` last reported (since running, if it never did).
+    fn feedback_age(&self, t: Timestamp, axis: usize) -> Duration {
+        let last = self
+            .axes
+            .get(axis)
+            .and_then(|a| a.rx)
+            .into_iter()
+            .chain(self.running_since)
+            .max();
+        last.map_or(Duration::ZERO, |last| t.saturating_since(last))
+    }
+
     fn run(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+        if let Some(axis) =
+            (0..self.axes.len()).find(|&a| self.feedback_age(t, a) > self.settings.feedback_timeout)
+        {
+            self.raise(DriveFault::FeedbackStale { axis });
+        }
         let state = self.drive_state();
         if let (Some(state), Some(asked)) = (state, self.enable_asked_at)
             && state != DriveState::OperationEnabled
@@ -658,15 +758,17 @@ impl DriveNode {
         {
             self.raise(DriveFault::EnableTimeout { state });
         }
-        if self.reset_drive && state.is_some_and(|s| !s.is_fault()) {
-            self.reset_drive = false;
+        if let Some(state) = state {
+            match self.reset {
+                Some(reset) => self.step_reset(t, state, reset),
+                None => {
+                    if let Some(cw) = next_controlword(state, self.goal) {
+                        self.controlword = cw;
+                    }
+                }
+            }
         }
-        if let Some(state) = state
-            && let Some(cw) = next_controlword(state, self.enable, self.reset_drive)
-        {
-            self.controlword = cw;
-        }
-        if !self.enable || !self.is_enabled() {
+        if self.goal != Goal::Enabled || !self.is_enabled() {
             self.targets.iter_mut().for_each(|x| *x = 0);
         }
         // Nothing is commanded until the drive's state is known.
@@ -762,10 +864,61 @@ impl DriveNode {
             .map_or(0, |v| i64::from(*v))
     }
 
-    /// Zero targets and "disable operation", sent straight away.
+    /// One step of the fault reset handshake in `state`.
+    fn step_reset(&mut self, t: Timestamp, state: DriveState, reset: FaultReset) {
+        let low = controlword::DISABLE_VOLTAGE;
+        if !state.is_fault() {
+            // Out of Fault: the reset worked.
+            tracing::info!(
+                node = self.settings.node.get(),
+                attempt = reset.attempt,
+                "fault reset"
+            );
+            self.reset = None;
+            self.fault = None;
+            self.controlword = next_controlword(state, self.goal).unwrap_or(low);
+            return;
+        }
+        self.reset = match reset.step {
+            // Bit 7 must be seen low for a cycle before the edge.
+            ResetStep::Low(since) if self.sent_controlword == Some(low) && t > since => {
+                self.controlword = controlword::FAULT_RESET;
+                self.stats.fault_resets += 1;
+                Some(FaultReset {
+                    step: ResetStep::Edge(t),
+                    ..reset
+                })
+            }
+            ResetStep::Low(_) => {
+                self.controlword = low;
+                Some(reset)
+            }
+            ResetStep::Edge(since) if t.saturating_since(since) <= self.settings.reset_wait => {
+                Some(reset)
+            }
+            ResetStep::Edge(_) if reset.attempt < self.settings.reset_attempts => {
+                self.controlword = low;
+                Some(FaultReset {
+                    attempt: reset.attempt + 1,
+                    step: ResetStep::Low(t),
+                })
+            }
+            ResetStep::Edge(_) => {
+                tracing::warn!(
+                    node = self.settings.node.get(),
+                    attempts = reset.attempt,
+                    "fault reset failed: the drive stays in fault"
+                );
+                self.controlword = low;
+                None
+            }
+        };
+    }
+
+    /// Zero targets and a quick stop, sent straight away.
     fn send_stop(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         self.targets.iter_mut().for_each(|x| *x = 0);
-        self.controlword = super::state::controlword::SWITCH_ON;
+        self.controlword = controlword::QUICK_STOP;
         match self.profile.command.mode {
             Transport::Pdo => self.send_rpdos(t, out, true),
             Transport::Sdo => {
@@ -814,21 +967,60 @@ fn target_writes(profile: &DriveProfile, targets: &[i32]) -> Vec<SdoRequest> {
     }
 }
 
-/// The set-up writes, in order: heartbeat producer, profile velocity mode, zero targets,
-/// PDO configuration, then the profile's own writes.
+/// The writes that make the drive stop by itself when chassisd is gone (the profile's
+/// `[master_loss]`).
+fn master_loss_writes(settings: &NodeSettings, profile: &DriveProfile) -> Vec<SdoRequest> {
+    let timeout_ms = settings
+        .master_timeout
+        .as_millis()
+        .min(u128::from(u16::MAX)) as u16;
+    match profile.master_loss {
+        Some(MasterLoss::Heartbeat { reaction }) => vec![
+            SdoRequest::Write(
+                CONSUMER_HEARTBEAT,
+                SdoData::u32((u32::from(settings.master_node.get()) << 16) | u32::from(timeout_ms)),
+            ),
+            SdoRequest::Write(
+                ABORT_CONNECTION_OPTION,
+                SdoData::u16(reaction.code() as u16),
+            ),
+        ],
+        Some(MasterLoss::Sync { reaction }) => vec![
+            SdoRequest::Write(
+                COMMUNICATION_CYCLE,
+                SdoData::u32(settings.sync_period.as_micros().min(u128::from(u32::MAX)) as u32),
+            ),
+            SdoRequest::Write(
+                ABORT_CONNECTION_OPTION,
+                SdoData::u16(reaction.code() as u16),
+            ),
+        ],
+        Some(MasterLoss::VendorTimeout { object, value_type }) => {
+            let data = match value_type {
+                ValueType::U32 => SdoData::u32(u32::from(timeout_ms)),
+                _ => SdoData::u16(timeout_ms),
+            };
+            vec![SdoRequest::Write(object, data)]
+        }
+        // Profiles without one are refused at load.
+        None => Vec::new(),
+    }
+}
+
+/// The set-up writes, in order: heartbeat producer, the loss-of-master watchdog, profile
+/// velocity mode, zero targets, PDO configuration, then the profile's own writes.
 fn setup_writes(settings: &NodeSettings, profile: &DriveProfile) -> Vec<SdoRequest> {
     let node = settings.node;
     let objects = &profile.objects;
-    let mut writes = vec![
-        SdoRequest::Write(
-            objects.heartbeat_producer,
-            SdoData::u16(settings.heartbeat_producer_ms),
-        ),
-        SdoRequest::Write(
-            objects.mode_of_operation,
-            SdoData::i8(PROFILE_VELOCITY_MODE),
-        ),
-    ];
+    let mut writes = vec![SdoRequest::Write(
+        objects.heartbeat_producer,
+        SdoData::u16(settings.heartbeat_producer_ms),
+    )];
+    writes.extend(master_loss_writes(settings, profile));
+    writes.extend([SdoRequest::Write(
+        objects.mode_of_operation,
+        SdoData::i8(PROFILE_VELOCITY_MODE),
+    )]);
     writes.extend(target_writes(profile, &vec![0; usize::from(profile.axes)]));
     if profile.feedback.mode == Transport::Pdo {
         for (n, mapping, spec) in profile.tpdo_mappings() {

@@ -1,5 +1,7 @@
-//! Drive profiles: which objects a CiA 402 drive uses, their units, and whether feedback and
-//! commands travel by PDO or SDO. Profiles are TOML files in `devices/`, checked on load.
+//! Drive profiles: which objects a CiA 402 drive uses, their units, whether feedback and
+//! commands travel by PDO or SDO, and how the drive stops by itself when chassisd is gone.
+//! Profiles are TOML files in `devices/`, checked on load; one without a loss-of-master
+//! reaction is refused.
 
 use serde::{Deserialize, Serialize};
 
@@ -37,7 +39,79 @@ pub struct DriveProfile {
     /// Vendor-specific SDO writes made after the standard set-up, in order.
     #[serde(default)]
     pub setup: Vec<SetupWrite>,
+    /// How the drive notices that chassisd is gone, and what it does then. Required.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub master_loss: Option<MasterLoss>,
 }
+
+/// How a drive notices that its master (chassisd) is gone: a dead process, a hung loop or a
+/// cut cable. Every way ends in the drive stopping its motors by itself.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(tag = "watch", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MasterLoss {
+    /// The drive consumes chassisd's heartbeat (0x1016:1, node id and time) and reacts as
+    /// 0x6007 (abort connection option code) says.
+    Heartbeat {
+        /// The reaction written to 0x6007.
+        reaction: LossReaction,
+    },
+    /// The drive watches chassisd's SYNC (0x1006, communication cycle period) and reacts as
+    /// 0x6007 says.
+    Sync {
+        /// The reaction written to 0x6007.
+        reaction: LossReaction,
+    },
+    /// A vendor object holds a communication timeout in ms: with no frame addressed to the
+    /// drive for that long, the drive stops its motors itself.
+    VendorTimeout {
+        /// The object.
+        object: ObjectAddress,
+        /// Its type (unsigned).
+        #[serde(rename = "type")]
+        value_type: ValueType,
+    },
+}
+
+/// What a CiA 402 drive does when its master is lost (0x6007 abort connection option code).
+/// "No action" (0) is not offered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossReaction {
+    /// 1: a fault (the motor stops as the fault reaction says).
+    Fault,
+    /// 2: disable voltage (the motor coasts).
+    DisableVoltage,
+    /// 3: quick stop (the motor brakes on the quick-stop ramp).
+    QuickStop,
+}
+
+impl LossReaction {
+    /// The option code written to 0x6007.
+    pub fn code(self) -> i16 {
+        match self {
+            Self::Fault => 1,
+            Self::DisableVoltage => 2,
+            Self::QuickStop => 3,
+        }
+    }
+
+    /// The reaction of an option code, if it is one of these.
+    pub fn from_code(code: i16) -> Option<Self> {
+        match code {
+            1 => Some(Self::Fault),
+            2 => Some(Self::DisableVoltage),
+            3 => Some(Self::QuickStop),
+            _ => None,
+        }
+    }
+}
+
+/// CiA 402 abort connection option code.
+pub const ABORT_CONNECTION_OPTION: ObjectAddress = ObjectAddress::new(0x6007, 0);
+/// CiA 301 consumer heartbeat time, first entry.
+pub const CONSUMER_HEARTBEAT: ObjectAddress = ObjectAddress::new(0x1016, 1);
+/// CiA 301 communication cycle period (SYNC), µs.
+pub const COMMUNICATION_CYCLE: ObjectAddress = ObjectAddress::new(0x1006, 0);
 
 /// The profile family.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
@@ -271,6 +345,29 @@ impl DriveProfile {
     pub fn validate(&self) -> Result<(), (String, String, String)> {
         let err =
             |key: &str, problem: String, fix: &str| Err((key.to_owned(), problem, fix.to_owned()));
+        match self.master_loss {
+            None => {
+                return err(
+                    "master_loss",
+                    "not set: nothing would stop this drive if chassisd died, hung or lost its \
+                     cable"
+                        .into(),
+                    "add [master_loss] with watch = \"heartbeat\" (or \"sync\") and reaction = \
+                     \"quick_stop\", or watch = \"vendor_timeout\" with the drive's own \
+                     timeout object",
+                );
+            }
+            Some(MasterLoss::VendorTimeout { value_type, .. })
+                if !matches!(value_type, ValueType::U16 | ValueType::U32) =>
+            {
+                return err(
+                    "master_loss.type",
+                    format!("{value_type:?}"),
+                    "a timeout in ms is u16 or u32",
+                );
+            }
+            Some(_) => {}
+        }
         if !(1..=2).contains(&self.axes) {
             return err(
                 "axes",
@@ -419,8 +516,18 @@ mod tests {
         let generic = shipped("cia402-generic.toml");
         assert_eq!(generic.axes, 1);
         assert_eq!(generic.feedback.mode, Transport::Pdo);
+        assert_eq!(
+            generic.master_loss,
+            Some(MasterLoss::Heartbeat {
+                reaction: LossReaction::QuickStop
+            })
+        );
         let zlac = shipped("zlac8015d.toml");
         assert_eq!(zlac.axes, 2);
+        assert!(matches!(
+            zlac.master_loss,
+            Some(MasterLoss::VendorTimeout { object, .. }) if object == ObjectAddress::new(0x2000, 0)
+        ));
         assert_eq!(
             zlac.objects.combined_target_velocity,
             Some(ObjectAddress::new(0x60FF, 3))
@@ -446,6 +553,17 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("`units.counts_per_rev`"), "{e}");
+        let start = text
+            .find("[master_loss]")
+            .expect("generic profile has [master_loss]");
+        let bad = &text[..start];
+        let e = DriveProfile::from_toml(bad, Path::new("p.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`master_loss`") && e.contains("nothing would stop"),
+            "{e}"
+        );
         let bad = text.replace("\"0x6041:0:16\"", "\"0x6041:0:12\"");
         let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
             .unwrap_err()

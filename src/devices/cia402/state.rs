@@ -112,24 +112,61 @@ pub mod controlword {
     pub const FAULT_RESET: u16 = 0x0080;
 }
 
-/// The controlword that moves a drive in `state` one step towards operation enabled (when
-/// `enable`) or towards switched on (when not), the 6 → 7 → 0x0F sequence. A faulted drive
-/// gets a fault reset only when `reset` is asked for; otherwise it is left alone.
-pub fn next_controlword(state: DriveState, enable: bool, reset: bool) -> Option<u16> {
+/// Where the owner wants a drive's power stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Goal {
+    /// Operation enabled: follow the target.
+    Enabled,
+    /// Switched on, no torque.
+    Standby,
+    /// Brake on the drive's quick-stop ramp.
+    QuickStop,
+    /// Power stage off (switch on disabled); a turning motor is quick-stopped first.
+    Disabled,
+}
+
+/// The power-state transitions, as a table (CiA 402 §6.3.1): in `state`, to get towards
+/// `goal`, write this controlword; `None` leaves the drive alone. Fault states have no entry:
+/// a fault reset is its own handshake (a rising edge of bit 7).
+const TRANSITIONS: [(DriveState, Goal, u16); 20] = {
+    use DriveState::*;
+    use Goal::*;
     use controlword::*;
-    match state {
-        DriveState::Fault if reset => Some(FAULT_RESET),
-        DriveState::Fault | DriveState::FaultReactionActive => None,
-        DriveState::NotReadyToSwitchOn => None,
-        DriveState::SwitchOnDisabled => Some(SHUTDOWN),
-        DriveState::ReadyToSwitchOn => Some(SWITCH_ON),
-        DriveState::SwitchedOn if enable => Some(ENABLE_OPERATION),
-        DriveState::SwitchedOn => Some(SWITCH_ON),
-        DriveState::OperationEnabled if enable => Some(ENABLE_OPERATION),
-        // Disable operation: back to switched on, the motor stops under the drive's ramp.
-        DriveState::OperationEnabled => Some(SWITCH_ON),
-        DriveState::QuickStopActive => Some(DISABLE_VOLTAGE),
-    }
+    [
+        (SwitchOnDisabled, Enabled, SHUTDOWN),
+        (SwitchOnDisabled, Standby, SHUTDOWN),
+        (SwitchOnDisabled, QuickStop, DISABLE_VOLTAGE),
+        (SwitchOnDisabled, Disabled, DISABLE_VOLTAGE),
+        (ReadyToSwitchOn, Enabled, SWITCH_ON),
+        (ReadyToSwitchOn, Standby, SWITCH_ON),
+        (ReadyToSwitchOn, QuickStop, QUICK_STOP),
+        (ReadyToSwitchOn, Disabled, DISABLE_VOLTAGE),
+        (SwitchedOn, Enabled, ENABLE_OPERATION),
+        (SwitchedOn, Standby, SWITCH_ON),
+        (SwitchedOn, QuickStop, QUICK_STOP),
+        (SwitchedOn, Disabled, DISABLE_VOLTAGE),
+        (OperationEnabled, Enabled, ENABLE_OPERATION),
+        // Disable operation: the motor stops under the drive's profile deceleration.
+        (OperationEnabled, Standby, SWITCH_ON),
+        (OperationEnabled, QuickStop, QUICK_STOP),
+        // Never let a turning motor coast: quick stop first, then disable voltage.
+        (OperationEnabled, Disabled, QUICK_STOP),
+        // Quick stop active leads only to switch on disabled (option codes 1–3).
+        (QuickStopActive, Enabled, DISABLE_VOLTAGE),
+        (QuickStopActive, Standby, DISABLE_VOLTAGE),
+        (QuickStopActive, QuickStop, QUICK_STOP),
+        (QuickStopActive, Disabled, DISABLE_VOLTAGE),
+    ]
+};
+
+/// The controlword that moves a drive in `state` one step towards `goal` (the 6 → 7 → 0x0F
+/// sequence towards operation enabled), from [`TRANSITIONS`]. `None` in not-ready and fault
+/// states.
+pub fn next_controlword(state: DriveState, goal: Goal) -> Option<u16> {
+    TRANSITIONS
+        .iter()
+        .find(|(s, g, _)| *s == state && *g == goal)
+        .map(|(_, _, cw)| *cw)
 }
 
 #[cfg(test)]
@@ -180,7 +217,7 @@ mod tests {
         let mut state = DriveState::SwitchOnDisabled;
         let mut words = Vec::new();
         while state != DriveState::OperationEnabled {
-            let cw = next_controlword(state, true, false).unwrap();
+            let cw = next_controlword(state, Goal::Enabled).unwrap();
             words.push(cw);
             state = match cw {
                 0x06 => DriveState::ReadyToSwitchOn,
@@ -191,10 +228,39 @@ mod tests {
         }
         assert_eq!(words, [0x06, 0x07, 0x0F]);
         assert_eq!(
-            next_controlword(DriveState::OperationEnabled, false, false),
+            next_controlword(DriveState::OperationEnabled, Goal::Standby),
             Some(0x07)
         );
-        assert_eq!(next_controlword(DriveState::Fault, true, false), None);
-        assert_eq!(next_controlword(DriveState::Fault, true, true), Some(0x80));
+        assert_eq!(next_controlword(DriveState::Fault, Goal::Enabled), None);
+    }
+
+    #[test]
+    fn every_reachable_state_has_a_way_to_every_goal() {
+        use DriveState::*;
+        let states = [
+            SwitchOnDisabled,
+            ReadyToSwitchOn,
+            SwitchedOn,
+            OperationEnabled,
+            QuickStopActive,
+        ];
+        for state in states {
+            for goal in [
+                Goal::Enabled,
+                Goal::Standby,
+                Goal::QuickStop,
+                Goal::Disabled,
+            ] {
+                assert!(
+                    next_controlword(state, goal).is_some(),
+                    "{state} towards {goal:?}"
+                );
+            }
+        }
+        // A disabled goal never lets an enabled drive coast.
+        assert_eq!(
+            next_controlword(OperationEnabled, Goal::Disabled),
+            Some(controlword::QUICK_STOP)
+        );
     }
 }

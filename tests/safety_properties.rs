@@ -1,0 +1,391 @@
+//! The safety rules of DESIGN.md §5, as properties of the drive-train arbiter and its
+//! supervisor (`core::chassis`, `core::safety`) over random sequences of commands, faults,
+//! e-stops, resets and silences. Proptest keeps failing cases in
+//! `tests/safety_properties.proptest-regressions` (persistence on) and replays them first.
+
+use std::time::Duration;
+
+use chassisd::config::chassis::ChassisConfig;
+use chassisd::core::chassis::{Chassis, ChassisFeedback, DriveSummary, WheelCommand, status_bits};
+use chassisd::core::safety::{ControlLinkConfig, EStopInput, Power, SafetyConfig, State};
+use chassisd::time::Timestamp;
+use proptest::prelude::*;
+
+const PERIOD_MS: u64 = 10;
+const CMD_TIMEOUT_MS: u64 = 300;
+const QUICK_STOP_MS: u64 = 200;
+
+fn chassis_config() -> ChassisConfig {
+    ChassisConfig {
+        wheel_radius_m: 0.1,
+        track_m: 0.5,
+        max_speed_mps: 1.0,
+        max_yaw_rate_rps: 1.5,
+        max_accel_mps2: 0.5,
+        max_decel_mps2: 1.0,
+        max_yaw_accel_rps2: 2.0,
+        cmd_timeout_s: CMD_TIMEOUT_MS as f64 / 1000.0,
+        enable_on_start: true,
+        quick_stop_s: QUICK_STOP_MS as f64 / 1000.0,
+        reset_timeout_s: 1.0,
+    }
+}
+
+/// What happens between two control ticks.
+#[derive(Debug, Clone)]
+enum Event {
+    /// A velocity command (m/s, rad/s); zero is the deliberate act.
+    Velocity(f64, f64),
+    /// The explicit reset.
+    Reset,
+    /// The operator's stop.
+    OperatorStop,
+    /// The software e-stop engaged or released.
+    SoftwareEStop(bool),
+    /// The drive raises a fault; `sticky` faults survive resets.
+    Fault { sticky: bool },
+    /// The sticky fault condition goes away (a later reset can clear it).
+    FaultCondition(bool),
+    /// The CAN interface goes down or up.
+    Bus(bool),
+    /// The e-stop input reports pressed or released.
+    EStopInput(bool),
+    /// The e-stop input goes silent (its frames stop) or speaks again.
+    EStopSilent(bool),
+    /// A control-link heartbeat.
+    Heartbeat,
+    /// Nothing for this many ticks.
+    Wait(u8),
+}
+
+fn event() -> impl Strategy<Value = Event> {
+    let speed = prop_oneof![
+        3 => Just(0.0),
+        5 => -1.5f64..1.5,
+    ];
+    prop_oneof![
+        20 => (speed.clone(), speed).prop_map(|(v, w)| Event::Velocity(v, w)),
+        2 => Just(Event::Reset),
+        1 => Just(Event::OperatorStop),
+        1 => any::<bool>().prop_map(Event::SoftwareEStop),
+        2 => any::<bool>().prop_map(|sticky| Event::Fault { sticky }),
+        1 => any::<bool>().prop_map(Event::FaultCondition),
+        1 => any::<bool>().prop_map(Event::Bus),
+        1 => any::<bool>().prop_map(Event::EStopInput),
+        1 => any::<bool>().prop_map(Event::EStopSilent),
+        6 => Just(Event::Heartbeat),
+        12 => (1u8..60).prop_map(Event::Wait),
+    ]
+}
+
+/// The drive and bus the chassis sees, as a small model: faults latch in the drive until a
+/// reset clears them, unless their condition is still there.
+#[derive(Debug, Default)]
+struct Plant {
+    fault: bool,
+    condition: bool,
+    bus_down: bool,
+    estop_pressed: bool,
+    estop_silent: bool,
+    estop_heard: Option<Timestamp>,
+}
+
+impl Plant {
+    fn feedback(&mut self, t: Timestamp, wheels: Option<&WheelCommand>) -> ChassisFeedback {
+        if !self.estop_silent {
+            self.estop_heard = Some(t);
+        }
+        let speed = wheels.map(|w| (w.left_rad_s, w.right_rad_s));
+        ChassisFeedback {
+            left: chassisd::core::chassis::WheelFeedback {
+                velocity_rad_s: speed.map(|s| s.0),
+                angle_rad: None,
+            },
+            right: chassisd::core::chassis::WheelFeedback {
+                velocity_rad_s: speed.map(|s| s.1),
+                angle_rad: None,
+            },
+            drives: vec![DriveSummary {
+                name: "drive".into(),
+                ready: !self.fault && !self.bus_down,
+                running: !self.bus_down,
+                enabled: !self.fault,
+                fault: self.fault.then(|| "over-current".to_owned()),
+                heartbeat_lost: false,
+                resetting: false,
+            }],
+            bus_down: self.bus_down,
+            estops: vec![EStopInput {
+                name: "front".into(),
+                pressed: Some(self.estop_pressed),
+                heard: self.estop_heard,
+                timeout: Duration::from_millis(100),
+            }],
+        }
+    }
+}
+
+fn ms(v: u64) -> Timestamp {
+    Timestamp::from_micros(v * 1000)
+}
+
+/// Speed (m/s) and yaw rate (rad/s) of a wheel command.
+fn body(w: &WheelCommand) -> (f64, f64) {
+    let c = chassis_config();
+    let (l, r) = (
+        w.left_rad_s * c.wheel_radius_m,
+        w.right_rad_s * c.wheel_radius_m,
+    );
+    ((l + r) / 2.0, (r - l) / c.track_m)
+}
+
+fn is_latched(state: &State) -> bool {
+    matches!(state, State::Latched { .. } | State::Resetting { .. })
+}
+
+/// Runs `events`, checking every rule at every tick.
+fn check(events: &[Event], control_link: bool) -> Result<(), TestCaseError> {
+    let config = chassis_config();
+    let mut chassis = Chassis::new(
+        config,
+        SafetyConfig {
+            cmd_timeout: config.cmd_timeout(),
+            quick_stop: config.quick_stop(),
+            reset_timeout: config.reset_timeout(),
+            control_link: control_link.then_some(ControlLinkConfig {
+                timeout: Duration::from_millis(500),
+                required_from_start: true,
+            }),
+            enable_on_start: true,
+        },
+    );
+    let mut plant = Plant {
+        estop_heard: Some(ms(0)),
+        ..Plant::default()
+    };
+    let mut now = 0u64;
+    // The last command the chassis took: time and whether it asked for motion.
+    let mut accepted: Option<(u64, bool)> = None;
+    // Since the last latch: was there a deliberate act (accepted zero command or reset)?
+    let mut deliberate_since_latch = false;
+    let mut was_latched = false;
+    let mut last = WheelCommand {
+        power: Power::Enabled,
+        reset_faults: false,
+        left_rad_s: 0.0,
+        right_rad_s: 0.0,
+    };
+    chassis.feedback(plant.feedback(ms(now), None));
+    for event in events {
+        let t = ms(now);
+        let ticks = match event {
+            Event::Velocity(v, w) => {
+                if chassis.command(t, *v, *w).is_ok() {
+                    let zero = *v == 0.0 && *w == 0.0;
+                    accepted = Some((now, !zero));
+                    deliberate_since_latch |= zero;
+                }
+                1
+            }
+            Event::Reset => {
+                if chassis.reset(t).is_ok() {
+                    deliberate_since_latch = true;
+                }
+                1
+            }
+            Event::OperatorStop => {
+                chassis.operator_stop(t);
+                1
+            }
+            Event::SoftwareEStop(on) => {
+                chassis.software_estop(t, *on);
+                1
+            }
+            Event::Fault { sticky } => {
+                plant.fault = true;
+                plant.condition = *sticky;
+                1
+            }
+            Event::FaultCondition(on) => {
+                plant.condition = *on;
+                1
+            }
+            Event::Bus(down) => {
+                plant.bus_down = *down;
+                1
+            }
+            Event::EStopInput(pressed) => {
+                plant.estop_pressed = *pressed;
+                1
+            }
+            Event::EStopSilent(silent) => {
+                plant.estop_silent = *silent;
+                1
+            }
+            Event::Heartbeat => {
+                chassis.control_heartbeat(t);
+                1
+            }
+            Event::Wait(n) => u64::from(*n),
+        };
+        for _ in 0..ticks {
+            now += PERIOD_MS;
+            let t = ms(now);
+            chassis.feedback(plant.feedback(t, Some(&last)));
+            let before = chassis.safety().state().clone();
+            let cmd = chassis.tick(t);
+            let state = chassis.safety().state().clone();
+            let status = chassis.status(t);
+            let moving = cmd.left_rad_s != 0.0 || cmd.right_rad_s != 0.0;
+
+            // 1. No non-zero wheel target after cmd_timeout + one period without a fresh
+            //    command.
+            let fresh = accepted.is_some_and(|(at, _)| now - at <= CMD_TIMEOUT_MS + PERIOD_MS);
+            prop_assert!(
+                !moving || fresh,
+                "moving at {now} ms with the last command at {accepted:?}"
+            );
+
+            // 2. Ramps are never exceeded; only a stop drops to zero at once.
+            let (v0, w0) = body(&last);
+            let (v1, w1) = body(&cmd);
+            let dt = PERIOD_MS as f64 / 1000.0;
+            let slowing = v1.abs() < v0.abs() || v1 * v0 < 0.0;
+            let limit = if slowing {
+                config.max_decel_mps2
+            } else {
+                config.max_accel_mps2
+            };
+            let stop = v1 == 0.0 && w1 == 0.0;
+            prop_assert!(
+                stop || (v1 - v0).abs() <= limit * dt + 1e-9,
+                "speed jumped {v0} → {v1} at {now} ms"
+            );
+            prop_assert!(
+                stop || (w1 - w0).abs() <= config.max_yaw_accel_rps2 * dt + 1e-9,
+                "yaw rate jumped {w0} → {w1} at {now} ms"
+            );
+
+            // 3. A latch means zero targets, a quick stop, then disabled drives.
+            if let State::Latched { since, .. } = &state {
+                prop_assert!(!moving, "moving while latched at {now} ms");
+                prop_assert!(
+                    matches!(cmd.power, Power::QuickStop | Power::Disabled),
+                    "{:?} while latched",
+                    cmd.power
+                );
+                if t.saturating_since(*since) >= Duration::from_millis(QUICK_STOP_MS) {
+                    prop_assert_eq!(cmd.power, Power::Disabled);
+                }
+            }
+            if matches!(state, State::Resetting { .. }) {
+                prop_assert!(!moving);
+                prop_assert_eq!(cmd.power, Power::Disabled);
+            }
+
+            // 4. A non-zero stream never re-arms: leaving a latch takes a deliberate act.
+            if is_latched(&state) && !is_latched(&before) {
+                deliberate_since_latch = false;
+            }
+            if was_latched && !is_latched(&state) {
+                prop_assert!(
+                    deliberate_since_latch,
+                    "re-armed at {now} ms without a zero command or a reset"
+                );
+            }
+            was_latched = is_latched(&state);
+
+            // 5. Every stop has a reason. (A ramp may pass through zero on its way to the
+            //    other direction: that is no stop.)
+            let asked = accepted.is_some_and(|(_, motion)| motion);
+            let ramp_through_zero = (v0 != 0.0 || w0 != 0.0)
+                && v0.abs() <= config.max_decel_mps2 * dt + 1e-9
+                && w0.abs() <= config.max_yaw_accel_rps2 * dt + 1e-9;
+            if asked && !moving && !ramp_through_zero {
+                prop_assert!(
+                    status.stop_reason.is_some()
+                        || status.status_bits & status_bits::COMMAND_TIMEOUT != 0,
+                    "stopped without a reason at {now} ms: {status:?}"
+                );
+            }
+            if is_latched(&state) {
+                prop_assert!(status.stop_reason.is_some());
+                prop_assert!(status.status_bits & status_bits::AWAITING_COMMAND != 0);
+            }
+
+            // The drive model: a reset clears a fault whose condition has gone.
+            if cmd.reset_faults && !plant.condition {
+                plant.fault = false;
+            }
+            last = cmd;
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    #[test]
+    fn safety_rules_hold(events in prop::collection::vec(event(), 1..120)) {
+        check(&events, false)?;
+    }
+
+    #[test]
+    fn safety_rules_hold_with_a_required_control_link(
+        events in prop::collection::vec(event(), 1..120),
+    ) {
+        check(&events, true)?;
+    }
+}
+
+/// The finding of the review, as an example: after a fault, a joystick stream that never
+/// pauses does not move the vehicle until it sends zero.
+#[test]
+fn a_continuous_stream_after_a_fault_does_not_move_until_zero() {
+    let mut events = vec![Event::Velocity(0.5, 0.0), Event::Wait(10)];
+    events.push(Event::Fault { sticky: false });
+    for _ in 0..100 {
+        events.push(Event::Velocity(0.5, 0.0));
+    }
+    check(&events, false).expect("rules hold");
+    let config = chassis_config();
+    let mut chassis = Chassis::new(
+        config,
+        SafetyConfig {
+            cmd_timeout: config.cmd_timeout(),
+            quick_stop: config.quick_stop(),
+            reset_timeout: config.reset_timeout(),
+            control_link: None,
+            enable_on_start: true,
+        },
+    );
+    let mut plant = Plant {
+        estop_heard: Some(ms(0)),
+        ..Plant::default()
+    };
+    let mut now = 0;
+    let mut step = |chassis: &mut Chassis, plant: &mut Plant, vx: f64| {
+        now += PERIOD_MS;
+        let _ = chassis.command(ms(now), vx, 0.0);
+        chassis.feedback(plant.feedback(ms(now), None));
+        let cmd = chassis.tick(ms(now));
+        if cmd.reset_faults {
+            plant.fault = false;
+        }
+        body(&cmd).0
+    };
+    for _ in 0..50 {
+        step(&mut chassis, &mut plant, 0.5);
+    }
+    plant.fault = true;
+    for _ in 0..300 {
+        assert_eq!(step(&mut chassis, &mut plant, 0.5), 0.0);
+    }
+    assert_eq!(step(&mut chassis, &mut plant, 0.0), 0.0);
+    let mut v = 0.0;
+    for _ in 0..20 {
+        v = step(&mut chassis, &mut plant, 0.5);
+    }
+    assert!(v > 0.05, "moves again after the zero command: {v}");
+}
