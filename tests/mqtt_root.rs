@@ -178,7 +178,22 @@ fn every_command_example_gets_its_documented_ack() {
         request(&broker, &acks, &topic("cmd/navigation/set"), manual)["data"]["code"],
         0
     );
+    // PAUSE latched a stop: DRIVE is refused until the RESET extension (or a zero DRIVE).
     let drive = &sets[7];
+    let refused = request(&broker, &acks, &drive.topic, &drive.text);
+    assert_eq!(refused["data"]["code"], 4, "{refused}");
+    assert!(
+        refused["data"]["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("stopped by the operator") && m.contains("reset")),
+        "{refused}"
+    );
+    let reset =
+        r#"{"messageId": 10, "timestamp": "2026-11-22 03:00:01", "messageType": 102, "data": {}}"#;
+    assert_eq!(
+        request(&broker, &acks, &topic("cmd/chassis/set"), reset)["data"]["code"],
+        0
+    );
     for _ in 0..20 {
         broker.publish(&drive.topic, &drive.text);
         broker.publish(&heartbeat.topic, &heartbeat.text);
@@ -312,9 +327,63 @@ fn a_silent_heartbeat_stops_the_vehicle_until_it_beats_again() {
     assert_eq!(event["data"]["key"], "CONTROL_LINK_LOST", "{event}");
     assert_eq!(event["data"]["code"], 402);
     wait_for_speed(&status, |v| v.abs() < 0.01, "stopped");
-    // Heartbeats again: DRIVE is a fresh command and moves it.
+    // Heartbeats again: a DRIVE stream that never paused still does not move it...
+    drive_with_heartbeats(&broker, drive, 10);
+    let ack = request(&broker, &acks, &topic("cmd/chassis/set"), drive);
+    assert_eq!(ack["data"]["code"], 4, "{ack}");
+    assert!(
+        ack["data"]["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("zero velocity command or a reset")),
+        "{ack}"
+    );
+    // ...a zero DRIVE re-arms, and then it moves.
+    let zero = r#"{"messageId": 2, "timestamp": "x", "messageType": 100, "data": {"linear": 0.0, "angular": 0.0}}"#;
+    broker.publish(&topic("heartbeat/set"), r#"{"timestamp": "x"}"#);
+    assert_eq!(
+        request(&broker, &acks, &topic("cmd/chassis/set"), zero)["data"]["code"],
+        0
+    );
     drive_with_heartbeats(&broker, drive, 20);
     wait_for_speed(&status, |v| v > 0.3, "moving again");
+}
+
+#[test]
+fn the_software_estop_latches_and_release_alone_does_not_rearm() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[&topic("+/+/ack")]);
+    let status = broker.subscribe(&["base_status"]);
+    let _d = daemon(&broker);
+    let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
+    let estop = |on: u8| {
+        format!(r#"{{"messageId": 7, "timestamp": "x", "messageType": 101, "data": {on}}}"#)
+    };
+    drive_with_heartbeats(&broker, drive, 20);
+    wait_for_speed(&status, |v| v > 0.3, "moving");
+    let ack = request(&broker, &acks, &topic("cmd/chassis/set"), &estop(1));
+    assert_eq!(ack["data"]["code"], 0, "{ack}");
+    wait_for_speed(&status, |v| v.abs() < 0.01, "stopped by the e-stop");
+    let s = json(&status.next_on("base_status", WAIT).expect("status"));
+    let bits = s["robot"]["robot_status"].as_u64().unwrap();
+    assert!(bits & (1 << 3) != 0, "robot_status bit 3 (e-stop): {s}");
+    // While engaged, neither a zero DRIVE nor a RESET re-arms.
+    let reset = r#"{"messageId": 8, "timestamp": "x", "messageType": 102, "data": {}}"#;
+    let ack = request(&broker, &acks, &topic("cmd/chassis/set"), reset);
+    assert_eq!(ack["data"]["code"], 4, "{ack}");
+    assert!(
+        ack["data"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("emergency stop")
+    );
+    // Released: still stopped until the deliberate act.
+    request(&broker, &acks, &topic("cmd/chassis/set"), &estop(0));
+    let ack = request(&broker, &acks, &topic("cmd/chassis/set"), drive);
+    assert_eq!(ack["data"]["code"], 4, "{ack}");
+    let ack = request(&broker, &acks, &topic("cmd/chassis/set"), reset);
+    assert_eq!(ack["data"]["code"], 0, "{ack}");
+    drive_with_heartbeats(&broker, drive, 20);
+    wait_for_speed(&status, |v| v > 0.3, "moving after release and reset");
 }
 
 #[test]

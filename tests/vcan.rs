@@ -85,13 +85,15 @@ impl Rig {
         }
     }
 
+    /// The deliberate act that re-arms after a stop.
+    fn rearm(&mut self) {
+        self.daemon
+            .send(r#"cmd_vel {"linear":{"x":0},"angular":{"z":0}}"#);
+    }
+
     /// The simulator's state.
     fn report(&mut self) -> Value {
-        self.sim.send("report");
-        self.sim.wait_out(WAIT, "a simulator report", |l| {
-            serde_json::from_str::<Value>(l).is_ok_and(|v| v.get("drives").is_some())
-        });
-        serde_json::from_str(self.sim.out.last().expect("report")).expect("JSON report")
+        report_of(&mut self.sim)
     }
 
     fn latest_status(&mut self) -> Value {
@@ -218,9 +220,165 @@ fn two_drives_enable_follow_velocity_and_report_odometry() {
     );
 }
 
+/// The state of the simulator `sim`.
+fn report_of(sim: &mut Proc) -> Value {
+    sim.send("report");
+    sim.wait_out(WAIT, "a simulator report", |l| {
+        serde_json::from_str::<Value>(l).is_ok_and(|v| v.get("drives").is_some())
+    });
+    serde_json::from_str(sim.out.last().expect("report")).expect("JSON report")
+}
+
+fn drive_json(report: &Value, drive: &str) -> Value {
+    report["drives"]
+        .as_array()
+        .and_then(|d| d.iter().find(|x| x["name"] == drive))
+        .cloned()
+        .expect("drive in report")
+}
+
+/// Waits until both simulated drives have stopped their motors by themselves; returns when.
+fn wait_drives_stopped(rig: &mut Rig, since: Instant) -> Duration {
+    loop {
+        let report = rig.report();
+        let stopped = ["left", "right"].iter().all(|d| {
+            let a = axis(&report, d);
+            a["state"] != "operation enabled" && a["target"] == 0
+        });
+        if stopped {
+            return since.elapsed();
+        }
+        assert!(since.elapsed() < WAIT, "the drives kept going: {report}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 #[test]
 #[ignore = "needs vcan0: run by tests/vm/can-tests"]
-fn lost_heartbeat_stops_and_needs_a_fresh_command() {
+fn killed_daemon_the_drives_stop_by_themselves() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    rig.drive(0.3, 0.0, Duration::from_secs(1));
+    assert_eq!(axis(&rig.report(), "left")["state"], "operation enabled");
+    let pid = nix::unistd::Pid::from_raw(rig.daemon.child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGKILL).expect("kill -9");
+    let killed = Instant::now();
+    let took = wait_drives_stopped(&mut rig, killed);
+    eprintln!("drives stopped {took:?} after kill -9 (consumer time 250 ms)");
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        assert_eq!(drive_json(&report, drive)["master_losses"], 1, "{report}");
+    }
+    // Consumer time 250 ms plus the VM's scheduling and the report's round trip.
+    assert!(took < Duration::from_millis(1500), "{took:?}");
+    std::thread::sleep(Duration::from_millis(1000));
+    for drive in ["left", "right"] {
+        let a = axis(&rig.report(), drive);
+        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{drive}: {a}");
+    }
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn interface_down_under_the_daemon_the_drives_stop_by_themselves() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    // Keep commanding while the bus is cut: nothing may reach the drives.
+    rig.drive(0.3, 0.0, Duration::from_millis(800));
+    ip_link("down");
+    let cut = Instant::now();
+    rig.drive(0.3, 0.0, Duration::from_millis(1500));
+    ip_link("up");
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        let d = drive_json(&report, drive);
+        assert_eq!(d["master_losses"], 1, "{report}");
+        let a = &d["axes"][0];
+        assert_ne!(a["state"], "operation enabled", "{report}");
+        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{report}");
+    }
+    eprintln!(
+        "bus cut for {:?}; both drives stopped on their own",
+        cut.elapsed()
+    );
+    // The daemon saw it too, and waits for a deliberate act.
+    rig.daemon.wait_log(WAIT, "drive right: running");
+    rig.daemon.wait_out(WAIT, "latched after the outage", |l| {
+        robot_status(l) & AWAITING_COMMAND != 0
+    });
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn sigterm_quick_stops_the_drives_before_exit() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    let mut candump = std::process::Command::new("candump")
+        .args(["-L", "vcan0"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("candump runs");
+    let dump = common::process::lines_of(candump.stdout.take().expect("candump stdout"));
+    rig.drive(0.3, 0.0, Duration::from_secs(1));
+    let Rig { mut sim, daemon } = rig;
+    daemon.stop();
+    std::thread::sleep(Duration::from_millis(300));
+    let _ = candump.kill();
+    let _ = candump.wait();
+    let frames: Vec<String> = dump.try_iter().collect();
+    // The last RPDO to each drive: quick stop (controlword 0x0002), target 0.
+    for rpdo in ["201#", "202#"] {
+        let last = frames
+            .iter()
+            .rev()
+            .find(|l| l.contains(&format!(" {rpdo}")))
+            .expect("RPDOs on the bus");
+        assert!(last.ends_with(&format!("{rpdo}020000000000")), "{last}");
+    }
+    let report = report_of(&mut sim);
+    for drive in ["left", "right"] {
+        let a = axis(&report, drive);
+        assert_ne!(a["state"], "operation enabled", "{report}");
+        assert_eq!(a["target"], 0);
+    }
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn a_nonzero_stream_after_a_fault_does_not_move_until_a_zero_command() {
+    let _turn = one_at_a_time();
+    let mut rig = Rig::start(None);
+    rig.wait_enabled();
+    rig.drive(0.2, 0.0, Duration::from_millis(500));
+    // A fault the drive clears only on the third reset edge.
+    rig.sim.send("fault right 1 0x2310 2");
+    rig.daemon.wait_log(WAIT, "drive right: fault");
+    // The joystick never pauses: nothing moves, and no reset is tried.
+    rig.drive(0.2, 0.0, Duration::from_secs(2));
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        let a = axis(&report, drive);
+        assert_ne!(a["state"], "operation enabled", "{report}");
+        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{report}");
+    }
+    assert_eq!(drive_json(&report, "right")["reset_edges"], 0, "{report}");
+    // A zero command: the reset handshake runs (three edges) and the vehicle re-arms.
+    rig.rearm();
+    rig.daemon.wait_log(WAIT, "drive right: fault cleared");
+    assert_eq!(drive_json(&rig.report(), "right")["reset_edges"], 3);
+    rig.drive(0.2, 0.0, Duration::from_secs(1));
+    rig.daemon.wait_out(WAIT, "moving again", |l| {
+        robot_status(l) & ENABLED != 0
+            && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
+    });
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn lost_heartbeat_stops_and_needs_a_deliberate_act() {
     let _turn = one_at_a_time();
     let mut rig = Rig::start(None);
     rig.wait_enabled();
@@ -262,7 +420,12 @@ fn lost_heartbeat_stops_and_needs_a_fresh_command() {
     let bits = s["robot"]["robot_status"].as_u64().unwrap();
     assert!(bits & AWAITING_COMMAND != 0 && bits & ENABLED == 0, "{s}");
     assert_ne!(axis(&rig.report(), "left")["state"], "operation enabled");
-    // ...until a fresh command.
+    // ...a non-zero command is refused...
+    rig.daemon.send(r#"cmd_vel {"linear":{"x":0.2}}"#);
+    rig.daemon
+        .wait_log(WAIT, "send a zero velocity command or a reset");
+    // ...until a deliberate act.
+    rig.daemon.send("reset {}");
     rig.drive(0.2, 0.0, Duration::from_secs(1));
     rig.daemon.wait_out(WAIT, "moving again", |l| {
         robot_status(l) & ENABLED != 0
@@ -299,6 +462,7 @@ fn interface_down_and_up_reconnects_and_waits_for_a_command() {
     for drive in ["left", "right"] {
         assert_ne!(axis(&rig.report(), drive)["state"], "operation enabled");
     }
+    rig.rearm();
     rig.drive(0.2, 0.0, Duration::from_secs(1));
     rig.daemon
         .wait_out(WAIT, "enabled and moving after the command", |l| {

@@ -421,6 +421,38 @@ impl Drivetrain {
         }
     }
 
+    /// The frames that quick-stop every drive with zero targets, by interface (for a panic
+    /// hook: computed ahead, sent without the engine).
+    pub fn stop_frames(&self) -> Vec<(String, Frame)> {
+        self.buses
+            .iter()
+            .filter(|b| !b.listen_only)
+            .flat_map(|b| {
+                b.drives.iter().flat_map(move |d| {
+                    d.node
+                        .stop_frames()
+                        .into_iter()
+                        .map(|f| (b.name.clone(), f))
+                })
+            })
+            .collect()
+    }
+
+    /// The daemon is exiting: every running drive quick-stops with zero targets now; the
+    /// frames go to `tx`.
+    pub fn shut_down(&mut self, tx: &mut Vec<(String, Frame)>) {
+        for bus in &mut self.buses {
+            if bus.link == BusLink::Down {
+                continue;
+            }
+            let mut out = Vec::new();
+            for d in &mut bus.drives {
+                d.node.shut_down(&mut out);
+            }
+            bus.emit(out, tx);
+        }
+    }
+
     /// The BMS reading, if a BMS is configured.
     pub fn bms_reading(&self) -> Option<&crate::devices::bms::BmsReading> {
         self.buses

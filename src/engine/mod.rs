@@ -46,6 +46,10 @@ pub const HOST_SOURCE: &str = "host";
 /// Source name of the local command channel (`chassisd run --commands-stdin`).
 pub const LOCAL_COMMANDS: &str = "stdin";
 
+/// Source name of process events: a `shutdown` record (topic `shutdown`, payload the signal's
+/// name) marks where live mode stopped the drives on exit, so a replay stops them too.
+pub const PROCESS_SOURCE: &str = "process";
+
 /// The smallest time step of the record clock.
 const ONE_MICRO: Duration = Duration::from_micros(1);
 
@@ -337,6 +341,13 @@ impl Engine {
                     self.stats.commands_without_dialect += 1;
                 }
                 out.extend(replies.into_iter().map(EngineOutput::Publish));
+            }
+            Payload::Command { topic, .. }
+                if record.source == PROCESS_SOURCE && topic == "shutdown" =>
+            {
+                self.vehicle
+                    .handle(t, Input::Command(crate::core::Command::Stop));
+                self.drivetrain.shut_down(&mut tx);
             }
             Payload::Command { payload, .. } if record.source == HOST_SOURCE => {
                 match serde_json::from_slice::<HostUsage>(payload) {

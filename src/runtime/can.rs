@@ -38,17 +38,34 @@ pub struct CanSpec {
 pub struct CanTx {
     queue: mpsc::Sender<Frame>,
     dropped: Arc<AtomicU64>,
+    /// Frames queued and not yet written (or dropped) by the driver.
+    pending: Arc<AtomicU64>,
 }
 
 impl CanTx {
     /// Queues a frame without waiting. A full queue drops it; the drop is counted.
     pub fn send(&self, frame: Frame) {
+        self.pending.fetch_add(1, Ordering::Relaxed);
         if self.queue.try_send(frame).is_err() {
+            self.pending.fetch_sub(1, Ordering::Relaxed);
             let n = self.dropped.fetch_add(1, Ordering::Relaxed) + 1;
             if n.is_power_of_two() {
                 tracing::error!(dropped = n, "CAN transmit queue full; frames dropped");
             }
         }
+    }
+
+    /// Waits until every queued frame has been written (or dropped), at most `limit`.
+    /// Returns whether the queue drained.
+    pub async fn flush(&self, limit: Duration) -> bool {
+        let deadline = tokio::time::Instant::now() + limit;
+        while self.pending.load(Ordering::Relaxed) > 0 {
+            if tokio::time::Instant::now() >= deadline {
+                return false;
+            }
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        true
     }
 
     /// Frames dropped so far (queue full, interface down, or write failed).
@@ -66,8 +83,58 @@ pub fn spawn(
 ) -> CanTx {
     let (queue, frames) = mpsc::channel(queue_len.max(1));
     let dropped = Arc::new(AtomicU64::new(0));
-    tokio::spawn(run(spec, clock, records, frames, dropped.clone()));
-    CanTx { queue, dropped }
+    let pending = Arc::new(AtomicU64::new(0));
+    let counters = Counters {
+        dropped: dropped.clone(),
+        pending: pending.clone(),
+    };
+    tokio::spawn(run(spec, clock, records, frames, counters));
+    CanTx {
+        queue,
+        dropped,
+        pending,
+    }
+}
+
+/// The driver's side of the transmit counters.
+struct Counters {
+    dropped: Arc<AtomicU64>,
+    pending: Arc<AtomicU64>,
+}
+
+impl Counters {
+    /// A frame left the queue: written, or dropped when `dropped`.
+    fn done(&self, dropped: bool) {
+        if dropped {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+        self.pending.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+/// Writes `frames` straight to their interfaces with blocking sockets, bypassing the driver
+/// tasks and the runtime: the last act of a panicking daemon. Returns how many went out.
+pub fn write_now(frames: &[(String, Frame)]) -> usize {
+    use socketcan::Socket;
+    let mut sent = 0;
+    let mut open: Vec<(&str, socketcan::CanSocket)> = Vec::new();
+    for (bus, frame) in frames {
+        if !open.iter().any(|(name, _)| name == bus) {
+            match socketcan::CanSocket::open(bus) {
+                Ok(s) => {
+                    let _ = s.set_write_timeout(WRITE_TIMEOUT);
+                    open.push((bus, s));
+                }
+                Err(_) => continue,
+            }
+        }
+        if let Some((_, socket)) = open.iter().find(|(name, _)| name == bus)
+            && socket.write_frame(&frame.to_socketcan()).is_ok()
+        {
+            sent += 1;
+        }
+    }
+    sent
 }
 
 /// Whether the kernel says the interface is administratively up (IFF_UP).
@@ -96,7 +163,7 @@ async fn run(
     clock: RecordClock,
     records: mpsc::Sender<Record>,
     mut frames: mpsc::Receiver<Frame>,
-    dropped: Arc<AtomicU64>,
+    counters: Counters,
 ) {
     let name = spec.interface.clone();
     let mut backoff = BACKOFF_START;
@@ -114,7 +181,7 @@ async fn run(
                     return;
                 }
                 let reason =
-                    match serve(&socket, &name, &clock, &records, &mut frames, &dropped).await {
+                    match serve(&socket, &name, &clock, &records, &mut frames, &counters).await {
                         Ok(reason) => reason,
                         Err(Closed) => return,
                     };
@@ -142,7 +209,7 @@ async fn run(
             tokio::select! {
                 () = &mut deadline => break,
                 frame = frames.recv() => match frame {
-                    Some(_) => { dropped.fetch_add(1, Ordering::Relaxed); }
+                    Some(_) => counters.done(true),
                     None => return,
                 },
             }
@@ -161,7 +228,7 @@ async fn serve(
     clock: &RecordClock,
     records: &mpsc::Sender<Record>,
     frames: &mut mpsc::Receiver<Frame>,
-    dropped: &AtomicU64,
+    counters: &Counters,
 ) -> Result<String, Closed> {
     let mut check = tokio::time::interval(LINK_CHECK);
     loop {
@@ -179,17 +246,15 @@ async fn serve(
             frame = frames.recv() => {
                 let Some(frame) = frame else { return Err(Closed) };
                 match tokio::time::timeout(WRITE_TIMEOUT, socket.write_frame(frame.to_socketcan())).await {
-                    Ok(Ok(())) => {}
+                    Ok(Ok(())) => counters.done(false),
                     Ok(Err(e)) => {
-                        dropped.fetch_add(1, Ordering::Relaxed);
+                        counters.done(true);
                         // A full buffer (no one acknowledging) is not a lost interface.
                         if e.raw_os_error() != Some(105) {
                             return Ok(format!("write failed: {e}"));
                         }
                     }
-                    Err(_) => {
-                        dropped.fetch_add(1, Ordering::Relaxed);
-                    }
+                    Err(_) => counters.done(true),
                 }
             }
             _ = check.tick() => {

@@ -3,8 +3,13 @@
 //! and the `[bms]` a simulated pack, speaking the same protocols chassisd expects.
 //!
 //! Standard input takes commands that inject faults, one per line:
-//! `heartbeat DRIVE off|on`, `fault DRIVE AXIS CODE` (CODE an EMCY code such as 0x2310),
-//! `report` (one JSON line on standard output with every node's state).
+//! `heartbeat DRIVE off|on`, `fault DRIVE AXIS CODE [REFUSED]` (CODE an EMCY code such as
+//! 0x2310; the drive ignores the first REFUSED reset edges), `tpdo DRIVE off|on` (TPDOs stop
+//! while the heartbeat goes on), `report` (one JSON line on standard output with every node's
+//! state).
+//!
+//! While an interface is down the drives on it keep running (their motors turn, their
+//! watchdogs count) with nothing to hear: a cut cable, as the drives see it.
 
 use std::time::Duration;
 
@@ -35,10 +40,11 @@ struct SimBus {
     dbc: Option<SimDbcBms>,
 }
 
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 enum SimCommand {
     Heartbeat(String, bool),
-    Fault(String, usize, u16),
+    Fault(String, usize, u16, u32),
+    Tpdo(String, bool),
     Report,
 }
 
@@ -88,7 +94,7 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
                 match parse(&line) {
                     Ok(Some(cmd)) => {
                         for tx in &senders {
-                            let _ = tx.send(clone_command(&cmd)).await;
+                            let _ = tx.send(cmd.clone()).await;
                         }
                     }
                     Ok(None) => {}
@@ -102,26 +108,24 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn clone_command(c: &SimCommand) -> SimCommand {
-    match c {
-        SimCommand::Heartbeat(n, on) => SimCommand::Heartbeat(n.clone(), *on),
-        SimCommand::Fault(n, a, code) => SimCommand::Fault(n.clone(), *a, *code),
-        SimCommand::Report => SimCommand::Report,
-    }
-}
-
 fn parse(line: &str) -> Result<Option<SimCommand>, String> {
     let words: Vec<&str> = line.split_whitespace().collect();
     Ok(Some(match words.as_slice() {
         [] => return Ok(None),
         ["heartbeat", name, "on"] => SimCommand::Heartbeat((*name).to_owned(), true),
         ["heartbeat", name, "off"] => SimCommand::Heartbeat((*name).to_owned(), false),
-        ["fault", name, axis, code] => {
+        ["fault", name, axis, code, refused @ ..] if refused.len() <= 1 => {
             let axis: usize = axis.parse().map_err(|_| format!("axis {axis:?}"))?;
             let code = u16::from_str_radix(code.trim_start_matches("0x"), 16)
                 .map_err(|_| format!("EMCY code {code:?}"))?;
-            SimCommand::Fault((*name).to_owned(), axis.saturating_sub(1), code)
+            let refused = match refused.first() {
+                Some(n) => n.parse().map_err(|_| format!("refused edges {n:?}"))?,
+                None => 0,
+            };
+            SimCommand::Fault((*name).to_owned(), axis.saturating_sub(1), code, refused)
         }
+        ["tpdo", name, "on"] => SimCommand::Tpdo((*name).to_owned(), true),
+        ["tpdo", name, "off"] => SimCommand::Tpdo((*name).to_owned(), false),
         ["report"] => SimCommand::Report,
         _ => return Err(format!("unknown command {line:?}")),
     }))
@@ -135,7 +139,25 @@ async fn serve_bus(mut sim: SimBus, clock: RecordClock, mut commands: mpsc::Rece
                     eprintln!("can-sim: {}: {e}", sim.name);
                 }
             }
-            Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+            Err(_) => {
+                // The bus is gone; the drives are not: they run on and hear nothing.
+                let until = tokio::time::Instant::now() + Duration::from_millis(100);
+                while tokio::time::Instant::now() < until {
+                    tokio::select! {
+                        () = tokio::time::sleep(STEP) => {
+                            let t = clock.now();
+                            let mut lost = Vec::new();
+                            for (_, d) in &mut sim.drives {
+                                d.step(t, &mut lost);
+                            }
+                        }
+                        cmd = commands.recv() => match cmd {
+                            Some(cmd) => apply(&mut sim, cmd, &mut Vec::new()),
+                            None => return,
+                        },
+                    }
+                }
+            }
         }
         if commands.is_closed() {
             return;
@@ -222,10 +244,18 @@ fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
                 }
             }
         }
-        SimCommand::Fault(name, axis, code) => {
+        SimCommand::Fault(name, axis, code, refused) => {
             for (n, d) in &mut sim.drives {
                 if *n == name {
+                    d.refuse_resets(refused);
                     d.inject_fault(axis, code, out);
+                }
+            }
+        }
+        SimCommand::Tpdo(name, on) => {
+            for (n, d) in &mut sim.drives {
+                if *n == name {
+                    d.set_tpdos(on);
                 }
             }
         }
@@ -239,6 +269,8 @@ fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
                         "node": d.node().get(),
                         "nmt": format!("{:?}", d.nmt_state()),
                         "axes": d.report(),
+                        "master_losses": d.master_losses(),
+                        "reset_edges": d.reset_edges(),
                     })
                 })
                 .collect();

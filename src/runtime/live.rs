@@ -18,13 +18,14 @@ use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use super::serial::{self, SerialSpec};
+use super::status_out::StatusOut;
 use crate::api::local;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::{DirStore, TrajectoryStore, Unconfigured};
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
-use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE};
+use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
 use crate::record::{Payload, Record, RecordingWriter, SourceKind, SourceMeta};
 use crate::time::Timestamp;
 
@@ -32,6 +33,8 @@ use crate::time::Timestamp;
 const CHANNEL: usize = 4096;
 /// How often fault counters are summarised in the log.
 const SUMMARY_EVERY: Duration = Duration::from_secs(30);
+/// How long the stop frames on exit may take to leave.
+const STOP_FLUSH: Duration = Duration::from_millis(500);
 /// Source name of the GNSS receiver.
 pub const GNSS_SOURCE: &str = "gnss";
 /// Source name of the IMU.
@@ -50,8 +53,10 @@ pub struct LiveOptions {
     pub commands_stdin: bool,
 }
 
-/// Runs until SIGINT or SIGTERM, writing base_status lines to `out`.
-pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()> {
+/// Runs until SIGINT or SIGTERM, writing base_status lines to `out` (from a thread of its
+/// own: a stalled `out` never holds up the control loop).
+pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+    let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
@@ -111,6 +116,15 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             can::spawn(spec, clock, tx.clone(), bus.tx_queue),
         );
     }
+    if !config.drive.is_empty() {
+        source_meta.push(SourceMeta {
+            name: PROCESS_SOURCE.into(),
+            kind: SourceKind::Commands,
+            file: format!("{PROCESS_SOURCE}.log"),
+            protocol: None,
+            events: None,
+        });
+    }
     if options.commands_stdin {
         source_meta.push(SourceMeta {
             name: STDIN_SOURCE.into(),
@@ -131,6 +145,7 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
     let mut trajectories = trajectory_store(config, Box::new(Unconfigured))?;
     let mut engine = Engine::with_trajectories(config, &sources, trajectories.0);
     engine.start_at(start);
+    install_panic_stop(engine.drivetrain().stop_frames());
     let mqtt = match &config.mqtt {
         Some(m) => {
             if m.embedded_broker {
@@ -217,25 +232,45 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
             _ = summary.tick() => {
                 summarise_faults(&engine, &can_tx, &mut reported);
             }
-            _ = tokio::signal::ctrl_c() => break Ok(()),
-            _ = sigterm.recv() => break Ok(()),
+            _ = tokio::signal::ctrl_c() => break Ok("SIGINT"),
+            _ = sigterm.recv() => break Ok("SIGTERM"),
         }
         let t = now.unwrap_or_else(|| clock.now());
-        if let Err(e) = dispatch(
+        dispatch(
             &mut outputs,
             t,
             &can_tx,
             mqtt.as_ref(),
             recorder.as_mut(),
             &mut out,
-        ) {
+        );
+        if let Some(e) = out.take_error() {
             break Err(e).context("cannot write status output");
         }
     };
-    // The ticks up to the stop, so a replay of the recording ends where this run ended.
+    // The ticks up to the stop, so a replay of the recording ends where this run ended; then
+    // every drive quick-stops with zero targets, recorded so the replay does the same, and
+    // those frames leave before the process does.
     let end = clock.now();
     engine.advance_to(end, &mut outputs);
-    let flushed = dispatch(
+    let shutdown = Record {
+        t: end,
+        source: PROCESS_SOURCE.into(),
+        payload: Payload::Command {
+            topic: "shutdown".into(),
+            payload: Bytes::from(match &result {
+                Ok(signal) => *signal,
+                Err(_) => "error",
+            }),
+        },
+    };
+    if !config.drive.is_empty() {
+        let t = engine.handle(&shutdown, &mut outputs);
+        if let Some(r) = recorder.as_mut() {
+            r.record(Record { t, ..shutdown });
+        }
+    }
+    dispatch(
         &mut outputs,
         end,
         &can_tx,
@@ -243,6 +278,11 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
         recorder.as_mut(),
         &mut out,
     );
+    for (bus, q) in &can_tx {
+        if !q.flush(STOP_FLUSH).await {
+            tracing::error!(device = %bus, "the stop frames did not all leave before exit");
+        }
+    }
     if let Some(r) = recorder {
         if r.dropped() > 0 {
             tracing::error!(dropped = r.dropped(), "recording is incomplete");
@@ -250,7 +290,34 @@ pub async fn run(options: LiveOptions, mut out: impl Write) -> anyhow::Result<()
         r.finish(end);
     }
     summarise_faults(&engine, &can_tx, &mut reported);
-    result.and(flushed.context("cannot write status output"))
+    if let Ok(signal) = &result {
+        tracing::info!(%signal, "stopped: drives quick-stopped, targets zero");
+    }
+    if out.dropped() > 0 {
+        tracing::warn!(
+            dropped = out.dropped(),
+            "status lines dropped (output not read)"
+        );
+    }
+    out.finish(STOP_FLUSH);
+    result.map(|_| ())
+}
+
+/// On a panic, after the usual report, quick-stop every drive with zero targets by writing
+/// `frames` straight to their interfaces (the engine may be what panicked).
+fn install_panic_stop(frames: Vec<(String, crate::devices::can::Frame)>) {
+    if frames.is_empty() {
+        return;
+    }
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        let sent = can::write_now(&frames);
+        eprintln!(
+            "chassisd: panic: {sent} of {} stop frames sent",
+            frames.len()
+        );
+    }));
 }
 
 /// Routes the engine's outputs: status lines to `out`, frames to their interface (and the
@@ -261,9 +328,8 @@ fn dispatch(
     can_tx: &BTreeMap<String, CanTx>,
     mqtt: Option<&MqttSender>,
     mut recorder: Option<&mut Recorder>,
-    out: &mut impl Write,
-) -> std::io::Result<()> {
-    let mut wrote = false;
+    out: &mut StatusOut,
+) {
     for output in outputs.drain(..) {
         let Some(output) = super::forward_common(output, mqtt) else {
             continue;
@@ -272,8 +338,7 @@ fn dispatch(
             EngineOutput::Status(status) => {
                 let mut line = BaseStatus::from_status(&status).to_json();
                 line.push('\n');
-                out.write_all(line.as_bytes())?;
-                wrote = true;
+                out.send(line);
             }
             EngineOutput::CanTx { bus, frame } => {
                 if let Some(r) = recorder.as_deref_mut() {
@@ -290,10 +355,6 @@ fn dispatch(
             _ => {}
         }
     }
-    if wrote {
-        out.flush()?;
-    }
-    Ok(())
 }
 
 /// The trajectory store of the `rtk` dialect, and its contents as JSON for a recording.

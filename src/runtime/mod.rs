@@ -10,6 +10,7 @@ pub mod mqtt;
 pub mod recorder;
 pub mod serial;
 pub mod sim;
+pub mod status_out;
 
 use crate::engine::EngineOutput;
 

@@ -16,6 +16,7 @@ use super::host;
 use super::live::{read_commands, trajectory_store};
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
+use super::status_out::StatusOut;
 use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
@@ -56,15 +57,14 @@ pub struct SimOptions {
     pub mqtt: Option<MqttConfig>,
 }
 
-/// Status lines to `out`, records to the recorder.
-struct Output<W: Write> {
-    out: W,
+/// Status lines to `out` (from its own thread), records to the recorder.
+struct Output {
+    out: StatusOut,
     recorder: Option<Recorder>,
     mqtt: Option<MqttSender>,
-    error: Option<std::io::Error>,
 }
 
-impl<W: Write> Sink for Output<W> {
+impl Sink for Output {
     fn record(&mut self, record: &Record) {
         if let Some(r) = self.recorder.as_mut() {
             r.record(record.clone());
@@ -78,19 +78,13 @@ impl<W: Write> Sink for Output<W> {
         {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
-            if let Err(e) = self
-                .out
-                .write_all(line.as_bytes())
-                .and_then(|()| self.out.flush())
-            {
-                self.error.get_or_insert(e);
-            }
+            self.out.send(line);
         }
     }
 }
 
 /// Runs until the scenario or duration ends, or SIGINT or SIGTERM.
-pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
+pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
     let clock = RecordClock::start();
     let start = clock.now();
     let config = crate::config::VehicleConfig {
@@ -145,10 +139,9 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
         None => None,
     };
     let mut sink = Output {
-        out,
+        out: StatusOut::start(out),
         recorder,
         mqtt,
-        error: None,
     };
     if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
@@ -189,12 +182,13 @@ pub async fn run(options: SimOptions, out: impl Write) -> anyhow::Result<()> {
             _ = tokio::signal::ctrl_c() => break,
             _ = sigterm.recv() => break,
         }
-        if let Some(e) = sink.error.take() {
+        if let Some(e) = sink.out.take_error() {
             finish(sink.recorder.take(), sim.time());
             return Err(e).context("cannot write status output");
         }
     }
     finish(sink.recorder.take(), sim.time());
+    sink.out.finish(Duration::from_millis(500));
     Ok(())
 }
 

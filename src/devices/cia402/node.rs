@@ -864,6 +864,58 @@ impl DriveNode {
             .map_or(0, |v| i64::from(*v))
     }
 
+    /// The frames that quick-stop this drive with zero targets, whatever its state: the
+    /// RPDOs, or SDO writes of the controlword and targets (sent without waiting for
+    /// answers). For the last act on exit or panic; empty in listen-only mode.
+    pub fn stop_frames(&self) -> Vec<Frame> {
+        if self.monitor {
+            return Vec::new();
+        }
+        let node = self.settings.node;
+        let zero = vec![0; self.targets.len()];
+        match self.profile.command.mode {
+            Transport::Pdo => self
+                .rpdos
+                .iter()
+                .filter_map(|(cob, mapping)| {
+                    let values: Vec<i64> = mapping
+                        .entries()
+                        .iter()
+                        .map(|e| {
+                            if e.object == self.profile.objects.controlword {
+                                i64::from(controlword::QUICK_STOP)
+                            } else {
+                                0
+                            }
+                        })
+                        .collect();
+                    Frame::standard(*cob, &mapping.pack(&values))
+                })
+                .collect(),
+            Transport::Sdo => std::iter::once(SdoRequest::Write(
+                self.profile.objects.controlword,
+                SdoData::u16(controlword::QUICK_STOP),
+            ))
+            .chain(target_writes(&self.profile, &zero))
+            .map(|r| r.frame(node))
+            .collect(),
+        }
+    }
+
+    /// Quick stop now, zero targets, and stay stopped: the daemon is exiting. The frames
+    /// go to `out`.
+    pub fn shut_down(&mut self, out: &mut Vec<Frame>) {
+        self.goal = Goal::QuickStop;
+        self.enable_asked_at = None;
+        self.targets.iter_mut().for_each(|x| *x = 0);
+        if self.phase == Phase::Running && !self.monitor {
+            self.controlword = controlword::QUICK_STOP;
+            out.extend(self.stop_frames());
+            self.sent_controlword = Some(self.controlword);
+            self.sent_targets = Some(self.targets.clone());
+        }
+    }
+
     /// One step of the fault reset handshake in `state`.
     fn step_reset(&mut self, t: Timestamp, state: DriveState, reset: FaultReset) {
         let low = controlword::DISABLE_VOLTAGE;
