@@ -278,7 +278,6 @@ impl SimVehicle {
         let model = MotorModel {
             accel_rpm_per_s: plant.motors.accel_rpm_per_s,
             time_constant_s: plant.motors.time_constant_s,
-            ..MotorModel::default()
         };
         let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
             .map(|d| d.naive_utc())
