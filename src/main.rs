@@ -129,9 +129,18 @@ enum BenchCommand {
     },
 }
 
+/// Log lines waiting for stderr before new ones are dropped.
+const LOG_QUEUE: usize = 4096;
+
 fn main() -> ExitCode {
+    // The guard writes what is queued when main returns.
+    let (log_writer, _log_guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .buffered_lines_limit(LOG_QUEUE)
+        .thread_name("log-out")
+        .finish(std::io::stderr());
     tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
+        .with_writer(log_writer)
         .with_ansi(std::io::stderr().is_terminal())
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()

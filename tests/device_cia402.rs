@@ -149,13 +149,7 @@ fn lost_heartbeat_faults_within_timeout_and_commands_zero() {
 
 #[test]
 fn emcy_faults_and_needs_a_reset() {
-    let mut rig = Rig::new("cia402-generic.toml", 1);
-    rig.start();
-    rig.run(400, true, &[50.0]);
-    let mut out = Vec::new();
-    rig.sim.inject_fault(0, 0x2310, &mut out);
-    rig.deliver(out, Vec::new());
-    rig.run(50, true, &[50.0]);
+    let mut rig = faulted_rig(0);
     match rig.node.fault() {
         Some(DriveFault::Emcy(e)) => assert_eq!(e.code, 0x2310),
         other => panic!("{other:?}"),
@@ -190,16 +184,23 @@ fn rising_edges(words: &[u16]) -> usize {
         .count()
 }
 
-#[test]
-fn fault_reset_makes_a_new_edge_each_attempt_and_keeps_the_fault_until_it_clears() {
+/// A generic drive enabled at 50 r/min, then faulted (EMCY 0x2310) so that it ignores its
+/// first `refused` reset edges.
+fn faulted_rig(refused: u32) -> Rig {
     let mut rig = Rig::new("cia402-generic.toml", 1);
     rig.start();
     rig.run(400, true, &[50.0]);
     let mut out = Vec::new();
-    rig.sim.refuse_resets(2);
+    rig.sim.refuse_resets(refused);
     rig.sim.inject_fault(0, 0x2310, &mut out);
     rig.deliver(out, Vec::new());
     rig.run(50, true, &[50.0]);
+    rig
+}
+
+#[test]
+fn fault_reset_makes_a_new_edge_each_attempt_and_keeps_the_fault_until_it_clears() {
+    let mut rig = faulted_rig(2);
     assert_eq!(rig.node.drive_state(), Some(DriveState::Fault));
     let before = controlwords(&rig).len();
     assert!(rig.node.reset_fault(ms(rig.now_ms)));
@@ -231,14 +232,7 @@ fn fault_reset_makes_a_new_edge_each_attempt_and_keeps_the_fault_until_it_clears
 
 #[test]
 fn a_drive_stuck_in_fault_gives_up_after_the_attempts_and_can_be_retried() {
-    let mut rig = Rig::new("cia402-generic.toml", 1);
-    rig.start();
-    rig.run(400, true, &[50.0]);
-    let mut out = Vec::new();
-    rig.sim.refuse_resets(4);
-    rig.sim.inject_fault(0, 0x2310, &mut out);
-    rig.deliver(out, Vec::new());
-    rig.run(50, true, &[50.0]);
+    let mut rig = faulted_rig(4);
     assert!(rig.node.reset_fault(ms(rig.now_ms)));
     rig.run(2_000, true, &[50.0]);
     assert!(!rig.node.is_resetting(), "bounded attempts");

@@ -11,10 +11,10 @@ use chassisd::core::safety::{ControlLinkConfig, EStopInput, Power, SafetyConfig,
 use chassisd::time::Timestamp;
 use proptest::prelude::*;
 
+/// The engine's control period.
 const PERIOD_MS: u64 = 10;
-const CMD_TIMEOUT_MS: u64 = 300;
-const QUICK_STOP_MS: u64 = 200;
 
+/// A typical configuration, for the worked example.
 fn chassis_config() -> ChassisConfig {
     ChassisConfig {
         wheel_radius_m: 0.1,
@@ -24,11 +24,51 @@ fn chassis_config() -> ChassisConfig {
         max_accel_mps2: 0.5,
         max_decel_mps2: 1.0,
         max_yaw_accel_rps2: 2.0,
-        cmd_timeout_s: CMD_TIMEOUT_MS as f64 / 1000.0,
+        cmd_timeout_s: 0.3,
         enable_on_start: true,
-        quick_stop_s: QUICK_STOP_MS as f64 / 1000.0,
+        quick_stop_s: 0.2,
         reset_timeout_s: 1.0,
     }
+}
+
+/// Legal configurations: geometry, ramps, command timeout and quick-stop time across the
+/// ranges the configuration accepts (the command timeout from 50 ms, a few periods, to 2 s).
+fn config_sweep() -> impl Strategy<Value = ChassisConfig> {
+    (
+        (0.05f64..0.5, 0.2f64..1.5),
+        (0.1f64..3.0, 1.0f64..2.0, 0.5f64..5.0),
+        (5u64..=200, 0u64..=100),
+    )
+        .prop_map(
+            |((radius, track), (accel, decel_factor, yaw_accel), (timeout, quick))| ChassisConfig {
+                wheel_radius_m: radius,
+                track_m: track,
+                max_accel_mps2: accel,
+                max_decel_mps2: accel * decel_factor,
+                max_yaw_accel_rps2: yaw_accel,
+                cmd_timeout_s: timeout as f64 / 100.0,
+                quick_stop_s: quick as f64 / 100.0,
+                ..chassis_config()
+            },
+        )
+}
+
+/// A chassis with `config`, enabled on start, optionally with a control link required from
+/// start.
+fn chassis(config: ChassisConfig, control_link: bool) -> Chassis {
+    Chassis::new(
+        config,
+        SafetyConfig {
+            cmd_timeout: config.cmd_timeout(),
+            quick_stop: config.quick_stop(),
+            reset_timeout: config.reset_timeout(),
+            control_link: control_link.then_some(ControlLinkConfig {
+                timeout: Duration::from_millis(500),
+                required_from_start: true,
+            }),
+            enable_on_start: true,
+        },
+    )
 }
 
 /// What happens between two control ticks.
@@ -129,9 +169,8 @@ fn ms(v: u64) -> Timestamp {
     Timestamp::from_micros(v * 1000)
 }
 
-/// Speed (m/s) and yaw rate (rad/s) of a wheel command.
-fn body(w: &WheelCommand) -> (f64, f64) {
-    let c = chassis_config();
+/// Speed (m/s) and yaw rate (rad/s) of a wheel command on `c`.
+fn body(w: &WheelCommand, c: &ChassisConfig) -> (f64, f64) {
     let (l, r) = (
         w.left_rad_s * c.wheel_radius_m,
         w.right_rad_s * c.wheel_radius_m,
@@ -143,22 +182,9 @@ fn is_latched(state: &State) -> bool {
     matches!(state, State::Latched { .. } | State::Resetting { .. })
 }
 
-/// Runs `events`, checking every rule at every tick.
-fn check(events: &[Event], control_link: bool) -> Result<(), TestCaseError> {
-    let config = chassis_config();
-    let mut chassis = Chassis::new(
-        config,
-        SafetyConfig {
-            cmd_timeout: config.cmd_timeout(),
-            quick_stop: config.quick_stop(),
-            reset_timeout: config.reset_timeout(),
-            control_link: control_link.then_some(ControlLinkConfig {
-                timeout: Duration::from_millis(500),
-                required_from_start: true,
-            }),
-            enable_on_start: true,
-        },
-    );
+/// Runs `events` on `config`, checking every rule at every tick.
+fn check(events: &[Event], config: ChassisConfig, control_link: bool) -> Result<(), TestCaseError> {
+    let mut chassis = chassis(config, control_link);
     let mut plant = Plant {
         estop_heard: Some(ms(0)),
         ..Plant::default()
@@ -240,15 +266,18 @@ fn check(events: &[Event], control_link: bool) -> Result<(), TestCaseError> {
 
             // 1. No non-zero wheel target after cmd_timeout + one period without a fresh
             //    command.
-            let fresh = accepted.is_some_and(|(at, _)| now - at <= CMD_TIMEOUT_MS + PERIOD_MS);
+            let fresh = accepted.is_some_and(|(at, _)| {
+                Duration::from_millis(now - at)
+                    <= config.cmd_timeout() + Duration::from_millis(PERIOD_MS)
+            });
             prop_assert!(
                 !moving || fresh,
                 "moving at {now} ms with the last command at {accepted:?}"
             );
 
             // 2. Ramps are never exceeded; only a stop drops to zero at once.
-            let (v0, w0) = body(&last);
-            let (v1, w1) = body(&cmd);
+            let (v0, w0) = body(&last, &config);
+            let (v1, w1) = body(&cmd, &config);
             let dt = PERIOD_MS as f64 / 1000.0;
             let slowing = v1.abs() < v0.abs() || v1 * v0 < 0.0;
             let limit = if slowing {
@@ -274,7 +303,7 @@ fn check(events: &[Event], control_link: bool) -> Result<(), TestCaseError> {
                     "{:?} while latched",
                     cmd.power
                 );
-                if t.saturating_since(*since) >= Duration::from_millis(QUICK_STOP_MS) {
+                if t.saturating_since(*since) >= config.quick_stop() {
                     prop_assert_eq!(cmd.power, Power::Disabled);
                 }
             }
@@ -327,15 +356,19 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
     #[test]
-    fn safety_rules_hold(events in prop::collection::vec(event(), 1..120)) {
-        check(&events, false)?;
+    fn safety_rules_hold(
+        config in config_sweep(),
+        events in prop::collection::vec(event(), 1..120),
+    ) {
+        check(&events, config, false)?;
     }
 
     #[test]
     fn safety_rules_hold_with_a_required_control_link(
+        config in config_sweep(),
         events in prop::collection::vec(event(), 1..120),
     ) {
-        check(&events, true)?;
+        check(&events, config, true)?;
     }
 }
 
@@ -348,18 +381,9 @@ fn a_continuous_stream_after_a_fault_does_not_move_until_zero() {
     for _ in 0..100 {
         events.push(Event::Velocity(0.5, 0.0));
     }
-    check(&events, false).expect("rules hold");
     let config = chassis_config();
-    let mut chassis = Chassis::new(
-        config,
-        SafetyConfig {
-            cmd_timeout: config.cmd_timeout(),
-            quick_stop: config.quick_stop(),
-            reset_timeout: config.reset_timeout(),
-            control_link: None,
-            enable_on_start: true,
-        },
-    );
+    check(&events, config, false).expect("rules hold");
+    let mut chassis = chassis(config, false);
     let mut plant = Plant {
         estop_heard: Some(ms(0)),
         ..Plant::default()
@@ -373,7 +397,7 @@ fn a_continuous_stream_after_a_fault_does_not_move_until_zero() {
         if cmd.reset_faults {
             plant.fault = false;
         }
-        body(&cmd).0
+        body(&cmd, &config).0
     };
     for _ in 0..50 {
         step(&mut chassis, &mut plant, 0.5);

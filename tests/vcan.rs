@@ -220,6 +220,28 @@ fn two_drives_enable_follow_velocity_and_report_odometry() {
     );
 }
 
+/// Asserts that neither simulated drive is enabled, commanded or turning.
+fn assert_drives_at_rest(report: &Value) {
+    for drive in ["left", "right"] {
+        let a = axis(report, drive);
+        assert_ne!(a["state"], "operation enabled", "{drive}: {report}");
+        assert_eq!(a["target"], 0, "{drive}: zero velocity commanded: {report}");
+        assert!(
+            a["rpm"].as_f64().unwrap().abs() < 1e-6,
+            "{drive} stopped: {report}"
+        );
+    }
+}
+
+/// Waits until the daemon reports the drives enabled and the vehicle moving forward.
+fn wait_moving(rig: &mut Rig, what: &str) {
+    rig.daemon.wait_out(WAIT, what, |l| {
+        robot_status(l) & ENABLED != 0
+            && robot_status(l) & FAULT == 0
+            && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
+    });
+}
+
 /// The state of the simulator `sim`.
 fn report_of(sim: &mut Proc) -> Value {
     sim.send("report");
@@ -273,10 +295,7 @@ fn killed_daemon_the_drives_stop_by_themselves() {
     // Consumer time 250 ms plus the VM's scheduling and the report's round trip.
     assert!(took < Duration::from_millis(1500), "{took:?}");
     std::thread::sleep(Duration::from_millis(1000));
-    for drive in ["left", "right"] {
-        let a = axis(&rig.report(), drive);
-        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{drive}: {a}");
-    }
+    assert_drives_at_rest(&rig.report());
 }
 
 #[test]
@@ -293,12 +312,9 @@ fn interface_down_under_the_daemon_the_drives_stop_by_themselves() {
     ip_link("up");
     let report = rig.report();
     for drive in ["left", "right"] {
-        let d = drive_json(&report, drive);
-        assert_eq!(d["master_losses"], 1, "{report}");
-        let a = &d["axes"][0];
-        assert_ne!(a["state"], "operation enabled", "{report}");
-        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{report}");
+        assert_eq!(drive_json(&report, drive)["master_losses"], 1, "{report}");
     }
+    assert_drives_at_rest(&report);
     eprintln!(
         "bus cut for {:?}; both drives stopped on their own",
         cut.elapsed()
@@ -359,21 +375,14 @@ fn a_nonzero_stream_after_a_fault_does_not_move_until_a_zero_command() {
     // The joystick never pauses: nothing moves, and no reset is tried.
     rig.drive(0.2, 0.0, Duration::from_secs(2));
     let report = rig.report();
-    for drive in ["left", "right"] {
-        let a = axis(&report, drive);
-        assert_ne!(a["state"], "operation enabled", "{report}");
-        assert!(a["rpm"].as_f64().unwrap().abs() < 1e-6, "{report}");
-    }
+    assert_drives_at_rest(&report);
     assert_eq!(drive_json(&report, "right")["reset_edges"], 0, "{report}");
     // A zero command: the reset handshake runs (three edges) and the vehicle re-arms.
     rig.rearm();
     rig.daemon.wait_log(WAIT, "drive right: fault cleared");
     assert_eq!(drive_json(&rig.report(), "right")["reset_edges"], 3);
     rig.drive(0.2, 0.0, Duration::from_secs(1));
-    rig.daemon.wait_out(WAIT, "moving again", |l| {
-        robot_status(l) & ENABLED != 0
-            && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
-    });
+    wait_moving(&mut rig, "moving again");
 }
 
 #[test]
@@ -399,15 +408,7 @@ fn lost_heartbeat_stops_and_needs_a_deliberate_act() {
         bits & HEARTBEAT_LOST != 0 && bits & AWAITING_COMMAND != 0 && bits & ENABLED == 0
     });
     std::thread::sleep(Duration::from_millis(500));
-    let report = rig.report();
-    for drive in ["left", "right"] {
-        let a = axis(&report, drive);
-        assert_eq!(a["target"], 0, "{drive}: zero velocity commanded: {report}");
-        assert!(
-            a["rpm"].as_f64().unwrap().abs() < 1e-6,
-            "{drive} stopped: {report}"
-        );
-    }
+    assert_drives_at_rest(&rig.report());
     // Refused while the drive is unreachable.
     rig.daemon.send(r#"cmd_vel {"linear":{"x":0.2}}"#);
     rig.daemon.wait_log(WAIT, "command refused");
@@ -427,10 +428,7 @@ fn lost_heartbeat_stops_and_needs_a_deliberate_act() {
     // ...until a deliberate act.
     rig.daemon.send("reset {}");
     rig.drive(0.2, 0.0, Duration::from_secs(1));
-    rig.daemon.wait_out(WAIT, "moving again", |l| {
-        robot_status(l) & ENABLED != 0
-            && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
-    });
+    wait_moving(&mut rig, "moving again");
 }
 
 #[test]
@@ -464,13 +462,7 @@ fn interface_down_and_up_reconnects_and_waits_for_a_command() {
     }
     rig.rearm();
     rig.drive(0.2, 0.0, Duration::from_secs(1));
-    rig.daemon
-        .wait_out(WAIT, "enabled and moving after the command", |l| {
-            let bits = robot_status(l);
-            bits & ENABLED != 0
-                && bits & FAULT == 0
-                && status(l).is_some_and(|s| s["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.1)
-        });
+    wait_moving(&mut rig, "enabled and moving after the command");
 
     // The bus's link events are recorded beside its candump file, so the replay sees the
     // outage too and prints exactly what the live daemon printed.

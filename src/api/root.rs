@@ -666,8 +666,9 @@ impl Dialect for RootDialect {
         if base == "heartbeat" {
             // Any heartbeat is answered; it feeds the watchdog when it comes from the client
             // followed (or from anyone, when none is named).
-            let sender = serde_json::from_slice::<Value>(payload)
-                .ok()
+            let sender = (payload.len() <= self.max_payload)
+                .then(|| serde_json::from_slice::<Value>(payload).ok())
+                .flatten()
                 .and_then(|v| v.get("clientId").and_then(Value::as_str).map(str::to_owned));
             if self
                 .heartbeat_client

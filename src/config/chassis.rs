@@ -418,20 +418,24 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
                 "list each interface once",
             ));
         }
-        check_range(
-            file,
-            &format!("can[{i}].reconnect_max_s"),
-            bus.reconnect_max_s,
-            0.05..=300.0,
-            "seconds",
-        )?;
-        check_range(
-            file,
-            &format!("can[{i}].tx_queue"),
-            bus.tx_queue as f64,
-            8.0..=65536.0,
-            "frames",
-        )?;
+        for (key, value, range, unit) in [
+            (
+                "reconnect_max_s",
+                bus.reconnect_max_s,
+                0.05..=300.0,
+                "seconds",
+            ),
+            ("tx_queue", bus.tx_queue as f64, 8.0..=65536.0, "frames"),
+            (
+                "master_heartbeat_ms",
+                bus.master_heartbeat_ms as f64,
+                10.0..=1000.0,
+                "ms",
+            ),
+            ("sync_ms", bus.sync_ms as f64, 1.0..=1000.0, "ms"),
+        ] {
+            check_range(file, &format!("can[{i}].{key}"), value, range, unit)?;
+        }
         if !(1..=127).contains(&bus.master_node) {
             return Err(invalid(
                 &format!("can[{i}].master_node"),
@@ -439,20 +443,6 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
                 "use a CANopen node id 1 to 127 that no device on the bus has (default 127)",
             ));
         }
-        check_range(
-            file,
-            &format!("can[{i}].master_heartbeat_ms"),
-            bus.master_heartbeat_ms as f64,
-            10.0..=1000.0,
-            "ms",
-        )?;
-        check_range(
-            file,
-            &format!("can[{i}].sync_ms"),
-            bus.sync_ms as f64,
-            1.0..=1000.0,
-            "ms",
-        )?;
     }
     let bus_known = |name: &str| config.can.iter().any(|b| b.interface == name);
     if !config.drive.is_empty() {

@@ -278,10 +278,7 @@ impl Vehicle {
                 Vec::new()
             }
             Input::Command(Command::Velocity { vx, wz }) => {
-                let result = match &mut self.chassis {
-                    Some(c) => c.command(t, vx, wz),
-                    None => Err(CommandRejected::NoDrives),
-                };
+                let result = self.with_chassis(|c| c.command(t, vx, wz));
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Stop) => {
@@ -309,13 +306,10 @@ impl Vehicle {
                 vec![Output::CommandResult(Ok(()))]
             }
             Input::Command(Command::SetMode(mode)) => {
-                let result = match &mut self.chassis {
-                    Some(c) => {
-                        c.set_mode(mode);
-                        Ok(())
-                    }
-                    None => Err(CommandRejected::NoDrives),
-                };
+                let result = self.with_chassis(|c| {
+                    c.set_mode(mode);
+                    Ok(())
+                });
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::ZeroLocalFrame) => {

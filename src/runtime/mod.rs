@@ -6,6 +6,7 @@ pub mod can_sim;
 pub mod clock;
 pub mod host;
 pub mod live;
+pub mod lossy;
 pub mod mqtt;
 pub mod recorder;
 pub mod serial;

@@ -1,10 +1,11 @@
 //! Writes live records to a recording folder on its own thread, so disk stalls never hold
 //! up the engine.
 
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use super::lossy::LossySender;
 use crate::record::{Record, RecordingWriter};
 use crate::time::Timestamp;
 
@@ -15,52 +16,35 @@ const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// Handle to the recorder thread.
 pub struct Recorder {
-    tx: Option<SyncSender<Record>>,
+    tx: LossySender<Record>,
     thread: Option<JoinHandle<RecordingWriter>>,
-    dropped: u64,
 }
 
 impl Recorder {
     /// Starts the writer thread.
     pub fn start(writer: RecordingWriter) -> Self {
-        let (tx, rx) = sync_channel(QUEUE);
+        let (tx, rx) = LossySender::new(QUEUE, "recording cannot keep up; records dropped");
         let thread = std::thread::Builder::new()
             .name("recorder".into())
             .spawn(move || write_loop(writer, rx))
             .map_err(|e| tracing::error!(error = %e, "recorder thread did not start"))
             .ok();
-        Self {
-            tx: Some(tx),
-            thread,
-            dropped: 0,
-        }
+        Self { tx, thread }
     }
 
     /// Queues a record. Never blocks; a full queue drops the record and counts it.
     pub fn record(&mut self, record: Record) {
-        let Some(tx) = &self.tx else { return };
-        match tx.try_send(record) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.dropped += 1;
-                if self.dropped.is_power_of_two() {
-                    tracing::error!(
-                        dropped = self.dropped,
-                        "recording cannot keep up; records dropped"
-                    );
-                }
-            }
-        }
+        self.tx.send(record);
     }
 
     /// Records dropped so far.
     pub fn dropped(&self) -> u64 {
-        self.dropped
+        self.tx.dropped()
     }
 
     /// Writes what is queued, stops the thread and marks the recording's clean end.
     pub fn finish(mut self, end: Timestamp) {
-        self.tx.take();
+        self.tx.close();
         let Some(thread) = self.thread.take() else {
             return;
         };

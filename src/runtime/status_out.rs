@@ -4,28 +4,28 @@
 
 use std::io::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+use super::lossy::LossySender;
 
 /// Lines waiting for the writer before new ones are dropped (25 s of base_status).
 const QUEUE: usize = 256;
 
 /// The control loop's side of the status writer.
 pub struct StatusOut {
-    tx: Option<SyncSender<String>>,
-    dropped: u64,
+    tx: LossySender<String>,
     /// The writer's error, once writing failed (a closed pipe).
     error: Arc<Mutex<Option<std::io::Error>>>,
     /// Lines the writer has finished writing.
     written: Arc<AtomicU64>,
-    sent: u64,
 }
 
 impl StatusOut {
     /// Starts the writer thread on `out`.
     pub fn start(out: impl Write + Send + 'static) -> Self {
-        let (tx, rx) = sync_channel(QUEUE);
+        let (tx, rx) = LossySender::new(QUEUE, "standard output is not read; status lines dropped");
         let error = Arc::new(Mutex::new(None));
         let written = Arc::new(AtomicU64::new(0));
         let (e, w) = (error.clone(), written.clone());
@@ -35,35 +35,17 @@ impl StatusOut {
         if let Err(e) = started {
             tracing::error!(error = %e, "status writer thread did not start");
         }
-        Self {
-            tx: Some(tx),
-            dropped: 0,
-            error,
-            written,
-            sent: 0,
-        }
+        Self { tx, error, written }
     }
 
     /// Queues a line (with its newline). Never blocks.
     pub fn send(&mut self, line: String) {
-        let Some(tx) = &self.tx else { return };
-        match tx.try_send(line) {
-            Ok(()) => self.sent += 1,
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.dropped += 1;
-                if self.dropped.is_power_of_two() {
-                    tracing::warn!(
-                        dropped = self.dropped,
-                        "standard output is not read; status lines dropped"
-                    );
-                }
-            }
-        }
+        self.tx.send(line);
     }
 
     /// Lines dropped so far.
     pub fn dropped(&self) -> u64 {
-        self.dropped
+        self.tx.dropped()
     }
 
     /// The error that stopped the writer, if one did.
@@ -73,9 +55,9 @@ impl StatusOut {
 
     /// Stops taking lines and waits, at most `limit`, for the queued ones to be written.
     pub fn finish(mut self, limit: Duration) {
-        self.tx.take();
+        self.tx.close();
         let deadline = Instant::now() + limit;
-        while self.written.load(Ordering::Relaxed) < self.sent && Instant::now() < deadline {
+        while self.written.load(Ordering::Relaxed) < self.tx.sent() && Instant::now() < deadline {
             if self.error.lock().map(|e| e.is_some()).unwrap_or(true) {
                 return;
             }

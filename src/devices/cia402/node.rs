@@ -366,11 +366,6 @@ impl DriveNode {
         self.reset.is_some()
     }
 
-    /// The controlword last set (sent, or queued for sending).
-    pub fn controlword(&self) -> u16 {
-        self.controlword
-    }
-
     /// Counters.
     pub fn stats(&self) -> NodeStats {
         self.stats
@@ -708,7 +703,7 @@ impl DriveNode {
             };
             // Command standstill in case only the heartbeat is missing, then keep trying
             // to reach the node.
-            self.send_stop(t, out);
+            self.send_stop(out);
             self.sdo.clear();
             return;
         }
@@ -774,7 +769,7 @@ impl DriveNode {
         // Nothing is commanded until the drive's state is known.
         if state.is_some() {
             match self.profile.command.mode {
-                Transport::Pdo => self.send_rpdos(t, out, false),
+                Transport::Pdo => self.send_rpdos(t, out),
                 Transport::Sdo => self.send_sdo_commands(t),
             }
         }
@@ -825,11 +820,11 @@ impl DriveNode {
         }
     }
 
-    /// Sends the RPDOs when something changed or the command period elapsed (or `force`).
-    fn send_rpdos(&mut self, t: Timestamp, out: &mut Vec<Frame>, force: bool) {
+    /// Sends the RPDOs when something changed or the command period elapsed.
+    fn send_rpdos(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         let changed = self.sent_controlword != Some(self.controlword)
             || self.sent_targets.as_deref() != Some(self.targets.as_slice());
-        if !changed && !force && t < self.next_command {
+        if !changed && t < self.next_command {
             return;
         }
         self.next_command = t.saturating_add(period(self.profile.command.rate_hz));
@@ -909,10 +904,7 @@ impl DriveNode {
         self.enable_asked_at = None;
         self.targets.iter_mut().for_each(|x| *x = 0);
         if self.phase == Phase::Running && !self.monitor {
-            self.controlword = controlword::QUICK_STOP;
-            out.extend(self.stop_frames());
-            self.sent_controlword = Some(self.controlword);
-            self.sent_targets = Some(self.targets.clone());
+            self.send_stop(out);
         }
     }
 
@@ -968,18 +960,12 @@ impl DriveNode {
     }
 
     /// Zero targets and a quick stop, sent straight away.
-    fn send_stop(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+    fn send_stop(&mut self, out: &mut Vec<Frame>) {
         self.targets.iter_mut().for_each(|x| *x = 0);
         self.controlword = controlword::QUICK_STOP;
-        match self.profile.command.mode {
-            Transport::Pdo => self.send_rpdos(t, out, true),
-            Transport::Sdo => {
-                let node = self.settings.node;
-                for request in target_writes(&self.profile, &self.targets) {
-                    out.push(request.frame(node));
-                }
-            }
-        }
+        out.extend(self.stop_frames());
+        self.sent_controlword = Some(self.controlword);
+        self.sent_targets = Some(self.targets.clone());
     }
 }
 
