@@ -24,6 +24,7 @@ const ENABLED: u64 = 1 << 0;
 const FAULT: u64 = 1 << 1;
 const HEARTBEAT_LOST: u64 = 1 << 2;
 const BUS_DOWN: u64 = 1 << 5;
+const ESTOP: u64 = 1 << 3;
 const AWAITING_COMMAND: u64 = 1 << 6;
 
 fn config(name: &str) -> PathBuf {
@@ -50,7 +51,10 @@ struct Rig {
 
 impl Rig {
     fn start(record: Option<&Path>) -> Rig {
-        let vehicle = config("vehicle-vcan.toml");
+        Rig::start_with(&config("vehicle-vcan.toml"), record)
+    }
+
+    fn start_with(vehicle: &Path, record: Option<&Path>) -> Rig {
         let sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
         let mut args: Vec<&std::ffi::OsStr> = vec![
             "run".as_ref(),
@@ -89,6 +93,19 @@ impl Rig {
     fn rearm(&mut self) {
         self.daemon
             .send(r#"cmd_vel {"linear":{"x":0},"angular":{"z":0}}"#);
+    }
+
+    /// Sends zero commands until the drives are enabled (after a stop at start).
+    fn arm(&mut self) {
+        let since = Instant::now();
+        loop {
+            self.rearm();
+            std::thread::sleep(Duration::from_millis(300));
+            if robot_status(&self.latest_status().to_string()) & ENABLED != 0 {
+                return;
+            }
+            assert!(since.elapsed() < WAIT, "never armed");
+        }
     }
 
     /// The simulator's state.
@@ -531,4 +548,74 @@ fn canplayer_session_decodes_like_replay() {
         (live_top - replay_top).abs() < 1e-9,
         "{live_top} vs {replay_top}"
     );
+}
+
+/// `vehicle-vcan.toml` with an e-stop module (`devices/estop-canopen-di.toml`, node 10) on
+/// vcan0, written to `dir`.
+fn estop_config(dir: &Path) -> PathBuf {
+    let devices = common::repo().join("devices");
+    let text = std::fs::read_to_string(config("vehicle-vcan.toml"))
+        .expect("vehicle-vcan.toml")
+        .replace("../../devices/", &format!("{}/", devices.display()));
+    let path = dir.join("vehicle-estop.toml");
+    let estop = format!(
+        "\n[[estop]]\nname = \"body\"\nprofile = \"{}\"\nbus = \"vcan0\"\n",
+        devices.join("estop-canopen-di.toml").display()
+    );
+    std::fs::write(&path, text + &estop).expect("config written");
+    path
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn hardware_estop_latches_and_its_silence_counts_as_pressed() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("vcan-estop");
+    let mut rig = Rig::start_with(&estop_config(&dir), None);
+    rig.daemon.wait_log(WAIT, "drive right: running");
+    // Silent until the module is first heard: a stop at start, and a deliberate act arms.
+    rig.arm();
+    rig.drive(0.3, 0.0, Duration::from_secs(1));
+    wait_moving(&mut rig, "moving");
+    assert_eq!(robot_status(&rig.latest_status().to_string()) & ESTOP, 0);
+
+    rig.sim.send("estop body pressed");
+    let pressed = Instant::now();
+    rig.daemon.wait_out(WAIT, "e-stop in the status", |l| {
+        robot_status(l) & ESTOP != 0
+    });
+    let reported = pressed.elapsed();
+    let stopped = wait_drives_stopped(&mut rig, pressed);
+    eprintln!("e-stop pressed: reported after {reported:?}, drives stopped after {stopped:?}");
+    rig.daemon
+        .wait_log(WAIT, "safety stop: emergency stop body pressed");
+    // While pressed, neither a zero command nor a reset re-arms, and the refusal names it.
+    rig.daemon.send("reset {}");
+    rig.daemon.wait_log(WAIT, "emergency stop body pressed");
+
+    // Released: a non-zero stream that never paused does not move the vehicle...
+    rig.sim.send("estop body released");
+    rig.drive(0.3, 0.0, Duration::from_millis(1500));
+    let s = rig.latest_status();
+    let bits = s["robot"]["robot_status"].as_u64().unwrap();
+    assert!(bits & ESTOP == 0 && bits & ENABLED == 0, "{s}");
+    std::thread::sleep(Duration::from_millis(1200));
+    assert_drives_at_rest(&rig.report());
+    // ...until a zero command.
+    rig.rearm();
+    rig.drive(0.3, 0.0, Duration::from_secs(1));
+    wait_moving(&mut rig, "moving after the release and a zero command");
+
+    // The module falls silent (a cut wire): after its 300 ms timeout, as if pressed.
+    rig.sim.send("estop body silent");
+    let silenced = Instant::now();
+    rig.daemon.wait_log(
+        WAIT,
+        "safety stop: emergency stop body silent (counts as pressed)",
+    );
+    let detected = silenced.elapsed();
+    let stopped = wait_drives_stopped(&mut rig, silenced);
+    eprintln!("e-stop module silent: stop after {detected:?}, drives stopped after {stopped:?}");
+    assert!(detected >= Duration::from_millis(250), "{detected:?}");
+    assert!(robot_status(&rig.latest_status().to_string()) & ESTOP != 0);
 }

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::{ConfigError, VehicleConfig, check_range};
 use crate::devices::bms::BmsProfile;
 use crate::devices::cia402::DriveProfile;
+use crate::devices::estop::EStopProfile;
 
 /// `[chassis]`: differential-drive geometry, motion limits and the command watchdog.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
@@ -213,6 +214,16 @@ impl LoadProfile for BmsProfile {
     }
 }
 
+impl LoadProfile for EStopProfile {
+    fn load_file(path: &Path) -> Result<Self, ConfigError> {
+        EStopProfile::load(path)
+    }
+
+    fn check(&self, file: &Path) -> Result<(), ConfigError> {
+        self.validate(file, "estop.profile.")
+    }
+}
+
 impl<T: LoadProfile> ProfileRef<T> {
     /// Reads a file reference, relative to `base`; checks an inline profile. `file` is the
     /// configuration, for errors.
@@ -363,6 +374,18 @@ fn default_poll_hz() -> f64 {
 }
 fn default_stale_s() -> f64 {
     3.0
+}
+
+/// `[[estop]]`: a hardware e-stop input read from a CAN status frame.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct EStopConfig {
+    /// Name for logs and status.
+    pub name: String,
+    /// E-stop profile: the frame, bit, active level and silence timeout.
+    pub profile: ProfileRef<EStopProfile>,
+    /// CAN interface.
+    pub bus: String,
 }
 
 /// Checks that a drive's loss-of-master timeout leaves room for what feeds it.
@@ -659,6 +682,29 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
             "not both wheels are driven".into(),
             "assign left and right to drive axes",
         ));
+    }
+    for (i, e) in config.estop.iter().enumerate() {
+        if e.name.trim().is_empty() || config.estop[..i].iter().any(|o| o.name == e.name) {
+            return Err(invalid(
+                &format!("estop[{i}].name"),
+                format!("{:?} is empty or used twice", e.name),
+                "give each e-stop input its own name",
+            ));
+        }
+        if !bus_known(&e.bus) {
+            return Err(invalid(
+                &format!("estop[{i}].bus"),
+                format!("{:?} is not a [[can]] interface", e.bus),
+                "add it under [[can]], or fix the name",
+            ));
+        }
+        if e.profile.get().is_none() {
+            return Err(invalid(
+                &format!("estop[{i}].profile"),
+                "not loaded".into(),
+                "name a profile file",
+            ));
+        }
     }
     if let Some(bms) = &config.bms {
         if !bus_known(&bms.bus) {

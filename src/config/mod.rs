@@ -91,6 +91,9 @@ pub struct VehicleConfig {
     /// Motor drives on CAN.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub drive: Vec<chassis::DriveConfig>,
+    /// Hardware e-stop inputs on CAN.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub estop: Vec<chassis::EStopConfig>,
     /// The battery management system.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bms: Option<chassis::BmsConfig>,
@@ -217,6 +220,9 @@ impl VehicleConfig {
         let base = file.parent().unwrap_or(Path::new("."));
         for drive in &mut config.drive {
             drive.profile.resolve(base, file)?;
+        }
+        for estop in &mut config.estop {
+            estop.profile.resolve(base, file)?;
         }
         if let Some(bms) = &mut config.bms {
             bms.profile.resolve(base, file)?;
@@ -358,6 +364,8 @@ mod tests {
         assert!(c.gnss.is_some());
         let mqtt = c.mqtt.expect("[mqtt]");
         assert!(mqtt.rtk.is_some() && mqtt.root.is_some() && mqtt.device.is_some());
+        let estop = c.estop[0].profile.get().expect("e-stop profile loaded");
+        assert_eq!((estop.id, estop.timeout_ms), (0x18A, 300));
     }
 
     #[test]
@@ -419,6 +427,25 @@ mod tests {
             "interface = \"can0\"",
             "can[1].interface",
         );
+        check(
+            "name = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can0\"",
+            "name = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can5\"",
+            "estop[0].bus",
+        );
+        let e = VehicleConfig::from_toml(
+            &text.replace("estop-canopen-di.toml", "../Cargo.toml"),
+            &path,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("Cargo.toml"), "{e}");
+        let e = VehicleConfig::from_toml(
+            &format!("{text}\n[[estop]]\nname = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can1\"\n"),
+            &path,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("`estop[1].name`"), "{e}");
         let e = VehicleConfig::from_toml(
             &text.replace("profile = \"zlac8015d.toml\"", "profile = \"missing.toml\""),
             &path,

@@ -4,5 +4,6 @@ pub mod bms;
 pub mod can;
 pub mod canopen;
 pub mod cia402;
+pub mod estop;
 pub mod gnss;
 pub mod imu;

@@ -13,6 +13,7 @@ use crate::devices::bms::profile::CurrentAboveOffset;
 use crate::devices::bms::{BmsDevice, BmsProfile};
 use crate::devices::can::{Frame, Received};
 use crate::devices::canopen::NodeId;
+use crate::devices::estop::EStopSignal;
 use crate::devices::canopen::nmt::{NmtState, heartbeat_frame};
 use crate::devices::cia402::node::{DriveFault, DriveNode, NodeSettings, Phase};
 use crate::devices::cia402::profile::MasterLoss;
@@ -46,6 +47,8 @@ pub struct BusStats {
     pub last_error: Option<String>,
     /// Remote and CAN FD frames, which no device uses.
     pub ignored: u64,
+    /// E-stop status frames too short to hold their bit.
+    pub estop_malformed: u64,
 }
 
 /// Unwraps a 32-bit encoder count into a continuous one.
@@ -116,6 +119,7 @@ pub struct Bus {
     drives: Vec<Drive>,
     deadman: Option<Deadman>,
     bms: Option<BmsDevice>,
+    estops: Vec<EStopSignal>,
     stats: BusStats,
 }
 
@@ -224,6 +228,12 @@ impl Drivetrain {
                         heartbeat: (node, Duration::from_millis(c.master_heartbeat_ms), None),
                         sync: watches_sync.then(|| (Duration::from_millis(c.sync_ms), None)),
                     });
+                let estops = config
+                    .estop
+                    .iter()
+                    .filter(|e| e.bus == c.interface)
+                    .filter_map(|e| Some(EStopSignal::new(e.name.clone(), e.profile.get()?.clone())))
+                    .collect();
                 Bus {
                     name: c.interface.clone(),
                     listen_only: c.listen_only,
@@ -231,6 +241,7 @@ impl Drivetrain {
                     drives,
                     deadman,
                     bms,
+                    estops,
                     stats: BusStats::default(),
                 }
             })
@@ -247,7 +258,7 @@ impl Drivetrain {
     pub fn is_empty(&self) -> bool {
         self.buses
             .iter()
-            .all(|b| b.drives.is_empty() && b.bms.is_none())
+            .all(|b| b.drives.is_empty() && b.bms.is_none() && b.estops.is_empty())
     }
 
     /// Whether any interface carries drives.
@@ -290,6 +301,10 @@ impl Drivetrain {
             d.node.on_frame(t, frame, &mut out);
         }
         let bms_changed = bus.bms.as_mut().is_some_and(|b| b.on_frame(t, frame));
+        for e in &mut bus.estops {
+            e.on_frame(t, frame);
+        }
+        bus.stats.estop_malformed = bus.estops.iter().map(EStopSignal::malformed).sum();
         bus.emit(out, tx);
         bms_changed
     }
@@ -358,6 +373,8 @@ impl Drivetrain {
             if bus.link == BusLink::Down && !bus.drives.is_empty() {
                 fb.bus_down = true;
             }
+            // A bus that is down delivers nothing: its e-stops fall silent and count as pressed.
+            fb.estops.extend(bus.estops.iter().map(EStopSignal::input));
             for d in &mut bus.drives {
                 let units = d.node.profile().units;
                 for (a, axis) in d.axes.iter_mut().enumerate() {
@@ -490,6 +507,31 @@ impl Bus {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn estop_frames_reach_the_feedback() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let text = "[[can]]\ninterface = \"can0\"\n\
+                    [[estop]]\nname = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can0\"\n";
+        let config = VehicleConfig::from_toml(text, &dir.join("test.toml")).unwrap();
+        let mut train = Drivetrain::new(&config);
+        assert!(!train.is_empty());
+        let mut tx = Vec::new();
+        let t = Timestamp::from_nanos(1_000_000);
+        let fb = train.feedback();
+        assert_eq!(fb.estops.len(), 1);
+        assert_eq!((fb.estops[0].pressed, fb.estops[0].heard), (None, None));
+        // Input 1 high: the normally-closed loop is closed, released.
+        train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [0x01])), &mut tx);
+        let input = &train.feedback().estops[0];
+        assert_eq!((input.pressed, input.heard), (Some(false), Some(t)));
+        assert_eq!(input.timeout, Duration::from_millis(300));
+        train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [0x00])), &mut tx);
+        assert_eq!(train.feedback().estops[0].pressed, Some(true));
+        train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [])), &mut tx);
+        assert_eq!(train.stats().next().unwrap().1.estop_malformed, 1);
+        assert!(tx.is_empty(), "an e-stop input is only listened to");
+    }
 
     #[test]
     fn unwraps_encoder_roll_over() {

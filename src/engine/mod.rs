@@ -150,6 +150,8 @@ pub struct Engine {
     recorded_tx: VecDeque<(String, Received)>,
     /// The drives as last reported, to announce changes.
     drive_states: Vec<(bool, Option<String>)>,
+    /// The latched stop's reason at the last status.
+    stop_reason: Option<String>,
     /// The MQTT protocol dialects.
     dialects: Dialects,
     stats: EngineStats,
@@ -247,6 +249,7 @@ impl Engine {
             sent: None,
             recorded_tx: VecDeque::new(),
             drive_states: Vec::new(),
+            stop_reason: None,
             dialects: dialects(config, trajectories),
             stats: EngineStats::default(),
         }
@@ -467,6 +470,7 @@ impl Engine {
             if tick.as_nanos() % STATUS_PERIOD.as_nanos() as u64 == 0 {
                 for output in self.vehicle.handle(tick, Input::Tick) {
                     if let Output::Status(s) = output {
+                        self.announce_stop_reason(&s, out);
                         let mut reports = Vec::new();
                         let mut core = CoreAt {
                             vehicle: &mut self.vehicle,
@@ -504,6 +508,18 @@ impl Engine {
             self.drivetrain.flush_commands(t, &mut tx);
         }
         self.transmit(tx, out);
+    }
+
+    /// Logs each new reason for a latched stop, and the re-arm that ends it.
+    fn announce_stop_reason(&mut self, status: &crate::core::status::VehicleStatus, out: &mut Vec<EngineOutput>) {
+        let reason = status.chassis.as_ref().and_then(|c| c.stop_reason.clone());
+        if reason != self.stop_reason {
+            out.push(EngineOutput::Event(match &reason {
+                Some(r) => format!("safety stop: {r}"),
+                None => "safety stop cleared: re-armed".to_owned(),
+            }));
+            self.stop_reason = reason;
+        }
     }
 
     fn announce_drive_changes(

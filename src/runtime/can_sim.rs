@@ -5,7 +5,8 @@
 //! Standard input takes commands that inject faults, one per line:
 //! `heartbeat DRIVE off|on`, `fault DRIVE AXIS CODE [REFUSED]` (CODE an EMCY code such as
 //! 0x2310; the drive ignores the first REFUSED reset edges), `tpdo DRIVE off|on` (TPDOs stop
-//! while the heartbeat goes on), `report` (one JSON line on standard output with every node's
+//! while the heartbeat goes on), `estop NAME pressed|released|silent` (an `[[estop]]` input's
+//! module: its button, or silence), `report` (one JSON line on standard output with every node's
 //! state).
 //!
 //! While an interface is down the drives on it keep running (their motors turn, their
@@ -28,6 +29,7 @@ use crate::devices::can::{Frame, Received};
 use crate::devices::canopen::NodeId;
 use crate::sim::bms::{Battery, SimDaly, SimDbcBms};
 use crate::sim::cia402_drive::{MotorModel, SimDrive};
+use crate::sim::estop::{Button, SimEStop};
 
 /// Simulation step.
 const STEP: Duration = Duration::from_millis(5);
@@ -38,6 +40,7 @@ struct SimBus {
     drives: Vec<(String, SimDrive)>,
     daly: Option<SimDaly>,
     dbc: Option<SimDbcBms>,
+    estops: Vec<(String, SimEStop)>,
 }
 
 #[derive(Debug, Clone)]
@@ -45,6 +48,7 @@ enum SimCommand {
     Heartbeat(String, bool),
     Fault(String, usize, u16, u32),
     Tpdo(String, bool),
+    EStop(String, Button),
     Report,
 }
 
@@ -59,7 +63,12 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
             drives: Vec::new(),
             daly: None,
             dbc: None,
+            estops: Vec::new(),
         };
+        for e in config.estop.iter().filter(|e| e.bus == bus.interface) {
+            let profile = e.profile.get().context("e-stop profile not loaded")?.clone();
+            sim.estops.push((e.name.clone(), SimEStop::new(profile)));
+        }
         for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
             let profile = d.profile.get().context("drive profile not loaded")?.clone();
             let node = NodeId::new(d.node).context("node id out of range")?;
@@ -126,6 +135,15 @@ fn parse(line: &str) -> Result<Option<SimCommand>, String> {
         }
         ["tpdo", name, "on"] => SimCommand::Tpdo((*name).to_owned(), true),
         ["tpdo", name, "off"] => SimCommand::Tpdo((*name).to_owned(), false),
+        ["estop", name, state] => SimCommand::EStop(
+            (*name).to_owned(),
+            match *state {
+                "pressed" => Button::Pressed,
+                "released" => Button::Released,
+                "silent" => Button::Silent,
+                _ => return Err(format!("e-stop state {state:?}: pressed, released or silent")),
+            },
+        ),
         ["report"] => SimCommand::Report,
         _ => return Err(format!("unknown command {line:?}")),
     }))
@@ -195,6 +213,9 @@ async fn exchange(
                 if let Some(dbc) = &mut sim.dbc {
                     dbc.step(t, &mut out);
                 }
+                for (_, e) in &mut sim.estops {
+                    e.step(t, &mut out);
+                }
             }
             read = socket.read_frame() => {
                 let frame = read.map_err(|e| e.to_string())?;
@@ -256,6 +277,13 @@ fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
             for (n, d) in &mut sim.drives {
                 if *n == name {
                     d.set_tpdos(on);
+                }
+            }
+        }
+        SimCommand::EStop(name, button) => {
+            for (n, e) in &mut sim.estops {
+                if *n == name {
+                    e.set(button);
                 }
             }
         }

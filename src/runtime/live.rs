@@ -19,10 +19,11 @@ use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use super::serial::{self, SerialSpec};
 use super::status_out::StatusOut;
+use super::trajectory_writer;
 use crate::api::local;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
-use crate::api::rtk::trajectory::{DirStore, TrajectoryStore, Unconfigured};
+use crate::api::rtk::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
@@ -142,8 +143,8 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     {
         tracing::warn!("mqtt.rtk.trajectory_dir is not set: trajectory commands will be refused");
     }
-    let mut trajectories = trajectory_store(config, Box::new(Unconfigured))?;
-    let mut engine = Engine::with_trajectories(config, &sources, trajectories.0);
+    let mut trajectories = trajectory_writer::open(config, Box::new(Unconfigured))?;
+    let mut engine = Engine::with_trajectories(config, &sources, trajectories.store);
     engine.start_at(start);
     install_panic_stop(engine.drivetrain().stop_frames());
     let mqtt = match &config.mqtt {
@@ -193,7 +194,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
                 source_meta,
             )
             .with_context(|| format!("cannot start recording in {}", dir.display()))?;
-            if let Some(snapshot) = trajectories.1.take() {
+            if let Some(snapshot) = trajectories.snapshot.take() {
                 writer
                     .attach_trajectories(&snapshot)
                     .context("cannot record the stored trajectories")?;
@@ -290,6 +291,11 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         r.finish(end);
     }
     summarise_faults(&engine, &can_tx, &mut reported);
+    // The engine holds the trajectory queue; once it is gone the writer drains and ends.
+    drop(engine);
+    if let Some(writer) = trajectories.writer {
+        writer.finish(STOP_FLUSH);
+    }
     if let Ok(signal) = &result {
         tracing::info!(%signal, "stopped: drives quick-stopped, targets zero");
     }
@@ -355,28 +361,6 @@ fn dispatch(
             _ => {}
         }
     }
-}
-
-/// The trajectory store of the `rtk` dialect, and its contents as JSON for a recording.
-pub(crate) type StoreAndSnapshot = (Box<dyn TrajectoryStore>, Option<Vec<u8>>);
-
-/// The `rtk` dialect's trajectory folder when one is configured; otherwise `fallback`.
-pub(crate) fn trajectory_store(
-    config: &VehicleConfig,
-    fallback: Box<dyn TrajectoryStore>,
-) -> anyhow::Result<StoreAndSnapshot> {
-    let Some(dir) = config
-        .mqtt
-        .as_ref()
-        .and_then(|m| m.rtk.as_ref())
-        .and_then(|r| r.trajectory_dir.as_ref())
-    else {
-        return Ok((fallback, None));
-    };
-    let mut store = DirStore::open(std::path::Path::new(dir))
-        .with_context(|| format!("trajectory folder {dir}"))?;
-    let snapshot = serde_json::to_vec(&store.all().unwrap_or_default()).ok();
-    Ok((Box::new(store), snapshot))
 }
 
 /// Reads `TOPIC JSON` lines from standard input as commands.
@@ -451,10 +435,11 @@ fn summarise_faults(
     *reported = now;
     for (bus, stats) in engine.bus_stats() {
         let dropped = can_tx.get(bus).map_or(0, CanTx::dropped);
-        if stats.error_frames > 0 || dropped > 0 {
+        if stats.error_frames > 0 || dropped > 0 || stats.estop_malformed > 0 {
             tracing::warn!(
                 device = %bus,
                 error_frames = stats.error_frames,
+                estop_malformed = stats.estop_malformed,
                 last_error = ?stats.last_error,
                 frames_dropped = dropped,
                 "CAN faults so far"

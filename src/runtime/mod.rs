@@ -12,6 +12,7 @@ pub mod recorder;
 pub mod serial;
 pub mod sim;
 pub mod status_out;
+pub mod trajectory_writer;
 
 use crate::engine::EngineOutput;
 

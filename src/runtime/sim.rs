@@ -13,7 +13,8 @@ use tokio::sync::mpsc;
 use super::broker;
 use super::clock::RecordClock;
 use super::host;
-use super::live::{read_commands, trajectory_store};
+use super::live::read_commands;
+use super::trajectory_writer;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
 use super::status_out::StatusOut;
@@ -92,7 +93,11 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         ..Default::default()
     };
     // A simulated session keeps trajectories in memory unless a folder is configured.
-    let (store, snapshot) = trajectory_store(&config, Box::new(MemoryStore::default()))?;
+    let trajectory_writer::OpenedStore {
+        store,
+        snapshot,
+        writer,
+    } = trajectory_writer::open(&config, Box::new(MemoryStore::default()))?;
     let mut sim = Lockstep::with_mqtt(
         options.plant.clone(),
         options.seed,
@@ -189,6 +194,11 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     }
     finish(sink.recorder.take(), sim.time());
     sink.out.finish(Duration::from_millis(500));
+    // The simulation holds the trajectory queue; once it is gone the writer drains and ends.
+    drop(sim);
+    if let Some(writer) = writer {
+        writer.finish(Duration::from_millis(500));
+    }
     Ok(())
 }
 

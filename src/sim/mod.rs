@@ -3,6 +3,7 @@
 
 pub mod bms;
 pub mod cia402_drive;
+pub mod estop;
 pub mod lockstep;
 pub mod nmea_out;
 pub mod plant;

@@ -74,6 +74,17 @@ pub enum TrajectoryError {
     /// The storage failed.
     #[error("storage: {0}")]
     Io(#[from] std::io::Error),
+    /// The storage queue is full.
+    #[error("trajectory storage is busy writing earlier changes; try again")]
+    Busy,
+    /// The store holds its limit of points.
+    #[error("trajectory storage is full: {stored} points stored, limit {limit}; delete trajectories first")]
+    StoreFull {
+        /// Points stored (besides the one being replaced).
+        stored: usize,
+        /// The limit.
+        limit: usize,
+    },
     /// No storage is configured.
     #[error("trajectory storage is not configured (set mqtt.rtk.trajectory_dir)")]
     Unconfigured,
@@ -178,6 +189,11 @@ impl MemoryStore {
                 .map(|t| (t.name.clone(), t))
                 .collect(),
         }
+    }
+
+    /// The trajectory named `name`.
+    pub fn get(&self, name: &str) -> Option<&Trajectory> {
+        self.trajectories.get(name)
     }
 }
 
