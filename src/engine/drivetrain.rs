@@ -13,11 +13,11 @@ use crate::devices::bms::profile::CurrentAboveOffset;
 use crate::devices::bms::{BmsDevice, BmsProfile};
 use crate::devices::can::{Frame, Received};
 use crate::devices::canopen::NodeId;
-use crate::devices::estop::EStopSignal;
 use crate::devices::canopen::nmt::{NmtState, heartbeat_frame};
 use crate::devices::cia402::node::{DriveFault, DriveNode, NodeSettings, Phase};
 use crate::devices::cia402::profile::MasterLoss;
 use crate::devices::cia402::state::Goal;
+use crate::devices::estop::EStopSignal;
 use crate::time::Timestamp;
 use std::time::Duration;
 
@@ -232,7 +232,9 @@ impl Drivetrain {
                     .estop
                     .iter()
                     .filter(|e| e.bus == c.interface)
-                    .filter_map(|e| Some(EStopSignal::new(e.name.clone(), e.profile.get()?.clone())))
+                    .filter_map(|e| {
+                        Some(EStopSignal::new(e.name.clone(), e.profile.get()?.clone()))
+                    })
                     .collect();
                 Bus {
                     name: c.interface.clone(),
@@ -522,11 +524,21 @@ mod tests {
         assert_eq!(fb.estops.len(), 1);
         assert_eq!((fb.estops[0].pressed, fb.estops[0].heard), (None, None));
         // Input 1 high: the normally-closed loop is closed, released.
-        train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [0x01])), &mut tx);
+        train.on_frame(
+            t,
+            "can0",
+            &Received::Data(Frame::std(0x18A, [0x01])),
+            &mut tx,
+        );
         let input = &train.feedback().estops[0];
         assert_eq!((input.pressed, input.heard), (Some(false), Some(t)));
         assert_eq!(input.timeout, Duration::from_millis(300));
-        train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [0x00])), &mut tx);
+        train.on_frame(
+            t,
+            "can0",
+            &Received::Data(Frame::std(0x18A, [0x00])),
+            &mut tx,
+        );
         assert_eq!(train.feedback().estops[0].pressed, Some(true));
         train.on_frame(t, "can0", &Received::Data(Frame::std(0x18A, [])), &mut tx);
         assert_eq!(train.stats().next().unwrap().1.estop_malformed, 1);

@@ -511,7 +511,11 @@ impl Engine {
     }
 
     /// Logs each new reason for a latched stop, and the re-arm that ends it.
-    fn announce_stop_reason(&mut self, status: &crate::core::status::VehicleStatus, out: &mut Vec<EngineOutput>) {
+    fn announce_stop_reason(
+        &mut self,
+        status: &crate::core::status::VehicleStatus,
+        out: &mut Vec<EngineOutput>,
+    ) {
         let reason = status.chassis.as_ref().and_then(|c| c.stop_reason.clone());
         if reason != self.stop_reason {
             out.push(EngineOutput::Event(match &reason {

@@ -66,7 +66,11 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
             estops: Vec::new(),
         };
         for e in config.estop.iter().filter(|e| e.bus == bus.interface) {
-            let profile = e.profile.get().context("e-stop profile not loaded")?.clone();
+            let profile = e
+                .profile
+                .get()
+                .context("e-stop profile not loaded")?
+                .clone();
             sim.estops.push((e.name.clone(), SimEStop::new(profile)));
         }
         for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
@@ -141,7 +145,11 @@ fn parse(line: &str) -> Result<Option<SimCommand>, String> {
                 "pressed" => Button::Pressed,
                 "released" => Button::Released,
                 "silent" => Button::Silent,
-                _ => return Err(format!("e-stop state {state:?}: pressed, released or silent")),
+                _ => {
+                    return Err(format!(
+                        "e-stop state {state:?}: pressed, released or silent"
+                    ));
+                }
             },
         ),
         ["report"] => SimCommand::Report,

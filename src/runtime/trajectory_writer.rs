@@ -59,7 +59,10 @@ pub struct OpenedStore {
 }
 
 /// The `rtk` dialect's trajectory folder when one is configured; otherwise `fallback`.
-pub fn open(config: &VehicleConfig, fallback: Box<dyn TrajectoryStore>) -> anyhow::Result<OpenedStore> {
+pub fn open(
+    config: &VehicleConfig,
+    fallback: Box<dyn TrajectoryStore>,
+) -> anyhow::Result<OpenedStore> {
     let Some(dir) = config
         .mqtt
         .as_ref()
@@ -72,8 +75,8 @@ pub fn open(config: &VehicleConfig, fallback: Box<dyn TrajectoryStore>) -> anyho
             writer: None,
         });
     };
-    let (store, writer) =
-        spawn(Path::new(dir), QUEUE, MAX_STORED_POINTS).with_context(|| format!("trajectory folder {dir}"))?;
+    let (store, writer) = spawn(Path::new(dir), QUEUE, MAX_STORED_POINTS)
+        .with_context(|| format!("trajectory folder {dir}"))?;
     let snapshot = serde_json::to_vec(&store.mirror_contents()).ok();
     Ok(OpenedStore {
         store: Box::new(store),
@@ -237,7 +240,10 @@ mod tests {
         store.save(&trajectory("b", 2)).unwrap();
         store.save(&trajectory("a", 1)).unwrap();
         store.delete("b").unwrap();
-        assert!(matches!(store.delete("b"), Err(TrajectoryError::NotFound(_))));
+        assert!(matches!(
+            store.delete("b"),
+            Err(TrajectoryError::NotFound(_))
+        ));
         assert_eq!(store.all().unwrap(), vec![trajectory("a", 1)]);
         drop(store);
         assert!(writer.finish(Duration::from_secs(5)));

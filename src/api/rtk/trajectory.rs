@@ -78,7 +78,9 @@ pub enum TrajectoryError {
     #[error("trajectory storage is busy writing earlier changes; try again")]
     Busy,
     /// The store holds its limit of points.
-    #[error("trajectory storage is full: {stored} points stored, limit {limit}; delete trajectories first")]
+    #[error(
+        "trajectory storage is full: {stored} points stored, limit {limit}; delete trajectories first"
+    )]
     StoreFull {
         /// Points stored (besides the one being replaced).
         stored: usize,
