@@ -276,6 +276,63 @@ fn the_drive_quick_stops_by_itself_when_chassisd_is_gone() {
     assert_eq!(rig.sim.master_losses(), 1);
 }
 
+/// The generic profile watching chassisd's SYNC instead of its heartbeat.
+fn sync_watching_rig() -> Rig {
+    let p = common::canbus::profile_edited("cia402-generic.toml", |text| {
+        text.replace("watch = \"heartbeat\"", "watch = \"sync\"")
+    });
+    let mut rig = Rig::with_profile(p, 1);
+    rig.sync_ms = Some(20);
+    rig
+}
+
+#[test]
+fn a_drive_watching_sync_is_set_up_for_it_and_stops_when_sync_ends() {
+    let mut rig = sync_watching_rig();
+    rig.start();
+    rig.run(500, true, &[300.0]);
+    let sent = rig.sent();
+    // 0x1006 communication cycle 20000 µs and 0x6007 quick stop, instead of 0x1016.
+    assert!(
+        sent.contains(&"601#23061000204E0000".to_owned()),
+        "{sent:?}"
+    );
+    assert!(
+        sent.contains(&"601#2B07600003000000".to_owned()),
+        "{sent:?}"
+    );
+    assert!(
+        !sent.iter().any(|f| f.starts_with("601#231610")),
+        "{sent:?}"
+    );
+    assert!((rig.sim.report()[0].rpm - 300.0).abs() < 1e-6);
+    // SYNC stops while chassisd's heartbeat goes on: the drive watches SYNC, so it stops.
+    rig.sync_ms = None;
+    let silent = rig.now_ms;
+    let mut reacted = None;
+    for _ in 0..200 {
+        rig.run(1, true, &[300.0]);
+        if rig.sim.report()[0].state == "quick stop active" {
+            reacted = Some(rig.now_ms - silent);
+            break;
+        }
+    }
+    let reacted = reacted.expect("quick stop on the lost SYNC");
+    // The last SYNC up to 20 ms before; two missed cycles.
+    assert!((20..=45).contains(&reacted), "reacted after {reacted} ms");
+    assert_eq!(rig.sim.master_losses(), 1);
+}
+
+#[test]
+fn a_drive_watching_sync_runs_on_while_sync_flows() {
+    let mut rig = sync_watching_rig();
+    rig.start();
+    rig.run(300, true, &[200.0]);
+    rig.run(2_000, true, &[200.0]);
+    assert_eq!(rig.sim.report()[0].state, "operation enabled");
+    assert_eq!(rig.sim.master_losses(), 0);
+}
+
 #[test]
 fn stale_feedback_faults_while_the_heartbeat_goes_on() {
     let mut rig = Rig::new("cia402-generic.toml", 1);

@@ -545,6 +545,44 @@ mod tests {
         assert!(tx.is_empty(), "an e-stop input is only listened to");
     }
 
+    /// A drive train with one generic drive whose profile watches `watch`; frames of the
+    /// first 100 ms of polling.
+    fn deadman_frames(watch: &str) -> Vec<Frame> {
+        let devices = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let dir =
+            std::env::temp_dir().join(format!("chassisd-deadman-{watch}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let profile = std::fs::read_to_string(devices.join("cia402-generic.toml"))
+            .unwrap()
+            .replace("watch = \"heartbeat\"", &format!("watch = \"{watch}\""));
+        std::fs::write(dir.join("drive.toml"), profile).unwrap();
+        let text = "[chassis]\nwheel_radius_m = 0.1\ntrack_m = 0.5\n\
+                    [wheels.left]\ndirection = 1\n[wheels.right]\ndirection = -1\n\
+                    [[can]]\ninterface = \"can0\"\nsync_ms = 20\n\
+                    [[drive]]\nname = \"l\"\nprofile = \"drive.toml\"\nbus = \"can0\"\nnode = 1\nwheels = [\"left\"]\n\
+                    [[drive]]\nname = \"r\"\nprofile = \"drive.toml\"\nbus = \"can0\"\nnode = 2\nwheels = [\"right\"]\n";
+        let config = VehicleConfig::from_toml(text, &dir.join("vehicle.toml")).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        let mut train = Drivetrain::new(&config);
+        let mut tx = Vec::new();
+        for ms in (0..100).step_by(10) {
+            train.poll(Timestamp::from_micros(ms * 1000), &mut tx);
+        }
+        tx.into_iter().map(|(_, f)| f).collect()
+    }
+
+    #[test]
+    fn sync_is_produced_only_for_drives_that_watch_it() {
+        let count = |frames: &[Frame], id: u32| frames.iter().filter(|f| f.id() == id).count();
+        let sync = deadman_frames("sync");
+        // Every 20 ms over 100 ms, and chassisd's heartbeat (node 0x7F) every 50 ms.
+        assert_eq!(count(&sync, 0x080), 5);
+        assert_eq!(count(&sync, 0x77F), 2);
+        let heartbeat = deadman_frames("heartbeat");
+        assert_eq!(count(&heartbeat, 0x080), 0);
+        assert_eq!(count(&heartbeat, 0x77F), 2);
+    }
+
     #[test]
     fn unwraps_encoder_roll_over() {
         let mut u = Unwrap::default();

@@ -14,10 +14,15 @@ use std::time::Duration;
 
 /// A shipped profile from `devices/`.
 pub fn profile(name: &str) -> DriveProfile {
+    profile_edited(name, |text| text)
+}
+
+/// A shipped profile from `devices/`, its text changed by `edit` first.
+pub fn profile_edited(name: &str, edit: impl FnOnce(String) -> String) -> DriveProfile {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("devices")
         .join(name);
-    let text = std::fs::read_to_string(&path).expect("profile file");
+    let text = edit(std::fs::read_to_string(&path).expect("profile file"));
     DriveProfile::from_toml(&text, &path).expect("valid profile")
 }
 
@@ -63,11 +68,17 @@ pub struct Rig {
     pub link_up: bool,
     /// chassisd produces its heartbeat (as the drive train does); false: chassisd is gone.
     pub master_alive: bool,
+    /// chassisd also produces SYNC with this period, ms (for drives that watch SYNC).
+    pub sync_ms: Option<u64>,
 }
 
 impl Rig {
     pub fn new(profile_name: &str, node: u8) -> Rig {
-        let p = profile(profile_name);
+        Rig::with_profile(profile(profile_name), node)
+    }
+
+    /// A rig around a drive with profile `p`.
+    pub fn with_profile(p: DriveProfile, node: u8) -> Rig {
         Rig {
             node: DriveNode::new(settings(node), p.clone()),
             sim: SimDrive::new(NodeId::new(node).unwrap(), p, MotorModel::default()),
@@ -75,6 +86,7 @@ impl Rig {
             log: Vec::new(),
             link_up: true,
             master_alive: true,
+            sync_ms: None,
         }
     }
 
@@ -105,6 +117,9 @@ impl Rig {
             }
             if self.now_ms.is_multiple_of(MASTER_HEARTBEAT_MS) {
                 from_node.push(heartbeat_frame(MASTER, NmtState::Operational));
+            }
+            if self.sync_ms.is_some_and(|p| self.now_ms.is_multiple_of(p)) {
+                from_node.push(Frame::std(0x080, []));
             }
             if self.now_ms.is_multiple_of(10) {
                 self.node.command(t, goal, rpm);
@@ -137,12 +152,12 @@ impl Rig {
         }
     }
 
-    /// Frames chassisd's node sent (not its heartbeat), as candump text.
+    /// Frames chassisd's node sent (not its heartbeat or SYNC), as candump text.
     pub fn sent(&self) -> Vec<String> {
         let heartbeat = 0x700 + u32::from(MASTER.get());
         self.log
             .iter()
-            .filter(|(_, mine, f)| *mine && f.id() != heartbeat)
+            .filter(|(_, mine, f)| *mine && f.id() != heartbeat && f.id() != 0x080)
             .map(|(_, _, f)| f.to_string())
             .collect()
     }
