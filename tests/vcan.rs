@@ -616,6 +616,11 @@ fn hardware_estop_latches_and_its_silence_counts_as_pressed() {
     let detected = silenced.elapsed();
     let stopped = wait_drives_stopped(&mut rig, silenced);
     eprintln!("e-stop module silent: stop after {detected:?}, drives stopped after {stopped:?}");
-    assert!(detected >= Duration::from_millis(250), "{detected:?}");
+    // The last frame came up to one period (75 ms) before the silence; the timeout is
+    // 300 ms; the VM adds its scheduling.
+    assert!(
+        (Duration::from_millis(200)..Duration::from_millis(1000)).contains(&detected),
+        "{detected:?}"
+    );
     assert!(robot_status(&rig.latest_status().to_string()) & ESTOP != 0);
 }
