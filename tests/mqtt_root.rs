@@ -353,6 +353,7 @@ fn the_software_estop_latches_and_release_alone_does_not_rearm() {
     let broker = Mosquitto::start();
     let acks = broker.subscribe(&[&topic("+/+/ack")]);
     let status = broker.subscribe(&["base_status"]);
+    let log = broker.subscribe(&[&topic("log/notify")]);
     let _d = daemon(&broker);
     let drive = r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.5, "angular": 0.0}}"#;
     let estop = |on: u8| {
@@ -366,6 +367,16 @@ fn the_software_estop_latches_and_release_alone_does_not_rearm() {
     let s = json(&status.next_on("base_status", WAIT).expect("status"));
     let bits = s["robot"]["robot_status"].as_u64().unwrap();
     assert!(bits & (1 << 3) != 0, "robot_status bit 3 (e-stop): {s}");
+    let event = json(&log.next_on(&topic("log/notify"), WAIT).expect("an event"));
+    assert_eq!(event["data"]["key"], "EMERGENCY_STOP", "{event}");
+    assert_eq!(event["data"]["code"], 404, "{event}");
+    assert!(
+        event["data"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("software emergency stop engaged"),
+        "{event}"
+    );
     // While engaged, neither a zero DRIVE nor a RESET re-arms.
     let reset = r#"{"messageId": 8, "timestamp": "x", "messageType": 102, "data": {}}"#;
     let ack = request(&broker, &acks, &topic("cmd/chassis/set"), reset);

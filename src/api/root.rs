@@ -68,7 +68,7 @@ const fn log(
 }
 
 /// Every `/log` code, with the numbers the spec left out or repeated resolved.
-pub const LOG_CODES: [LogCode; 15] = [
+pub const LOG_CODES: [LogCode; 16] = [
     log(
         "LOCALIZATION_ERROR",
         100,
@@ -155,6 +155,13 @@ pub const LOG_CODES: [LogCode; 15] = [
         "ERROR",
         "chassis",
         "drive fault: stopped",
+    ),
+    log(
+        "EMERGENCY_STOP",
+        404,
+        "ERROR",
+        "chassis",
+        "emergency stop: stopped",
     ),
 ];
 
@@ -533,13 +540,17 @@ impl RootDialect {
         if rose(status_bits::CONTROL_LINK_LOST) {
             self.event(t, "CONTROL_LINK_LOST", "", out);
         }
-        if rose(status_bits::FAULT) {
-            let reason = s
-                .chassis
+        let reason = || {
+            s.chassis
                 .as_ref()
                 .and_then(|c| c.stop_reason.clone())
-                .unwrap_or_default();
-            self.event(t, "SAFETY_STOP", &reason, out);
+                .unwrap_or_default()
+        };
+        if rose(status_bits::FAULT) {
+            self.event(t, "SAFETY_STOP", &reason(), out);
+        }
+        if rose(status_bits::ESTOP) {
+            self.event(t, "EMERGENCY_STOP", &reason(), out);
         }
         self.previous = Some(s.clone());
     }
