@@ -624,3 +624,39 @@ fn hardware_estop_latches_and_its_silence_counts_as_pressed() {
     );
     assert!(robot_status(&rig.latest_status().to_string()) & ESTOP != 0);
 }
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn a_panic_writes_the_precomputed_stop_frames_to_the_bus() {
+    let _turn = one_at_a_time();
+    // The frames the daemon computes at start for the VM vehicle: one RPDO per drive.
+    let vehicle = chassisd::config::VehicleConfig::load(&config("vehicle-vcan.toml"))
+        .expect("vehicle-vcan.toml");
+    let frames = chassisd::engine::drivetrain::Drivetrain::new(&vehicle).stop_frames();
+    assert_eq!(frames.len(), 2, "{frames:?}");
+    let mut candump = Command::new("candump")
+        .args(["-L", "vcan0"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("candump runs");
+    let dump = common::process::lines_of(candump.stdout.take().expect("candump stdout"));
+    std::thread::sleep(Duration::from_millis(300));
+    // The daemon's hook, and a real panic on another thread (the engine's, say).
+    chassisd::runtime::can::install_panic_stop(frames);
+    let panicked = std::thread::spawn(|| panic!("deliberate panic for the stop hook"))
+        .join()
+        .is_err();
+    // Back to the default hook for the tests that follow.
+    let _ = std::panic::take_hook();
+    assert!(panicked);
+    std::thread::sleep(Duration::from_millis(300));
+    let _ = candump.kill();
+    let _ = candump.wait();
+    let lines: Vec<String> = dump.try_iter().collect();
+    for rpdo in ["201#020000000000", "202#020000000000"] {
+        assert!(
+            lines.iter().any(|l| l.ends_with(&format!(" {rpdo}"))),
+            "quick stop with zero target {rpdo} on the bus: {lines:?}"
+        );
+    }
+}

@@ -137,6 +137,23 @@ pub fn write_now(frames: &[(String, Frame)]) -> usize {
     sent
 }
 
+/// On a panic, after the usual report, quick-stop every drive with zero targets by writing
+/// `frames` straight to their interfaces (the engine may be what panicked).
+pub fn install_panic_stop(frames: Vec<(String, Frame)>) {
+    if frames.is_empty() {
+        return;
+    }
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        let sent = write_now(&frames);
+        eprintln!(
+            "chassisd: panic: {sent} of {} stop frames sent",
+            frames.len()
+        );
+    }));
+}
+
 /// Whether the kernel says the interface is administratively up (IFF_UP).
 pub(crate) fn interface_up(name: &str) -> Result<bool, String> {
     let flags = std::fs::read_to_string(format!("/sys/class/net/{name}/flags"))

@@ -146,7 +146,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut trajectories = trajectory_writer::open(config, Box::new(Unconfigured))?;
     let mut engine = Engine::with_trajectories(config, &sources, trajectories.store);
     engine.start_at(start);
-    install_panic_stop(engine.drivetrain().stop_frames());
+    can::install_panic_stop(engine.drivetrain().stop_frames());
     let mqtt = match &config.mqtt {
         Some(m) => {
             if m.embedded_broker {
@@ -307,23 +307,6 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     }
     out.finish(STOP_FLUSH);
     result.map(|_| ())
-}
-
-/// On a panic, after the usual report, quick-stop every drive with zero targets by writing
-/// `frames` straight to their interfaces (the engine may be what panicked).
-fn install_panic_stop(frames: Vec<(String, crate::devices::can::Frame)>) {
-    if frames.is_empty() {
-        return;
-    }
-    let report = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        report(info);
-        let sent = can::write_now(&frames);
-        eprintln!(
-            "chassisd: panic: {sent} of {} stop frames sent",
-            frames.len()
-        );
-    }));
 }
 
 /// Routes the engine's outputs: status lines to `out`, frames to their interface (and the
