@@ -224,3 +224,38 @@ fn estimation_error_is_consistent_across_seeds() {
         "mean NEES {mean} over {samples} samples"
     );
 }
+
+/// Receivers at any legal rate start the filter, including those whose heading of an epoch
+/// comes after its position, so that at each position the last heading is a whole period
+/// old (a 1 Hz receiver once never started: the heading had to be younger than 1 s).
+#[test]
+fn starts_at_every_receiver_rate_with_the_heading_after_the_position() {
+    for period_ms in [50, 100, 200, 500, 999, 1000, 1001, 2000, 5000] {
+        let mut loc = Localizer::new(config());
+        let mut started_after = None;
+        for epoch in 0..4u64 {
+            let t = epoch * period_ms;
+            loc.add(
+                ms(t),
+                Measurement::Position {
+                    en: (1.0, 2.0),
+                    sigma: (0.02, 0.02),
+                },
+            );
+            if loc.ekf().is_some() {
+                started_after = Some(epoch);
+                break;
+            }
+            // The same epoch's heading, taken just after its position.
+            loc.add(
+                ms(t),
+                Measurement::Heading {
+                    yaw: 0.5,
+                    sigma: 0.01,
+                },
+            );
+        }
+        // The first position has no heading yet; the second one has, one period old.
+        assert_eq!(started_after, Some(1), "{period_ms} ms period");
+    }
+}

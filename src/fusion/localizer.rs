@@ -185,6 +185,8 @@ pub struct Localizer {
     buffer: VecDeque<(Timestamp, Measurement, Filter)>,
     /// Latest heading and course seen, to initialise with.
     last_heading: Option<(Timestamp, f64)>,
+    /// The last position's time, and the interval before it: the receiver's period.
+    last_position: (Option<Timestamp>, Option<Duration>),
     last_speed: f64,
     converged: bool,
     /// The frame poses are published in.
@@ -201,6 +203,7 @@ impl Localizer {
             base: None,
             buffer: VecDeque::new(),
             last_heading: None,
+            last_position: (None, None),
             last_speed: 0.0,
             converged: false,
             map: MapFrame::default(),
@@ -288,6 +291,12 @@ impl Localizer {
                 self.last_heading = Some((t, yaw));
             }
             Measurement::Odometry { v, .. } => self.last_speed = v,
+            Measurement::Position { .. } => {
+                if let Some(before) = self.last_position.0.filter(|&b| t > b) {
+                    self.last_position.1 = Some(t.saturating_since(before));
+                }
+                self.last_position.0 = Some(t);
+            }
             _ => {}
         }
         let Some(current) = self.current().cloned() else {
@@ -351,10 +360,18 @@ impl Localizer {
         let Measurement::Position { en, sigma } = *m else {
             return;
         };
-        // A heading from the last second: dual antenna, or course while moving.
+        // A recent heading (dual antenna, or course while moving): from the last second, or
+        // from the last one and a half of the receiver's periods when that is longer (a
+        // 1 Hz receiver's last heading can be a whole period old).
+        let max_age = self
+            .last_position
+            .1
+            .map_or(Duration::from_secs(1), |period| {
+                period.mul_f64(1.5).max(Duration::from_secs(1))
+            });
         let Some((_, yaw)) = self
             .last_heading
-            .filter(|(ht, _)| t.saturating_since(*ht) < Duration::from_secs(1) || *ht > t)
+            .filter(|(ht, _)| t.saturating_since(*ht) < max_age || *ht > t)
         else {
             return;
         };
