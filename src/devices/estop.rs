@@ -135,11 +135,11 @@ impl EStopSignal {
         }
     }
 
-    /// Takes a received frame; other frames are ignored. A frame too short for the bit is
-    /// counted and does not count as heard.
-    pub fn on_frame(&mut self, t: Timestamp, frame: &Frame) {
+    /// Takes a received frame; other frames are ignored. A frame too short for the bit does
+    /// not count as heard; the error says why.
+    pub fn on_frame(&mut self, t: Timestamp, frame: &Frame) -> Result<(), String> {
         if !self.profile.matches(frame) {
-            return;
+            return Ok(());
         }
         match self.profile.decode(frame) {
             Ok(pressed) => {
@@ -152,12 +152,15 @@ impl EStopSignal {
                 }
                 self.pressed = Some(pressed);
                 self.heard = Some(t);
+                Ok(())
             }
             Err(e) => {
                 self.malformed += 1;
+                // A flood of them logs at 1, 2, 4, 8, ... rather than every frame.
                 if self.malformed.is_power_of_two() {
                     tracing::warn!(estop = %self.name, count = self.malformed, "malformed e-stop frame: {e}");
                 }
+                Err(e)
             }
         }
     }
@@ -170,16 +173,6 @@ impl EStopSignal {
             heard: self.heard,
             timeout: Duration::from_millis(self.profile.timeout_ms),
         }
-    }
-
-    /// Status frames too short to decode.
-    pub fn malformed(&self) -> u64 {
-        self.malformed
-    }
-
-    /// The profile.
-    pub fn profile(&self) -> &EStopProfile {
-        &self.profile
     }
 }
 
@@ -222,11 +215,14 @@ mod tests {
     #[test]
     fn short_frame_is_counted_and_not_heard() {
         let mut s = EStopSignal::new("front".into(), profile(ActiveLevel::Low));
-        s.on_frame(Timestamp::from_nanos(1), &Frame::std(0x191, [0xFF]));
-        assert_eq!(s.malformed(), 1);
+        assert!(
+            s.on_frame(Timestamp::from_nanos(1), &Frame::std(0x191, [0xFF]))
+                .is_err()
+        );
         assert_eq!(s.input().heard, None);
         assert_eq!(s.input().pressed, None);
-        s.on_frame(Timestamp::from_nanos(2), &Frame::std(0x191, [0x00, 0x08]));
+        s.on_frame(Timestamp::from_nanos(2), &Frame::std(0x191, [0x00, 0x08]))
+            .unwrap();
         assert_eq!(s.input().pressed, Some(false));
         assert_eq!(s.input().heard, Some(Timestamp::from_nanos(2)));
     }

@@ -304,9 +304,10 @@ impl Drivetrain {
         }
         let bms_changed = bus.bms.as_mut().is_some_and(|b| b.on_frame(t, frame));
         for e in &mut bus.estops {
-            e.on_frame(t, frame);
+            if e.on_frame(t, frame).is_err() {
+                bus.stats.estop_malformed += 1;
+            }
         }
-        bus.stats.estop_malformed = bus.estops.iter().map(EStopSignal::malformed).sum();
         bus.emit(out, tx);
         bms_changed
     }

@@ -23,8 +23,20 @@ use crate::config::VehicleConfig;
 
 /// Changes waiting for the disk before new ones are refused.
 pub const QUEUE: usize = 64;
-/// Points the mirror (and the folder) may hold in all: 56 bytes each in memory.
-pub const MAX_STORED_POINTS: usize = 2_000_000;
+/// What the mirror (and the folder) may hold.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Points in all: 56 bytes each in memory.
+    pub points: usize,
+    /// Trajectories: each costs its name and a map entry beyond its points.
+    pub trajectories: usize,
+}
+
+/// The limits of a vehicle's store: about 112 MB of points at most.
+pub const LIMITS: Limits = Limits {
+    points: 2_000_000,
+    trajectories: 10_000,
+};
 
 /// One change for the folder.
 enum Change {
@@ -37,7 +49,7 @@ enum Change {
 pub struct QueuedStore {
     mirror: MemoryStore,
     points: usize,
-    max_points: usize,
+    limits: Limits,
     changes: SyncSender<Change>,
 }
 
@@ -75,9 +87,9 @@ pub fn open(
             writer: None,
         });
     };
-    let (store, writer) = spawn(Path::new(dir), QUEUE, MAX_STORED_POINTS)
-        .with_context(|| format!("trajectory folder {dir}"))?;
-    let snapshot = serde_json::to_vec(&store.mirror_contents()).ok();
+    let (mut store, writer) =
+        spawn(Path::new(dir), QUEUE, LIMITS).with_context(|| format!("trajectory folder {dir}"))?;
+    let snapshot = serde_json::to_vec(&store.all()?).ok();
     Ok(OpenedStore {
         store: Box::new(store),
         snapshot,
@@ -86,11 +98,11 @@ pub fn open(
 }
 
 /// Reads the folder `dir` into a mirror and starts its writer with a queue of `capacity`;
-/// saves beyond `max_points` in all are refused.
+/// saves beyond `limits` are refused.
 pub fn spawn(
     dir: &Path,
     capacity: usize,
-    max_points: usize,
+    limits: Limits,
 ) -> Result<(QueuedStore, StoreWriter), TrajectoryError> {
     let mut disk = DirStore::open(dir)?;
     let existing = disk.all()?;
@@ -109,7 +121,7 @@ pub fn spawn(
         QueuedStore {
             mirror: MemoryStore::with(existing),
             points,
-            max_points,
+            limits,
             changes,
         },
         StoreWriter { done, failures },
@@ -135,11 +147,6 @@ fn write_changes(mut disk: DirStore, queue: Receiver<Change>, failures: &AtomicU
 }
 
 impl QueuedStore {
-    fn mirror_contents(&self) -> Vec<Trajectory> {
-        let mut mirror = self.mirror.clone();
-        mirror.all().unwrap_or_default()
-    }
-
     fn queue(&self, change: Change) -> Result<(), TrajectoryError> {
         self.changes.try_send(change).map_err(|e| match e {
             TrySendError::Full(_) => TrajectoryError::Busy,
@@ -156,15 +163,17 @@ impl TrajectoryStore for QueuedStore {
     }
 
     fn save(&mut self, trajectory: &Trajectory) -> Result<(), TrajectoryError> {
-        let replaced = self
-            .mirror
-            .get(&trajectory.name)
-            .map_or(0, |t| t.data.len());
+        let existing = self.mirror.get(&trajectory.name).map(|t| t.data.len());
+        let count = self.mirror.len();
+        if existing.is_none() && count >= self.limits.trajectories {
+            return Err(TrajectoryError::TooManyTrajectories(count));
+        }
+        let replaced = existing.unwrap_or(0);
         let points = self.points - replaced + trajectory.data.len();
-        if points > self.max_points {
+        if points > self.limits.points {
             return Err(TrajectoryError::StoreFull {
                 stored: self.points - replaced,
-                limit: self.max_points,
+                limit: self.limits.points,
             });
         }
         self.queue(Change::Save(trajectory.clone()))?;
@@ -198,11 +207,6 @@ impl StoreWriter {
         }
         finished && self.failures.load(Ordering::Relaxed) == 0
     }
-
-    /// Changes that failed to reach the folder.
-    pub fn failures(&self) -> u64 {
-        self.failures.load(Ordering::Relaxed)
-    }
 }
 
 #[cfg(test)]
@@ -235,7 +239,7 @@ mod tests {
     #[test]
     fn changes_reach_the_folder_in_order() {
         let dir = folder("queued-order");
-        let (mut store, writer) = spawn(&dir, QUEUE, MAX_STORED_POINTS).unwrap();
+        let (mut store, writer) = spawn(&dir, QUEUE, LIMITS).unwrap();
         store.save(&trajectory("a", 3)).unwrap();
         store.save(&trajectory("b", 2)).unwrap();
         store.save(&trajectory("a", 1)).unwrap();
@@ -250,7 +254,7 @@ mod tests {
         let mut disk = DirStore::open(&dir).unwrap();
         assert_eq!(disk.all().unwrap(), vec![trajectory("a", 1)]);
         // A new start reads the folder into the mirror.
-        let (mut again, writer) = spawn(&dir, QUEUE, MAX_STORED_POINTS).unwrap();
+        let (mut again, writer) = spawn(&dir, QUEUE, LIMITS).unwrap();
         assert_eq!(again.all().unwrap(), vec![trajectory("a", 1)]);
         assert_eq!(again.delete_all().unwrap(), 1);
         drop(again);
@@ -262,7 +266,7 @@ mod tests {
     #[test]
     fn a_full_queue_refuses_without_changing_the_mirror() {
         let dir = folder("queued-full");
-        let (mut store, writer) = spawn(&dir, 1, MAX_STORED_POINTS).unwrap();
+        let (mut store, writer) = spawn(&dir, 1, LIMITS).unwrap();
         // The writer cannot keep up with a burst: at some point a save is refused, and the
         // refused one is in neither the mirror nor the folder.
         let mut refused = None;
@@ -296,9 +300,13 @@ mod tests {
     }
 
     #[test]
-    fn the_stored_points_are_bounded() {
+    fn the_store_is_bounded_in_points_and_trajectories() {
         let dir = folder("queued-bound");
-        let (mut store, writer) = spawn(&dir, QUEUE, 20).unwrap();
+        let limits = Limits {
+            points: 20,
+            trajectories: 3,
+        };
+        let (mut store, writer) = spawn(&dir, QUEUE, limits).unwrap();
         let half = 10;
         store.save(&trajectory("a", half)).unwrap();
         store.save(&trajectory("b", half)).unwrap();
@@ -311,6 +319,12 @@ mod tests {
         store.save(&trajectory("c", 1)).unwrap();
         store.delete("a").unwrap();
         store.save(&trajectory("d", half)).unwrap();
+        // Three trajectories: a fourth name is refused, a replacement is not.
+        assert!(matches!(
+            store.save(&trajectory("e", 0)),
+            Err(TrajectoryError::TooManyTrajectories(3))
+        ));
+        store.save(&trajectory("c", 0)).unwrap();
         drop(store);
         assert!(writer.finish(Duration::from_secs(5)));
         std::fs::remove_dir_all(&dir).ok();

@@ -43,20 +43,19 @@ impl SimEStop {
         self.next = None;
     }
 
-    /// The status frame for the button's state.
-    pub fn frame(&self, pressed: bool) -> Frame {
+    /// The status frame for the button's state (`None` only for an unchecked profile whose
+    /// id, byte or bit does not fit).
+    pub fn frame(&self, pressed: bool) -> Option<Frame> {
         let mut data = [0u8; 8];
-        let high = pressed == (self.profile.active == ActiveLevel::High);
-        if high {
-            data[usize::from(self.profile.byte)] |= 1 << self.profile.bit;
+        if pressed == (self.profile.active == ActiveLevel::High) {
+            let byte = data.get_mut(usize::from(self.profile.byte))?;
+            *byte |= 1u8.checked_shl(u32::from(self.profile.bit))?;
         }
-        let frame = if self.profile.extended {
+        if self.profile.extended {
             Frame::extended(self.profile.id, &data)
         } else {
             Frame::standard(self.profile.id, &data)
-        };
-        // A checked profile's id fits its format.
-        frame.unwrap_or_else(|| Frame::std(0, data))
+        }
     }
 
     /// Sends the status frame when due.
@@ -67,7 +66,7 @@ impl SimEStop {
             Button::Released => false,
         };
         if self.next.is_none_or(|n| t >= n) {
-            out.push(self.frame(pressed));
+            out.extend(self.frame(pressed));
             let period = Duration::from_millis((self.profile.timeout_ms / 4).max(5));
             self.next = Some(t.saturating_add(period));
         }
@@ -100,7 +99,7 @@ mod tests {
                 sim.set(button);
                 let mut out = Vec::new();
                 sim.step(Timestamp::from_nanos(1), &mut out);
-                signal.on_frame(Timestamp::from_nanos(1), &out[0]);
+                signal.on_frame(Timestamp::from_nanos(1), &out[0]).unwrap();
                 assert_eq!(signal.input().pressed, expect, "{active:?} {button:?}");
             }
             sim.set(Button::Silent);

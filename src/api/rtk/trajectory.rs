@@ -87,6 +87,9 @@ pub enum TrajectoryError {
         /// The limit.
         limit: usize,
     },
+    /// The store holds its limit of trajectories.
+    #[error("trajectory storage is full: {0} trajectories stored; delete some first")]
+    TooManyTrajectories(usize),
     /// No storage is configured.
     #[error("trajectory storage is not configured (set mqtt.rtk.trajectory_dir)")]
     Unconfigured,
@@ -196,6 +199,16 @@ impl MemoryStore {
     /// The trajectory named `name`.
     pub fn get(&self, name: &str) -> Option<&Trajectory> {
         self.trajectories.get(name)
+    }
+
+    /// How many trajectories it holds.
+    pub fn len(&self) -> usize {
+        self.trajectories.len()
+    }
+
+    /// Whether it holds none.
+    pub fn is_empty(&self) -> bool {
+        self.trajectories.is_empty()
     }
 }
 
