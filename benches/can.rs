@@ -10,7 +10,7 @@ use chassisd::config::VehicleConfig;
 use chassisd::devices::can::Received;
 use chassisd::engine::drivetrain::Drivetrain;
 use chassisd::record::{Payload, RecordingReader};
-use chassisd::replay::replay;
+use chassisd::replay::{ReplayOptions, replay};
 use chassisd::time::Timestamp;
 
 fn repo() -> PathBuf {
@@ -57,7 +57,8 @@ fn replay_session(c: &mut Criterion) {
     group.throughput(Throughput::Elements(records));
     group.bench_function("can-drive", |b| {
         b.iter(|| {
-            let summary = replay(&path, None, &mut std::io::sink()).expect("replay");
+            let summary =
+                replay(&path, &ReplayOptions::default(), &mut std::io::sink()).expect("replay");
             black_box(summary.engine.ticks)
         })
     });

@@ -10,7 +10,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 use chassisd::devices::gnss::NmeaReceiver;
 use chassisd::record::{Payload, RecordingReader};
-use chassisd::replay::replay;
+use chassisd::replay::{ReplayOptions, replay};
 use chassisd::time::Timestamp;
 
 fn repo() -> PathBuf {
@@ -78,7 +78,8 @@ fn replay_fixture(c: &mut Criterion) {
     group.throughput(Throughput::Elements(frames));
     group.bench_function("rtk-drive", |b| {
         b.iter(|| {
-            let summary = replay(&path, None, &mut std::io::sink()).expect("replay");
+            let summary =
+                replay(&path, &ReplayOptions::default(), &mut std::io::sink()).expect("replay");
             black_box(summary.engine.ticks)
         })
     });

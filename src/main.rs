@@ -3,6 +3,7 @@
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
@@ -12,6 +13,7 @@ use chassisd::config::VehicleConfig;
 use chassisd::config::mqtt::{
     DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
 };
+use chassisd::record::nmea_import::ImportOptions;
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
 use chassisd::runtime::sim::{self, SimOptions};
@@ -35,6 +37,14 @@ enum Command {
         /// Vehicle configuration to use instead of the one stored with the recording.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Add `stamp`, the recorded time in seconds, to each line (for analysis; the lines
+        /// then leave the protocol's schema).
+        #[arg(long)]
+        stamped: bool,
+        /// In a plain NMEA log, a forward step of the clock longer than this (seconds)
+        /// starts a new segment instead of ticking through the gap.
+        #[arg(long, default_value = "10", value_parser = seconds_arg)]
+        max_gap: Duration,
     },
     /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
     Run {
@@ -68,8 +78,8 @@ enum Command {
         #[arg(long)]
         scenario: Option<String>,
         /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
+        #[arg(long, value_parser = seconds_arg)]
+        duration: Option<Duration>,
         /// Use the MQTT broker at HOST:PORT instead of starting one on 127.0.0.1:1883.
         #[arg(long, value_name = "HOST:PORT", conflicts_with = "no_mqtt")]
         mqtt: Option<String>,
@@ -121,8 +131,8 @@ enum BenchCommand {
         #[arg(long)]
         plant: Option<PathBuf>,
         /// How long to measure, s.
-        #[arg(long, default_value_t = 60.0)]
-        seconds: f64,
+        #[arg(long, default_value = "60", value_parser = seconds_arg)]
+        seconds: Duration,
         /// Use the MQTT broker at HOST:PORT (default: an embedded one on a free port).
         #[arg(long, value_name = "HOST:PORT")]
         mqtt: Option<String>,
@@ -177,11 +187,20 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     mqtt,
                 },
         } => bench_mqtt(plant, seconds, mqtt.as_deref()),
-        Command::Replay { path, config } => {
-            let config = config.map(|p| VehicleConfig::load(&p)).transpose()?;
+        Command::Replay {
+            path,
+            config,
+            stamped,
+            max_gap,
+        } => {
+            let options = replay::ReplayOptions {
+                config: config.map(|p| VehicleConfig::load(&p)).transpose()?,
+                stamped,
+                import: ImportOptions { max_gap },
+            };
             let stdout = std::io::stdout();
             let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());
-            let summary = replay::replay(&path, config.as_ref(), &mut out)
+            let summary = replay::replay(&path, &options, &mut out)
                 .with_context(|| format!("replay of {}", path.display()))?;
             out.flush()?;
             for skip in &summary.skipped_lines.0 {
@@ -241,12 +260,6 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 rtk.trajectory_dir = trajectory_dir.map(|d| d.to_string_lossy().into_owned());
             }
             let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
-            let duration = match duration {
-                Some(d) if !(d > 0.0 && d.is_finite()) => {
-                    anyhow::bail!("--duration must be a positive number of seconds")
-                }
-                d => d.map(std::time::Duration::from_secs_f64),
-            };
             let runtime = async_runtime(1)?;
             let result = runtime.block_on(sim::run(
                 SimOptions {
@@ -345,10 +358,11 @@ fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::
     Ok(report.pass)
 }
 
-fn bench_mqtt(plant: Option<PathBuf>, seconds: f64, broker: Option<&str>) -> anyhow::Result<bool> {
-    if !(seconds > 0.0 && seconds.is_finite()) {
-        anyhow::bail!("--seconds must be a positive number");
-    }
+fn bench_mqtt(
+    plant: Option<PathBuf>,
+    seconds: Duration,
+    broker: Option<&str>,
+) -> anyhow::Result<bool> {
     let plant = load_plant(plant)?;
     let mut mqtt = sim_mqtt(broker)?;
     if broker.is_none() {
@@ -362,7 +376,7 @@ fn bench_mqtt(plant: Option<PathBuf>, seconds: f64, broker: Option<&str>) -> any
     let report = runtime.block_on(chassisd::bench::mqtt::run(
         chassisd::bench::mqtt::MqttBenchOptions {
             plant,
-            duration: std::time::Duration::from_secs_f64(seconds),
+            duration: seconds,
             mqtt,
         },
     ));
@@ -380,4 +394,21 @@ fn async_runtime(threads: usize) -> anyhow::Result<tokio::runtime::Runtime> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")
+}
+
+/// The longest span a seconds argument may give: about 31 years.
+const MAX_SECONDS_ARG: f64 = 1e9;
+
+/// Parses a positive, finite number of seconds (up to [`MAX_SECONDS_ARG`]).
+fn seconds_arg(s: &str) -> Result<Duration, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if !(v > 0.0 && v <= MAX_SECONDS_ARG) {
+        return Err(format!(
+            "{s:?}: give a positive number of seconds, at most {MAX_SECONDS_ARG:e}"
+        ));
+    }
+    Ok(Duration::from_secs_f64(v))
 }

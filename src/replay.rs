@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::{MemoryStore, Trajectory, TrajectoryStore};
@@ -12,8 +12,8 @@ use crate::devices::gnss::GnssStats;
 use crate::engine::EngineOutput;
 use crate::engine::drivetrain::BusStats;
 use crate::engine::{Decoder, Engine, EngineStats, STATUS_PERIOD};
-use crate::record::nmea_import::{IMPORT_SOURCE, ImportReport, import_nmea_log};
-use crate::record::{RecordError, RecordingReader, SkippedLine, SourceKind};
+use crate::record::nmea_import::{IMPORT_SOURCE, ImportOptions, ImportReport, NmeaLogReader};
+use crate::record::{Record, RecordError, RecordingReader, SkippedLine, SourceKind};
 use crate::time::Timestamp;
 
 /// Why a replay could not run.
@@ -47,15 +47,32 @@ pub struct ReplaySummary {
     pub sources_without_decoder: Vec<(String, String)>,
     /// First and last record times.
     pub span: Option<(Timestamp, Timestamp)>,
+    /// The process's peak resident memory at the end, bytes.
+    pub peak_memory: Option<u64>,
+}
+
+/// The span of ticks run between two writes of their output.
+const TICK_BATCH: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// How to replay.
+#[derive(Debug, Clone, Default)]
+pub struct ReplayOptions {
+    /// Overrides the configuration stored with the recording.
+    pub config: Option<VehicleConfig>,
+    /// Adds `stamp` (the recorded time, s) to each line.
+    pub stamped: bool,
+    /// How a plain NMEA log is imported (its largest gap within a segment).
+    pub import: ImportOptions,
 }
 
 /// Replays `path` (a recording folder or a plain NMEA log) and writes one base_status line
-/// per tick to `out`. `config` overrides the configuration stored with the recording.
+/// per tick to `out`.
 pub fn replay(
     path: &Path,
-    config: Option<&VehicleConfig>,
+    options: &ReplayOptions,
     out: &mut impl Write,
 ) -> Result<ReplaySummary, ReplayError> {
+    let config = options.config.as_ref();
     let mut summary = ReplaySummary::default();
     let mut span = SessionSpan::default();
     let mut trajectories = Vec::new();
@@ -94,23 +111,114 @@ pub fn replay(
                 SourceKind::Can | SourceKind::Commands => {}
             }
         }
-        (reader, vehicle, sources)
+        (Input::Recording(reader), vehicle, sources)
     } else {
-        let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
-            path: PathBuf::from(path),
-            source,
-        })?;
-        let (records, report) = import_nmea_log(&bytes)?;
-        summary.import = Some(report);
+        let reader = NmeaLogReader::open(path, options.import)?;
         (
-            RecordingReader::from_records(records),
+            Input::Log(Box::new(reader)),
             config.cloned().unwrap_or_default(),
             vec![(IMPORT_SOURCE.to_owned(), Decoder::Nmea)],
         )
     };
     let store = Box::new(MemoryStore::with(trajectories));
-    run(reader, &vehicle, &sources, store, span, out, &mut summary)?;
+    let output = Output {
+        out,
+        stamped: options.stamped,
+        line: String::with_capacity(512),
+    };
+    run(
+        reader,
+        &vehicle,
+        &sources,
+        store,
+        span,
+        output,
+        &mut summary,
+    )?;
     Ok(summary)
+}
+
+/// Ticks up to `until` in batches of [`TICK_BATCH`], writing each batch's lines.
+fn advance<W: Write>(
+    engine: &mut Engine,
+    until: Timestamp,
+    outputs: &mut Vec<EngineOutput>,
+    out: &mut Output<'_, W>,
+    offset: i128,
+) -> std::io::Result<()> {
+    while let Some(next) = engine.next_tick().filter(|&next| next <= until) {
+        engine.advance_to(until.min(next.saturating_add(TICK_BATCH)), outputs);
+        out.statuses(outputs, offset)?;
+    }
+    Ok(())
+}
+
+/// Where records come from: a recording folder, or a plain log in segments.
+enum Input {
+    Recording(RecordingReader),
+    Log(Box<NmeaLogReader>),
+}
+
+impl Iterator for Input {
+    type Item = Record;
+
+    fn next(&mut self) -> Option<Record> {
+        match self {
+            Input::Recording(r) => r.next(),
+            Input::Log(r) => r.next(),
+        }
+    }
+}
+
+impl Input {
+    /// The recorded time minus the engine's time for the last record read, ns.
+    fn logged_offset_ns(&self) -> i128 {
+        match self {
+            Input::Recording(_) => 0,
+            Input::Log(r) => r.logged_offset_ns(),
+        }
+    }
+}
+
+/// The status lines' destination.
+struct Output<'a, W: Write> {
+    out: &'a mut W,
+    stamped: bool,
+    line: String,
+}
+
+impl<W: Write> Output<'_, W> {
+    /// Writes the statuses among `outputs`, stamped with their time plus `offset_ns`.
+    fn statuses(
+        &mut self,
+        outputs: &mut Vec<EngineOutput>,
+        offset_ns: i128,
+    ) -> std::io::Result<()> {
+        for output in outputs.drain(..) {
+            let EngineOutput::Status(status) = output else {
+                continue;
+            };
+            let json = BaseStatus::from_status(&status).to_json();
+            self.line.clear();
+            match json.strip_prefix('{').filter(|_| self.stamped) {
+                Some(rest) => {
+                    let nanos = i128::from(status.time.as_nanos()) + offset_ns;
+                    let micros = nanos.div_euclid(1_000);
+                    let _ = write!(
+                        self.line,
+                        "{{\"stamp\":{}.{:06},",
+                        micros.div_euclid(1_000_000),
+                        micros.rem_euclid(1_000_000)
+                    );
+                    self.line.push_str(rest);
+                }
+                None => self.line.push_str(&json),
+            }
+            self.line.push('\n');
+            self.out.write_all(self.line.as_bytes())?;
+        }
+        Ok(())
+    }
 }
 
 /// The trajectories a recording stored at its start.
@@ -134,13 +242,13 @@ struct SessionSpan {
     end: Option<Timestamp>,
 }
 
-fn run(
-    mut reader: RecordingReader,
+fn run<W: Write>(
+    mut input: Input,
     vehicle: &VehicleConfig,
     sources: &[(String, Decoder)],
     trajectories: Box<dyn TrajectoryStore>,
     session: SessionSpan,
-    out: &mut impl Write,
+    mut out: Output<'_, W>,
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
     let mut engine = Engine::with_trajectories(vehicle, sources, trajectories);
@@ -149,23 +257,27 @@ fn run(
         engine.start_at(start);
     }
     let mut outputs = Vec::new();
-    let mut line = String::with_capacity(512);
     let mut span: Option<(Timestamp, Timestamp)> = None;
-    for record in reader.by_ref() {
+    // Ticks before a record belong to the segment of the record before it.
+    let mut offset = 0;
+    while let Some(record) = input.next() {
+        // The ticks of a long gap leave in batches, so memory does not grow with it.
+        let before = Timestamp::from_nanos(record.t.as_nanos().saturating_sub(1));
+        advance(&mut engine, before, &mut outputs, &mut out, offset)?;
         let t = engine.handle(&record, &mut outputs);
         span = Some(span.map_or((t, t), |(first, _)| (first, t)));
-        write_statuses(&mut outputs, &mut line, out)?;
+        out.statuses(&mut outputs, offset)?;
+        offset = input.logged_offset_ns();
     }
     // Tick to the session's recorded end, else to the period boundary after the last record.
     let end = session
         .end
         .or(span.map(|(_, last)| last.ceil_to(STATUS_PERIOD)));
     if let Some(end) = end {
-        engine.advance_to(end, &mut outputs);
-        write_statuses(&mut outputs, &mut line, out)?;
+        advance(&mut engine, end, &mut outputs, &mut out, offset)?;
     }
     engine.finish();
-    out.flush()?;
+    out.out.flush()?;
     summary.engine = engine.stats().clone();
     summary.gnss = engine
         .gnss_stats()
@@ -175,26 +287,15 @@ fn run(
         .bus_stats()
         .map(|(name, stats)| (name.to_owned(), stats.clone()))
         .collect();
-    let (skipped, count) = reader.skipped();
-    summary.skipped_lines = (skipped.to_vec(), count);
-    summary.span = span;
-    Ok(())
-}
-
-fn write_statuses(
-    outputs: &mut Vec<EngineOutput>,
-    line: &mut String,
-    out: &mut impl Write,
-) -> std::io::Result<()> {
-    for output in outputs.drain(..) {
-        let EngineOutput::Status(status) = output else {
-            continue;
-        };
-        line.clear();
-        line.push_str(&BaseStatus::from_status(&status).to_json());
-        line.push('\n');
-        out.write_all(line.as_bytes())?;
+    match &input {
+        Input::Recording(reader) => {
+            let (skipped, count) = reader.skipped();
+            summary.skipped_lines = (skipped.to_vec(), count);
+        }
+        Input::Log(reader) => summary.import = Some(reader.report().clone()),
     }
+    summary.span = span;
+    summary.peak_memory = crate::runtime::host::peak_memory_bytes();
     Ok(())
 }
 
@@ -272,7 +373,31 @@ impl ReplaySummary {
         if self.engine.reordered > 0 {
             let _ = write!(s, "; {} records re-timed", self.engine.reordered);
         }
+        if let Some(import) = self.import.as_ref().filter(|i| i.jump_count > 0) {
+            let _ = write!(
+                s,
+                "; {} clock jumps, each starting a new segment (",
+                import.jump_count
+            );
+            join(
+                &mut s,
+                import
+                    .jumps
+                    .iter()
+                    .map(|j| format!("line {}: {} to {}", j.line, j.from, j.to)),
+            );
+            if import.jumps.len() as u64 != import.jump_count {
+                s.push_str(", ...");
+            }
+            s.push(')');
+        }
+        if let Some(e) = self.import.as_ref().and_then(|i| i.read_error.as_ref()) {
+            let _ = write!(s, "; the log ended early: {e}");
+        }
         let _ = write!(s, "; skipped lines {}", self.skipped_lines.1);
+        if let Some(bytes) = self.peak_memory {
+            let _ = write!(s, "; peak memory {:.1} MB", bytes as f64 / 1e6);
+        }
         s
     }
 }

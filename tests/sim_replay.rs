@@ -117,3 +117,17 @@ fn a_bad_plant_file_is_refused_with_the_key() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("geometry.track_m"), "{stderr}");
 }
+
+#[test]
+fn durations_that_are_not_a_span_of_seconds_are_refused_without_a_panic() {
+    for bad in ["1e300", "nan", "inf", "0", "-3", "ten"] {
+        let out = Command::new(common::chassisd())
+            .args(["sim", "--no-mqtt", &format!("--duration={bad}")])
+            .output()
+            .expect("chassisd runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{bad}: {stderr}");
+        assert!(stderr.contains("seconds"), "{bad}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{bad}: {stderr}");
+    }
+}

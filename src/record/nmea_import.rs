@@ -1,12 +1,24 @@
-//! Imports a plain NMEA text log (such as gpsd's regression logs) as a recording.
+//! Imports a plain NMEA text log (such as gpsd's regression logs) as a stream of records.
 //!
 //! Such logs have `#` comment lines and no host timestamps, so time comes from the
 //! sentences: each line becomes one serial chunk stamped with the UTC time of the timed
 //! sentence it holds (GGA, GNS, RMC, GST, ZDA), or of the last one before it. The date comes
 //! from RMC or ZDA; lines before the first date take it from the first dated sentence, and
-//! the date rolls over at midnight. Time never runs backwards: a sentence whose time steps
-//! back is stamped with the time before it. Binary data and broken sentences are kept
-//! byte for byte.
+//! the date rolls over at midnight. Binary data and broken sentences are kept byte for byte.
+//!
+//! Receivers boot with a default date and set their clock later, so a log's time can jump.
+//! A step back of more than [`BACKSTEP_TOLERANCE`], or forward by more than the configured
+//! gap, starts a new segment: the records' time (the engine's, which never steps) continues
+//! one receiver period after the last record, and the jump is reported with its line. Smaller
+//! steps back (a ZDA stamped for the coming second) keep the time before them.
+//!
+//! The log is read twice, line by line (the first pass finds the first date), so memory does
+//! not grow with its length or the span it covers.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Cursor, Read};
+use std::path::Path;
+use std::time::Duration;
 
 use bytes::Bytes;
 use chrono::{NaiveDate, NaiveDateTime, NaiveTime};
@@ -19,111 +31,345 @@ use crate::time::Timestamp;
 
 /// Source name given to imported chunks.
 pub const IMPORT_SOURCE: &str = "gnss";
+/// Steps back up to this long are the order of sentences within an epoch, not a new clock.
+pub const BACKSTEP_TOLERANCE: Duration = Duration::from_secs(1);
+/// The default largest forward step within one segment.
+pub const DEFAULT_MAX_GAP: Duration = Duration::from_secs(10);
+/// A line longer than this is imported as several chunks (binary data without newlines).
+const MAX_CHUNK: usize = 4096;
+/// How many jumps are kept for the report; the rest are only counted.
+const KEEP_JUMPS: usize = 100;
+
+/// How a log is imported.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// A forward step longer than this starts a new segment.
+    pub max_gap: Duration,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self {
+            max_gap: DEFAULT_MAX_GAP,
+        }
+    }
+}
+
+/// A jump of the log's clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClockJump {
+    /// One-based line of the log where the new time starts.
+    pub line: u64,
+    /// The time before the jump.
+    pub from: NaiveDateTime,
+    /// The time after it.
+    pub to: NaiveDateTime,
+}
 
 /// What the import found.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ImportReport {
-    /// Chunks (lines) imported.
+    /// Chunks imported.
     pub chunks: usize,
     /// Comment lines dropped.
     pub comment_lines: usize,
     /// False when no sentence carried a date and 1970-01-01 was assumed.
     pub date_known: bool,
+    /// Clock jumps, the first hundred.
+    pub jumps: Vec<ClockJump>,
+    /// Clock jumps, all of them.
+    pub jump_count: u64,
+    /// Chunks whose time stepped back within the tolerance and kept the time before.
+    pub retimed: u64,
+    /// A read error that ended the log early.
+    pub read_error: Option<String>,
 }
 
-/// Time fields of the sentences in one chunk, in order.
-type ChunkTimes = Vec<(NaiveTime, Option<NaiveDate>)>;
+/// Where a log's time starts: the date of its first lines, and its first time.
+#[derive(Debug, Clone, Copy)]
+struct Start {
+    date: NaiveDate,
+    date_known: bool,
+    first: NaiveDateTime,
+}
 
-/// Splits `log` into records. Fails only when no sentence carries a UTC time.
+/// Splits `log` into records (the whole log in memory; for tests and small inputs).
 pub fn import_nmea_log(log: &[u8]) -> Result<(Vec<Record>, ImportReport), RecordError> {
-    let mut comment_lines = 0;
-    let chunks: Vec<&[u8]> = log
-        .split_inclusive(|&b| b == b'\n')
-        .filter(|line| {
-            let comment = line.first() == Some(&b'#');
-            comment_lines += usize::from(comment);
-            !comment
-        })
-        .collect();
+    let mut reader = NmeaLogReader::new(
+        || Ok(Box::new(Cursor::new(log.to_vec())) as Box<dyn BufRead>),
+        ImportOptions::default(),
+    )?;
+    let records: Vec<Record> = reader.by_ref().collect();
+    Ok((records, reader.report().clone()))
+}
 
-    let times = sentence_times(&chunks);
-    let all = times.iter().flatten();
-    let first_time = all
-        .clone()
-        .next()
-        .map(|(t, _)| *t)
+/// Lines of a log in bounded chunks, with their one-based line numbers; comment lines are
+/// counted and dropped.
+struct Lines {
+    input: Box<dyn BufRead>,
+    line_no: u64,
+    /// The last chunk did not end its line.
+    mid_line: bool,
+    /// The line being read is a comment.
+    in_comment: bool,
+    comment_lines: usize,
+    read_error: Option<String>,
+}
+
+impl Lines {
+    fn new(input: Box<dyn BufRead>) -> Self {
+        Self {
+            input,
+            line_no: 0,
+            mid_line: false,
+            in_comment: false,
+            comment_lines: 0,
+            read_error: None,
+        }
+    }
+
+    /// The next chunk and its line, or `None` at the end (or at a read error).
+    fn next_chunk(&mut self) -> Option<(u64, Vec<u8>)> {
+        loop {
+            let mut buf = Vec::with_capacity(128);
+            let mut bounded = Read::take(&mut self.input, MAX_CHUNK as u64);
+            match bounded.read_until(b'\n', &mut buf) {
+                Ok(0) => return None,
+                Ok(_) => {}
+                Err(e) => {
+                    self.read_error = Some(e.to_string());
+                    return None;
+                }
+            }
+            if !self.mid_line {
+                self.line_no += 1;
+                self.in_comment = buf.first() == Some(&b'#');
+                self.comment_lines += usize::from(self.in_comment);
+            }
+            self.mid_line = buf.last() != Some(&b'\n');
+            if !self.in_comment {
+                return Some((self.line_no, buf));
+            }
+        }
+    }
+}
+
+/// The time of day (and date, where given) of a timed sentence.
+fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
+    match decode(&Sentence::parse(body)) {
+        Ok(Some(GnssSentence::Gga(r) | GnssSentence::Gns(r))) => r.time.map(|t| (t, None)),
+        Ok(Some(GnssSentence::Rmc(r))) => r.time.map(|t| (t, r.date)),
+        Ok(Some(GnssSentence::Gst(g))) => g.time.map(|t| (t, None)),
+        Ok(Some(GnssSentence::Zda(z))) => z.time.map(|t| (t, z.date)),
+        _ => None,
+    }
+}
+
+/// The first pass: the first timed sentence and the first dated one.
+fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
+    let mut lines = Lines::new(input);
+    let mut framer = NmeaFramer::new();
+    let mut first: Option<(NaiveTime, Option<NaiveDate>)> = None;
+    let mut first_dated: Option<(NaiveTime, NaiveDate)> = None;
+    while first_dated.is_none()
+        && let Some((_, chunk)) = lines.next_chunk()
+    {
+        framer.push(&chunk, |body| {
+            if let Some((time, date)) = sentence_time(body) {
+                first.get_or_insert((time, date));
+                if let Some(d) = date {
+                    first_dated.get_or_insert((time, d));
+                }
+            }
+        });
+    }
+    if let Some(e) = lines.read_error {
+        return Err(RecordError::Import(format!("reading the log: {e}")));
+    }
+    let (first_time, first_date) = first
         .ok_or_else(|| RecordError::Import("no sentence with a UTC time in the log".into()))?;
-    let first_dated = all.clone().find_map(|(t, d)| d.map(|d| (*t, d)));
-    let start_date = match first_dated {
+    let date = match first_dated {
         // Lines before the first date that show a later time of day were on the day before.
         Some((dated_time, date)) if first_time > dated_time => date.pred_opt().unwrap_or(date),
         Some((_, date)) => date,
         None => NaiveDate::default(),
     };
+    Ok(Start {
+        date,
+        date_known: first_dated.is_some(),
+        first: first_date.unwrap_or(date).and_time(first_time),
+    })
+}
 
-    let mut tracker = UtcTracker::starting_on(start_date);
-    let mut stamps: Vec<Option<NaiveDateTime>> = Vec::with_capacity(chunks.len());
-    for chunk_times in &times {
-        let mut first = None;
-        for (time, date) in chunk_times {
-            let dt = tracker.observe(*time, *date);
-            first = first.or(dt);
-        }
-        stamps.push(first);
+/// A plain NMEA log read as time-stamped records, in segments across clock jumps.
+pub struct NmeaLogReader {
+    lines: Lines,
+    framer: NmeaFramer,
+    tracker: UtcTracker,
+    options: ImportOptions,
+    /// The log's time of the last chunk (the latest, within a segment) ...
+    last_logged: NaiveDateTime,
+    /// ... and the time records carry for it.
+    last_time: Timestamp,
+    /// The last step between two chunk times: the receiver's period.
+    last_step: Option<Duration>,
+    /// Records' time minus the log's time in the current segment, ns.
+    offset_ns: i128,
+    /// The last timed chunk started a segment.
+    just_jumped: bool,
+    report: ImportReport,
+}
+
+impl NmeaLogReader {
+    /// Opens the log at `path`.
+    pub fn open(path: &Path, options: ImportOptions) -> Result<Self, RecordError> {
+        Self::new(
+            || {
+                File::open(path)
+                    .map(|f| Box::new(BufReader::with_capacity(1 << 16, f)) as Box<dyn BufRead>)
+                    .map_err(|source| RecordError::Io {
+                        path: path.to_owned(),
+                        source,
+                    })
+            },
+            options,
+        )
     }
 
-    let first_stamp = stamps.iter().flatten().next().copied();
-    let mut current = first_stamp.map(to_timestamp).transpose()?;
-    let mut records = Vec::with_capacity(chunks.len());
-    for (chunk, stamp) in chunks.iter().zip(stamps) {
-        if let Some(dt) = stamp {
-            let t = to_timestamp(dt)?;
-            current = Some(current.map_or(t, |c| c.max(t)));
+    /// Reads the log that `open` opens: once to find where its time starts, then as
+    /// records. Fails when no sentence carries a UTC time.
+    fn new(
+        open: impl Fn() -> Result<Box<dyn BufRead>, RecordError>,
+        options: ImportOptions,
+    ) -> Result<Self, RecordError> {
+        let start = find_start(open()?)?;
+        let first = to_timestamp(start.first)
+            .ok_or_else(|| RecordError::Import(format!("time {} is before 1970", start.first)))?;
+        Ok(Self {
+            lines: Lines::new(open()?),
+            framer: NmeaFramer::new(),
+            tracker: UtcTracker::starting_on(start.date),
+            options,
+            last_logged: start.first,
+            last_time: first,
+            last_step: None,
+            offset_ns: 0,
+            just_jumped: false,
+            report: ImportReport {
+                date_known: start.date_known,
+                ..ImportReport::default()
+            },
+        })
+    }
+
+    /// What the import found so far (all of it once the reader is exhausted).
+    pub fn report(&self) -> &ImportReport {
+        &self.report
+    }
+
+    /// The log's time minus the records' time in the current segment, ns: what turns the
+    /// time of the last record handed out (and of ticks up to the next one) back into the
+    /// time the log shows.
+    pub fn logged_offset_ns(&self) -> i128 {
+        -self.offset_ns
+    }
+
+    /// The records' time for a chunk the log stamps `logged`, starting a new segment on a
+    /// jump.
+    fn place(&mut self, line: u64, logged: NaiveDateTime) -> Timestamp {
+        let Some(logged_t) = to_timestamp(logged) else {
+            return self.last_time;
+        };
+        let back = self.last_logged - logged;
+        let jumped = back.to_std().is_ok_and(|b| b > BACKSTEP_TOLERANCE)
+            || (logged - self.last_logged)
+                .to_std()
+                .is_ok_and(|f| f > self.options.max_gap);
+        if jumped && self.just_jumped && logged.time() == self.last_logged.time() {
+            // The epoch's time-only sentences came first, on the old date; its RMC or ZDA
+            // now brings the new date. One jump, to the new date.
+            self.offset_ns =
+                i128::from(self.last_time.as_nanos()) - i128::from(logged_t.as_nanos());
+            if self.report.jump_count <= KEEP_JUMPS as u64
+                && let Some(jump) = self.report.jumps.last_mut()
+            {
+                jump.to = logged;
+            }
+            self.last_logged = logged;
+            return self.last_time;
         }
-        let Some(t) = current else { continue };
-        records.push(Record {
+        self.just_jumped = jumped;
+        let time = if jumped {
+            // The receiver's clock was set: carry on one receiver period after the last
+            // record, in the log's new time.
+            let step = self
+                .last_step
+                .unwrap_or(Duration::from_secs(1))
+                .min(self.options.max_gap);
+            let time = self.last_time.saturating_add(step);
+            self.offset_ns = i128::from(time.as_nanos()) - i128::from(logged_t.as_nanos());
+            self.report.jump_count += 1;
+            if self.report.jumps.len() < KEEP_JUMPS {
+                self.report.jumps.push(ClockJump {
+                    line,
+                    from: self.last_logged,
+                    to: logged,
+                });
+            }
+            self.last_logged = logged;
+            time
+        } else {
+            let shifted = i128::from(logged_t.as_nanos()) + self.offset_ns;
+            let time = Timestamp::from_nanos(u64::try_from(shifted.max(0)).unwrap_or(u64::MAX));
+            self.last_logged = self.last_logged.max(logged);
+            if time < self.last_time {
+                self.report.retimed += 1;
+                return self.last_time;
+            }
+            time
+        };
+        if time > self.last_time {
+            self.last_step = Some(time.saturating_since(self.last_time));
+        }
+        self.last_time = time;
+        time
+    }
+}
+
+impl Iterator for NmeaLogReader {
+    type Item = Record;
+
+    fn next(&mut self) -> Option<Record> {
+        let Some((line, chunk)) = self.lines.next_chunk() else {
+            self.report.comment_lines = self.lines.comment_lines;
+            self.report.read_error = self.lines.read_error.clone();
+            return None;
+        };
+        let mut stamp = None;
+        let tracker = &mut self.tracker;
+        self.framer.push(&chunk, |body| {
+            if let Some((time, date)) = sentence_time(body) {
+                let dt = tracker.observe(time, date);
+                stamp = stamp.or(dt);
+            }
+        });
+        let t = match stamp {
+            Some(logged) => self.place(line, logged),
+            None => self.last_time,
+        };
+        self.report.chunks += 1;
+        Some(Record {
             t,
             source: IMPORT_SOURCE.to_owned(),
-            payload: Payload::Serial(Bytes::copy_from_slice(chunk)),
-        });
-    }
-    let report = ImportReport {
-        chunks: records.len(),
-        comment_lines,
-        date_known: first_dated.is_some(),
-    };
-    Ok((records, report))
-}
-
-/// The time (and date, where given) of every timed sentence, per chunk. One framer runs
-/// across all chunks, as the receiver's stream would.
-fn sentence_times(chunks: &[&[u8]]) -> Vec<ChunkTimes> {
-    let mut framer = NmeaFramer::new();
-    chunks
-        .iter()
-        .map(|chunk| {
-            let mut found = Vec::new();
-            framer.push(chunk, |body| {
-                let time_date = match decode(&Sentence::parse(body)) {
-                    Ok(Some(GnssSentence::Gga(r) | GnssSentence::Gns(r))) => {
-                        r.time.map(|t| (t, None))
-                    }
-                    Ok(Some(GnssSentence::Rmc(r))) => r.time.map(|t| (t, r.date)),
-                    Ok(Some(GnssSentence::Gst(g))) => g.time.map(|t| (t, None)),
-                    Ok(Some(GnssSentence::Zda(z))) => z.time.map(|t| (t, z.date)),
-                    _ => None,
-                };
-                found.extend(time_date);
-            });
-            found
+            payload: Payload::Serial(Bytes::from(chunk)),
         })
-        .collect()
+    }
 }
 
-fn to_timestamp(dt: NaiveDateTime) -> Result<Timestamp, RecordError> {
+fn to_timestamp(dt: NaiveDateTime) -> Option<Timestamp> {
     u64::try_from(dt.and_utc().timestamp_micros())
+        .ok()
         .map(Timestamp::from_micros)
-        .map_err(|_| RecordError::Import(format!("time {dt} is before 1970")))
 }
 
 #[cfg(test)]
@@ -133,11 +379,6 @@ mod tests {
 
     fn line(body: &str) -> String {
         format!("${body}*{:02X}\r\n", checksum(body.as_bytes()))
-    }
-
-    fn stamps(log: &str) -> Vec<String> {
-        let (records, _) = import_nmea_log(log.as_bytes()).unwrap();
-        records.iter().map(|r| r.t.to_string()).collect()
     }
 
     #[test]
@@ -184,16 +425,107 @@ mod tests {
     }
 
     #[test]
-    fn never_runs_backwards_and_survives_gaps() {
+    fn small_steps_back_keep_the_time_before_them() {
         let log = format!(
             "{}{}{}",
             line("GPZDA,120010.00,01,01,2022,00,00"),
             line("GPGGA,120009.000,5104.0859,N,11405.7387,W,1,8,0.9,1.0,M,0,M,,"),
-            line("GPGGA,130000.000,5104.0859,N,11405.7387,W,1,8,0.9,1.0,M,0,M,,"),
+            line("GPGGA,120011.000,5104.0859,N,11405.7387,W,1,8,0.9,1.0,M,0,M,,"),
         );
-        let s = stamps(&log);
-        assert_eq!(s[0], s[1]);
-        assert_eq!(s[2], "1641042000.000000");
+        let (records, report) = import_nmea_log(log.as_bytes()).unwrap();
+        assert_eq!(records[0].t, records[1].t);
+        assert_eq!(records[2].t.to_string(), "1641038411.000000");
+        assert_eq!((report.retimed, report.jump_count), (1, 0));
+    }
+
+    fn rmc(time: &str, date: &str) -> String {
+        line(&format!(
+            "GPRMC,{time},A,5104.0859,N,11405.7387,W,0.0,,{date},,,A"
+        ))
+    }
+
+    #[test]
+    fn a_clock_set_after_boot_starts_a_segment_one_period_on() {
+        // Three epochs on the receiver's default date, then the real one.
+        let log = [
+            rmc("000039.00", "010108"),
+            rmc("000040.00", "010108"),
+            rmc("000041.00", "010108"),
+            "# a comment between\n".to_owned(),
+            rmc("073658.00", "090710"),
+            rmc("073659.00", "090710"),
+        ]
+        .concat();
+        let (records, report) = import_nmea_log(log.as_bytes()).unwrap();
+        let s: Vec<String> = records.iter().map(|r| r.t.to_string()).collect();
+        // 2008-01-01T00:00:39Z onwards, one second apart across the jump.
+        assert_eq!(
+            s,
+            [
+                "1199145639.000000",
+                "1199145640.000000",
+                "1199145641.000000",
+                "1199145642.000000",
+                "1199145643.000000"
+            ]
+        );
+        assert_eq!(report.jump_count, 1);
+        assert_eq!(report.jumps[0].line, 5);
+        assert_eq!(report.jumps[0].from.to_string(), "2008-01-01 00:00:41");
+        assert_eq!(report.jumps[0].to.to_string(), "2010-07-09 07:36:58");
+    }
+
+    #[test]
+    fn backward_jumps_and_week_rollovers_are_segments_too() {
+        // A week rollover: 1980-01-05, 1980-01-12, then 2008; and a jump back at the end.
+        let log = [
+            rmc("235959.00", "050180"),
+            rmc("000000.00", "060180"),
+            rmc("000000.50", "120180"),
+            rmc("120000.00", "230808"),
+            rmc("120000.10", "230808"),
+            rmc("110000.00", "230808"),
+        ]
+        .concat();
+        let (records, report) = import_nmea_log(log.as_bytes()).unwrap();
+        assert_eq!(report.jump_count, 3, "{:?}", report.jumps);
+        let lines: Vec<u64> = report.jumps.iter().map(|j| j.line).collect();
+        assert_eq!(lines, [3, 4, 6]);
+        // Time never runs back, and each segment continues one period (the last step) on.
+        let t: Vec<u64> = records.iter().map(|r| r.t.as_micros()).collect();
+        let steps: Vec<u64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        assert_eq!(steps, [1_000_000, 1_000_000, 1_000_000, 100_000, 100_000]);
+    }
+
+    #[test]
+    fn the_gap_that_starts_a_segment_is_configurable() {
+        let log = [rmc("120000.00", "010122"), rmc("120030.00", "010122")].concat();
+        let (_, report) = import_nmea_log(log.as_bytes()).unwrap();
+        assert_eq!(report.jump_count, 1);
+        let bytes = log.into_bytes();
+        let mut wide = NmeaLogReader::new(
+            || Ok(Box::new(Cursor::new(bytes.clone())) as Box<dyn BufRead>),
+            ImportOptions {
+                max_gap: Duration::from_secs(60),
+            },
+        )
+        .unwrap();
+        let t: Vec<u64> = wide.by_ref().map(|r| r.t.as_micros()).collect();
+        assert_eq!(t[1] - t[0], 30_000_000);
+        assert_eq!(wide.report().jump_count, 0);
+    }
+
+    #[test]
+    fn long_lines_are_cut_into_bounded_chunks() {
+        let mut log = vec![b'x'; 3 * MAX_CHUNK + 10];
+        log.push(b'\n');
+        log.extend_from_slice(rmc("120000.00", "010122").as_bytes());
+        let (records, _) = import_nmea_log(&log).unwrap();
+        assert_eq!(records.len(), 5);
+        assert!(records.iter().all(|r| match &r.payload {
+            Payload::Serial(b) => b.len() <= MAX_CHUNK,
+            _ => false,
+        }));
     }
 
     #[test]

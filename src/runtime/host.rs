@@ -29,20 +29,28 @@ fn cpu_ticks(stat: &str) -> Option<(u64, u64)> {
     Some((total.saturating_sub(idle), total))
 }
 
+/// The number after `name` in a /proc file of `Name: value kB` lines.
+fn proc_field(text: &str, name: &str) -> Option<f64> {
+    text.lines()
+        .find(|l| l.starts_with(name))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
 /// Memory in use from /proc/meminfo, % of the total.
 fn memory_percent(meminfo: &str) -> Option<f64> {
-    let field = |name: &str| -> Option<f64> {
-        meminfo
-            .lines()
-            .find(|l| l.starts_with(name))?
-            .split_whitespace()
-            .nth(1)?
-            .parse()
-            .ok()
-    };
-    let total = field("MemTotal:")?;
-    let available = field("MemAvailable:")?;
+    let total = proc_field(meminfo, "MemTotal:")?;
+    let available = proc_field(meminfo, "MemAvailable:")?;
     (total > 0.0).then(|| (total - available) / total * 100.0)
+}
+
+/// This process's peak resident memory (VmHWM), bytes, where /proc tells it. Unlike
+/// `getrusage`, it covers only this program, not the one that spawned it before exec.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    proc_field(&status, "VmHWM:").map(|kib| (kib * 1024.0) as u64)
 }
 
 /// CPU busy between two samples, %.

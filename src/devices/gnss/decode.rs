@@ -11,7 +11,7 @@
 //! - it keeps several values as `f32`; they are widened through their shortest decimal form,
 //!   so `244.28` stays `244.28` rather than `244.27999877929688`.
 
-use chrono::{NaiveDate, NaiveTime};
+use chrono::{Datelike, NaiveDate, NaiveTime};
 use nmea::SentenceType;
 use nmea::sentences::rmc::RmcStatusOfFix;
 use nmea::sentences::{FaaMode, FixType};
@@ -379,12 +379,22 @@ fn decode_rmc(sentence: &Sentence<'_>) -> Result<Rmc, DecodeError> {
         });
     Ok(Rmc {
         time: rmc.fix_time,
-        date: rmc.fix_date,
+        date: rmc.fix_date.map(gps_era_date),
         quality,
         latitude: rmc.lat,
         longitude: rmc.lon,
         velocity,
     })
+}
+
+/// RMC's two-digit years 80 to 82 are the GPS epoch's first years (a receiver's default
+/// date after a cold start or a week-number rollover), not 2080 to 2082 as the nmea crate's
+/// 1983 pivot reads them.
+fn gps_era_date(date: NaiveDate) -> NaiveDate {
+    match date.year() {
+        2080..=2082 => date.with_year(date.year() - 100).unwrap_or(date),
+        _ => date,
+    }
 }
 
 fn decode_vtg(sentence: &Sentence<'_>) -> Result<GroundVelocity, DecodeError> {
