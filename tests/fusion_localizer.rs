@@ -227,12 +227,13 @@ fn estimation_error_is_consistent_across_seeds() {
 
 /// Receivers at any legal rate start the filter, including those whose heading of an epoch
 /// comes after its position, so that at each position the last heading is a whole period
-/// old (a 1 Hz receiver once never started: the heading had to be younger than 1 s).
+/// old (a 1 Hz receiver once never started: the heading had to be younger than 1 s). The
+/// first position starts it with the heading unknown (`LOCATE_FALSE`); the heading that
+/// follows resolves it.
 #[test]
 fn starts_at_every_receiver_rate_with_the_heading_after_the_position() {
     for period_ms in [50, 100, 200, 500, 999, 1000, 1001, 2000, 5000] {
         let mut loc = Localizer::new(config());
-        let mut started_after = None;
         for epoch in 0..4u64 {
             let t = epoch * period_ms;
             loc.add(
@@ -242,9 +243,10 @@ fn starts_at_every_receiver_rate_with_the_heading_after_the_position() {
                     sigma: (0.02, 0.02),
                 },
             );
-            if loc.ekf().is_some() {
-                started_after = Some(epoch);
-                break;
+            assert!(loc.ekf().is_some(), "{period_ms} ms: not started");
+            if epoch == 0 {
+                assert_eq!(loc.locate(ms(t)), LocateState::Lost, "{period_ms} ms");
+                assert!(loc.ekf().unwrap().yaw_sigma() > 1.0);
             }
             // The same epoch's heading, taken just after its position.
             loc.add(
@@ -255,7 +257,13 @@ fn starts_at_every_receiver_rate_with_the_heading_after_the_position() {
                 },
             );
         }
-        // The first position has no heading yet; the second one has, one period old.
-        assert_eq!(started_after, Some(1), "{period_ms} ms period");
+        let e = loc.ekf().unwrap();
+        let t = 3 * period_ms;
+        assert!(
+            (e.x[YAW] - 0.5).abs() < 0.01,
+            "{period_ms} ms: yaw {}",
+            e.x[YAW]
+        );
+        assert_eq!(loc.locate(ms(t)), LocateState::Good, "{period_ms} ms");
     }
 }

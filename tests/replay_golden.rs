@@ -81,10 +81,13 @@ fn rtk_drive_status_follows_the_script() {
     let angle = |s: f64| at(s)["rtk"]["angle"].as_f64().unwrap();
     assert!((angle(12.0) - 30.0).abs() < 1.0, "heading {}", angle(12.0));
     assert!((angle(40.0) - 245.0).abs() < 8.0, "course {}", angle(40.0));
-    // Fusion: localised once RTK fixed gives the datum (15 s); the pose's yaw agrees with
-    // the dual-antenna heading; lost during the outage, found again after it.
+    // Fusion: no map pose before the first fix; the first (single) fix is the datum and
+    // gives a pose, beyond the bound while single; localised in float with the dual-antenna
+    // heading, whose yaw the pose agrees with; lost during the outage, found again after it.
     let locate = |s: f64| at(s)["nav"]["locate"].as_str().unwrap().to_owned();
-    assert_eq!(locate(10.0), "LOCATE_UNINIT");
+    assert_eq!(locate(0.0), "LOCATE_UNINIT");
+    assert_eq!(locate(5.0), "LOCATE_FALSE");
+    assert_eq!(locate(10.0), "LOCATE_TRUE");
     assert_eq!(locate(25.0), "LOCATE_TRUE");
     let yaw_deg = at(25.0)["pose"]["yaw"].as_f64().unwrap().to_degrees();
     let heading_as_yaw = 90.0 - angle(25.0);

@@ -664,3 +664,85 @@ fn a_panic_writes_the_precomputed_stop_frames_to_the_bus() {
         );
     }
 }
+
+/// Lines that arrive on `sim`'s stdout within `span`, while a `cmd_vel` goes every 100 ms.
+fn lines_while_driving(sim: &mut Proc, span: Duration) -> Vec<Value> {
+    sim.drain_out();
+    let before = sim.out.len();
+    let until = Instant::now() + span;
+    while Instant::now() < until {
+        sim.send(r#"cmd_vel {"linear":{"x":0.3},"angular":{"z":0.0}}"#);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    sim.drain_out();
+    sim.out[before..].iter().filter_map(|l| status(l)).collect()
+}
+
+fn set_wall_clock(unix_s: i64) {
+    let ok = Command::new("date")
+        .args(["-u", "-s", &format!("@{unix_s}")])
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("date runs")
+        .success();
+    assert!(ok, "date -s needs root (the VM's)");
+}
+
+fn wall_clock() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() as i64)
+}
+
+/// NTP or a GNSS time source sets the clock after boot: a step of the wall clock, back by an
+/// hour and forward by two, neither stalls nor rushes the status lines, the control loop or
+/// the command watchdog (the vehicle keeps moving on a 10 Hz command stream), and the
+/// recording that spans both steps replays to the live output.
+#[test]
+#[ignore = "steps the wall clock (root): run by tests/vm/can-tests"]
+fn a_wall_clock_step_neither_stalls_nor_rushes_the_loop() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("clock-step");
+    let recording = dir.join("rec");
+    let mut sim = Proc::start(&[
+        "sim",
+        "--no-mqtt",
+        "--commands-stdin",
+        "--record",
+        recording.to_str().expect("UTF-8 path"),
+    ]);
+    sim.wait_out(WAIT, "a status line", |l| status(l).is_some());
+    let span = Duration::from_secs(3);
+    let steady = lines_while_driving(&mut sim, span);
+    let started = Instant::now();
+    let wall = wall_clock();
+    set_wall_clock(wall - 3600);
+    let after_back = lines_while_driving(&mut sim, span);
+    set_wall_clock(wall - 3600 + 7200);
+    let after_forward = lines_while_driving(&mut sim, span);
+    // Back to about the right time for what follows.
+    set_wall_clock(wall + started.elapsed().as_secs() as i64);
+    let live = sim.stop();
+    let (n0, n1, n2) = (steady.len(), after_back.len(), after_forward.len());
+    println!(
+        "status lines per 3 s: steady {n0}, after a step back {n1}, after a step forward {n2}"
+    );
+    for (n, what) in [(n1, "after the step back"), (n2, "after the step forward")] {
+        assert!(
+            n * 2 >= n0 && n <= n0 * 2,
+            "{what}: {n} lines in 3 s against {n0} before"
+        );
+    }
+    for rows in [&after_back, &after_forward] {
+        let moving = rows
+            .iter()
+            .filter(|r| r["robot"]["vx"].as_f64().unwrap_or(0.0) > 0.2)
+            .count();
+        assert!(
+            moving * 2 > rows.len(),
+            "the command watchdog tripped: {rows:?}"
+        );
+    }
+    assert_replays_as_live(&recording, &live);
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -17,6 +17,7 @@ use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
 };
+use crate::fusion::odometry::{OdomPose, Odometry, WheelReading};
 use crate::time::Timestamp;
 pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
@@ -180,6 +181,8 @@ pub enum Output {
     Wheels(WheelCommand),
     /// The answer to a command.
     CommandResult(Result<(), CommandRejected>),
+    /// Something for the operator's log.
+    Event(String),
 }
 
 /// The vehicle core.
@@ -196,6 +199,8 @@ pub struct Vehicle {
     imu: Option<ImuSample>,
     imu_link_down: bool,
     localizer: Localizer,
+    /// The `odom` frame: wheels and gyro, with or without GNSS.
+    odometry: Option<Odometry>,
     /// Receive times of the GNSS data already given to the localiser.
     fed_gnss: (Option<Timestamp>, Option<Timestamp>, Option<Timestamp>),
     /// The host's load, when sampled.
@@ -226,9 +231,15 @@ impl Vehicle {
             imu: None,
             imu_link_down: false,
             localizer: Localizer::new(config.localizer),
+            odometry: config.chassis.map(|c| Odometry::new(c.track_m)),
             fed_gnss: (None, None, None),
             host: None,
         }
+    }
+
+    /// The `odom` frame's pose (wheels and gyro), once the drives have reported.
+    pub fn odom_pose(&self) -> Option<OdomPose> {
+        self.odometry.as_ref().and_then(Odometry::pose)
     }
 
     /// Handles one input at time `t` and returns what it produced.
@@ -237,7 +248,11 @@ impl Vehicle {
             Input::Gnss(fix) => {
                 self.gnss_fix = Some(*fix);
                 self.feed_gnss(fix);
-                Vec::new()
+                self.localizer
+                    .take_events()
+                    .into_iter()
+                    .map(Output::Event)
+                    .collect()
             }
             Input::Link(Device::Gnss, state) => {
                 self.gnss_link_down = state == LinkState::Down;
@@ -252,6 +267,9 @@ impl Vehicle {
                     self.imu = Some(*sample);
                     self.localizer
                         .add(sample.rx, Measurement::Gyro { wz: sample.gyro.z });
+                    if let Some(o) = &mut self.odometry {
+                        o.gyro(sample.rx, sample.gyro.z);
+                    }
                 }
                 Vec::new()
             }
@@ -262,6 +280,20 @@ impl Vehicle {
                         (feedback.left.velocity_rad_s, feedback.right.velocity_rad_s)
                     {
                         let (vl, vr) = (l * cfg.wheel_radius_m, r * cfg.wheel_radius_m);
+                        if let Some(o) = &mut self.odometry {
+                            let travel = feedback
+                                .left
+                                .angle_rad
+                                .zip(feedback.right.angle_rad)
+                                .map(|(a, b)| (a * cfg.wheel_radius_m, b * cfg.wheel_radius_m));
+                            o.wheels(
+                                t,
+                                WheelReading {
+                                    speeds: (vl, vr),
+                                    travel,
+                                },
+                            );
+                        }
                         self.localizer.add(
                             t,
                             Measurement::Odometry {
@@ -383,10 +415,18 @@ impl Vehicle {
             LocateState::Good => Localization::Good,
             LocateState::Lost => Localization::Lost,
         };
-        let pose = self
-            .localizer
-            .map_pose(t)
-            .map_or_else(Pose2D::default, |(x, y, yaw)| Pose2D { x, y, yaw });
+        // The map pose once GNSS (or INIT_POSITION) has placed the vehicle; before that the
+        // odom frame's, which LOCATE_UNINIT marks.
+        let odom = self.odometry.as_ref().and_then(Odometry::pose);
+        let pose = match (self.localizer.map_pose(t), odom) {
+            (Some((x, y, yaw)), _) => Pose2D { x, y, yaw },
+            (None, Some(o)) => Pose2D {
+                x: o.x,
+                y: o.y,
+                yaw: o.yaw,
+            },
+            (None, None) => Pose2D::default(),
+        };
         VehicleStatus {
             time: t,
             imu_ok,
@@ -394,6 +434,7 @@ impl Vehicle {
             battery,
             gnss: self.gnss_status(t),
             pose,
+            odom,
             localization,
             navigation: Navigation::Idle,
             obstacle_stop: false,
@@ -451,8 +492,13 @@ impl Vehicle {
             lon_deg: p.value.longitude_deg,
             h_m: p.value.altitude_msl_m.unwrap_or(0.0) + p.value.geoid_separation_m.unwrap_or(0.0),
         };
-        if fix.quality == FixQuality::RtkFixed {
-            self.localizer.offer_datum(here);
+        // Without a configured datum the first valid fix of any quality is the origin.
+        if self.localizer.offer_datum(here) {
+            self.localizer.add_event(format!(
+                "datum: the first fix ({:?}) at {:.8}, {:.8}, {:.2} m is the local frame's origin \
+                 (no localization.datum configured)",
+                fix.quality, here.lat_deg, here.lon_deg, here.h_m
+            ));
         }
         let Some(frame) = self.localizer.frame() else {
             return;

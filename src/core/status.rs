@@ -18,8 +18,12 @@ pub struct VehicleStatus {
     pub battery: Option<BatteryStatus>,
     /// GNSS receiver state.
     pub gnss: GnssStatus,
-    /// Pose in the local ENU frame. Zero until fusion provides it.
+    /// The published pose: in the map frame (the datum's ENU frame, or INIT_POSITION's)
+    /// once GNSS or INIT_POSITION has placed the vehicle; until then the `odom` frame's, and
+    /// `localization` is `Uninitialized`. Zero without either.
     pub pose: Pose2D,
+    /// The `odom` frame's pose (wheels and gyro only, continuous), once the drives report.
+    pub odom: Option<crate::fusion::odometry::OdomPose>,
     /// Localisation state.
     pub localization: Localization,
     /// Navigation task state.
@@ -77,15 +81,15 @@ pub struct Pose2D {
     pub yaw: f64,
 }
 
-/// Localisation state.
+/// Localisation state (`nav.locate`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Localization {
-    /// Not initialised yet.
+    /// No map pose yet: the pose is the `odom` frame's (`LOCATE_UNINIT`).
     #[default]
     Uninitialized,
-    /// Localised within bounds.
+    /// Map pose with position and heading within their bounds (`LOCATE_TRUE`).
     Good,
-    /// Lost.
+    /// Map pose beyond a bound, or with its heading not yet known (`LOCATE_FALSE`).
     Lost,
 }
 

@@ -301,7 +301,11 @@ impl Engine {
                 let vehicle = &mut self.vehicle;
                 if let Some(receiver) = self.nmea.get_mut(&record.source) {
                     receiver.push(t, bytes, |fix| {
-                        vehicle.handle(t, Input::Gnss(fix));
+                        for output in vehicle.handle(t, Input::Gnss(fix)) {
+                            if let Output::Event(event) = output {
+                                out.push(EngineOutput::Event(event));
+                            }
+                        }
                     });
                 } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
                     decoder.push(t, bytes, |sample| {

@@ -100,6 +100,17 @@ impl Ekf {
         self.symmetrise();
     }
 
+    /// Propagates by `dt` seconds while the wheels stand still: the pose stays, and only the
+    /// speed, yaw rate and bias uncertainties grow.
+    pub fn predict_still(&mut self, dt: f64, q: &ProcessNoise) {
+        if dt <= 0.0 {
+            return;
+        }
+        self.p[(V, V)] += q.accel.powi(2) * dt;
+        self.p[(W, W)] += q.angular_accel.powi(2) * dt;
+        self.p[(BIAS, BIAS)] += q.bias_walk.powi(2) * dt;
+    }
+
     /// A measurement update: `z` measured, `hx` predicted from the state, `h` its Jacobian,
     /// `r` its covariance. Components listed in `angles` are wrapped. Applied only when the
     /// normalised innovation squared is within `gate` (pass `f64::INFINITY` to always apply).
@@ -112,7 +123,21 @@ impl Ekf {
         angles: &[usize],
         gate: f64,
     ) -> Innovation {
-        let mut y = z - hx;
+        self.update_except(z - hx, h, r, angles, gate, &[])
+    }
+
+    /// [`Ekf::update`] of the innovation `y` (measured minus predicted) that leaves the
+    /// states in `kept` unchanged (their gain rows zeroed, as a Schmidt filter does): the
+    /// Joseph form keeps the covariance right for any gain.
+    pub fn update_except<const M: usize>(
+        &mut self,
+        mut y: SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        angles: &[usize],
+        gate: f64,
+        kept: &[usize],
+    ) -> Innovation {
         for &i in angles {
             y[i] = wrap(y[i]);
         }
@@ -130,7 +155,10 @@ impl Ekf {
                 applied: false,
             };
         }
-        let k = self.p * h.transpose() * s_inv;
+        let mut k = self.p * h.transpose() * s_inv;
+        for &i in kept {
+            k.row_mut(i).fill(0.0);
+        }
         self.x += k * y;
         self.x[YAW] = wrap(self.x[YAW]);
         // Joseph form: (I - KH) P (I - KH)ᵀ + K R Kᵀ.

@@ -24,8 +24,11 @@ use crate::time::Timestamp;
 const GATE_1: f64 = 10.83;
 /// χ² gate, 2 degrees of freedom, 99.9 %.
 const GATE_2: f64 = 13.82;
-/// A gyro rate this recent makes the gyro, not the wheels, the source of yaw rate.
-const GYRO_LIVE: Duration = Duration::from_millis(200);
+/// A gyro whose last rate is younger than this many of its measured periods is the source of
+/// yaw rate, not the wheels ...
+const GYRO_LIVE_PERIODS: f64 = 5.0;
+/// ... and never younger than this.
+const GYRO_LIVE_MIN: Duration = Duration::from_millis(50);
 /// Wheels slower than this stand still, m/s ...
 const STILL_MPS: f64 = 0.002;
 /// ... and rad/s.
@@ -36,6 +39,8 @@ const STILL_YAW_RATE_SIGMA: f64 = 0.002;
 const QUALITY_STEP: f64 = 0.5;
 /// ... and the estimate keeps at least this fraction of the old σ as its uncertainty.
 const CORRELATED_PART: f64 = 0.5;
+/// The heading's 1σ before anything has shown it, rad.
+const UNKNOWN_YAW_SIGMA: f64 = std::f64::consts::PI;
 /// A relocation needs at least this many rejected positions, whatever their rate.
 pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
 
@@ -50,7 +55,7 @@ pub struct LocalizerConfig {
     pub gnss_latency: Duration,
     /// `LOCATE_TRUE` while the 1σ position uncertainty is within this, m.
     pub locate_bound_m: f64,
-    /// Leaving `LOCATE_UNINIT` also needs the 1σ heading within this, rad.
+    /// `LOCATE_TRUE` also needs the 1σ heading within this, rad.
     pub converged_yaw_rad: f64,
     /// Dual-antenna heading noise, 1σ rad.
     pub heading_sigma_rad: f64,
@@ -172,6 +177,10 @@ struct Filter {
     last_gyro: Option<Timestamp>,
     /// The larger 1σ of the last position fix.
     last_position_sigma: Option<f64>,
+    /// The wheels stood still at the last odometry: the pose holds.
+    still: bool,
+    /// Smoothed interval between gyro samples, s.
+    gyro_period: Option<f64>,
 }
 
 /// The localiser.
@@ -188,10 +197,11 @@ pub struct Localizer {
     /// The last position's time, and the interval before it: the receiver's period.
     last_position: (Option<Timestamp>, Option<Duration>),
     last_speed: f64,
-    converged: bool,
     /// The frame poses are published in.
     map: MapFrame,
     stats: LocalizerStats,
+    /// What happened that an operator should read in the log, until taken.
+    events: Vec<String>,
 }
 
 impl Localizer {
@@ -205,9 +215,9 @@ impl Localizer {
             last_heading: None,
             last_position: (None, None),
             last_speed: 0.0,
-            converged: false,
             map: MapFrame::default(),
             stats: LocalizerStats::default(),
+            events: Vec::new(),
         }
     }
 
@@ -222,10 +232,22 @@ impl Localizer {
     }
 
     /// Sets the datum unless one is set (the first RTK-fixed position).
-    pub fn offer_datum(&mut self, datum: Geodetic) {
-        if self.frame.is_none() {
-            self.frame = Some(Enu::new(datum));
+    pub fn offer_datum(&mut self, datum: Geodetic) -> bool {
+        if self.frame.is_some() {
+            return false;
         }
+        self.frame = Some(Enu::new(datum));
+        true
+    }
+
+    /// Adds an event for the log.
+    pub fn add_event(&mut self, event: String) {
+        self.events.push(event);
+    }
+
+    /// Takes the events since the last call (the filter's start, the datum's choice).
+    pub fn take_events(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.events)
     }
 
     /// Counters.
@@ -264,20 +286,15 @@ impl Localizer {
         Some(ekf)
     }
 
-    /// The `nav.locate` state at `t`.
-    pub fn locate(&mut self, t: Timestamp) -> LocateState {
+    /// The `nav.locate` state at `t`: uninitialised without a map pose, good while both the
+    /// position and the heading are within their bounds, else lost.
+    pub fn locate(&self, t: Timestamp) -> LocateState {
         let Some(ekf) = self.predicted(t) else {
             return LocateState::Uninitialized;
         };
-        let (sigma, yaw_sigma) = (ekf.position_sigma(), ekf.yaw_sigma());
-        if !self.converged {
-            if sigma <= self.config.locate_bound_m && yaw_sigma <= self.config.converged_yaw_rad {
-                self.converged = true;
-            } else {
-                return LocateState::Uninitialized;
-            }
-        }
-        if sigma <= self.config.locate_bound_m {
+        if ekf.position_sigma() <= self.config.locate_bound_m
+            && ekf.yaw_sigma() <= self.config.converged_yaw_rad
+        {
             LocateState::Good
         } else {
             LocateState::Lost
@@ -362,19 +379,19 @@ impl Localizer {
         };
         // A recent heading (dual antenna, or course while moving): from the last second, or
         // from the last one and a half of the receiver's periods when that is longer (a
-        // 1 Hz receiver's last heading can be a whole period old).
+        // 1 Hz receiver's last heading can be a whole period old). Without one the filter
+        // starts anyway, its heading unknown until course or a second antenna gives it.
         let max_age = self
             .last_position
             .1
             .map_or(Duration::from_secs(1), |period| {
                 period.mul_f64(1.5).max(Duration::from_secs(1))
             });
-        let Some((_, yaw)) = self
+        let heading = self
             .last_heading
             .filter(|(ht, _)| t.saturating_since(*ht) < max_age || *ht > t)
-        else {
-            return;
-        };
+            .map(|(_, yaw)| yaw);
+        let yaw = heading.unwrap_or(0.0);
         let (ax, ay) = self.config.antenna;
         let (s, c) = yaw.sin_cos();
         let mut x = State::zeros();
@@ -383,18 +400,41 @@ impl Localizer {
         x[YAW] = yaw;
         x[V] = self.last_speed;
         let mut p = Cov::zeros();
-        p[(X, X)] = sigma.0.powi(2) + 0.01;
-        p[(Y, Y)] = sigma.1.powi(2) + 0.01;
-        p[(YAW, YAW)] = 5f64.to_radians().powi(2);
+        // With the heading unknown, so is where the antenna sits around the vehicle.
+        let lever = if heading.is_some() {
+            0.0
+        } else {
+            ax * ax + ay * ay
+        };
+        p[(X, X)] = sigma.0.powi(2) + 0.01 + lever;
+        p[(Y, Y)] = sigma.1.powi(2) + 0.01 + lever;
+        p[(YAW, YAW)] = match heading {
+            Some(_) => 5f64.to_radians().powi(2),
+            None => UNKNOWN_YAW_SIGMA.powi(2),
+        };
         p[(V, V)] = 0.25;
         p[(W, W)] = 0.25;
         p[(BIAS, BIAS)] = 0.02f64.powi(2);
+        self.events.push(match heading {
+            Some(yaw) => format!(
+                "localisation started: position from a fix with 1σ {:.2} m, heading {:.1}° from GNSS",
+                sigma.0.max(sigma.1),
+                heading_deg_of_yaw(yaw)
+            ),
+            None => format!(
+                "localisation started: position from a fix with 1σ {:.2} m; heading unknown \
+                 (LOCATE_FALSE) until course over ground while moving or a dual-antenna heading gives it",
+                sigma.0.max(sigma.1)
+            ),
+        });
         self.base = Some(Filter {
             ekf: Ekf::new(x, p),
             time: t,
             rejections: None,
             last_gyro: None,
             last_position_sigma: None,
+            still: false,
+            gyro_period: None,
         });
         self.buffer.clear();
     }
@@ -402,10 +442,16 @@ impl Localizer {
     /// Predicts `f` to `t` and applies `m`.
     fn apply(&mut self, f: &mut Filter, t: Timestamp, m: &Measurement) {
         if t > f.time {
-            f.ekf
-                .predict(t.saturating_since(f.time).as_secs_f64(), &self.config.noise);
+            let dt = t.saturating_since(f.time).as_secs_f64();
+            if f.still {
+                f.ekf.predict_still(dt, &self.config.noise);
+            } else {
+                f.ekf.predict(dt, &self.config.noise);
+            }
             f.time = t;
         }
+        // A still vehicle's pose moves only by GNSS: wheel and gyro updates leave it.
+        let pose: &[usize] = &[X, Y, YAW];
         let e = &mut f.ekf;
         let row = |i: usize| {
             let mut h = SMatrix::<f64, 1, N>::zeros();
@@ -417,49 +463,66 @@ impl Localizer {
         match *m {
             Measurement::Odometry { v, w } => {
                 let (base, rel) = self.config.odometry_sigma;
-                e.update(
-                    &one(v),
-                    &one(e.x[V]),
+                let still = v.abs() < STILL_MPS && w.abs() < STILL_RPS;
+                let kept: &[usize] = if still { pose } else { &[] };
+                e.update_except(
+                    one(v - e.x[V]),
                     &row(V),
                     &var(base + rel * v.abs()),
                     &[],
                     f64::INFINITY,
+                    kept,
                 );
                 // The wheels' yaw rate carries the slip and track errors, which the gyro bias
                 // would soak up; with a live gyro it is used only when the wheels stand still,
                 // where it is exact (and makes the bias observable).
+                let live_for = f
+                    .gyro_period
+                    .map_or(GYRO_LIVE_MIN, |p| {
+                        Duration::from_secs_f64(p * GYRO_LIVE_PERIODS)
+                    })
+                    .max(GYRO_LIVE_MIN);
                 let gyro_live = f
                     .last_gyro
-                    .is_some_and(|g| t.saturating_since(g) <= GYRO_LIVE);
-                let still = v.abs() < STILL_MPS && w.abs() < STILL_RPS;
+                    .is_some_and(|g| t.saturating_since(g) <= live_for);
+                f.still = still;
                 let yaw_rate_sigma = match (gyro_live, still) {
                     (false, _) => Some(self.config.odometry_yaw_rate_sigma),
                     (true, true) => Some(STILL_YAW_RATE_SIGMA),
                     (true, false) => None,
                 };
                 if let Some(sigma) = yaw_rate_sigma {
-                    e.update(
-                        &one(w),
-                        &one(e.x[W]),
+                    f.ekf.update_except(
+                        one(w - f.ekf.x[W]),
                         &row(W),
                         &var(sigma),
                         &[],
                         f64::INFINITY,
+                        kept,
                     );
                 }
                 self.stats.applied += 1;
             }
             Measurement::Gyro { wz } => {
+                if let Some(last) = f.last_gyro.filter(|&l| t > l) {
+                    let dt = t.saturating_since(last).as_secs_f64();
+                    f.gyro_period = Some(match f.gyro_period {
+                        // Gaps (a lost link) count as a few periods at most.
+                        Some(p) => p + (dt.min(p * GYRO_LIVE_PERIODS) - p) * 0.05,
+                        None => dt,
+                    });
+                }
                 f.last_gyro = Some(t);
                 let mut h = row(W);
                 h[(0, BIAS)] = 1.0;
-                e.update(
-                    &one(wz),
-                    &one(e.x[W] + e.x[BIAS]),
+                let kept: &[usize] = if f.still { pose } else { &[] };
+                e.update_except(
+                    one(wz - e.x[W] - e.x[BIAS]),
                     &h,
                     &var(self.config.gyro_sigma),
                     &[],
                     f64::INFINITY,
+                    kept,
                 );
                 self.stats.applied += 1;
             }
@@ -520,7 +583,9 @@ impl Localizer {
                 h[(1, YAW)] = c * ax - s * ay;
                 let r = SMatrix::<f64, 2, 2>::new(sigma.0.powi(2), 0.0, 0.0, sigma.1.powi(2));
                 let z = SVector::<f64, 2>::new(en.0, en.1);
-                let result = e.update(&z, &hx, &h, &r, &[], GATE_2);
+                // A position step is not a gyro fault: the bias learns from heading and
+                // standstill, never from where a fix lands.
+                let result = e.update_except(z - hx, &h, &r, &[], GATE_2, &[BIAS]);
                 self.count(result.applied);
                 if result.applied {
                     f.rejections = None;
@@ -624,6 +689,8 @@ impl Localizer {
             rejections: None,
             last_gyro: None,
             last_position_sigma: None,
+            still: false,
+            gyro_period: None,
         });
         self.buffer.clear();
     }

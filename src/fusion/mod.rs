@@ -1,5 +1,6 @@
-//! Localisation: geodesy and the fusion filter.
+//! Localisation: geodesy, the `odom` frame's dead reckoning and the fusion filter.
 
 pub mod ekf;
 pub mod geodesy;
 pub mod localizer;
+pub mod odometry;

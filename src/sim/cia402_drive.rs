@@ -144,6 +144,9 @@ pub struct SimDrive {
     /// TPDOs are sent (false: they stop while the heartbeat goes on, as a half-failed node).
     tpdos_on: bool,
     last_step: Option<Timestamp>,
+    /// Motor speed forced from outside (the wheels back-driven: a recorded motion played
+    /// through the simulator), r/min, in place of the motor model.
+    back_driven: Option<f64>,
 }
 
 impl SimDrive {
@@ -185,6 +188,7 @@ impl SimDrive {
             reset_edges: 0,
             tpdos_on: true,
             last_step: None,
+            back_driven: None,
             profile,
         }
     }
@@ -663,6 +667,12 @@ impl SimDrive {
         self.read(addr).map_or(0, |d| i64::from(d.as_i32()))
     }
 
+    /// Forces every axis's motor speed (r/min) whatever the drive commands, or gives the
+    /// motors back to the model (`None`).
+    pub fn back_drive(&mut self, rpm: Option<f64>) {
+        self.back_driven = rpm;
+    }
+
     /// Advances the motor model and sends what is due: boot-up, heartbeats, TPDOs.
     pub fn step(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         if !self.booted {
@@ -698,7 +708,10 @@ impl SimDrive {
             } else {
                 wanted - a.rpm
             };
-            let change = lagged.clamp(-max_step, max_step);
+            let change = match self.back_driven {
+                Some(forced) => forced - a.rpm,
+                None => lagged.clamp(-max_step, max_step),
+            };
             // Average speed over the step moves the encoder.
             let rpm_before = a.rpm;
             a.rpm += change;

@@ -270,6 +270,20 @@ pub struct SimVehicle {
     gnss_error: (f64, f64),
     pending_gnss: VecDeque<(Timestamp, Bytes)>,
     imu_count: u32,
+    /// A recorded motion played through the simulator, in place of the motors and the gyro.
+    forced: Option<ForcedMotion>,
+}
+
+/// A motion imposed on the simulated vehicle (a real robot's recorded wheel odometry and
+/// gyro), so its frames carry real data through the real decoders.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ForcedMotion {
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Yaw rate the wheels show, rad/s (sets their speed difference).
+    pub wheel_yaw_rate: f64,
+    /// What the gyro reads (z), rad/s, bias and noise included.
+    pub gyro_z: f64,
 }
 
 impl SimVehicle {
@@ -300,6 +314,7 @@ impl SimVehicle {
             gnss_error: (0.0, 0.0),
             pending_gnss: VecDeque::new(),
             imu_count: 0,
+            forced: None,
         }
     }
 
@@ -311,6 +326,23 @@ impl SimVehicle {
     /// The plant.
     pub fn plant(&self) -> &PlantConfig {
         &self.plant
+    }
+
+    /// Imposes a motion from now on (wheels back-driven, the gyro reading given), or gives
+    /// the vehicle back to its motors (`None`).
+    pub fn force_motion(&mut self, motion: Option<ForcedMotion>) {
+        self.forced = motion;
+        let g = self.plant.geometry;
+        let rpm = |v: f64| v / g.wheel_radius_m * 60.0 / TAU * g.gear_ratio;
+        let (l, r) = match motion {
+            Some(m) => {
+                let half = m.wheel_yaw_rate * g.track_m / 2.0;
+                (Some(rpm(m.v - half)), Some(rpm(m.v + half)))
+            }
+            None => (None, None),
+        };
+        self.left.back_drive(l);
+        self.right.back_drive(r);
     }
 
     /// Adds to the gyro's z bias (a scenario's temperature drift), rad/s.
@@ -371,6 +403,10 @@ impl SimVehicle {
             let s = self.plant.slip.sigma;
             self.slip = (self.normal(s), self.normal(s));
         }
+        if self.forced.is_some() {
+            // The recorded wheels are the motion; there is no slip beyond what they show.
+            self.slip = (-self.plant.slip.bias[0], -self.plant.slip.bias[1]);
+        }
         let (vl, vr) = self.wheel_speeds();
         let v = (vl + vr) / 2.0;
         let w = (vr - vl) / self.plant.geometry.track_m;
@@ -416,10 +452,14 @@ impl SimVehicle {
 
     fn imu_record(&mut self, t: Timestamp, forward_accel: f64) -> Record {
         let m = self.plant.imu;
+        let gyro_z = match self.forced {
+            Some(f) => f.gyro_z,
+            None => self.truth.w + self.gyro_bias + self.normal(m.gyro_noise_rps),
+        };
         let gyro = Vector3::new(
             self.normal(m.gyro_noise_rps),
             self.normal(m.gyro_noise_rps),
-            self.truth.w + self.gyro_bias + self.normal(m.gyro_noise_rps),
+            gyro_z,
         );
         let accel = Vector3::new(
             forward_accel.clamp(-20.0, 20.0) + self.normal(m.accel_noise_mps2),

@@ -24,6 +24,21 @@ pub fn replay(path: &Path) -> Output {
     out
 }
 
+/// A folder of the shared data (`../shared/data/SUB` beside the checkout, or
+/// `$CHASSISD_SHARED_DATA/SUB`). Panics when missing: CI must fail, not skip.
+pub fn shared_data(sub: &str) -> PathBuf {
+    let base = std::env::var_os("CHASSISD_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let dir = base.join(sub);
+    assert!(
+        dir.is_dir(),
+        "{} is missing: the tests need the shared data (set CHASSISD_SHARED_DATA)",
+        dir.display()
+    );
+    dir
+}
+
 /// The shared receiver logs (`../shared/data/gnss` beside the checkout, or
 /// `$CHASSISD_SHARED_DATA/gnss`). Panics when missing: CI must fail, not skip.
 pub fn shared_gnss_dir() -> PathBuf {

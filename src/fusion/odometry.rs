@@ -1,0 +1,265 @@
+//! The `odom` frame of REP-105: a pose dead-reckoned from the wheels and the gyro alone. It
+//! starts at (0, 0, 0) when the drives first report, is continuous and never jumps, with or
+//! without GNSS. Distance comes from the wheel encoders; yaw from the gyro, less a bias
+//! learnt whenever the wheels stand still (a zero-velocity update), or from the wheels when
+//! no gyro is live.
+
+use std::time::Duration;
+
+use super::ekf::wrap;
+use crate::time::Timestamp;
+
+/// Wheels slower than this stand still, m/s.
+pub const STILL_MPS: f64 = 0.002;
+/// A standstill's gyro readings give the bias only when their spread is within this, rad/s
+/// (a vehicle being loaded or pushed is not still).
+const QUIET_RPS: f64 = 0.02;
+/// Readings a standstill needs before its mean counts as the bias.
+const MIN_STILL_SAMPLES: u64 = 10;
+/// A gyro counts as live while its last sample is younger than this many of its periods.
+const LIVE_PERIODS: f64 = 5.0;
+/// ... and never less than this.
+const MIN_LIVE: Duration = Duration::from_millis(50);
+
+/// One wheel-odometry reading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WheelReading {
+    /// Left and right wheel ground speeds, m/s.
+    pub speeds: (f64, f64),
+    /// Left and right wheel travel since start, m, when the encoders report it.
+    pub travel: Option<(f64, f64)>,
+}
+
+/// The odometry pose: x, y (m) and yaw (rad) in the `odom` frame, with its speed.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct OdomPose {
+    /// Forward, m, along the heading at start.
+    pub x: f64,
+    /// Left, m.
+    pub y: f64,
+    /// Yaw, rad, counter-clockwise from the heading at start.
+    pub yaw: f64,
+    /// Forward speed, m/s.
+    pub v: f64,
+    /// Yaw rate, rad/s.
+    pub w: f64,
+}
+
+/// Running mean and spread (Welford).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Spread {
+    n: u64,
+    mean: f64,
+    m2: f64,
+}
+
+impl Spread {
+    fn add(&mut self, x: f64) {
+        self.n += 1;
+        let d = x - self.mean;
+        self.mean += d / self.n as f64;
+        self.m2 += d * (x - self.mean);
+    }
+
+    fn sigma(&self) -> f64 {
+        if self.n < 2 {
+            return f64::INFINITY;
+        }
+        (self.m2 / (self.n - 1) as f64).sqrt()
+    }
+}
+
+/// The `odom` frame's dead reckoning.
+#[derive(Debug, Clone, Default)]
+pub struct Odometry {
+    track_m: f64,
+    pose: Option<OdomPose>,
+    last_wheels: Option<(Timestamp, WheelReading)>,
+    still: bool,
+    /// Yaw turned by the gyro since the last wheel reading, rad.
+    gyro_turn: f64,
+    last_gyro: Option<Timestamp>,
+    /// Smoothed gyro sample interval, s.
+    gyro_period: Option<f64>,
+    /// The gyro bias, rad/s, once a standstill has shown it.
+    bias: Option<f64>,
+    standstill: Spread,
+}
+
+impl Odometry {
+    /// Dead reckoning for wheels `track_m` apart.
+    pub fn new(track_m: f64) -> Self {
+        Self {
+            track_m,
+            ..Self::default()
+        }
+    }
+
+    /// The pose, once the drives have reported.
+    pub fn pose(&self) -> Option<OdomPose> {
+        self.pose
+    }
+
+    /// The gyro bias learnt at standstill, rad/s.
+    pub fn gyro_bias(&self) -> Option<f64> {
+        self.bias
+    }
+
+    /// Whether the wheels stood still at the last reading.
+    pub fn is_still(&self) -> bool {
+        self.still
+    }
+
+    fn gyro_live(&self, t: Timestamp) -> bool {
+        let Some(last) = self.last_gyro else {
+            return false;
+        };
+        let window = self
+            .gyro_period
+            .map_or(MIN_LIVE, |p| Duration::from_secs_f64(p * LIVE_PERIODS))
+            .max(MIN_LIVE);
+        t.saturating_since(last) <= window
+    }
+
+    /// A gyro yaw rate (bias included) at `t`, rad/s.
+    pub fn gyro(&mut self, t: Timestamp, wz: f64) {
+        let Some(last) = self.last_gyro.filter(|&l| t > l) else {
+            self.last_gyro = self.last_gyro.max(Some(t));
+            return;
+        };
+        let dt = t.saturating_since(last).as_secs_f64();
+        self.last_gyro = Some(t);
+        // Gaps (a lost link) do not enter the rate estimate beyond a few periods.
+        self.gyro_period = Some(match self.gyro_period {
+            Some(p) => p + (dt.min(p * LIVE_PERIODS) - p) * 0.05,
+            None => dt,
+        });
+        if self.still {
+            self.standstill.add(wz);
+            if self.standstill.n >= MIN_STILL_SAMPLES && self.standstill.sigma() <= QUIET_RPS {
+                self.bias = Some(self.standstill.mean);
+            }
+            return;
+        }
+        if self.pose.is_some() {
+            self.gyro_turn += (wz - self.bias.unwrap_or(0.0)) * dt;
+        }
+    }
+
+    /// A wheel reading at `t`: moves the pose.
+    pub fn wheels(&mut self, t: Timestamp, reading: WheelReading) {
+        let (vl, vr) = reading.speeds;
+        let still = vl.abs() < STILL_MPS && vr.abs() < STILL_MPS;
+        if still && !self.still {
+            self.standstill = Spread::default();
+        }
+        let gyro_live = self.gyro_live(t);
+        let Some((t0, before)) = self.last_wheels.replace((t, reading)) else {
+            self.pose = Some(OdomPose::default());
+            self.still = still;
+            self.gyro_turn = 0.0;
+            return;
+        };
+        let dt = t.saturating_since(t0).as_secs_f64();
+        // Travel from the encoders where both readings have it, else from the speeds.
+        let (dl, dr) = match (before.travel, reading.travel) {
+            (Some((l0, r0)), Some((l1, r1))) => (l1 - l0, r1 - r0),
+            _ => (
+                (before.speeds.0 + vl) / 2.0 * dt,
+                (before.speeds.1 + vr) / 2.0 * dt,
+            ),
+        };
+        let turn = if still {
+            0.0
+        } else if gyro_live {
+            self.gyro_turn
+        } else {
+            (dr - dl) / self.track_m
+        };
+        self.gyro_turn = 0.0;
+        self.still = still;
+        let ds = if still { 0.0 } else { (dl + dr) / 2.0 };
+        if let Some(p) = &mut self.pose {
+            let mid = p.yaw + turn / 2.0;
+            p.x += ds * mid.cos();
+            p.y += ds * mid.sin();
+            p.yaw = wrap(p.yaw + turn);
+            if dt > 0.0 {
+                p.v = ds / dt;
+                p.w = turn / dt;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(ms: u64) -> Timestamp {
+        Timestamp::from_micros(ms * 1000)
+    }
+
+    fn wheels(v: (f64, f64), travel: (f64, f64)) -> WheelReading {
+        WheelReading {
+            speeds: v,
+            travel: Some(travel),
+        }
+    }
+
+    #[test]
+    fn starts_at_zero_and_drives_straight_on_the_encoders() {
+        let mut o = Odometry::new(0.5);
+        assert_eq!(o.pose(), None);
+        for k in 0..=100u64 {
+            let s = k as f64 * 0.01;
+            o.wheels(at(10 * k), wheels((1.0, 1.0), (s, s)));
+        }
+        let p = o.pose().unwrap();
+        assert!((p.x - 1.0).abs() < 1e-12 && p.y.abs() < 1e-12 && p.yaw == 0.0);
+    }
+
+    #[test]
+    fn a_still_vehicle_stays_put_and_learns_the_gyro_bias() {
+        let mut o = Odometry::new(0.5);
+        // 60 s still at 100 Hz with a biased, noisy gyro.
+        for k in 0..6000u64 {
+            let noise = if k % 2 == 0 { 0.003 } else { -0.003 };
+            o.gyro(at(10 * k + 5), 0.01 + noise);
+            o.wheels(at(10 * k), wheels((0.0, 0.0), (0.0, 0.0)));
+        }
+        let p = o.pose().unwrap();
+        assert_eq!((p.x, p.y, p.yaw), (0.0, 0.0, 0.0));
+        assert!((o.gyro_bias().unwrap() - 0.01).abs() < 1e-4);
+        // Then it turns on the bias-corrected gyro: 0.5 rad/s for 1 s.
+        for k in 6000..6100u64 {
+            o.gyro(at(10 * k + 5), 0.51);
+            o.wheels(at(10 * k + 10), wheels((-0.1, 0.1), (0.0, 0.0)));
+        }
+        let yaw = o.pose().unwrap().yaw;
+        assert!((yaw - 0.5).abs() < 0.01, "{yaw}");
+    }
+
+    #[test]
+    fn without_a_live_gyro_the_wheels_turn_it() {
+        let mut o = Odometry::new(0.5);
+        o.gyro(at(0), 0.0);
+        o.gyro(at(10), 0.0);
+        // The gyro falls silent; the wheels turn the vehicle by (0.25 - (-0.25)) / 0.5 = 1 rad.
+        for k in 0..=100u64 {
+            let s = k as f64 * 0.0025;
+            o.wheels(at(1000 + 10 * k), wheels((-0.25, 0.25), (-s, s)));
+        }
+        assert!((o.pose().unwrap().yaw - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_noisy_standstill_does_not_set_the_bias() {
+        let mut o = Odometry::new(0.5);
+        for k in 0..200u64 {
+            o.gyro(at(10 * k + 5), if k % 2 == 0 { 0.2 } else { -0.1 });
+            o.wheels(at(10 * k), wheels((0.0, 0.0), (0.0, 0.0)));
+        }
+        assert_eq!(o.gyro_bias(), None);
+    }
+}
