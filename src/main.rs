@@ -123,6 +123,13 @@ enum BenchCommand {
         /// outage-30s, jump-5m, bias-drift.
         #[arg(long)]
         scenario: Vec<String>,
+        /// The receiver's rate, Hz, instead of the plant's.
+        #[arg(long, value_parser = gnss_rate_arg)]
+        gnss_rate: Option<f64>,
+        /// One antenna (heading from course over ground) or two (dual-antenna heading),
+        /// instead of the plant's.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+        antennas: Option<u8>,
     },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
@@ -177,8 +184,19 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     plant,
                     seed,
                     scenario,
+                    gnss_rate,
+                    antennas,
                 },
-        } => bench_fusion(plant, seed, &scenario),
+        } => {
+            let mut plant = load_plant(plant)?;
+            if let Some(rate) = gnss_rate {
+                plant.gnss.rate_hz = rate;
+            }
+            if let Some(n) = antennas {
+                plant.gnss.dual_antenna = n == 2;
+            }
+            bench_fusion(plant, seed, &scenario)
+        }
         Command::Bench {
             which:
                 BenchCommand::Mqtt {
@@ -334,8 +352,7 @@ fn find_scenario(name: &str) -> anyhow::Result<Scenario> {
     })
 }
 
-fn bench_fusion(plant: Option<PathBuf>, seed: u64, names: &[String]) -> anyhow::Result<bool> {
-    let plant = load_plant(plant)?;
+fn bench_fusion(plant: PlantConfig, seed: u64, names: &[String]) -> anyhow::Result<bool> {
     let scenarios = if names.is_empty() {
         Scenario::all()
     } else {
@@ -411,4 +428,12 @@ fn seconds_arg(s: &str) -> Result<Duration, String> {
         ));
     }
     Ok(Duration::from_secs_f64(v))
+}
+
+/// Parses a receiver rate: 0.1 to 50 Hz.
+fn gnss_rate_arg(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.1..=50.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: give a rate from 0.1 to 50 Hz")),
+    }
 }

@@ -11,7 +11,7 @@ use bytes::Bytes;
 use serde::Serialize;
 
 use crate::config::ConfigError;
-use crate::core::status::VehicleStatus;
+use crate::core::status::{PoseCovariance, VehicleStatus};
 use crate::devices::gnss::NmeaReceiver;
 use crate::engine::EngineOutput;
 use crate::fusion::ekf::wrap;
@@ -42,6 +42,11 @@ pub mod target {
     pub const HEADING_RMSE_DEG: f64 = 1.0;
     /// Position error at the end of a 30 s outage at 1 m/s, under, m.
     pub const OUTAGE_DRIFT_M: f64 = 0.5;
+    /// The mean normalised estimation error squared of position (2 DOF), within, in every
+    /// scenario and regime.
+    pub const NEES_POSITION: std::ops::RangeInclusive<f64> = 0.3..=3.0;
+    /// The same for heading (1 DOF).
+    pub const NEES_HEADING: std::ops::RangeInclusive<f64> = 0.2..=2.0;
 }
 
 /// Sums of squared errors.
@@ -49,6 +54,8 @@ pub mod target {
 struct Errors {
     position: (f64, u64),
     heading: (f64, u64),
+    nees_position: (f64, u64),
+    nees_heading: (f64, u64),
 }
 
 impl Errors {
@@ -62,18 +69,41 @@ impl Errors {
         self.heading.1 += 1;
     }
 
+    /// The normalised estimation errors squared of a position error (east, north) and a
+    /// heading error against the estimate's covariance.
+    fn nees(&mut self, e: (f64, f64), yaw_error: f64, cov: &PoseCovariance) {
+        let det = cov.xx * cov.yy - cov.xy * cov.xy;
+        if det > 0.0 {
+            let q = (cov.yy * e.0 * e.0 - 2.0 * cov.xy * e.0 * e.1 + cov.xx * e.1 * e.1) / det;
+            self.nees_position.0 += q;
+            self.nees_position.1 += 1;
+        }
+        if cov.yaw > 0.0 {
+            self.nees_heading.0 += yaw_error * yaw_error / cov.yaw;
+            self.nees_heading.1 += 1;
+        }
+    }
+
     fn merge(&mut self, other: &Errors) {
-        self.position.0 += other.position.0;
-        self.position.1 += other.position.1;
-        self.heading.0 += other.heading.0;
-        self.heading.1 += other.heading.1;
+        for (a, b) in [
+            (&mut self.position, other.position),
+            (&mut self.heading, other.heading),
+            (&mut self.nees_position, other.nees_position),
+            (&mut self.nees_heading, other.nees_heading),
+        ] {
+            a.0 += b.0;
+            a.1 += b.1;
+        }
     }
 
     fn figures(&self) -> Figures {
         let rms = |(sum, n): (f64, u64)| (n > 0).then(|| (sum / n as f64).sqrt());
+        let mean = |(sum, n): (f64, u64)| (n > 0).then(|| sum / n as f64);
         Figures {
             position_rmse_m: rms(self.position),
             heading_rmse_deg: rms(self.heading).map(f64::to_degrees),
+            nees_position: mean(self.nees_position),
+            nees_heading: mean(self.nees_heading),
             samples: self.position.1,
         }
     }
@@ -86,6 +116,10 @@ pub struct Figures {
     pub position_rmse_m: Option<f64>,
     /// Heading, degrees.
     pub heading_rmse_deg: Option<f64>,
+    /// Mean NEES of position (2 DOF; 2 for a consistent estimate), fused pose only.
+    pub nees_position: Option<f64>,
+    /// Mean NEES of heading (1 DOF; 1 for a consistent estimate), fused pose only.
+    pub nees_heading: Option<f64>,
     /// Position samples.
     pub samples: u64,
 }
@@ -136,6 +170,8 @@ pub struct FusionReport {
     pub outage_drift_m: Option<f64>,
     /// Whether every jump was rejected.
     pub jump_rejected: bool,
+    /// Scenario and regime pairs whose mean NEES misses its target.
+    pub nees_misses: Vec<String>,
     /// Every target met.
     pub pass: bool,
 }
@@ -316,6 +352,9 @@ fn score(
         let f = fused.entry(regime).or_default();
         f.position(error);
         f.heading(wrap(pose.yaw - tr.yaw));
+        if let Some(cov) = &status.pose_covariance {
+            f.nees((pose.x - tr.x, pose.y - tr.y), wrap(pose.yaw - tr.yaw), cov);
+        }
         let o = odometry.entry(regime).or_default();
         o.position(odometry_error);
         o.heading(wrap(dyaw - tr.yaw));
@@ -422,7 +461,25 @@ fn report(plant: &PlantConfig, seed: u64, scenarios: Vec<ScenarioFigures>) -> Fu
         .filter_map(|s| s.jump_max_error_m)
         .collect();
     let jump_rejected = !jumps.is_empty() && jumps.iter().all(|e| *e < JUMP_REJECTED_M);
-    let pass = degraded_ratio.is_some_and(|r| r <= target::DEGRADED_RATIO)
+    let mut nees_misses = Vec::new();
+    for s in &scenarios {
+        for (regime, f) in &s.fused {
+            for (what, value, range) in [
+                ("position", f.nees_position, &target::NEES_POSITION),
+                ("heading", f.nees_heading, &target::NEES_HEADING),
+            ] {
+                if value.is_some_and(|v| !range.contains(&v)) {
+                    nees_misses.push(format!(
+                        "{} {regime} {what} {:.2}",
+                        s.name,
+                        value.unwrap_or_default()
+                    ));
+                }
+            }
+        }
+    }
+    let pass = nees_misses.is_empty()
+        && degraded_ratio.is_some_and(|r| r <= target::DEGRADED_RATIO)
         && fixed_ratio.is_some_and(|r| r <= target::FIXED_RATIO)
         && heading_rmse_deg.is_some_and(|h| h < target::HEADING_RMSE_DEG)
         && outage_drift_m.is_some_and(|d| d < target::OUTAGE_DRIFT_M)
@@ -436,6 +493,7 @@ fn report(plant: &PlantConfig, seed: u64, scenarios: Vec<ScenarioFigures>) -> Fu
         heading_rmse_deg,
         outage_drift_m,
         jump_rejected,
+        nees_misses,
         pass,
     }
 }
@@ -455,8 +513,18 @@ impl FusionReport {
         );
         let _ = writeln!(
             out,
-            "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>6}",
-            "scenario", "regime", "fused m", "GNSS m", "odom m", "fused °", "GNSS °", "odom °", "n"
+            "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>7} {:>7} {:>6}",
+            "scenario",
+            "regime",
+            "fused m",
+            "GNSS m",
+            "odom m",
+            "fused °",
+            "GNSS °",
+            "odom °",
+            "NEES p",
+            "NEES h",
+            "n"
         );
         for s in &self.scenarios {
             for (regime, f) in &s.fused {
@@ -464,7 +532,7 @@ impl FusionReport {
                 let o = s.odometry_only.get(regime);
                 let _ = writeln!(
                     out,
-                    "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>6}",
+                    "{:<11} {:<9} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>7} {:>7} {:>6}",
                     s.name,
                     regime,
                     num(f.position_rmse_m, 3),
@@ -473,6 +541,8 @@ impl FusionReport {
                     num(f.heading_rmse_deg, 2),
                     num(g.and_then(|g| g.heading_rmse_deg), 2),
                     num(o.and_then(|o| o.heading_rmse_deg), 2),
+                    num(f.nees_position, 2),
+                    num(f.nees_heading, 2),
                     f.samples,
                 );
             }
@@ -537,6 +607,18 @@ impl FusionReport {
             out,
             "target: 5 m jump rejected (error stays under {JUMP_REJECTED_M} m): {}",
             verdict(self.jump_rejected),
+        );
+        let _ = writeln!(
+            out,
+            "target: mean NEES within {:?} (position) and {:?} (heading) in every scenario and regime: {}{}",
+            target::NEES_POSITION,
+            target::NEES_HEADING,
+            verdict(self.nees_misses.is_empty()),
+            if self.nees_misses.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", self.nees_misses.join(", "))
+            }
         );
         out
     }

@@ -30,6 +30,13 @@ pub struct LocalizationConfig {
     /// position (the vehicle really is elsewhere), s.
     #[serde(default = "default_relocate_after_s")]
     pub relocate_after_s: f64,
+    /// The slowly wandering part of a fix's error (multipath, atmosphere), as a fraction of
+    /// its 1σ: what averaging fixes cannot remove.
+    #[serde(default = "default_correlated_fraction")]
+    pub gnss_correlated_fraction: f64,
+    /// That part's correlation time, s.
+    #[serde(default = "default_correlation_time_s")]
+    pub gnss_correlation_time_s: f64,
 }
 
 fn default_bound() -> f64 {
@@ -41,6 +48,12 @@ fn default_heading_sigma() -> f64 {
 fn default_relocate_after_s() -> f64 {
     3.0
 }
+fn default_correlated_fraction() -> f64 {
+    0.5
+}
+fn default_correlation_time_s() -> f64 {
+    30.0
+}
 
 impl Default for LocalizationConfig {
     fn default() -> Self {
@@ -50,6 +63,8 @@ impl Default for LocalizationConfig {
             gnss_latency_s: 0.0,
             heading_sigma_deg: default_heading_sigma(),
             relocate_after_s: default_relocate_after_s(),
+            gnss_correlated_fraction: default_correlated_fraction(),
+            gnss_correlation_time_s: default_correlation_time_s(),
         }
     }
 }
@@ -95,6 +110,20 @@ impl LocalizationConfig {
             self.relocate_after_s,
             0.2..=60.0,
             "s",
+        )?;
+        check_range(
+            file,
+            "localization.gnss_correlated_fraction",
+            self.gnss_correlated_fraction,
+            0.0..=0.95,
+            "",
+        )?;
+        check_range(
+            file,
+            "localization.gnss_correlation_time_s",
+            self.gnss_correlation_time_s,
+            1.0..=3600.0,
+            "s",
         )
     }
 }
@@ -112,8 +141,10 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         locate_bound_m: l.locate_bound_m,
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
         relocate_after: Duration::from_secs_f64(l.relocate_after_s),
+        gnss_correlated_fraction: l.gnss_correlated_fraction,
         ..LocalizerConfig::default()
     };
+    c.noise.gnss_correlation_s = l.gnss_correlation_time_s;
     if let Some(g) = &config.gnss {
         c.antenna = (g.antenna.x, g.antenna.y);
         c.cog_min_speed_mps = g.cog_min_speed_mps;

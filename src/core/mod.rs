@@ -23,8 +23,25 @@ pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
 use safety::{ControlLinkConfig, SafetyConfig};
 pub use status::{
-    BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, VehicleStatus,
+    BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, PoseCovariance,
+    VehicleStatus,
 };
+
+/// A course over ground is never trusted beyond this, degrees ...
+const MIN_COURSE_SIGMA_DEG: f64 = 1.0;
+/// ... and not used when less certain than this.
+const MAX_COURSE_SIGMA_DEG: f64 = 15.0;
+
+/// A receiver's typical speed accuracy (1σ, m/s) at a fix quality: NMEA carries none.
+/// Speed comes from Doppler, which RTK does not sharpen; differential and single fixes carry
+/// more multipath and fewer satellites.
+fn speed_sigma(quality: FixQuality) -> f64 {
+    match quality {
+        FixQuality::RtkFixed | FixQuality::RtkFloat => 0.04,
+        FixQuality::Dgps | FixQuality::Pps => 0.06,
+        _ => 0.1,
+    }
+}
 
 /// Core settings, taken from the vehicle configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -434,6 +451,10 @@ impl Vehicle {
             battery,
             gnss: self.gnss_status(t),
             pose,
+            pose_covariance: self
+                .localizer
+                .map_covariance(t)
+                .map(|[xx, xy, yy, yaw]| PoseCovariance { xx, xy, yy, yaw }),
             odom,
             localization,
             navigation: Navigation::Idle,
@@ -467,15 +488,21 @@ impl Vehicle {
         {
             self.fed_gnss.1 = Some(v.rx);
             let speed = v.value.speed_mps;
+            // The course's 1σ follows from the receiver's speed accuracy at this fix
+            // quality; a course too uncertain to help (slow, or a poor fix) is not used.
+            let sigma = speed_sigma(fix.quality)
+                .atan2(speed)
+                .max(MIN_COURSE_SIGMA_DEG.to_radians());
             if let Some(course) = v.value.course_deg
                 && speed >= self.localizer.config().cog_min_speed_mps
+                && sigma <= MAX_COURSE_SIGMA_DEG.to_radians()
             {
                 // The localiser models the antenna's motion (turning, reversing).
                 self.localizer.add(
                     at(v.rx),
                     Measurement::Course {
                         yaw: yaw_of_heading_deg(course),
-                        sigma: (0.1f64).atan2(speed).max(2f64.to_radians()),
+                        sigma,
                     },
                 );
             }

@@ -22,6 +22,8 @@ pub struct VehicleStatus {
     /// once GNSS or INIT_POSITION has placed the vehicle; until then the `odom` frame's, and
     /// `localization` is `Uninitialized`. Zero without either.
     pub pose: Pose2D,
+    /// The map pose's covariance; `None` while the pose is the odom frame's.
+    pub pose_covariance: Option<PoseCovariance>,
     /// The `odom` frame's pose (wheels and gyro only, continuous), once the drives report.
     pub odom: Option<crate::fusion::odometry::OdomPose>,
     /// Localisation state.
@@ -78,6 +80,19 @@ pub struct Pose2D {
     /// North, metres.
     pub y: f64,
     /// Yaw, radians counter-clockwise from east.
+    pub yaw: f64,
+}
+
+/// The covariance of a planar pose: m², m² and rad².
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PoseCovariance {
+    /// Var(x).
+    pub xx: f64,
+    /// Cov(x, y).
+    pub xy: f64,
+    /// Var(y).
+    pub yy: f64,
+    /// Var(yaw).
     pub yaw: f64,
 }
 

@@ -1,13 +1,15 @@
 //! A planar extended Kalman filter on fixed-size matrices. State: x, y (m, local ENU), yaw
-//! (rad, counter-clockwise from east), v (m/s forward), ω (rad/s) and the gyro's z bias
-//! (rad/s). Updates use the Joseph form, so the covariance stays symmetric and positive
+//! (rad, counter-clockwise from east), v (m/s forward), ω (rad/s), the gyro's z bias (rad/s)
+//! with its rate of change (rad/s², temperature drift), and the slowly wandering part of the GNSS position error, east and north (m, a first-order
+//! Gauss–Markov process: multipath and atmosphere change over tens of seconds, so averaging
+//! fixes cannot remove it). Updates use the Joseph form, so the covariance stays symmetric and positive
 //! definite, and report the innovation's Mahalanobis distance for gating.
 
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::PI;
 
 /// State dimension.
-pub const N: usize = 6;
+pub const N: usize = 9;
 /// Index of x.
 pub const X: usize = 0;
 /// Index of y.
@@ -20,6 +22,12 @@ pub const V: usize = 3;
 pub const W: usize = 4;
 /// Index of gyro bias.
 pub const BIAS: usize = 5;
+/// Index of the GNSS error, east.
+pub const GNSS_E: usize = 6;
+/// Index of the GNSS error, north.
+pub const GNSS_N: usize = 7;
+/// Index of the gyro bias's rate of change (a temperature drift), rad/s².
+pub const BIAS_RATE: usize = 8;
 
 /// State vector.
 pub type State = SVector<f64, N>;
@@ -46,8 +54,17 @@ pub struct ProcessNoise {
     pub angular_accel: f64,
     /// Gyro bias random walk, rad/s per √s.
     pub bias_walk: f64,
+    /// Random walk of the bias's rate of change, rad/s² per √s.
+    pub bias_rate_walk: f64,
     /// Position diffusion (lateral slip), m per √s.
     pub position: f64,
+    /// Position diffusion per unit of speed (wheel slip and scale errors that persist over
+    /// many odometry samples), m per √s per m/s.
+    pub position_per_speed: f64,
+    /// The GNSS error's correlation time, s.
+    pub gnss_correlation_s: f64,
+    /// The GNSS error's steady 1σ, east and north, m (set from the current fix quality).
+    pub gnss_error: (f64, f64),
 }
 
 /// The result of one update.
@@ -76,39 +93,65 @@ impl Ekf {
 
     /// Propagates by `dt` seconds: constant speed and yaw rate along the heading.
     pub fn predict(&mut self, dt: f64, q: &ProcessNoise) {
+        self.propagate(dt, q, true);
+    }
+
+    /// Propagates by `dt` seconds while the wheels stand still: the pose stays (no motion and
+    /// no slip), while the speed, yaw rate, bias and GNSS error evolve as ever.
+    pub fn predict_still(&mut self, dt: f64, q: &ProcessNoise) {
+        self.propagate(dt, q, false);
+    }
+
+    fn propagate(&mut self, dt: f64, q: &ProcessNoise, moving: bool) {
         if dt <= 0.0 {
             return;
         }
         let (yaw, v, w) = (self.x[YAW], self.x[V], self.x[W]);
         let (s, c) = yaw.sin_cos();
-        self.x[X] += v * c * dt;
-        self.x[Y] += v * s * dt;
-        self.x[YAW] = wrap(yaw + w * dt);
         let mut f = Cov::identity();
-        f[(X, YAW)] = -v * s * dt;
-        f[(X, V)] = c * dt;
-        f[(Y, YAW)] = v * c * dt;
-        f[(Y, V)] = s * dt;
-        f[(YAW, W)] = dt;
         let mut qm = Cov::zeros();
-        qm[(X, X)] = q.position.powi(2) * dt;
-        qm[(Y, Y)] = q.position.powi(2) * dt;
+        if moving {
+            self.x[X] += v * c * dt;
+            self.x[Y] += v * s * dt;
+            self.x[YAW] = wrap(yaw + w * dt);
+            f[(X, YAW)] = -v * s * dt;
+            f[(X, V)] = c * dt;
+            f[(Y, YAW)] = v * c * dt;
+            f[(Y, V)] = s * dt;
+            f[(YAW, W)] = dt;
+            let diffusion = (q.position + q.position_per_speed * v.abs()).powi(2) * dt;
+            qm[(X, X)] = diffusion;
+            qm[(Y, Y)] = diffusion;
+        }
+        self.x[BIAS] += self.x[BIAS_RATE] * dt;
+        f[(BIAS, BIAS_RATE)] = dt;
+        let phi = (-dt / q.gnss_correlation_s.max(1e-3)).exp();
+        f[(GNSS_E, GNSS_E)] = phi;
+        f[(GNSS_N, GNSS_N)] = phi;
+        self.x[GNSS_E] *= phi;
+        self.x[GNSS_N] *= phi;
         qm[(V, V)] = q.accel.powi(2) * dt;
         qm[(W, W)] = q.angular_accel.powi(2) * dt;
         qm[(BIAS, BIAS)] = q.bias_walk.powi(2) * dt;
+        qm[(BIAS_RATE, BIAS_RATE)] = q.bias_rate_walk.powi(2) * dt;
+        qm[(GNSS_E, GNSS_E)] = q.gnss_error.0.powi(2) * (1.0 - phi * phi);
+        qm[(GNSS_N, GNSS_N)] = q.gnss_error.1.powi(2) * (1.0 - phi * phi);
         self.p = f * self.p * f.transpose() + qm;
         self.symmetrise();
     }
 
-    /// Propagates by `dt` seconds while the wheels stand still: the pose stays, and only the
-    /// speed, yaw rate and bias uncertainties grow.
-    pub fn predict_still(&mut self, dt: f64, q: &ProcessNoise) {
-        if dt <= 0.0 {
-            return;
+    /// Forgets the GNSS error (a new fix quality, whose error is unrelated to the last):
+    /// zero with 1σ `sigma` (east, north), uncorrelated with the rest.
+    pub fn reset_gnss_error(&mut self, sigma: (f64, f64)) {
+        for g in [GNSS_E, GNSS_N] {
+            self.x[g] = 0.0;
+            for i in 0..N {
+                self.p[(i, g)] = 0.0;
+                self.p[(g, i)] = 0.0;
+            }
         }
-        self.p[(V, V)] += q.accel.powi(2) * dt;
-        self.p[(W, W)] += q.angular_accel.powi(2) * dt;
-        self.p[(BIAS, BIAS)] += q.bias_walk.powi(2) * dt;
+        self.p[(GNSS_E, GNSS_E)] = sigma.0.powi(2);
+        self.p[(GNSS_N, GNSS_N)] = sigma.1.powi(2);
     }
 
     /// A measurement update: `z` measured, `hx` predicted from the state, `h` its Jacobian,
@@ -196,7 +239,11 @@ mod tests {
             accel: 0.5,
             angular_accel: 0.5,
             bias_walk: 1e-4,
+            bias_rate_walk: 1e-6,
             position: 0.01,
+            position_per_speed: 0.0,
+            gnss_correlation_s: 30.0,
+            gnss_error: (0.0, 0.0),
         }
     }
 
@@ -224,10 +271,9 @@ mod tests {
     #[test]
     fn updates_keep_the_covariance_symmetric_positive_definite() {
         let mut f = Ekf::new(State::zeros(), Cov::identity() * 10.0);
-        let h = SMatrix::<f64, 2, N>::from_row_slice(&[
-            1.0, 0.0, 0.0, 0.0, 0.0, 0.0, //
-            0.0, 1.0, 0.0, 0.0, 0.0, 0.0,
-        ]);
+        let mut h = SMatrix::<f64, 2, N>::zeros();
+        h[(0, X)] = 1.0;
+        h[(1, Y)] = 1.0;
         let r = SMatrix::<f64, 2, 2>::identity() * 1e-6;
         for i in 0..1000 {
             f.predict(0.1, &q());
@@ -243,7 +289,8 @@ mod tests {
     #[test]
     fn gate_rejects_outliers() {
         let mut f = Ekf::new(State::zeros(), Cov::identity() * 0.01);
-        let h = SMatrix::<f64, 1, N>::from_row_slice(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let mut h = SMatrix::<f64, 1, N>::zeros();
+        h[(0, X)] = 1.0;
         let r = SMatrix::<f64, 1, 1>::new(0.01);
         let far = f.update(
             &SVector::<f64, 1>::new(5.0),

@@ -16,7 +16,9 @@ use std::time::Duration;
 
 use nalgebra::{SMatrix, SVector, Vector3};
 
-use super::ekf::{BIAS, Cov, Ekf, N, ProcessNoise, State, V, W, X, Y, YAW, wrap};
+use super::ekf::{
+    BIAS, BIAS_RATE, Cov, Ekf, GNSS_E, GNSS_N, N, ProcessNoise, State, V, W, X, Y, YAW, wrap,
+};
 use super::geodesy::{Enu, Geodetic};
 use crate::time::Timestamp;
 
@@ -37,8 +39,12 @@ const STILL_RPS: f64 = 0.005;
 const STILL_YAW_RATE_SIGMA: f64 = 0.002;
 /// A fix whose σ is below this fraction of the last one's marks a better fix quality ...
 const QUALITY_STEP: f64 = 0.5;
-/// ... and the estimate keeps at least this fraction of the old σ as its uncertainty.
-const CORRELATED_PART: f64 = 0.5;
+/// The gyro bias's rate of change before anything has shown it, 1σ rad/s² (a warming
+/// MEMS gyro's drift).
+const INITIAL_BIAS_RATE_SIGMA: f64 = 1e-4;
+/// Fixes inform the heading (through the antenna's lever arm and the motion between them)
+/// only once its 1σ is within this, rad.
+const HEADING_FROM_POSITIONS_RAD: f64 = 0.5;
 /// The heading's 1σ before anything has shown it, rad.
 const UNKNOWN_YAW_SIGMA: f64 = std::f64::consts::PI;
 /// A relocation needs at least this many rejected positions, whatever their rate.
@@ -75,6 +81,9 @@ pub struct LocalizerConfig {
     pub odometry_yaw_rate_sigma: f64,
     /// Gyro noise, 1σ rad/s.
     pub gyro_sigma: f64,
+    /// The slowly wandering part of a fix's error, as a fraction of its 1σ; its
+    /// correlation time is `noise.gnss_correlation_s`.
+    pub gnss_correlated_fraction: f64,
 }
 
 impl Default for LocalizerConfig {
@@ -92,9 +101,14 @@ impl Default for LocalizerConfig {
             noise: ProcessNoise {
                 accel: 1.0,
                 angular_accel: 1.0,
-                bias_walk: 2e-4,
+                bias_walk: 2e-5,
+                bias_rate_walk: 1e-6,
                 position: 0.005,
+                position_per_speed: 0.025,
+                gnss_correlation_s: 30.0,
+                gnss_error: (0.0, 0.0),
             },
+            gnss_correlated_fraction: 0.5,
             odometry_sigma: (0.01, 0.02),
             odometry_yaw_rate_sigma: 0.05,
             gyro_sigma: 0.003,
@@ -173,10 +187,14 @@ struct Filter {
     time: Timestamp,
     /// The current run of rejected positions: its first time and its length.
     rejections: Option<(Timestamp, u32)>,
+    /// The same for headings and courses.
+    heading_rejections: Option<(Timestamp, u32)>,
     /// The last gyro rate applied.
     last_gyro: Option<Timestamp>,
     /// The larger 1σ of the last position fix.
     last_position_sigma: Option<f64>,
+    /// The steady 1σ of the GNSS error at the current fix quality, east and north, m.
+    gnss_error: (f64, f64),
     /// The wheels stood still at the last odometry: the pose holds.
     still: bool,
     /// Smoothed interval between gyro samples, s.
@@ -276,12 +294,30 @@ impl Localizer {
         Some(self.map.pose_of(e.x[X], e.x[Y], e.x[YAW]))
     }
 
+    /// The covariance of [`Localizer::map_pose`] at `t`: var x, cov xy, var y (m²), var yaw
+    /// (rad²), turned into the map frame.
+    pub fn map_covariance(&self, t: Timestamp) -> Option<[f64; 4]> {
+        let e = self.predicted(t)?;
+        let (s, c) = self.map.rotation.sin_cos();
+        let (a, b, d) = (e.p[(X, X)], e.p[(X, Y)], e.p[(Y, Y)]);
+        // Rᵀ P R with R the rotation by `rotation`.
+        let xx = c * c * a + 2.0 * c * s * b + s * s * d;
+        let yy = s * s * a - 2.0 * c * s * b + c * c * d;
+        let xy = -c * s * a + (c * c - s * s) * b + c * s * d;
+        Some([xx, xy, yy, e.p[(YAW, YAW)]])
+    }
+
     /// The filter predicted to `t` (no measurement since then), without changing it.
     pub fn predicted(&self, t: Timestamp) -> Option<Ekf> {
         let f = self.current()?;
         let mut ekf = f.ekf.clone();
         if t > f.time {
-            ekf.predict(t.saturating_since(f.time).as_secs_f64(), &self.config.noise);
+            let dt = t.saturating_since(f.time).as_secs_f64();
+            if f.still {
+                ekf.predict_still(dt, &self.noise(f));
+            } else {
+                ekf.predict(dt, &self.noise(f));
+            }
         }
         Some(ekf)
     }
@@ -415,6 +451,14 @@ impl Localizer {
         p[(V, V)] = 0.25;
         p[(W, W)] = 0.25;
         p[(BIAS, BIAS)] = 0.02f64.powi(2);
+        p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
+        // The first fix's slow error is in the position it gave.
+        let slow = self.config.gnss_correlated_fraction;
+        for (i, g, sd) in [(X, GNSS_E, sigma.0), (Y, GNSS_N, sigma.1)] {
+            p[(g, g)] = (slow * sd).powi(2);
+            p[(i, g)] = -(slow * sd).powi(2);
+            p[(g, i)] = -(slow * sd).powi(2);
+        }
         self.events.push(match heading {
             Some(yaw) => format!(
                 "localisation started: position from a fix with 1σ {:.2} m, heading {:.1}° from GNSS",
@@ -431,8 +475,10 @@ impl Localizer {
             ekf: Ekf::new(x, p),
             time: t,
             rejections: None,
+            heading_rejections: None,
             last_gyro: None,
-            last_position_sigma: None,
+            last_position_sigma: Some(sigma.0.max(sigma.1)),
+            gnss_error: (slow * sigma.0, slow * sigma.1),
             still: false,
             gyro_period: None,
         });
@@ -444,9 +490,9 @@ impl Localizer {
         if t > f.time {
             let dt = t.saturating_since(f.time).as_secs_f64();
             if f.still {
-                f.ekf.predict_still(dt, &self.config.noise);
+                f.ekf.predict_still(dt, &self.noise(f));
             } else {
-                f.ekf.predict(dt, &self.config.noise);
+                f.ekf.predict(dt, &self.noise(f));
             }
             f.time = t;
         }
@@ -536,6 +582,7 @@ impl Localizer {
                     GATE_1,
                 );
                 self.count(r.applied);
+                self.heading_run(f, t, r.applied, yaw, sigma);
             }
             Measurement::Course { yaw, sigma } => {
                 // The antenna moves at (v - ω·ay, ω·ax) in the vehicle frame: off the heading
@@ -549,43 +596,58 @@ impl Localizer {
                 let mut h = row(YAW);
                 h[(0, V)] = -across / speed_sq;
                 h[(0, W)] = (along * ax + across * ay) / speed_sq;
-                let predicted = e.x[YAW] + across.atan2(along);
+                let offset = across.atan2(along);
+                let predicted = e.x[YAW] + offset;
                 let r = e.update(&one(yaw), &one(predicted), &h, &var(sigma), &[0], GATE_1);
                 self.count(r.applied);
+                self.heading_run(f, t, r.applied, wrap(yaw - offset), sigma);
             }
             Measurement::Position { en, sigma } => {
-                // GNSS errors wander slowly, so averaging worse fixes leaves an error the
-                // filter cannot see; when the fix gets much better (float to fixed), the
-                // estimate is only as good as a part of the old fixes' σ.
+                // The fix's error is a slowly wandering part (a state of the filter, which
+                // averaging cannot remove) plus white noise. A new fix quality brings an
+                // error unrelated to the last one's.
                 let sigma_now = sigma.0.max(sigma.1);
-                if let Some(before) = f.last_position_sigma
-                    && sigma_now < before * QUALITY_STEP
-                {
-                    let floor = (before * CORRELATED_PART).powi(2);
-                    for i in [X, Y] {
-                        if e.p[(i, i)] < floor {
-                            let scale = (floor / e.p[(i, i)].max(1e-12)).sqrt();
-                            for j in 0..N {
-                                e.p[(i, j)] *= scale;
-                                e.p[(j, i)] *= scale;
-                            }
-                        }
-                    }
+                let slow = self.config.gnss_correlated_fraction;
+                let slow_sigma = (sigma.0 * slow, sigma.1 * slow);
+                let new_quality = f.last_position_sigma.is_none_or(|before| {
+                    sigma_now < before * QUALITY_STEP || sigma_now * QUALITY_STEP > before
+                });
+                if new_quality {
+                    e.reset_gnss_error(slow_sigma);
                 }
+                f.gnss_error = slow_sigma;
                 f.last_position_sigma = Some(sigma_now);
+                let white = (1.0 - slow * slow).max(0.0).sqrt();
                 let (ax, ay) = self.config.antenna;
                 let (s, c) = e.x[YAW].sin_cos();
-                let hx = SVector::<f64, 2>::new(e.x[X] + c * ax - s * ay, e.x[Y] + s * ax + c * ay);
+                let hx = SVector::<f64, 2>::new(
+                    e.x[X] + c * ax - s * ay + e.x[GNSS_E],
+                    e.x[Y] + s * ax + c * ay + e.x[GNSS_N],
+                );
                 let mut h = SMatrix::<f64, 2, N>::zeros();
                 h[(0, X)] = 1.0;
                 h[(1, Y)] = 1.0;
                 h[(0, YAW)] = -s * ax - c * ay;
                 h[(1, YAW)] = c * ax - s * ay;
-                let r = SMatrix::<f64, 2, 2>::new(sigma.0.powi(2), 0.0, 0.0, sigma.1.powi(2));
+                h[(0, GNSS_E)] = 1.0;
+                h[(1, GNSS_N)] = 1.0;
+                let r = SMatrix::<f64, 2, 2>::new(
+                    (sigma.0 * white).powi(2),
+                    0.0,
+                    0.0,
+                    (sigma.1 * white).powi(2),
+                );
                 let z = SVector::<f64, 2>::new(en.0, en.1);
                 // A position step is not a gyro fault: the bias learns from heading and
-                // standstill, never from where a fix lands.
-                let result = e.update_except(z - hx, &h, &r, &[], GATE_2, &[BIAS]);
+                // standstill, never from where a fix lands. While the heading is unknown,
+                // fixes do not set it either: linearised about a wrong heading they would
+                // make up a confident, wrong one that the course gate then keeps out.
+                let kept: &[usize] = if e.yaw_sigma() > HEADING_FROM_POSITIONS_RAD {
+                    &[YAW, BIAS, BIAS_RATE]
+                } else {
+                    &[BIAS, BIAS_RATE]
+                };
+                let result = e.update_except(z - hx, &h, &r, &[], GATE_2, kept);
                 self.count(result.applied);
                 if result.applied {
                     f.rejections = None;
@@ -607,11 +669,45 @@ impl Localizer {
                         }
                         e.p[(X, X)] = sigma.0.powi(2);
                         e.p[(Y, Y)] = sigma.1.powi(2);
+                        e.reset_gnss_error(slow_sigma);
                         f.rejections = None;
                         self.stats.resets += 1;
                     }
                 }
             }
+        }
+    }
+
+    /// The process noise of `f`, its GNSS error at the current fix quality.
+    fn noise(&self, f: &Filter) -> ProcessNoise {
+        ProcessNoise {
+            gnss_error: f.gnss_error,
+            ..self.config.noise
+        }
+    }
+
+    /// Tracks runs of rejected headings (dual antenna or course): a run as long as a
+    /// position relocation's means the heading is wrong (a bad start, a slip on the spot),
+    /// and the measured `yaw` (with its `sigma`) replaces it.
+    fn heading_run(&mut self, f: &mut Filter, t: Timestamp, applied: bool, yaw: f64, sigma: f64) {
+        if applied {
+            f.heading_rejections = None;
+            return;
+        }
+        let (since, count) = f.heading_rejections.map_or((t, 1), |(s, n)| (s, n + 1));
+        f.heading_rejections = Some((since, count));
+        if count >= MIN_REJECTIONS_TO_RELOCATE
+            && t.saturating_since(since) >= self.config.relocate_after
+        {
+            let e = &mut f.ekf;
+            e.x[YAW] = yaw;
+            for i in 0..N {
+                e.p[(YAW, i)] = 0.0;
+                e.p[(i, YAW)] = 0.0;
+            }
+            e.p[(YAW, YAW)] = sigma * sigma;
+            f.heading_rejections = None;
+            self.stats.resets += 1;
         }
     }
 
@@ -672,7 +768,17 @@ impl Localizer {
         state[X] = x;
         state[Y] = y;
         state[YAW] = wrap(yaw);
-        let mut p = self.ekf().map_or_else(|| Cov::identity() * 0.25, |e| e.p);
+        let mut p = self.ekf().map_or_else(
+            || {
+                let mut p = Cov::zeros();
+                p[(V, V)] = 0.25;
+                p[(W, W)] = 0.25;
+                p[(BIAS, BIAS)] = 0.02f64.powi(2);
+                p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
+                p
+            },
+            |e| e.p,
+        );
         for i in 0..N {
             for j in [X, Y, YAW] {
                 p[(i, j)] = 0.0;
@@ -687,8 +793,10 @@ impl Localizer {
             ekf: Ekf::new(state, p),
             time,
             rejections: None,
+            heading_rejections: None,
             last_gyro: None,
             last_position_sigma: None,
+            gnss_error: (0.0, 0.0),
             still: false,
             gyro_period: None,
         });
