@@ -119,6 +119,10 @@ enum BenchCommand {
         /// Noise seed.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Monte Carlo runs of each scenario, each with its own noise; figures pool them
+        /// (the outage drift is the RMS over runs, the jump figure the worst run's).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=1000))]
+        runs: u32,
         /// Run only these scenarios (repeatable): straight, turns, loop-10min, float,
         /// outage-30s, jump-5m, bias-drift.
         #[arg(long)]
@@ -183,6 +187,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 BenchCommand::Fusion {
                     plant,
                     seed,
+                    runs,
                     scenario,
                     gnss_rate,
                     antennas,
@@ -195,7 +200,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             if let Some(n) = antennas {
                 plant.gnss.dual_antenna = n == 2;
             }
-            bench_fusion(plant, seed, &scenario)
+            bench_fusion(plant, seed, runs, &scenario)
         }
         Command::Bench {
             which:
@@ -352,7 +357,12 @@ fn find_scenario(name: &str) -> anyhow::Result<Scenario> {
     })
 }
 
-fn bench_fusion(plant: PlantConfig, seed: u64, names: &[String]) -> anyhow::Result<bool> {
+fn bench_fusion(
+    plant: PlantConfig,
+    seed: u64,
+    runs: u32,
+    names: &[String],
+) -> anyhow::Result<bool> {
     let scenarios = if names.is_empty() {
         Scenario::all()
     } else {
@@ -362,9 +372,9 @@ fn bench_fusion(plant: PlantConfig, seed: u64, names: &[String]) -> anyhow::Resu
             .collect::<anyhow::Result<Vec<_>>>()?
     };
     let started = std::time::Instant::now();
-    let report = fusion::run(&plant, &scenarios, seed)?;
+    let report = fusion::run(&plant, &scenarios, seed, runs)?;
     let elapsed = started.elapsed();
-    let simulated = fusion::simulated_time(&scenarios).as_secs_f64();
+    let simulated = fusion::simulated_time(&scenarios).as_secs_f64() * f64::from(runs);
     print!("{}", report.table());
     println!(
         "simulated {simulated:.0} s in {:.1} s of wall time ({:.0}x real time)",

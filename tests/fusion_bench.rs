@@ -1,33 +1,71 @@
-//! The fusion benchmark through the real binary: every scenario on both plant files meets the
-//! accuracy targets, and its last line is the JSON summary. The NEES figures are computed
-//! for every scenario and regime and printed; their target is not yet met in every cell of
-//! the rate and antenna sweep (see the README), so `pass` is not required here.
+//! The fusion benchmark through the real binary, across the sweep the README reports: both
+//! plant files, one and two antennas, receivers at 1, 2, 5, 10 and 20 Hz. Every configuration
+//! meets every target (accuracy, outage drift, jump rejection and the NEES consistency of the
+//! published covariance, pooled over the bench's Monte Carlo runs), and its last line is the
+//! JSON summary. The bench is slow unoptimised (some 140 times slower than in release), so
+//! these run on the release build: `tests/run-all` runs `cargo test --release --test
+//! fusion_bench`.
 
 mod common;
 
 use std::process::Command;
 
-fn bench(plant: &str) -> serde_json::Value {
+const RATES_HZ: [&str; 5] = ["1", "2", "5", "10", "20"];
+const ANTENNAS: [&str; 2] = ["1", "2"];
+
+fn bench(plant: &str, rate: &str, antennas: &str) -> serde_json::Value {
     let out = Command::new(common::chassisd())
         .args(["bench", "fusion", "--plant"])
         .arg(common::repo().join("devices").join(plant))
+        .args(["--gnss-rate", rate, "--antennas", antennas])
         .output()
         .expect("chassisd runs");
     let stdout = String::from_utf8_lossy(&out.stdout);
     let last = stdout.lines().last().unwrap_or_default();
     let summary: serde_json::Value = serde_json::from_str(last).expect("last line is JSON");
-    let at_most = |key: &str, limit: f64| summary[key].as_f64().is_some_and(|v| v <= limit);
     assert!(
-        at_most("degraded_ratio", 0.5)
-            && at_most("fixed_ratio", 1.2)
-            && at_most("heading_rmse_deg", 1.0)
-            && at_most("outage_drift_m", 0.5)
-            && summary["jump_rejected"] == true,
-        "targets missed on {plant}:\n{stdout}\n{}",
+        summary["pass"] == true && out.status.success(),
+        "targets missed on {plant} at {rate} Hz with {antennas} antenna(s):\n{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    println!("{plant}: NEES misses {}", summary["nees_misses"]);
+    let (position, heading) = (
+        nees_range(&summary, "nees_position"),
+        nees_range(&summary, "nees_heading"),
+    );
+    println!(
+        "{plant} {rate} Hz {antennas} antenna(s): degraded {:.3} fixed {:.3} heading {:.3}° drift {:.3} m NEES position {:.2}–{:.2} heading {:.2}–{:.2}",
+        summary["degraded_ratio"].as_f64().unwrap_or(f64::NAN),
+        summary["fixed_ratio"].as_f64().unwrap_or(f64::NAN),
+        summary["heading_rmse_deg"].as_f64().unwrap_or(f64::NAN),
+        summary["outage_drift_m"].as_f64().unwrap_or(f64::NAN),
+        position.0,
+        position.1,
+        heading.0,
+        heading.1,
+    );
     summary
+}
+
+/// The smallest and largest mean NEES `key` over every scenario and regime of the fused pose.
+fn nees_range(summary: &serde_json::Value, key: &str) -> (f64, f64) {
+    let values = summary["scenarios"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|s| s["fused"].as_object())
+        .flat_map(|regimes| regimes.values())
+        .filter_map(|f| f[key].as_f64());
+    values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    })
+}
+
+fn sweep(plant: &str) {
+    for antennas in ANTENNAS {
+        for rate in RATES_HZ {
+            check(&bench(plant, rate, antennas));
+        }
+    }
 }
 
 fn check(summary: &serde_json::Value) {
@@ -71,13 +109,19 @@ fn check(summary: &serde_json::Value) {
 }
 
 #[test]
-fn fusion_meets_the_targets_on_the_mower() {
-    check(&bench("plant.mower.toml"));
+#[cfg_attr(
+    debug_assertions,
+    ignore = "slow unoptimised: tests/run-all runs it with cargo test --release"
+)]
+fn fusion_meets_every_target_across_the_sweep_on_the_mower() {
+    sweep("plant.mower.toml");
 }
 
 #[test]
-fn fusion_meets_the_targets_on_the_delivery_robot() {
-    let summary = bench("plant.delivery.toml");
-    assert_eq!(summary["plant"], "sim-delivery");
-    check(&summary);
+#[cfg_attr(
+    debug_assertions,
+    ignore = "slow unoptimised: tests/run-all runs it with cargo test --release"
+)]
+fn fusion_meets_every_target_across_the_sweep_on_the_delivery_robot() {
+    sweep("plant.delivery.toml");
 }

@@ -31,6 +31,9 @@ struct Drive {
     yaw: f64,
     v: f64,
     w: f64,
+    /// The slowly wandering part of the fix error, east and north (m), as the filter
+    /// models it: a Gauss–Markov process of the configured share and correlation time.
+    gnss_slow: Option<(f64, f64)>,
 }
 
 impl Drive {
@@ -42,6 +45,7 @@ impl Drive {
             yaw: 0.3,
             v: 1.0,
             w: 0.1,
+            gnss_slow: None,
         }
     }
 
@@ -72,8 +76,19 @@ impl Drive {
         if k.is_multiple_of(20) {
             let (s, co) = self.yaw.sin_cos();
             let sigma = 0.02;
-            let e = self.x + co * ANTENNA.0 - s * ANTENNA.1 + self.noise(sigma);
-            let n = self.y + s * ANTENNA.0 + co * ANTENNA.1 + self.noise(sigma);
+            let slow_sigma = sigma * c.gnss_correlated_fraction;
+            let white_sigma = (sigma * sigma - slow_sigma * slow_sigma).sqrt();
+            let phi = (-0.2 / c.noise.gnss_correlation_s).exp();
+            let slow = match self.gnss_slow {
+                None => (self.noise(slow_sigma), self.noise(slow_sigma)),
+                Some((se, sn)) => {
+                    let drive = slow_sigma * (1.0 - phi * phi).sqrt();
+                    (phi * se + self.noise(drive), phi * sn + self.noise(drive))
+                }
+            };
+            self.gnss_slow = Some(slow);
+            let e = self.x + co * ANTENNA.0 - s * ANTENNA.1 + slow.0 + self.noise(white_sigma);
+            let n = self.y + s * ANTENNA.0 + co * ANTENNA.1 + slow.1 + self.noise(white_sigma);
             out.push((
                 t,
                 Measurement::Heading {
@@ -126,13 +141,19 @@ fn late_measurements_give_the_same_result_as_in_order() {
     for (t, m) in &stream {
         in_order.add(*t, *m);
     }
-    // The same measurements, with every GNSS one arriving 80 ms late (after the gyro and
-    // odometry samples of the next eight ticks).
+    // The same measurements, with every GNSS one after the first second arriving 80 ms late
+    // (after the gyro and odometry samples of the next eight ticks). Both start alike: the
+    // filter starts at a fix, and slowly forgotten states (the wheels' scale, the bias's
+    // rate) would remember a start 80 ms apart.
     let mut arrivals: Vec<(Timestamp, Timestamp, Measurement)> = stream
         .iter()
         .map(|(t, m)| {
             let delay = match m {
-                Measurement::Position { .. } | Measurement::Heading { .. } => 80_000,
+                Measurement::Position { .. } | Measurement::Heading { .. }
+                    if t.as_micros() > 1_000_000 =>
+                {
+                    80_000
+                }
                 _ => 0,
             };
             (Timestamp::from_micros(t.as_micros() + delay), *t, *m)

@@ -37,6 +37,17 @@ pub struct LocalizationConfig {
     /// That part's correlation time, s.
     #[serde(default = "default_correlation_time_s")]
     pub gnss_correlation_time_s: f64,
+    /// The receiver's velocity accuracy, 1σ per axis, m/s (its datasheet's figure). NMEA
+    /// carries none; without it a typical figure per fix quality is used.
+    #[serde(default)]
+    pub gnss_velocity_sigma_mps: Option<f64>,
+    /// The gyro's white noise per sample, 1σ rad/s (its datasheet's figure at the output
+    /// rate).
+    #[serde(default = "default_gyro_noise")]
+    pub gyro_noise_rps: f64,
+    /// The gyro bias's random walk, rad/s per √s.
+    #[serde(default = "default_gyro_bias_walk")]
+    pub gyro_bias_walk: f64,
 }
 
 fn default_bound() -> f64 {
@@ -54,6 +65,12 @@ fn default_correlated_fraction() -> f64 {
 fn default_correlation_time_s() -> f64 {
     30.0
 }
+fn default_gyro_noise() -> f64 {
+    0.003
+}
+fn default_gyro_bias_walk() -> f64 {
+    2e-5
+}
 
 impl Default for LocalizationConfig {
     fn default() -> Self {
@@ -65,6 +82,9 @@ impl Default for LocalizationConfig {
             relocate_after_s: default_relocate_after_s(),
             gnss_correlated_fraction: default_correlated_fraction(),
             gnss_correlation_time_s: default_correlation_time_s(),
+            gnss_velocity_sigma_mps: None,
+            gyro_noise_rps: default_gyro_noise(),
+            gyro_bias_walk: default_gyro_bias_walk(),
         }
     }
 }
@@ -124,6 +144,29 @@ impl LocalizationConfig {
             self.gnss_correlation_time_s,
             1.0..=3600.0,
             "s",
+        )?;
+        if let Some(v) = self.gnss_velocity_sigma_mps {
+            check_range(
+                file,
+                "localization.gnss_velocity_sigma_mps",
+                v,
+                0.001..=1.0,
+                "m/s",
+            )?;
+        }
+        check_range(
+            file,
+            "localization.gyro_noise_rps",
+            self.gyro_noise_rps,
+            1e-5..=0.5,
+            "rad/s",
+        )?;
+        check_range(
+            file,
+            "localization.gyro_bias_walk",
+            self.gyro_bias_walk,
+            1e-7..=1e-2,
+            "rad/s per √s",
         )
     }
 }
@@ -142,9 +185,12 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
         relocate_after: Duration::from_secs_f64(l.relocate_after_s),
         gnss_correlated_fraction: l.gnss_correlated_fraction,
+        gnss_velocity_sigma_mps: l.gnss_velocity_sigma_mps,
+        gyro_sigma: l.gyro_noise_rps,
         ..LocalizerConfig::default()
     };
     c.noise.gnss_correlation_s = l.gnss_correlation_time_s;
+    c.noise.bias_walk = l.gyro_bias_walk;
     if let Some(g) = &config.gnss {
         c.antenna = (g.antenna.x, g.antenna.y);
         c.cog_min_speed_mps = g.cog_min_speed_mps;

@@ -32,10 +32,10 @@ const MIN_COURSE_SIGMA_DEG: f64 = 1.0;
 /// ... and not used when less certain than this.
 const MAX_COURSE_SIGMA_DEG: f64 = 15.0;
 
-/// A receiver's typical speed accuracy (1σ, m/s) at a fix quality: NMEA carries none.
-/// Speed comes from Doppler, which RTK does not sharpen; differential and single fixes carry
-/// more multipath and fewer satellites.
-fn speed_sigma(quality: FixQuality) -> f64 {
+/// A receiver's typical speed accuracy (1σ, m/s) at a fix quality, when the configuration
+/// gives none: NMEA carries none. Speed comes from Doppler, which RTK does not sharpen;
+/// differential and single fixes carry more multipath and fewer satellites.
+fn typical_speed_sigma(quality: FixQuality) -> f64 {
     match quality {
         FixQuality::RtkFixed | FixQuality::RtkFloat => 0.04,
         FixQuality::Dgps | FixQuality::Pps => 0.06,
@@ -490,7 +490,12 @@ impl Vehicle {
             let speed = v.value.speed_mps;
             // The course's 1σ follows from the receiver's speed accuracy at this fix
             // quality; a course too uncertain to help (slow, or a poor fix) is not used.
-            let sigma = speed_sigma(fix.quality)
+            let speed_sigma = self
+                .localizer
+                .config()
+                .gnss_velocity_sigma_mps
+                .unwrap_or_else(|| typical_speed_sigma(fix.quality));
+            let sigma = speed_sigma
                 .atan2(speed)
                 .max(MIN_COURSE_SIGMA_DEG.to_radians());
             if let Some(course) = v.value.course_deg

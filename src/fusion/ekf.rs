@@ -1,15 +1,18 @@
 //! A planar extended Kalman filter on fixed-size matrices. State: x, y (m, local ENU), yaw
 //! (rad, counter-clockwise from east), v (m/s forward), ω (rad/s), the gyro's z bias (rad/s)
-//! with its rate of change (rad/s², temperature drift), and the slowly wandering part of the GNSS position error, east and north (m, a first-order
-//! Gauss–Markov process: multipath and atmosphere change over tens of seconds, so averaging
-//! fixes cannot remove it). Updates use the Joseph form, so the covariance stays symmetric and positive
+//! with its rate of change (rad/s², temperature drift), the slowly wandering part of the
+//! GNSS position error, east and north (m, a first-order Gauss–Markov process: multipath and
+//! atmosphere change over tens of seconds, so averaging fixes cannot remove it), and the
+//! wheels' scale error (the wheels read v·(1 + s): tyre wear, load and systematic slip, which
+//! GNSS shows while it is there and which would otherwise grow into the drift of an outage).
+//! Updates use the Joseph form, so the covariance stays symmetric and positive
 //! definite, and report the innovation's Mahalanobis distance for gating.
 
 use nalgebra::{SMatrix, SVector};
 use std::f64::consts::PI;
 
 /// State dimension.
-pub const N: usize = 9;
+pub const N: usize = 10;
 /// Index of x.
 pub const X: usize = 0;
 /// Index of y.
@@ -28,6 +31,8 @@ pub const GNSS_E: usize = 6;
 pub const GNSS_N: usize = 7;
 /// Index of the gyro bias's rate of change (a temperature drift), rad/s².
 pub const BIAS_RATE: usize = 8;
+/// Index of the wheels' scale error: they read the forward speed times (1 + this).
+pub const SCALE: usize = 9;
 
 /// State vector.
 pub type State = SVector<f64, N>;
@@ -56,11 +61,13 @@ pub struct ProcessNoise {
     pub bias_walk: f64,
     /// Random walk of the bias's rate of change, rad/s² per √s.
     pub bias_rate_walk: f64,
-    /// Position diffusion (lateral slip), m per √s.
+    /// Position diffusion (sideways slip), m per √s.
     pub position: f64,
-    /// Position diffusion per unit of speed (wheel slip and scale errors that persist over
-    /// many odometry samples), m per √s per m/s.
+    /// Position diffusion along the heading per unit of speed (random wheel slip that
+    /// persists over many odometry samples), m per √s per m/s.
     pub position_per_speed: f64,
+    /// Random walk of the wheels' scale error, per √s.
+    pub scale_walk: f64,
     /// The GNSS error's correlation time, s.
     pub gnss_correlation_s: f64,
     /// The GNSS error's steady 1σ, east and north, m (set from the current fix quality).
@@ -119,9 +126,14 @@ impl Ekf {
             f[(Y, YAW)] = v * c * dt;
             f[(Y, V)] = s * dt;
             f[(YAW, W)] = dt;
-            let diffusion = (q.position + q.position_per_speed * v.abs()).powi(2) * dt;
-            qm[(X, X)] = diffusion;
-            qm[(Y, Y)] = diffusion;
+            // Wheel slip errs along the wheels' direction; across it only the vehicle's
+            // sideways slip (slopes, skids) moves it.
+            let along = (q.position + q.position_per_speed * v.abs()).powi(2) * dt;
+            let across = q.position.powi(2) * dt;
+            qm[(X, X)] = along * c * c + across * s * s;
+            qm[(Y, Y)] = along * s * s + across * c * c;
+            qm[(X, Y)] = (along - across) * s * c;
+            qm[(Y, X)] = qm[(X, Y)];
         }
         self.x[BIAS] += self.x[BIAS_RATE] * dt;
         f[(BIAS, BIAS_RATE)] = dt;
@@ -134,6 +146,7 @@ impl Ekf {
         qm[(W, W)] = q.angular_accel.powi(2) * dt;
         qm[(BIAS, BIAS)] = q.bias_walk.powi(2) * dt;
         qm[(BIAS_RATE, BIAS_RATE)] = q.bias_rate_walk.powi(2) * dt;
+        qm[(SCALE, SCALE)] = q.scale_walk.powi(2) * dt;
         qm[(GNSS_E, GNSS_E)] = q.gnss_error.0.powi(2) * (1.0 - phi * phi);
         qm[(GNSS_N, GNSS_N)] = q.gnss_error.1.powi(2) * (1.0 - phi * phi);
         self.p = f * self.p * f.transpose() + qm;
@@ -242,6 +255,7 @@ mod tests {
             bias_rate_walk: 1e-6,
             position: 0.01,
             position_per_speed: 0.0,
+            scale_walk: 1e-4,
             gnss_correlation_s: 30.0,
             gnss_error: (0.0, 0.0),
         }

@@ -17,7 +17,7 @@ use std::time::Duration;
 use nalgebra::{SMatrix, SVector, Vector3};
 
 use super::ekf::{
-    BIAS, BIAS_RATE, Cov, Ekf, GNSS_E, GNSS_N, N, ProcessNoise, State, V, W, X, Y, YAW, wrap,
+    BIAS, BIAS_RATE, Cov, Ekf, GNSS_E, GNSS_N, N, ProcessNoise, SCALE, State, V, W, X, Y, YAW, wrap,
 };
 use super::geodesy::{Enu, Geodetic};
 use crate::time::Timestamp;
@@ -41,7 +41,9 @@ const STILL_YAW_RATE_SIGMA: f64 = 0.002;
 const QUALITY_STEP: f64 = 0.5;
 /// The gyro bias's rate of change before anything has shown it, 1σ rad/s² (a warming
 /// MEMS gyro's drift).
-const INITIAL_BIAS_RATE_SIGMA: f64 = 1e-4;
+const INITIAL_BIAS_RATE_SIGMA: f64 = 3e-5;
+/// The wheels' scale error before GNSS has shown it, 1σ (tyre wear and load).
+const INITIAL_SCALE_SIGMA: f64 = 0.02;
 /// Fixes inform the heading (through the antenna's lever arm and the motion between them)
 /// only once its 1σ is within this, rad.
 const HEADING_FROM_POSITIONS_RAD: f64 = 0.5;
@@ -84,6 +86,8 @@ pub struct LocalizerConfig {
     /// The slowly wandering part of a fix's error, as a fraction of its 1σ; its
     /// correlation time is `noise.gnss_correlation_s`.
     pub gnss_correlated_fraction: f64,
+    /// The receiver's velocity accuracy, 1σ per axis, m/s; `None`: typical by fix quality.
+    pub gnss_velocity_sigma_mps: Option<f64>,
 }
 
 impl Default for LocalizerConfig {
@@ -100,15 +104,17 @@ impl Default for LocalizerConfig {
             window: Duration::from_secs(1),
             noise: ProcessNoise {
                 accel: 1.0,
-                angular_accel: 1.0,
+                angular_accel: 0.5,
                 bias_walk: 2e-5,
-                bias_rate_walk: 1e-6,
-                position: 0.005,
-                position_per_speed: 0.025,
+                bias_rate_walk: 3e-6,
+                position: 0.002,
+                position_per_speed: 0.006,
+                scale_walk: 1e-4,
                 gnss_correlation_s: 30.0,
                 gnss_error: (0.0, 0.0),
             },
             gnss_correlated_fraction: 0.5,
+            gnss_velocity_sigma_mps: None,
             odometry_sigma: (0.01, 0.02),
             odometry_yaw_rate_sigma: 0.05,
             gyro_sigma: 0.003,
@@ -452,6 +458,7 @@ impl Localizer {
         p[(W, W)] = 0.25;
         p[(BIAS, BIAS)] = 0.02f64.powi(2);
         p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
+        p[(SCALE, SCALE)] = INITIAL_SCALE_SIGMA.powi(2);
         // The first fix's slow error is in the position it gave.
         let slow = self.config.gnss_correlated_fraction;
         for (i, g, sd) in [(X, GNSS_E, sigma.0), (Y, GNSS_N, sigma.1)] {
@@ -511,9 +518,14 @@ impl Localizer {
                 let (base, rel) = self.config.odometry_sigma;
                 let still = v.abs() < STILL_MPS && w.abs() < STILL_RPS;
                 let kept: &[usize] = if still { pose } else { &[] };
+                // The wheels read v·(1 + scale).
+                let scale = 1.0 + e.x[SCALE];
+                let mut h = row(V);
+                h[(0, V)] = scale;
+                h[(0, SCALE)] = e.x[V];
                 e.update_except(
-                    one(v - e.x[V]),
-                    &row(V),
+                    one(v - e.x[V] * scale),
+                    &h,
                     &var(base + rel * v.abs()),
                     &[],
                     f64::INFINITY,
@@ -550,8 +562,10 @@ impl Localizer {
                 self.stats.applied += 1;
             }
             Measurement::Gyro { wz } => {
+                let mut step = 0.0;
                 if let Some(last) = f.last_gyro.filter(|&l| t > l) {
                     let dt = t.saturating_since(last).as_secs_f64();
+                    step = dt.min(GYRO_LIVE_MIN.as_secs_f64());
                     f.gyro_period = Some(match f.gyro_period {
                         // Gaps (a lost link) count as a few periods at most.
                         Some(p) => p + (dt.min(p * GYRO_LIVE_PERIODS) - p) * 0.05,
@@ -562,6 +576,7 @@ impl Localizer {
                 let mut h = row(W);
                 h[(0, BIAS)] = 1.0;
                 let kept: &[usize] = if f.still { pose } else { &[] };
+                let rate_before = e.x[W];
                 e.update_except(
                     one(wz - e.x[W] - e.x[BIAS]),
                     &h,
@@ -570,6 +585,13 @@ impl Localizer {
                     f64::INFINITY,
                     kept,
                 );
+                if !f.still {
+                    // The prediction turned the yaw at the old rate since the last sample; the
+                    // trapezoid rule turns it at the mean of the old and the new, so a turn
+                    // that speeds up leaves no lag. A refinement of the mean's integration:
+                    // the covariance already holds the rate's uncertainty.
+                    e.x[YAW] = wrap(e.x[YAW] + (e.x[W] - rate_before) * step / 2.0);
+                }
                 self.stats.applied += 1;
             }
             Measurement::Heading { yaw, sigma } => {
@@ -638,14 +660,15 @@ impl Localizer {
                     (sigma.1 * white).powi(2),
                 );
                 let z = SVector::<f64, 2>::new(en.0, en.1);
-                // A position step is not a gyro fault: the bias learns from heading and
-                // standstill, never from where a fix lands. While the heading is unknown,
-                // fixes do not set it either: linearised about a wrong heading they would
-                // make up a confident, wrong one that the course gate then keeps out.
+                // While the heading is unknown, fixes set neither it nor what it would
+                // teach (bias, its rate, the wheels' scale): linearised about a wrong heading
+                // they would make up a confident, wrong one that the course gate then keeps
+                // out. Once it is known they inform every state: a jump fails the gate, and
+                // the fixes' slow wander is a state of its own, not bias.
                 let kept: &[usize] = if e.yaw_sigma() > HEADING_FROM_POSITIONS_RAD {
-                    &[YAW, BIAS, BIAS_RATE]
+                    &[YAW, BIAS, BIAS_RATE, SCALE]
                 } else {
-                    &[BIAS, BIAS_RATE]
+                    &[]
                 };
                 let result = e.update_except(z - hx, &h, &r, &[], GATE_2, kept);
                 self.count(result.applied);
@@ -775,6 +798,7 @@ impl Localizer {
                 p[(W, W)] = 0.25;
                 p[(BIAS, BIAS)] = 0.02f64.powi(2);
                 p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
+                p[(SCALE, SCALE)] = INITIAL_SCALE_SIGMA.powi(2);
                 p
             },
             |e| e.p,

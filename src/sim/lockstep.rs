@@ -47,7 +47,8 @@ pub trait Sink {
 }
 
 /// The chassisd configuration of a simulated vehicle: its GNSS receiver and IMU, and one
-/// generic CiA 402 drive per wheel (nodes 1 and 2) on the simulated bus.
+/// generic CiA 402 drive per wheel (nodes 1 and 2) on the simulated bus. The receiver's and
+/// gyro's noise figures go into `[localization]` as an integrator copies a datasheet's.
 pub fn vehicle_config(plant: &PlantConfig) -> Result<VehicleConfig, ConfigError> {
     let file = Path::new(SIM_CONFIG_NAME);
     let g = &plant.geometry;
@@ -70,6 +71,11 @@ z = 0.0
 datum = [{lat}, {lon}, {h}]
 gnss_latency_s = {latency}
 heading_sigma_deg = {heading_sigma}
+gnss_correlated_fraction = {correlated}
+gnss_correlation_time_s = {correlation_time}
+gnss_velocity_sigma_mps = {velocity_sigma}
+gyro_noise_rps = {gyro_noise}
+gyro_bias_walk = {gyro_walk}
 
 [imu]
 port = "sim:imu"
@@ -115,6 +121,11 @@ wheels = ["right"]
         ay = g.antenna[1],
         latency = plant.gnss.latency_s,
         heading_sigma = plant.gnss.heading_sigma_deg.max(0.01),
+        correlated = plant.gnss.correlated_fraction.min(0.95),
+        correlation_time = plant.gnss.correlation_time_s.clamp(1.0, 3600.0),
+        velocity_sigma = plant.gnss.velocity_sigma_mps.clamp(0.001, 1.0),
+        gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),
+        gyro_walk = plant.imu.gyro_bias_walk.clamp(1e-7, 1e-2),
         imu = plant.imu.protocol.name(),
         radius = g.wheel_radius_m,
         track = g.track_m,
