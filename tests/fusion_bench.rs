@@ -3,8 +3,7 @@
 //! meets every target (accuracy, outage drift, jump rejection and the NEES consistency of the
 //! published covariance, pooled over the bench's Monte Carlo runs), and its last line is the
 //! JSON summary. The bench is slow unoptimised (some 140 times slower than in release), so
-//! these run on the release build: `tests/run-all` runs `cargo test --release --test
-//! fusion_bench`.
+//! these run on the release build: `tests/run-all` runs `cargo test --release`.
 
 mod common;
 
