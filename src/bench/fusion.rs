@@ -159,8 +159,8 @@ pub struct ScenarioFigures {
 }
 
 impl ScenarioFigures {
-    /// This run and `other` (the same scenario) as one: errors over both runs' samples,
-    /// the worse drift and jump error.
+    /// This run and `other` (the same scenario) as one: errors over both runs' samples, the
+    /// outage drift as the RMS over the runs (and the worst run's), the worse jump error.
     fn pooled_with(mut self, other: ScenarioFigures) -> ScenarioFigures {
         for (mine, theirs) in self.errors.iter_mut().zip(&other.errors) {
             for (r, e) in theirs {

@@ -565,7 +565,8 @@ impl Localizer {
                 let mut step = 0.0;
                 if let Some(last) = f.last_gyro.filter(|&l| t > l) {
                     let dt = t.saturating_since(last).as_secs_f64();
-                    step = dt.min(GYRO_LIVE_MIN.as_secs_f64());
+                    // A gap (a lost link) turns the yaw over a few periods at most.
+                    step = f.gyro_period.map_or(dt, |p| dt.min(p * GYRO_LIVE_PERIODS));
                     f.gyro_period = Some(match f.gyro_period {
                         // Gaps (a lost link) count as a few periods at most.
                         Some(p) => p + (dt.min(p * GYRO_LIVE_PERIODS) - p) * 0.05,
