@@ -7,6 +7,7 @@
 pub mod api;
 pub mod bench;
 pub mod config;
+pub mod control;
 pub mod core;
 pub mod devices;
 pub mod engine;

@@ -135,6 +135,17 @@ enum BenchCommand {
         #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
         antennas: Option<u8>,
     },
+    /// Score closed-loop moves and the command watchdog on the simulated vehicle against
+    /// its truth; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Control {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
     Mqtt {
@@ -201,6 +212,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 plant.gnss.dual_antenna = n == 2;
             }
             bench_fusion(plant, seed, runs, &scenario)
+        }
+        Command::Bench {
+            which: BenchCommand::Control { plant, seed },
+        } => {
+            let plant = load_plant(plant)?;
+            let report = chassisd::bench::control::run(&plant, seed)?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
         }
         Command::Bench {
             which:

@@ -12,6 +12,15 @@
 //! - `set_lng_lat [113.0196, 23.1496, 12.3]` moves the datum to this longitude, latitude
 //!   (degrees) and height (m), in SET_LNG_LAT's order.
 //!
+//! Moves (`/set_navi_cmd` of ros1-navigation-interface.txt, its request as JSON):
+//! - `set_navi_cmd {"cmd": "1", "distance": 100}`: `cmd` 1 forward, 2 back (distance in cm),
+//!   3 turn left, 4 turn right (degrees), 5 stop. `cmd` is a string in the service; a number
+//!   is taken too. `distance` is a whole or decimal number ≥ 0, up to 10000 cm or 3600°; cmd 5
+//!   needs none. The move closes its loop on the vehicle's own pose; its end (succeeded,
+//!   cancelled, timed out, aborted, with the reason) is logged. A new move replaces the one
+//!   under way; a `cmd_vel` (in manual mode), `stop` or cmd 5 ends it. Cmd 5 brings the
+//!   vehicle to rest without latching: the next move needs no re-arm.
+//!
 //! Safety:
 //! - `stop {}` stops and latches, as an operator's stop;
 //! - `estop {"engaged":true}` engages the software emergency stop (latches), `{"engaged":false}`
@@ -21,6 +30,7 @@
 
 use serde::Deserialize;
 
+use crate::control::MoveKind;
 use crate::core::Command;
 use crate::fusion::geodesy::Geodetic;
 
@@ -38,6 +48,12 @@ pub const STOP: &str = "stop";
 pub const ESTOP: &str = "estop";
 /// Topic that re-arms a latched stop.
 pub const RESET: &str = "reset";
+/// Topic of distance and angle moves.
+pub const SET_NAVI_CMD: &str = "set_navi_cmd";
+/// Longest distance move, cm.
+const MAX_MOVE_CM: f64 = 10_000.0;
+/// Largest angle move, degrees.
+const MAX_TURN_DEG: f64 = 3_600.0;
 /// Largest payload accepted, bytes.
 pub const MAX_PAYLOAD: usize = 4096;
 
@@ -72,6 +88,15 @@ struct EStop {
 #[serde(deny_unknown_fields)]
 struct Empty {}
 
+/// `/set_navi_cmd`'s request.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NaviCmd {
+    cmd: serde_json::Value,
+    #[serde(default)]
+    distance: Option<f64>,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Pose {
@@ -90,6 +115,7 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
         STOP,
         ESTOP,
         RESET,
+        SET_NAVI_CMD,
     ]
     .contains(&topic)
     {
@@ -115,6 +141,7 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
                 Command::Reset
             }))
         }
+        SET_NAVI_CMD => navi_cmd(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
         ESTOP => {
             let e: EStop = serde_json::from_slice(payload).map_err(parse_error)?;
             Ok(Some(Command::EmergencyStop { engaged: e.engaged }))
@@ -148,6 +175,51 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
             })))
         }
     }
+}
+
+/// `/set_navi_cmd`: 1 forward, 2 back (cm), 3 left, 4 right (degrees), 5 stop.
+fn navi_cmd(request: NaviCmd) -> Result<Command, String> {
+    let cmd = match &request.cmd {
+        serde_json::Value::String(s) => s.trim().parse::<u8>().ok(),
+        serde_json::Value::Number(n) => n.as_u64().and_then(|n| u8::try_from(n).ok()),
+        _ => None,
+    };
+    let Some(cmd @ 1..=5) = cmd else {
+        return Err(format!(
+            "set_navi_cmd: cmd must be \"1\" (forward), \"2\" (back), \"3\" (left), \"4\" \
+             (right) or \"5\" (stop), not {}",
+            request.cmd
+        ));
+    };
+    if cmd == 5 {
+        return Ok(Command::CancelMotion);
+    }
+    let Some(distance) = request.distance else {
+        return Err(
+            "set_navi_cmd: distance is needed (cm for cmd 1 and 2, degrees for 3 and 4)".into(),
+        );
+    };
+    let max = if cmd <= 2 { MAX_MOVE_CM } else { MAX_TURN_DEG };
+    if !(0.0..=max).contains(&distance) {
+        return Err(format!(
+            "set_navi_cmd: distance {distance} is outside 0..={max} {}",
+            if cmd <= 2 { "cm" } else { "degrees" }
+        ));
+    }
+    Ok(Command::Move(match cmd {
+        1 => MoveKind::Straight {
+            distance_m: distance / 100.0,
+        },
+        2 => MoveKind::Straight {
+            distance_m: -distance / 100.0,
+        },
+        3 => MoveKind::Turn {
+            angle_rad: distance.to_radians(),
+        },
+        _ => MoveKind::Turn {
+            angle_rad: -distance.to_radians(),
+        },
+    }))
 }
 
 fn velocity(twist: Twist) -> Result<Command, String> {
@@ -248,6 +320,44 @@ mod tests {
         );
         assert!(decode("estop", b"{}").is_err());
         assert!(decode("estop", br#"{"engaged":"yes"}"#).is_err());
+    }
+
+    #[test]
+    fn decodes_navi_cmds() {
+        assert_eq!(
+            decode("set_navi_cmd", br#"{"cmd": "1", "distance": 100}"#),
+            Ok(Some(Command::Move(MoveKind::Straight { distance_m: 1.0 })))
+        );
+        assert_eq!(
+            decode("set_navi_cmd", br#"{"cmd": 2, "distance": 50}"#),
+            Ok(Some(Command::Move(MoveKind::Straight { distance_m: -0.5 })))
+        );
+        assert_eq!(
+            decode("set_navi_cmd", br#"{"cmd": "4", "distance": 90}"#),
+            Ok(Some(Command::Move(MoveKind::Turn {
+                angle_rad: -90f64.to_radians()
+            })))
+        );
+        assert_eq!(
+            decode("set_navi_cmd", br#"{"cmd": "5"}"#),
+            Ok(Some(Command::CancelMotion))
+        );
+        for bad in [
+            &br#"{"cmd": "6", "distance": 1}"#[..],
+            br#"{"cmd": "1"}"#,
+            br#"{"cmd": "1", "distance": -5}"#,
+            br#"{"cmd": "1", "distance": 1e9}"#,
+            br#"{"cmd": "3", "distance": 4000}"#,
+            br#"{"cmd": true, "distance": 1}"#,
+            br#"{"cmd": "1", "distance": "far"}"#,
+            br#"{"cmd": "1", "distance": 1, "speed": 2}"#,
+        ] {
+            assert!(
+                decode("set_navi_cmd", bad).is_err(),
+                "{}",
+                String::from_utf8_lossy(bad)
+            );
+        }
     }
 
     #[test]

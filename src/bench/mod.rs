@@ -1,5 +1,6 @@
 //! Benchmarks that print figures (`chassisd bench ...`), as opposed to the criterion
 //! micro-benchmarks under `benches/`.
 
+pub mod control;
 pub mod fusion;
 pub mod mqtt;

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 pub mod chassis;
 pub mod imu;
 pub mod localization;
+pub mod motion;
 pub mod mqtt;
 
 /// A configuration that failed to load or validate.
@@ -82,6 +83,9 @@ pub struct VehicleConfig {
     /// Geometry, limits and safety of the drive train; required with `[[drive]]`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chassis: Option<chassis::ChassisConfig>,
+    /// Limits and tolerances of closed-loop moves (default: the chassis limits).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<motion::MotionConfig>,
     /// Per-wheel direction and gear ratio.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheels: Option<chassis::WheelsConfig>,
@@ -261,6 +265,9 @@ impl VehicleConfig {
         }
         if let Some(l) = &self.localization {
             l.validate(file)?;
+        }
+        if let Some(m) = &self.motion {
+            m.validate(self.chassis.as_ref(), file)?;
         }
         if let Some(m) = &self.mqtt {
             m.validate(file)?;

@@ -9,10 +9,13 @@ use std::time::Duration;
 
 use super::safety::{Cause, EStopInput, Power, Refusal, Safety, SafetyConfig, State, StopKind};
 use crate::config::chassis::ChassisConfig;
+use crate::control::response::ResponseEstimator;
 use crate::time::Timestamp;
 
 /// The control period the engine runs the chassis at.
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
+/// A move's command leads the ramp by the drives' response time, at most this, s.
+const MAX_LEAD_S: f64 = 0.3;
 
 /// Bits of `robot.robot_status`.
 pub mod status_bits {
@@ -112,6 +115,12 @@ pub enum CommandRejected {
     /// The command needs a position, and there is none yet.
     #[error("no position yet")]
     NoPosition,
+    /// A move needs the wheel odometry, and the drives have not reported yet.
+    #[error("no wheel odometry yet (the drives have not reported)")]
+    NoOdometry,
+    /// The command would move the map frame under a move that holds the map's heading.
+    #[error("a move holding the map's heading is under way; stop it first")]
+    MoveUnderWay,
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,
@@ -167,14 +176,21 @@ pub struct Chassis {
     config: ChassisConfig,
     mode: DriveMode,
     safety: Safety,
-    /// Ramped setpoint (v, w).
+    /// The command ramped within the acceleration limits (v, w).
+    reference: (f64, f64),
+    /// What the drives are sent (v, w): the reference, or for a move the move's command
+    /// within its lead allowance of the reference.
     setpoint: (f64, f64),
+    /// The command in force came from a closed-loop move.
+    autonomous: bool,
     /// Why the wheels hold zero at the last tick.
     stop: Option<StopKind>,
     feedback: ChassisFeedback,
     last_angles: Option<(f64, f64)>,
     odometry: WheelOdometry,
     last_tick: Option<Timestamp>,
+    /// How quickly the drives follow their speed command.
+    response: ResponseEstimator,
 }
 
 impl Chassis {
@@ -185,12 +201,15 @@ impl Chassis {
             safety: Safety::new(safety),
             mode: DriveMode::default(),
             config,
+            reference: (0.0, 0.0),
             setpoint: (0.0, 0.0),
+            autonomous: false,
             stop: None,
             feedback: ChassisFeedback::default(),
             last_angles: None,
             odometry: WheelOdometry::default(),
             last_tick: None,
+            response: ResponseEstimator::default(),
         }
     }
 
@@ -272,12 +291,59 @@ impl Chassis {
             return Err(CommandRejected::NavigationMode);
         }
         self.drives_reachable()?;
+        if self.autonomous {
+            // The ramp goes on from what the drives were sent, the move's lead included.
+            self.reference = self.setpoint;
+            self.autonomous = false;
+        }
         self.safety.velocity(
             t,
             vx.clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
             wz.clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
         )?;
         Ok(())
+    }
+
+    /// A velocity proposed by a closed-loop move: forward speed (m/s) and yaw rate (rad/s),
+    /// clamped to the limits. Taken in either drive mode; refused while latched (a move never
+    /// re-arms).
+    pub fn autonomous(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), CommandRejected> {
+        if !vx.is_finite() || !wz.is_finite() {
+            return Err(CommandRejected::NotFinite);
+        }
+        self.drives_reachable()?;
+        self.safety.autonomous(
+            t,
+            vx.clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
+            wz.clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
+        )?;
+        self.autonomous = true;
+        Ok(())
+    }
+
+    /// Holds zero velocity while armed (the end of a move, a stop request); nothing else
+    /// changes: no arming, no re-arming.
+    pub fn hold_zero(&mut self, t: Timestamp) {
+        if *self.safety.state() == State::Armed {
+            // Armed takes any command.
+            let _ = self.safety.autonomous(t, 0.0, 0.0);
+        }
+    }
+
+    /// Whether the drives are ready to take a move: configured, reachable, not latched.
+    pub fn ready_to_move(&self) -> Result<(), CommandRejected> {
+        self.drives_reachable()?;
+        match self.safety.state() {
+            State::Latched { reason, .. } => Err(Refusal::Latched(reason.to_string()).into()),
+            State::Resetting { .. } => Err(Refusal::Resetting.into()),
+            State::Standby | State::Armed => Ok(()),
+        }
+    }
+
+    /// The drives' speed response time (a first-order lag), s, learnt from commands and
+    /// feedback.
+    pub fn response_time(&self) -> f64 {
+        self.response.time_constant()
     }
 
     /// One control step at `t`: the wheel speeds to command. A stop (latched, or no fresh
@@ -291,25 +357,70 @@ impl Chassis {
         self.last_tick = Some(t);
         let verdict = self.safety.tick(t, &self.feedback);
         self.stop = verdict.stop.clone();
-        self.setpoint = match verdict.target {
+        (self.reference, self.setpoint) = match verdict.target {
             Some((target_v, target_w)) if verdict.stop.is_none() => {
-                let (v, w) = self.setpoint;
-                (
+                let (v, w) = self.reference;
+                let reference = (
                     self.ramp_speed(v, target_v, dt),
                     approach(w, target_w, self.config.max_yaw_accel_rps2 * dt),
-                )
+                );
+                (reference, self.lead(reference, (target_v, target_w)))
             }
-            _ => (0.0, 0.0),
+            _ => ((0.0, 0.0), (0.0, 0.0)),
         };
         let (v, w) = self.setpoint;
         let half_track = self.config.track_m / 2.0;
         let r = self.config.wheel_radius_m;
-        WheelCommand {
+        let command = WheelCommand {
             power: verdict.power,
             reset_faults: verdict.reset_faults,
             left_rad_s: (v - w * half_track) / r,
             right_rad_s: (v + w * half_track) / r,
+        };
+        self.learn_response(t, &command);
+        command
+    }
+
+    /// Feeds the response estimator: the wheel speeds reported now, and the command from now
+    /// on, while the drives follow commands.
+    fn learn_response(&mut self, t: Timestamp, command: &WheelCommand) {
+        let r = self.config.wheel_radius_m;
+        let measured = self
+            .feedback
+            .left
+            .velocity_rad_s
+            .zip(self.feedback.right.velocity_rad_s);
+        match measured {
+            Some((l, rr)) if command.power == Power::Enabled => {
+                self.response.feedback(t, (l * r, rr * r));
+                self.response
+                    .command(t, (command.left_rad_s * r, command.right_rad_s * r));
+            }
+            _ => self.response.interrupt(),
         }
+    }
+
+    /// The setpoint for `target` given the ramped `reference`. A move's command may lead the
+    /// reference by the drives' response time times the acceleration limit (capped): a
+    /// drive lagging by that time then moves the vehicle along the ramp, not behind it. A
+    /// manual command gets the reference.
+    fn lead(&self, reference: (f64, f64), target: (f64, f64)) -> (f64, f64) {
+        if !self.autonomous {
+            return reference;
+        }
+        let lead_s = self.response.time_constant().min(MAX_LEAD_S);
+        let lead_v = lead_s * self.config.max_accel_mps2.max(self.config.max_decel_mps2);
+        let lead_w = lead_s * self.config.max_yaw_accel_rps2;
+        (
+            target
+                .0
+                .clamp(reference.0 - lead_v, reference.0 + lead_v)
+                .clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
+            target
+                .1
+                .clamp(reference.1 - lead_w, reference.1 + lead_w)
+                .clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
+        )
     }
 
     /// One ramp step of the speed from `v` towards `target`: slowing down (towards zero)

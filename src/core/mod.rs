@@ -10,6 +10,8 @@ use std::time::Duration;
 use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
 use crate::config::localization::localizer_config;
+use crate::config::motion::MotionSettings;
+use crate::control::{Motion, MotionResult, MoveKind, Outcome, PoseView};
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
@@ -60,6 +62,8 @@ pub struct CoreConfig {
     pub imu_timeout: Option<Duration>,
     /// The fusion filter.
     pub localizer: LocalizerConfig,
+    /// Closed-loop moves, when the vehicle has drives.
+    pub motion: Option<MotionSettings>,
 }
 
 impl Default for CoreConfig {
@@ -72,6 +76,7 @@ impl Default for CoreConfig {
             bms_stale_after: None,
             imu_timeout: None,
             localizer: LocalizerConfig::default(),
+            motion: None,
         }
     }
 }
@@ -89,6 +94,9 @@ impl CoreConfig {
         };
         if !config.drive.is_empty() {
             core.chassis = config.chassis;
+            core.motion = config
+                .chassis
+                .map(|c| config.motion.unwrap_or_default().settings(&c));
         }
         core.control_link =
             config
@@ -164,6 +172,12 @@ pub enum Command {
     ControlHeartbeat,
     /// Switch who may drive (SWITCH_MODE).
     SetMode(DriveMode),
+    /// A closed-loop distance or angle move (`set_navi_cmd` 1–4), replacing the one under
+    /// way.
+    Move(MoveKind),
+    /// End the move under way and bring the vehicle to rest, without latching
+    /// (`set_navi_cmd` 5).
+    CancelMotion,
 }
 
 /// One input to the core.
@@ -200,6 +214,8 @@ pub enum Output {
     CommandResult(Result<(), CommandRejected>),
     /// Something for the operator's log.
     Event(String),
+    /// A closed-loop motion ended.
+    MotionEnded(MotionResult),
 }
 
 /// The vehicle core.
@@ -222,6 +238,8 @@ pub struct Vehicle {
     fed_gnss: (Option<Timestamp>, Option<Timestamp>, Option<Timestamp>),
     /// The host's load, when sampled.
     host: Option<HostUsage>,
+    /// Closed-loop moves; `None` without drives.
+    motion: Option<Motion>,
 }
 
 impl Vehicle {
@@ -251,12 +269,18 @@ impl Vehicle {
             odometry: config.chassis.map(|c| Odometry::new(c.track_m)),
             fed_gnss: (None, None, None),
             host: None,
+            motion: config.motion.map(Motion::new),
         }
     }
 
     /// The `odom` frame's pose (wheels and gyro), once the drives have reported.
     pub fn odom_pose(&self) -> Option<OdomPose> {
         self.odometry.as_ref().and_then(Odometry::pose)
+    }
+
+    /// The drives' speed response time learnt so far, s; `None` without drives.
+    pub fn response_time(&self) -> Option<f64> {
+        self.chassis.as_ref().map(Chassis::response_time)
     }
 
     /// Handles one input at time `t` and returns what it produced.
@@ -327,10 +351,28 @@ impl Vehicle {
                 Vec::new()
             }
             Input::Command(Command::Velocity { vx, wz }) => {
+                // In manual mode the operator's velocity takes over from a move; in
+                // navigation mode it is refused and the move goes on.
+                if self.chassis.as_ref().map(Chassis::mode) == Some(DriveMode::Manual) {
+                    self.end_motion(t, Outcome::Cancelled("a velocity command took over".into()));
+                }
                 let result = self.with_chassis(|c| c.command(t, vx, wz));
                 vec![Output::CommandResult(result)]
             }
+            Input::Command(Command::Move(kind)) => {
+                let result = self.start_move(t, kind);
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::CancelMotion) => {
+                self.end_motion(t, Outcome::Cancelled("stop requested".into()));
+                let result = self.with_chassis(|c| {
+                    c.hold_zero(t);
+                    Ok(())
+                });
+                vec![Output::CommandResult(result)]
+            }
             Input::Command(Command::Stop) => {
+                self.end_motion(t, Outcome::Cancelled("stopped by the operator".into()));
                 let result = self.with_chassis(|c| {
                     c.operator_stop(t);
                     Ok(())
@@ -355,11 +397,20 @@ impl Vehicle {
                 vec![Output::CommandResult(Ok(()))]
             }
             Input::Command(Command::SetMode(mode)) => {
+                if self.chassis.as_ref().is_some_and(|c| c.mode() != mode) {
+                    self.end_motion(t, Outcome::Cancelled("the drive mode was switched".into()));
+                }
                 let result = self.with_chassis(|c| {
                     c.set_mode(mode);
                     Ok(())
                 });
                 vec![Output::CommandResult(result)]
+            }
+            Input::Command(
+                Command::ZeroLocalFrame | Command::SetPose { .. } | Command::SetDatum(_),
+            ) if self.motion.as_ref().is_some_and(Motion::uses_map_heading) => {
+                // The move's heading is the map's: moving the map would move its goal.
+                vec![Output::CommandResult(Err(CommandRejected::MoveUnderWay))]
             }
             Input::Command(Command::ZeroLocalFrame) => {
                 let result = if self.localizer.zero_here(t) {
@@ -390,15 +441,92 @@ impl Vehicle {
                 };
                 vec![Output::CommandResult(result)]
             }
-            Input::ControlTick => match &mut self.chassis {
-                Some(c) => vec![Output::Wheels(c.tick(t))],
-                None => Vec::new(),
-            },
+            Input::ControlTick => self.control_tick(t),
             Input::Host(usage) => {
                 self.host = Some(usage);
                 Vec::new()
             }
             Input::Tick => vec![Output::Status(Box::new(self.status(t)))],
+        }
+    }
+
+    /// One control step: the move under way proposes a velocity, the drive train decides
+    /// what reaches the wheels, and a latched stop ends the move.
+    fn control_tick(&mut self, t: Timestamp) -> Vec<Output> {
+        let view = self.pose_view(t);
+        let (Some(chassis), Some(motion)) = (&mut self.chassis, &mut self.motion) else {
+            return match &mut self.chassis {
+                Some(c) => vec![Output::Wheels(c.tick(t))],
+                None => Vec::new(),
+            };
+        };
+        // A stop latched since the last tick (a command, an e-stop) ends the move first.
+        if let Some(cause) = chassis.safety().latched() {
+            motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+        }
+        if motion.is_active() {
+            match motion.step(t, view.as_ref(), chassis.response_time()) {
+                Some((v, w)) => {
+                    if let Err(e) = chassis.autonomous(t, v, w) {
+                        motion.end(t, Outcome::Aborted(e.to_string()), None);
+                    }
+                }
+                // Just ended: hold zero rather than let the last speed run to the timeout.
+                None => chassis.hold_zero(t),
+            }
+        }
+        let wheels = chassis.tick(t);
+        if let Some(cause) = chassis.safety().latched() {
+            motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+        }
+        let mut out = vec![Output::Wheels(wheels)];
+        for result in motion.take_results() {
+            out.push(Output::Event(result.to_string()));
+            out.push(Output::MotionEnded(result));
+        }
+        out
+    }
+
+    /// What a move sees: the `odom` pose, and the map yaw while located.
+    fn pose_view(&self, t: Timestamp) -> Option<PoseView> {
+        let odom = self.odometry.as_ref().and_then(Odometry::pose)?;
+        let located = self.localizer.locate(t) == LocateState::Good;
+        let map_yaw = located
+            .then(|| self.localizer.map_pose(t).map(|(_, _, yaw)| yaw))
+            .flatten();
+        let wheel_scale = located.then(|| self.localizer.wheel_scale()).flatten();
+        Some(PoseView {
+            odom,
+            map_yaw,
+            wheel_scale,
+        })
+    }
+
+    /// Starts a move, once the drives can take it and the odometry runs.
+    fn start_move(&mut self, t: Timestamp, kind: MoveKind) -> Result<(), CommandRejected> {
+        let finite = match kind {
+            MoveKind::Straight { distance_m } => distance_m.is_finite(),
+            MoveKind::Turn { angle_rad } => angle_rad.is_finite(),
+        };
+        if !finite {
+            return Err(CommandRejected::NotFinite);
+        }
+        let view = self.pose_view(t);
+        let (Some(chassis), Some(motion)) = (&mut self.chassis, &mut self.motion) else {
+            return Err(CommandRejected::NoDrives);
+        };
+        chassis.ready_to_move()?;
+        let Some(view) = view else {
+            return Err(CommandRejected::NoOdometry);
+        };
+        motion.start(t, kind, &view);
+        Ok(())
+    }
+
+    /// Ends the motion under way, if any.
+    fn end_motion(&mut self, t: Timestamp, outcome: Outcome) {
+        if let Some(m) = &mut self.motion {
+            m.end(t, outcome, None);
         }
     }
 
@@ -457,7 +585,10 @@ impl Vehicle {
                 .map(|[xx, xy, yy, yaw]| PoseCovariance { xx, xy, yy, yaw }),
             odom,
             localization,
-            navigation: Navigation::Idle,
+            navigation: self
+                .motion
+                .as_ref()
+                .map_or(Navigation::Idle, Motion::navigation),
             obstacle_stop: false,
             host: self.host,
             mode: self.chassis.as_ref().map(Chassis::mode),

@@ -7,12 +7,13 @@
 //!
 //! | state     | event                                   | next      |
 //! |-----------|-----------------------------------------|-----------|
-//! | Standby   | velocity command (any)                  | Armed     |
+//! | Standby   | velocity command (any), or a move's velocity | Armed |
 //! | Standby, Armed | a cause becomes active             | Latched   |
 //! | Armed     | operator stop                           | Latched   |
 //! | Latched   | zero velocity or reset, no cause, no drive fault | Armed |
 //! | Latched   | zero velocity or reset, no cause, drive faults   | Resetting |
 //! | Latched   | non-zero velocity                       | Latched (refused) |
+//! | Latched   | a move's velocity, zero or not          | Latched (refused) |
 //! | Resetting | every drive fault cleared               | Armed     |
 //! | Resetting | a cause, or the reset failed or timed out | Latched |
 //!
@@ -302,6 +303,21 @@ impl Safety {
                 Ok(())
             }
             State::Resetting { .. } if zero => Ok(()),
+            State::Resetting { .. } => Err(Refusal::Resetting),
+        }
+    }
+
+    /// A velocity (m/s, rad/s) proposed by a closed-loop move, already checked for range.
+    /// Starting a move is as deliberate as a velocity command, so it arms from standby; it
+    /// never re-arms a latched stop, zero or not.
+    pub fn autonomous(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), Refusal> {
+        match &self.state {
+            State::Standby | State::Armed => {
+                self.state = State::Armed;
+                self.command = Some((t, vx, wz));
+                Ok(())
+            }
+            State::Latched { reason, .. } => Err(Refusal::Latched(reason.to_string())),
             State::Resetting { .. } => Err(Refusal::Resetting),
         }
     }

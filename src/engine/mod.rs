@@ -98,6 +98,8 @@ pub enum EngineOutput {
     Event(String),
     /// A message for the MQTT broker (a dialect's report or reply).
     Publish(Publish),
+    /// A closed-loop motion ended (also announced as an event).
+    MotionEnded(crate::control::MotionResult),
     /// The answer to a command record.
     CommandResult {
         /// The channel it came on.
@@ -504,8 +506,11 @@ impl Engine {
             self.announce_drive_changes(&feedback.drives, out);
             self.vehicle.handle(t, Input::Chassis(&feedback));
             for output in self.vehicle.handle(t, Input::ControlTick) {
-                if let Output::Wheels(command) = output {
-                    self.drivetrain.command(t, &command);
+                match output {
+                    Output::Wheels(command) => self.drivetrain.command(t, &command),
+                    Output::Event(event) => out.push(EngineOutput::Event(event)),
+                    Output::MotionEnded(result) => out.push(EngineOutput::MotionEnded(result)),
+                    Output::Status(_) | Output::CommandResult(_) => {}
                 }
             }
             // The new command leaves in this tick, not with the next poll.
@@ -599,6 +604,11 @@ impl Engine {
     /// Counters of each CAN interface.
     pub fn bus_stats(&self) -> impl Iterator<Item = (&str, &BusStats)> {
         self.drivetrain.stats()
+    }
+
+    /// The drives' speed response time learnt so far, s; `None` without drives.
+    pub fn response_time(&self) -> Option<f64> {
+        self.vehicle.response_time()
     }
 
     /// The drive train, for diagnostics.

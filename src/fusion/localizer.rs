@@ -293,6 +293,11 @@ impl Localizer {
         self.ekf().map(|e| (e.x[X], e.x[Y], e.x[YAW]))
     }
 
+    /// Odometry distance per true distance (1 + the wheels' scale error), once filtering.
+    pub fn wheel_scale(&self) -> Option<f64> {
+        self.ekf().map(|e| 1.0 + e.x[SCALE])
+    }
+
     /// The published pose at `t`: the filter predicted to `t`, in the map frame
     /// (INIT_POSITION's frame; the ENU frame of the datum until then): x, y (m), yaw (rad).
     pub fn map_pose(&self, t: Timestamp) -> Option<(f64, f64, f64)> {

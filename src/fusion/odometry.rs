@@ -184,10 +184,17 @@ impl Odometry {
             p.x += ds * mid.cos();
             p.y += ds * mid.sin();
             p.yaw = wrap(p.yaw + turn);
-            if dt > 0.0 {
-                p.v = ds / dt;
-                p.w = turn / dt;
-            }
+            // Speeds from the drives' reports, not from the travel since the last tick: the
+            // encoders report less often than the control loop runs, so the travel comes in
+            // steps (twice the speed, then nothing).
+            p.v = if still { 0.0 } else { (vl + vr) / 2.0 };
+            p.w = if still {
+                0.0
+            } else if gyro_live && dt > 0.0 {
+                turn / dt
+            } else {
+                (vr - vl) / self.track_m
+            };
         }
     }
 }

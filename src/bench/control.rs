@@ -1,0 +1,461 @@
+//! `chassisd bench control`: closed-loop moves and the command watchdog on the simulated
+//! vehicle, through the whole path (local command channel, engine, core, CAN frames to the
+//! simulated drives), scored against the simulator's truth.
+//!
+//! The vehicle first stands still (the drives boot, the gyro bias is learnt), then drives
+//! straight so the fusion finds its heading, then stops. Each move then starts from rest
+//! where the last ended. A move's duration is compared with the time-optimal profile under
+//! the configured limits (`[motion]`, by default the chassis limits).
+
+use serde::Serialize;
+
+use crate::config::ConfigError;
+use crate::config::motion::MotionSettings;
+use crate::control::moves::HeadingSource;
+use crate::control::profile::Profile;
+use crate::control::{MotionResult, MoveKind, Outcome};
+use crate::core::status::VehicleStatus;
+use crate::devices::gnss::FixQuality;
+use crate::engine::EngineOutput;
+use crate::fusion::ekf::wrap;
+use crate::record::Record;
+use crate::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
+use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
+use crate::time::Timestamp;
+
+/// Sessions start here (2026-01-01T00:00:00Z).
+const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
+/// Standing still at the start, s.
+const STILL_S: f64 = 5.0;
+/// Then straight at this speed (m/s) for this long (s), so the heading is known.
+const WARMUP: (f64, f64) = (0.8, 10.0);
+/// Rest after each move before the truth is read (a move that ends still moving shows it).
+const SETTLE_S: f64 = 1.0;
+/// Watchdog trials, each with its last command at another phase of the control period.
+const WATCHDOG_TRIALS: u32 = 10;
+/// Speed of the watchdog trials, m/s.
+const WATCHDOG_SPEED: f64 = 1.0;
+/// The wheels count as stopped below this, m/s (a first-order drive only approaches zero).
+const STOPPED_MPS: f64 = 0.01;
+
+/// The targets.
+pub mod target {
+    /// Distance moves against truth: at most this, m ...
+    pub const DISTANCE_ABS_M: f64 = 0.005;
+    /// ... plus this share of the distance.
+    pub const DISTANCE_REL: f64 = 0.005;
+    /// Distance moves in the frame they closed on, m.
+    pub const DISTANCE_FRAME_M: f64 = 0.002;
+    /// Turns against truth, degrees.
+    pub const TURN_DEG: f64 = 0.3;
+    /// A move's duration over the time-optimal profile's, at most.
+    pub const DURATION_RATIO: f64 = 1.15;
+}
+
+/// One move's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct MoveFigures {
+    /// What it was.
+    pub name: String,
+    /// How it ended.
+    pub outcome: String,
+    /// Error against truth after it settled: m for distances, degrees for turns.
+    pub truth_error: f64,
+    /// The target for it.
+    pub truth_target: f64,
+    /// Error in the frame it closed on at its end: m or degrees.
+    pub frame_error: f64,
+    /// Duration, s.
+    pub duration_s: f64,
+    /// The time-optimal profile under the configured limits, s.
+    pub optimal_s: f64,
+    /// Met every target.
+    pub pass: bool,
+}
+
+/// The watchdog's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct WatchdogFigures {
+    /// Time from the last command to the wheels at rest, worst trial, s.
+    pub worst_stop_s: f64,
+    /// cmd_timeout + one control period + the deceleration time at the configured limit.
+    pub bound_s: f64,
+    /// Every trial within the bound.
+    pub pass: bool,
+}
+
+/// The whole report.
+#[derive(Debug, Clone, Serialize)]
+pub struct ControlReport {
+    /// The plant's name.
+    pub plant: String,
+    /// Noise seed.
+    pub seed: u64,
+    /// The drives' response time learnt by the controller, s.
+    pub response_time_s: f64,
+    /// Every move.
+    pub moves: Vec<MoveFigures>,
+    /// The command watchdog.
+    pub watchdog: WatchdogFigures,
+    /// Parts of the issue's benchmark not measured yet, named.
+    pub not_measured: Vec<&'static str>,
+    /// Every target met.
+    pub pass: bool,
+}
+
+#[derive(Default)]
+struct Collector {
+    results: Vec<MotionResult>,
+    refused: Vec<String>,
+    last_status: Option<Box<VehicleStatus>>,
+}
+
+impl Sink for Collector {
+    fn record(&mut self, _record: &Record) {}
+
+    fn output(&mut self, output: EngineOutput) {
+        match output {
+            EngineOutput::MotionEnded(r) => self.results.push(r),
+            EngineOutput::Status(s) => self.last_status = Some(s),
+            EngineOutput::CommandResult {
+                result: Err(e),
+                topic,
+                ..
+            } => self.refused.push(format!("{topic}: {e}")),
+            _ => {}
+        }
+    }
+}
+
+const FIXED: GnssCondition = GnssCondition {
+    quality: Some(FixQuality::RtkFixed),
+    offset: (0.0, 0.0),
+};
+
+/// The simulated vehicle under test.
+struct Bench {
+    sim: Lockstep,
+    sink: Collector,
+}
+
+impl Bench {
+    fn run_for(&mut self, seconds: f64) {
+        let steps = (seconds / PLANT_STEP.as_secs_f64()).round() as u64;
+        for _ in 0..steps {
+            self.sim.step(FIXED, &mut self.sink);
+        }
+    }
+
+    /// Velocity commands every 100 ms for `seconds`.
+    fn drive(&mut self, v: f64, w: f64, seconds: f64) {
+        let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
+        for _ in 0..(seconds * 10.0).round() as u64 {
+            self.sim.command("cmd_vel", &twist, &mut self.sink);
+            self.run_for(0.1);
+        }
+    }
+
+    fn truth(&self) -> Truth {
+        self.sim.vehicle().truth()
+    }
+
+    /// The pose the moves close on, from the last status: `odom` x, y, yaw and the map yaw.
+    fn frame_pose(&self) -> Option<FramePose> {
+        let s = self.sink.last_status.as_ref()?;
+        let odom = s.odom?;
+        Some(FramePose {
+            x: odom.x,
+            y: odom.y,
+            odom_yaw: odom.yaw,
+            map_yaw: s.pose.yaw,
+        })
+    }
+
+    /// One move through the local channel; its result once it ended and settled, with the
+    /// truth and the frame's pose before and after.
+    fn do_move(&mut self, request: &str) -> Option<MoveRun> {
+        // A status tick, so the frame's pose is current.
+        self.run_for(0.1);
+        let before = (self.truth(), self.frame_pose()?);
+        self.sink.results.clear();
+        self.sim.command("set_navi_cmd", request, &mut self.sink);
+        let limit = (60.0 / PLANT_STEP.as_secs_f64()) as u64;
+        for _ in 0..limit {
+            self.sim.step(FIXED, &mut self.sink);
+            if !self.sink.results.is_empty() {
+                break;
+            }
+        }
+        let result = self.sink.results.pop()?;
+        self.run_for(SETTLE_S);
+        Some(MoveRun {
+            result,
+            before,
+            after: (self.truth(), self.frame_pose()?),
+        })
+    }
+}
+
+/// The pose a move closes on.
+#[derive(Debug, Clone, Copy)]
+struct FramePose {
+    x: f64,
+    y: f64,
+    odom_yaw: f64,
+    map_yaw: f64,
+}
+
+/// One move's result, and the truth and frame pose before it and after it settled.
+struct MoveRun {
+    result: MotionResult,
+    before: (Truth, FramePose),
+    after: (Truth, FramePose),
+}
+
+/// Runs every move and the watchdog trials on `plant`.
+pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError> {
+    let sim = Lockstep::new(plant.clone(), seed, START)?;
+    let Some(chassis) = sim.config().chassis else {
+        return Err(ConfigError::invalid(
+            std::path::Path::new("<simulated vehicle>"),
+            "chassis",
+            "is missing".to_owned(),
+            "the simulated vehicle needs a drive train",
+        ));
+    };
+    let settings: MotionSettings = sim.config().motion.unwrap_or_default().settings(&chassis);
+    let mut bench = Bench {
+        sim,
+        sink: Collector::default(),
+    };
+    bench.run_for(STILL_S);
+    bench.drive(WARMUP.0, 0.0, WARMUP.1);
+    bench.drive(0.0, 0.0, 2.0);
+
+    let cases: [(&str, MoveKind, &str); 10] = [
+        (
+            "forward 0.1 m",
+            MoveKind::Straight { distance_m: 0.1 },
+            r#"{"cmd":"1","distance":10}"#,
+        ),
+        (
+            "forward 1 m",
+            MoveKind::Straight { distance_m: 1.0 },
+            r#"{"cmd":"1","distance":100}"#,
+        ),
+        (
+            "forward 5 m",
+            MoveKind::Straight { distance_m: 5.0 },
+            r#"{"cmd":"1","distance":500}"#,
+        ),
+        (
+            "back 0.1 m",
+            MoveKind::Straight { distance_m: -0.1 },
+            r#"{"cmd":"2","distance":10}"#,
+        ),
+        (
+            "back 1 m",
+            MoveKind::Straight { distance_m: -1.0 },
+            r#"{"cmd":"2","distance":100}"#,
+        ),
+        (
+            "back 5 m",
+            MoveKind::Straight { distance_m: -5.0 },
+            r#"{"cmd":"2","distance":500}"#,
+        ),
+        (
+            "left 90°",
+            MoveKind::Turn {
+                angle_rad: 90f64.to_radians(),
+            },
+            r#"{"cmd":"3","distance":90}"#,
+        ),
+        (
+            "right 90°",
+            MoveKind::Turn {
+                angle_rad: -90f64.to_radians(),
+            },
+            r#"{"cmd":"4","distance":90}"#,
+        ),
+        (
+            "left 180°",
+            MoveKind::Turn {
+                angle_rad: 180f64.to_radians(),
+            },
+            r#"{"cmd":"3","distance":180}"#,
+        ),
+        (
+            "right 180°",
+            MoveKind::Turn {
+                angle_rad: -180f64.to_radians(),
+            },
+            r#"{"cmd":"4","distance":180}"#,
+        ),
+    ];
+    let mut moves = Vec::new();
+    for (name, kind, request) in cases {
+        let figures = match bench.do_move(request) {
+            Some(run) => score(name, kind, &run, &settings),
+            None => MoveFigures {
+                name: name.to_owned(),
+                outcome: format!(
+                    "no result (refused: {})",
+                    bench.sink.refused.last().map_or("no", String::as_str)
+                ),
+                truth_error: f64::NAN,
+                truth_target: f64::NAN,
+                frame_error: f64::NAN,
+                duration_s: f64::NAN,
+                optimal_s: f64::NAN,
+                pass: false,
+            },
+        };
+        moves.push(figures);
+    }
+    let response_time_s = bench.sim.engine().response_time().unwrap_or(f64::NAN);
+    let watchdog = watchdog(&mut bench, &chassis);
+    let pass = moves.iter().all(|m| m.pass) && watchdog.pass;
+    Ok(ControlReport {
+        plant: plant.name.clone(),
+        seed,
+        response_time_s,
+        moves,
+        watchdog,
+        not_measured: vec![
+            "goal 10 m away (go-to-goal is not built yet)",
+            "50 m closed path (trajectory following is not built yet)",
+        ],
+        pass,
+    })
+}
+
+/// Scores a move after it settled: against truth, and in the frame it closed on.
+fn score(name: &str, kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigures {
+    let result = &run.result;
+    let ((before, frame_before), (after, frame_after)) = (run.before, run.after);
+    let (truth_error, truth_target, frame_error, frame_target, optimal_s) = match kind {
+        MoveKind::Straight { distance_m } => {
+            let (s, c) = before.yaw.sin_cos();
+            let along = (after.x - before.x) * c + (after.y - before.y) * s;
+            let (s, c) = frame_before.odom_yaw.sin_cos();
+            let frame_along = ((frame_after.x - frame_before.x) * c
+                + (frame_after.y - frame_before.y) * s)
+                / result.wheel_scale;
+            (
+                (along - distance_m).abs(),
+                target::DISTANCE_ABS_M + target::DISTANCE_REL * distance_m.abs(),
+                (frame_along - distance_m).abs(),
+                target::DISTANCE_FRAME_M,
+                Profile::plan(distance_m, settings.linear).duration(),
+            )
+        }
+        MoveKind::Turn { angle_rad } => {
+            let turned = wrap(after.yaw - before.yaw);
+            let frame_turned = match result.heading {
+                HeadingSource::Map => wrap(frame_after.map_yaw - frame_before.map_yaw),
+                HeadingSource::Odom => wrap(frame_after.odom_yaw - frame_before.odom_yaw),
+            };
+            (
+                wrap(turned - angle_rad).abs().to_degrees(),
+                target::TURN_DEG,
+                wrap(frame_turned - angle_rad).abs().to_degrees(),
+                target::TURN_DEG,
+                Profile::plan(angle_rad, settings.angular).duration(),
+            )
+        }
+    };
+    let pass = result.outcome == Outcome::Succeeded
+        && truth_error <= truth_target
+        && frame_error <= frame_target
+        && result.duration_s <= target::DURATION_RATIO * optimal_s;
+    MoveFigures {
+        name: name.to_owned(),
+        outcome: result.outcome.to_string(),
+        truth_error,
+        truth_target,
+        frame_error,
+        duration_s: result.duration_s,
+        optimal_s,
+        pass,
+    }
+}
+
+/// Drives at full speed, stops commanding, and times the stop; each trial's last command
+/// falls at another millisecond of the control period.
+fn watchdog(bench: &mut Bench, chassis: &crate::config::chassis::ChassisConfig) -> WatchdogFigures {
+    let bound_s = chassis.cmd_timeout_s
+        + crate::core::chassis::CONTROL_PERIOD.as_secs_f64()
+        + WATCHDOG_SPEED / chassis.max_decel_mps2;
+    let mut worst: f64 = 0.0;
+    for trial in 0..WATCHDOG_TRIALS {
+        // Re-arm (a move's end leaves the vehicle armed; a zero command is harmless).
+        bench.drive(0.0, 0.0, 0.3);
+        bench.run_for(0.001 * f64::from(trial));
+        bench.drive(WATCHDOG_SPEED, 0.0, 2.0);
+        // `drive` ran 100 ms past its last command.
+        let mut since_last = 0.1;
+        let step = PLANT_STEP.as_secs_f64();
+        while bench.truth().v.abs() >= STOPPED_MPS && since_last < 10.0 {
+            bench.sim.step(FIXED, &mut bench.sink);
+            since_last += step;
+        }
+        worst = worst.max(since_last);
+        bench.run_for(0.5);
+    }
+    WatchdogFigures {
+        worst_stop_s: worst,
+        bound_s,
+        pass: worst <= bound_s,
+    }
+}
+
+impl ControlReport {
+    /// The table.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "control benchmark: plant {}, seed {}, drive response learnt {:.3} s",
+            self.plant, self.seed, self.response_time_s
+        );
+        let _ = writeln!(
+            out,
+            "{:<12} {:<10} {:>12} {:>10} {:>12} {:>8} {:>8} {:>6} {:>6}",
+            "move", "outcome", "truth err", "target", "frame err", "took s", "opt s", "ratio", ""
+        );
+        for m in &self.moves {
+            let unit = if m.name.ends_with('°') { "°" } else { " mm" };
+            let scale = if unit == "°" { 1.0 } else { 1000.0 };
+            let _ = writeln!(
+                out,
+                "{:<12} {:<10} {:>9.2}{unit:<3} {:>7.2}{unit:<3} {:>9.2}{unit:<3} {:>8.2} {:>8.2} {:>6.3} {:>6}",
+                m.name,
+                m.outcome.split(':').next().unwrap_or(""),
+                m.truth_error * scale,
+                m.truth_target * scale,
+                m.frame_error * scale,
+                m.duration_s,
+                m.optimal_s,
+                m.duration_s / m.optimal_s,
+                if m.pass { "ok" } else { "MISSED" },
+            );
+        }
+        let _ = writeln!(
+            out,
+            "watchdog: wheels at rest {:.3} s after the last command at worst of {WATCHDOG_TRIALS} (bound {:.3} s): {}",
+            self.watchdog.worst_stop_s,
+            self.watchdog.bound_s,
+            if self.watchdog.pass { "ok" } else { "MISSED" }
+        );
+        for n in &self.not_measured {
+            let _ = writeln!(out, "not measured: {n}");
+        }
+        out
+    }
+
+    /// The one-line JSON summary.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_else(|e| format!(r#"{{"error":"{e}"}}"#))
+    }
+}

@@ -1,0 +1,212 @@
+//! `[motion]`: the limits and tolerances of closed-loop moves (distance and angle moves,
+//! goals, trajectory tasks). Every limit defaults to the drive train's (`[chassis]`) and may
+//! only be lower: the chassis limits stay the last word on what reaches the wheels.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::chassis::ChassisConfig;
+use super::{ConfigError, check_range};
+use crate::control::profile::Limits;
+
+/// `[motion]`
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct MotionConfig {
+    /// Peak speed of a move, m/s (default: `chassis.max_speed_mps`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_speed_mps: Option<f64>,
+    /// Acceleration of a move, m/s² (default: `chassis.max_accel_mps2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_accel_mps2: Option<f64>,
+    /// Deceleration of a move, m/s² (default: `chassis.max_decel_mps2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_decel_mps2: Option<f64>,
+    /// Jerk limit of a move, m/s³; without one the profile is a trapezoid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_jerk_mps3: Option<f64>,
+    /// Peak yaw rate of a turn, rad/s (default: `chassis.max_yaw_rate_rps`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_yaw_rate_rps: Option<f64>,
+    /// Yaw acceleration (and deceleration) of a turn, rad/s² (default:
+    /// `chassis.max_yaw_accel_rps2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_yaw_accel_rps2: Option<f64>,
+    /// Yaw jerk limit of a turn, rad/s³; without one the profile is a trapezoid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_yaw_jerk_rps3: Option<f64>,
+    /// A distance move has arrived within this, m (default 0.001).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_tolerance_m: Option<f64>,
+    /// A turn has arrived within this, degrees (default 0.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angle_tolerance_deg: Option<f64>,
+    /// A move times out after its profile's duration times this ... (default 1.5)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_allowance_factor: Option<f64>,
+    /// ... plus this, s (default 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_allowance_s: Option<f64>,
+}
+
+/// The settings a move runs with, resolved against the chassis limits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionSettings {
+    /// Distance moves, m.
+    pub linear: Limits,
+    /// Turns, rad.
+    pub angular: Limits,
+    /// Arrival tolerance of a distance move, m.
+    pub position_tolerance_m: f64,
+    /// Arrival tolerance of a turn, rad.
+    pub angle_tolerance_rad: f64,
+    /// Time allowance: the profile's duration times this ...
+    pub time_allowance_factor: f64,
+    /// ... plus this, s.
+    pub time_allowance_s: f64,
+}
+
+impl MotionConfig {
+    /// The settings under `chassis`'s limits.
+    pub fn settings(&self, chassis: &ChassisConfig) -> MotionSettings {
+        MotionSettings {
+            linear: Limits {
+                speed: self.max_speed_mps.unwrap_or(chassis.max_speed_mps),
+                accel: self.max_accel_mps2.unwrap_or(chassis.max_accel_mps2),
+                decel: self.max_decel_mps2.unwrap_or(chassis.max_decel_mps2),
+                jerk: self.max_jerk_mps3.unwrap_or(f64::INFINITY),
+            },
+            angular: Limits {
+                speed: self.max_yaw_rate_rps.unwrap_or(chassis.max_yaw_rate_rps),
+                accel: self
+                    .max_yaw_accel_rps2
+                    .unwrap_or(chassis.max_yaw_accel_rps2),
+                decel: self
+                    .max_yaw_accel_rps2
+                    .unwrap_or(chassis.max_yaw_accel_rps2),
+                jerk: self.max_yaw_jerk_rps3.unwrap_or(f64::INFINITY),
+            },
+            position_tolerance_m: self.position_tolerance_m.unwrap_or(0.001),
+            angle_tolerance_rad: self.angle_tolerance_deg.unwrap_or(0.1).to_radians(),
+            time_allowance_factor: self.time_allowance_factor.unwrap_or(1.5),
+            time_allowance_s: self.time_allowance_s.unwrap_or(3.0),
+        }
+    }
+
+    /// Checks every value against its range and the chassis limits.
+    pub fn validate(
+        &self,
+        chassis: Option<&ChassisConfig>,
+        file: &Path,
+    ) -> Result<(), ConfigError> {
+        let Some(chassis) = chassis else {
+            return Err(ConfigError::invalid(
+                file,
+                "motion",
+                "is set without a [chassis]".to_owned(),
+                "add the [chassis] table of the drive train, or remove [motion]",
+            ));
+        };
+        let capped = [
+            (
+                "max_speed_mps",
+                self.max_speed_mps,
+                chassis.max_speed_mps,
+                "m/s",
+            ),
+            (
+                "max_accel_mps2",
+                self.max_accel_mps2,
+                chassis.max_accel_mps2,
+                "m/s²",
+            ),
+            (
+                "max_decel_mps2",
+                self.max_decel_mps2,
+                chassis.max_decel_mps2,
+                "m/s²",
+            ),
+            (
+                "max_yaw_rate_rps",
+                self.max_yaw_rate_rps,
+                chassis.max_yaw_rate_rps,
+                "rad/s",
+            ),
+            (
+                "max_yaw_accel_rps2",
+                self.max_yaw_accel_rps2,
+                chassis.max_yaw_accel_rps2,
+                "rad/s²",
+            ),
+        ];
+        for (key, value, cap, unit) in capped {
+            if let Some(v) = value {
+                // A move may be gentler than the drive train, never harsher.
+                check_range(file, &format!("motion.{key}"), v, 0.001..=cap, unit)?;
+            }
+        }
+        for (key, value, range, unit) in [
+            ("max_jerk_mps3", self.max_jerk_mps3, 0.01..=1000.0, "m/s³"),
+            (
+                "max_yaw_jerk_rps3",
+                self.max_yaw_jerk_rps3,
+                0.01..=1000.0,
+                "rad/s³",
+            ),
+            (
+                "position_tolerance_m",
+                self.position_tolerance_m,
+                0.0001..=0.5,
+                "m",
+            ),
+            (
+                "angle_tolerance_deg",
+                self.angle_tolerance_deg,
+                0.01..=20.0,
+                "degrees",
+            ),
+            (
+                "time_allowance_factor",
+                self.time_allowance_factor,
+                1.0..=100.0,
+                "times",
+            ),
+            ("time_allowance_s", self.time_allowance_s, 0.0..=3600.0, "s"),
+        ] {
+            if let Some(v) = value {
+                check_range(file, &format!("motion.{key}"), v, range, unit)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chassis() -> ChassisConfig {
+        toml::from_str("wheel_radius_m = 0.1\ntrack_m = 0.5\nmax_speed_mps = 1.0").expect("chassis")
+    }
+
+    #[test]
+    fn limits_default_to_the_chassis_and_may_only_be_lower() {
+        let m = MotionConfig::default();
+        let s = m.settings(&chassis());
+        assert_eq!(s.linear.speed, 1.0);
+        assert!(s.linear.jerk.is_infinite());
+        let file = Path::new("v.toml");
+        assert!(m.validate(Some(&chassis()), file).is_ok());
+        let faster = MotionConfig {
+            max_speed_mps: Some(1.2),
+            ..m
+        };
+        let e = faster
+            .validate(Some(&chassis()), file)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("motion.max_speed_mps"), "{e}");
+        assert!(m.validate(None, file).is_err());
+    }
+}

@@ -1,0 +1,222 @@
+//! Closed-loop motion: the moves the vehicle makes by itself, one at a time, and their
+//! results. It proposes a velocity at each control tick; the drive train's arbiter, limits,
+//! ramps and safety supervisor decide what reaches the wheels ([`crate::core::chassis`]).
+
+pub mod moves;
+pub mod profile;
+pub mod response;
+
+use std::fmt;
+
+use crate::config::motion::MotionSettings;
+use crate::core::status::Navigation;
+use crate::fusion::odometry::OdomPose;
+use crate::time::Timestamp;
+use moves::{RelativeMove, Step};
+
+/// Names one motion from its start to its result.
+pub type MotionId = u64;
+
+/// A distance or angle move relative to the pose at its start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MoveKind {
+    /// Straight, m: positive forward, negative back.
+    Straight {
+        /// m.
+        distance_m: f64,
+    },
+    /// On the spot, rad: positive left (counter-clockwise), negative right.
+    Turn {
+        /// rad.
+        angle_rad: f64,
+    },
+}
+
+impl fmt::Display for MoveKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Straight { distance_m } if distance_m < 0.0 => {
+                write!(f, "back {:.3} m", -distance_m)
+            }
+            Self::Straight { distance_m } => write!(f, "forward {distance_m:.3} m"),
+            Self::Turn { angle_rad } if angle_rad < 0.0 => {
+                write!(f, "turn right {:.1}°", -angle_rad.to_degrees())
+            }
+            Self::Turn { angle_rad } => write!(f, "turn left {:.1}°", angle_rad.to_degrees()),
+        }
+    }
+}
+
+/// How a motion ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Arrived within its tolerance.
+    Succeeded,
+    /// Ended on request (a new move, a velocity command, a stop, a mode switch): why.
+    Cancelled(String),
+    /// Did not arrive within its time allowance.
+    TimedOut,
+    /// Ended by a fault or a lost precondition: why.
+    Aborted(String),
+}
+
+impl fmt::Display for Outcome {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Succeeded => write!(f, "succeeded"),
+            Self::Cancelled(why) => write!(f, "cancelled: {why}"),
+            Self::TimedOut => write!(f, "timed out"),
+            Self::Aborted(why) => write!(f, "aborted: {why}"),
+        }
+    }
+}
+
+/// The end of a motion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MotionResult {
+    /// Which motion.
+    pub id: MotionId,
+    /// What it was.
+    pub kind: MoveKind,
+    /// How it ended.
+    pub outcome: Outcome,
+    /// From acceptance to the end, s.
+    pub duration_s: f64,
+    /// The time-optimal profile's duration, s.
+    pub planned_s: f64,
+    /// What was left to go where the vehicle comes to rest, in the frame it closed on (m
+    /// or rad); NaN when it ended before arriving.
+    pub error: f64,
+    /// Where its heading came from.
+    pub heading: moves::HeadingSource,
+    /// The wheel scale its distance was corrected by (odometry per true distance).
+    pub wheel_scale: f64,
+}
+
+impl fmt::Display for MotionResult {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let error = match self.kind {
+            MoveKind::Straight { .. } => format!("{:.1} mm", self.error * 1000.0),
+            MoveKind::Turn { .. } => format!("{:.2}°", self.error.to_degrees()),
+        };
+        write!(
+            f,
+            "move {} ({}): {} after {:.2} s (profile {:.2} s), left to go {error}",
+            self.id, self.kind, self.outcome, self.duration_s, self.planned_s
+        )
+    }
+}
+
+/// The vehicle's pose as a move sees it at a control tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseView {
+    /// The `odom` frame's pose and speeds.
+    pub odom: OdomPose,
+    /// The map yaw (rad), while the vehicle is located.
+    pub map_yaw: Option<f64>,
+    /// Odometry distance per true distance (1 + the wheels' scale error the fusion has
+    /// learnt), while the vehicle is located.
+    pub wheel_scale: Option<f64>,
+}
+
+/// The motion under way, if any, and the last result.
+#[derive(Debug, Clone)]
+pub struct Motion {
+    settings: MotionSettings,
+    active: Option<(MotionId, RelativeMove)>,
+    last_id: MotionId,
+    results: Vec<MotionResult>,
+    navigation: Navigation,
+}
+
+impl Motion {
+    /// No motion yet.
+    pub fn new(settings: MotionSettings) -> Self {
+        Self {
+            settings,
+            active: None,
+            last_id: 0,
+            results: Vec::new(),
+            navigation: Navigation::Idle,
+        }
+    }
+
+    /// Whether a motion is under way.
+    pub fn is_active(&self) -> bool {
+        self.active.is_some()
+    }
+
+    /// Whether the motion under way holds its heading on the map's yaw (a change of the map
+    /// frame would move its goal).
+    pub fn uses_map_heading(&self) -> bool {
+        self.active
+            .as_ref()
+            .is_some_and(|(_, m)| m.heading_source() == moves::HeadingSource::Map)
+    }
+
+    /// Starts a move at `t` from `view`, replacing (cancelling) the one under way.
+    pub fn start(&mut self, t: Timestamp, kind: MoveKind, view: &PoseView) -> MotionId {
+        self.end(t, Outcome::Cancelled("replaced by a new move".into()), None);
+        self.last_id += 1;
+        self.active = Some((
+            self.last_id,
+            RelativeMove::new(t, kind, view, &self.settings),
+        ));
+        self.navigation = Navigation::Running;
+        self.last_id
+    }
+
+    /// Ends the motion under way (if any) with `outcome`; `error` when known.
+    pub fn end(&mut self, t: Timestamp, outcome: Outcome, error: Option<f64>) {
+        let Some((id, m)) = self.active.take() else {
+            return;
+        };
+        self.navigation = if outcome == Outcome::Succeeded {
+            Navigation::Succeeded
+        } else {
+            Navigation::Failed
+        };
+        self.results.push(MotionResult {
+            id,
+            kind: m.kind(),
+            outcome,
+            duration_s: t.saturating_since(m.started()).as_secs_f64(),
+            planned_s: m.profile().duration(),
+            error: error.unwrap_or(f64::NAN),
+            heading: m.heading_source(),
+            wheel_scale: m.wheel_scale(),
+        });
+    }
+
+    /// One control step at `t`: the velocity (m/s, rad/s) the motion asks for, or `None`
+    /// when none is under way (or it just ended). Without a pose the motion is aborted.
+    pub fn step(
+        &mut self,
+        t: Timestamp,
+        view: Option<&PoseView>,
+        response_s: f64,
+    ) -> Option<(f64, f64)> {
+        let (_, m) = self.active.as_mut()?;
+        let Some(view) = view else {
+            self.end(t, Outcome::Aborted("no odometry".into()), None);
+            return None;
+        };
+        match m.step(t, view, response_s) {
+            Step::Drive { v, w } => Some((v, w)),
+            Step::Done(outcome, error) => {
+                self.end(t, outcome, Some(error));
+                None
+            }
+        }
+    }
+
+    /// The results since the last call.
+    pub fn take_results(&mut self) -> Vec<MotionResult> {
+        std::mem::take(&mut self.results)
+    }
+
+    /// `nav.status`: running, or how the last motion ended.
+    pub fn navigation(&self) -> Navigation {
+        self.navigation
+    }
+}
