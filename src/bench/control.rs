@@ -7,6 +7,8 @@
 //! where the last ended. A move's duration is compared with the time-optimal profile under
 //! the configured limits (`[motion]`, by default the chassis limits).
 
+use std::f64::consts::{FRAC_PI_2, PI};
+
 use serde::Serialize;
 
 use crate::config::ConfigError;
@@ -57,6 +59,8 @@ pub mod target {
 pub struct MoveFigures {
     /// What it was.
     pub name: String,
+    /// A turn (figures in degrees) rather than a distance (metres).
+    pub turn: bool,
     /// How it ended.
     pub outcome: String,
     /// Error against truth after it settled: m for distances, degrees for turns.
@@ -232,72 +236,29 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
     bench.drive(WARMUP.0, 0.0, WARMUP.1);
     bench.drive(0.0, 0.0, 2.0);
 
-    let cases: [(&str, MoveKind, &str); 10] = [
-        (
-            "forward 0.1 m",
-            MoveKind::Straight { distance_m: 0.1 },
-            r#"{"cmd":"1","distance":10}"#,
-        ),
-        (
-            "forward 1 m",
-            MoveKind::Straight { distance_m: 1.0 },
-            r#"{"cmd":"1","distance":100}"#,
-        ),
-        (
-            "forward 5 m",
-            MoveKind::Straight { distance_m: 5.0 },
-            r#"{"cmd":"1","distance":500}"#,
-        ),
-        (
-            "back 0.1 m",
-            MoveKind::Straight { distance_m: -0.1 },
-            r#"{"cmd":"2","distance":10}"#,
-        ),
-        (
-            "back 1 m",
-            MoveKind::Straight { distance_m: -1.0 },
-            r#"{"cmd":"2","distance":100}"#,
-        ),
-        (
-            "back 5 m",
-            MoveKind::Straight { distance_m: -5.0 },
-            r#"{"cmd":"2","distance":500}"#,
-        ),
-        (
-            "left 90°",
-            MoveKind::Turn {
-                angle_rad: 90f64.to_radians(),
-            },
-            r#"{"cmd":"3","distance":90}"#,
-        ),
-        (
-            "right 90°",
-            MoveKind::Turn {
-                angle_rad: -90f64.to_radians(),
-            },
-            r#"{"cmd":"4","distance":90}"#,
-        ),
-        (
-            "left 180°",
-            MoveKind::Turn {
-                angle_rad: 180f64.to_radians(),
-            },
-            r#"{"cmd":"3","distance":180}"#,
-        ),
-        (
-            "right 180°",
-            MoveKind::Turn {
-                angle_rad: -180f64.to_radians(),
-            },
-            r#"{"cmd":"4","distance":180}"#,
-        ),
+    let cases = [
+        MoveKind::Straight { distance_m: 0.1 },
+        MoveKind::Straight { distance_m: 1.0 },
+        MoveKind::Straight { distance_m: 5.0 },
+        MoveKind::Straight { distance_m: -0.1 },
+        MoveKind::Straight { distance_m: -1.0 },
+        MoveKind::Straight { distance_m: -5.0 },
+        MoveKind::Turn {
+            angle_rad: FRAC_PI_2,
+        },
+        MoveKind::Turn {
+            angle_rad: -FRAC_PI_2,
+        },
+        MoveKind::Turn { angle_rad: PI },
+        MoveKind::Turn { angle_rad: -PI },
     ];
     let mut moves = Vec::new();
-    for (name, kind, request) in cases {
-        let figures = match bench.do_move(request) {
-            Some(run) => score(name, kind, &run, &settings),
+    for kind in cases {
+        let figures = match bench.do_move(&navi_cmd(kind)) {
+            Some(run) => score(kind, &run, &settings),
             None => MoveFigures {
-                name: name.to_owned(),
+                name: kind.to_string(),
+                turn: matches!(kind, MoveKind::Turn { .. }),
                 outcome: format!(
                     "no result (refused: {})",
                     bench.sink.refused.last().map_or("no", String::as_str)
@@ -330,7 +291,18 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
 }
 
 /// Scores a move after it settled: against truth, and in the frame it closed on.
-fn score(name: &str, kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigures {
+/// The `set_navi_cmd` request of a move: cm or whole degrees, as the service takes them.
+fn navi_cmd(kind: MoveKind) -> String {
+    let (cmd, amount) = match kind {
+        MoveKind::Straight { distance_m } if distance_m < 0.0 => (2, -distance_m * 100.0),
+        MoveKind::Straight { distance_m } => (1, distance_m * 100.0),
+        MoveKind::Turn { angle_rad } if angle_rad < 0.0 => (4, -angle_rad.to_degrees()),
+        MoveKind::Turn { angle_rad } => (3, angle_rad.to_degrees()),
+    };
+    format!(r#"{{"cmd":"{cmd}","distance":{}}}"#, amount.round())
+}
+
+fn score(kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigures {
     let result = &run.result;
     let ((before, frame_before), (after, frame_after)) = (run.before, run.after);
     let (truth_error, truth_target, frame_error, frame_target, optimal_s) = match kind {
@@ -369,7 +341,8 @@ fn score(name: &str, kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -
         && frame_error <= frame_target
         && result.duration_s <= target::DURATION_RATIO * optimal_s;
     MoveFigures {
-        name: name.to_owned(),
+        name: kind.to_string(),
+        turn: matches!(kind, MoveKind::Turn { .. }),
         outcome: result.outcome.to_string(),
         truth_error,
         truth_target,
@@ -421,15 +394,14 @@ impl ControlReport {
         );
         let _ = writeln!(
             out,
-            "{:<12} {:<10} {:>12} {:>10} {:>12} {:>8} {:>8} {:>6} {:>6}",
+            "{:<18} {:<10} {:>12} {:>10} {:>12} {:>8} {:>8} {:>6} {:>6}",
             "move", "outcome", "truth err", "target", "frame err", "took s", "opt s", "ratio", ""
         );
         for m in &self.moves {
-            let unit = if m.name.ends_with('°') { "°" } else { " mm" };
-            let scale = if unit == "°" { 1.0 } else { 1000.0 };
+            let (unit, scale) = if m.turn { ("°", 1.0) } else { (" mm", 1000.0) };
             let _ = writeln!(
                 out,
-                "{:<12} {:<10} {:>9.2}{unit:<3} {:>7.2}{unit:<3} {:>9.2}{unit:<3} {:>8.2} {:>8.2} {:>6.3} {:>6}",
+                "{:<18} {:<10} {:>9.2}{unit:<3} {:>7.2}{unit:<3} {:>9.2}{unit:<3} {:>8.2} {:>8.2} {:>6.3} {:>6}",
                 m.name,
                 m.outcome.split(':').next().unwrap_or(""),
                 m.truth_error * scale,

@@ -108,45 +108,39 @@ impl MotionConfig {
                 "add the [chassis] table of the drive train, or remove [motion]",
             ));
         };
-        let capped = [
+        // A move may be gentler than the drive train, never harsher.
+        let capped = |cap: f64| 0.001..=cap;
+        for (key, value, range, unit) in [
             (
                 "max_speed_mps",
                 self.max_speed_mps,
-                chassis.max_speed_mps,
+                capped(chassis.max_speed_mps),
                 "m/s",
             ),
             (
                 "max_accel_mps2",
                 self.max_accel_mps2,
-                chassis.max_accel_mps2,
+                capped(chassis.max_accel_mps2),
                 "m/s²",
             ),
             (
                 "max_decel_mps2",
                 self.max_decel_mps2,
-                chassis.max_decel_mps2,
+                capped(chassis.max_decel_mps2),
                 "m/s²",
             ),
             (
                 "max_yaw_rate_rps",
                 self.max_yaw_rate_rps,
-                chassis.max_yaw_rate_rps,
+                capped(chassis.max_yaw_rate_rps),
                 "rad/s",
             ),
             (
                 "max_yaw_accel_rps2",
                 self.max_yaw_accel_rps2,
-                chassis.max_yaw_accel_rps2,
+                capped(chassis.max_yaw_accel_rps2),
                 "rad/s²",
             ),
-        ];
-        for (key, value, cap, unit) in capped {
-            if let Some(v) = value {
-                // A move may be gentler than the drive train, never harsher.
-                check_range(file, &format!("motion.{key}"), v, 0.001..=cap, unit)?;
-            }
-        }
-        for (key, value, range, unit) in [
             ("max_jerk_mps3", self.max_jerk_mps3, 0.01..=1000.0, "m/s³"),
             (
                 "max_yaw_jerk_rps3",

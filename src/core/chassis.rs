@@ -333,11 +333,7 @@ impl Chassis {
     /// Whether the drives are ready to take a move: configured, reachable, not latched.
     pub fn ready_to_move(&self) -> Result<(), CommandRejected> {
         self.drives_reachable()?;
-        match self.safety.state() {
-            State::Latched { reason, .. } => Err(Refusal::Latched(reason.to_string()).into()),
-            State::Resetting { .. } => Err(Refusal::Resetting.into()),
-            State::Standby | State::Armed => Ok(()),
-        }
+        Ok(self.safety.may_move()?)
     }
 
     /// The drives' speed response time (a first-order lag), s, learnt from commands and

@@ -351,12 +351,12 @@ impl Vehicle {
                 Vec::new()
             }
             Input::Command(Command::Velocity { vx, wz }) => {
-                // In manual mode the operator's velocity takes over from a move; in
-                // navigation mode it is refused and the move goes on.
-                if self.chassis.as_ref().map(Chassis::mode) == Some(DriveMode::Manual) {
+                // Taken (manual mode), the operator's velocity takes over from a move;
+                // refused (navigation mode, a bad value), the move goes on.
+                let result = self.with_chassis(|c| c.command(t, vx, wz));
+                if result.is_ok() {
                     self.end_motion(t, Outcome::Cancelled("a velocity command took over".into()));
                 }
-                let result = self.with_chassis(|c| c.command(t, vx, wz));
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Move(kind)) => {
@@ -450,40 +450,38 @@ impl Vehicle {
         }
     }
 
-    /// One control step: the move under way proposes a velocity, the drive train decides
-    /// what reaches the wheels, and a latched stop ends the move.
+    /// One control step: a latched stop ends the move under way, the move proposes a
+    /// velocity, and the drive train decides what reaches the wheels. A stop that latches
+    /// during this tick ends the move at the next.
     fn control_tick(&mut self, t: Timestamp) -> Vec<Output> {
-        let view = self.pose_view(t);
-        let (Some(chassis), Some(motion)) = (&mut self.chassis, &mut self.motion) else {
-            return match &mut self.chassis {
-                Some(c) => vec![Output::Wheels(c.tick(t))],
-                None => Vec::new(),
-            };
+        // Only a move needs the pose (two filter predictions).
+        let moving = self.motion.as_ref().is_some_and(Motion::is_active);
+        let view = if moving { self.pose_view(t) } else { None };
+        let Some(chassis) = &mut self.chassis else {
+            return Vec::new();
         };
-        // A stop latched since the last tick (a command, an e-stop) ends the move first.
-        if let Some(cause) = chassis.safety().latched() {
-            motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
-        }
-        if motion.is_active() {
-            match motion.step(t, view.as_ref(), chassis.response_time()) {
-                Some((v, w)) => {
-                    if let Err(e) = chassis.autonomous(t, v, w) {
-                        motion.end(t, Outcome::Aborted(e.to_string()), None);
+        let mut out = Vec::new();
+        if let Some(motion) = &mut self.motion {
+            if let Some(cause) = chassis.safety().latched() {
+                motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+            }
+            if motion.is_active() {
+                match motion.step(t, view.as_ref(), chassis.response_time()) {
+                    Some((v, w)) => {
+                        if let Err(e) = chassis.autonomous(t, v, w) {
+                            motion.end(t, Outcome::Aborted(e.to_string()), None);
+                        }
                     }
+                    // Just ended: hold zero rather than let the last speed run to the timeout.
+                    None => chassis.hold_zero(t),
                 }
-                // Just ended: hold zero rather than let the last speed run to the timeout.
-                None => chassis.hold_zero(t),
+            }
+            for result in motion.take_results() {
+                out.push(Output::Event(result.to_string()));
+                out.push(Output::MotionEnded(result));
             }
         }
-        let wheels = chassis.tick(t);
-        if let Some(cause) = chassis.safety().latched() {
-            motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
-        }
-        let mut out = vec![Output::Wheels(wheels)];
-        for result in motion.take_results() {
-            out.push(Output::Event(result.to_string()));
-            out.push(Output::MotionEnded(result));
-        }
+        out.insert(0, Output::Wheels(chassis.tick(t)));
         out
     }
 

@@ -311,12 +311,16 @@ impl Safety {
     /// Starting a move is as deliberate as a velocity command, so it arms from standby; it
     /// never re-arms a latched stop, zero or not.
     pub fn autonomous(&mut self, t: Timestamp, vx: f64, wz: f64) -> Result<(), Refusal> {
+        self.may_move()?;
+        self.state = State::Armed;
+        self.command = Some((t, vx, wz));
+        Ok(())
+    }
+
+    /// Whether a move may drive now: not while latched or resetting.
+    pub fn may_move(&self) -> Result<(), Refusal> {
         match &self.state {
-            State::Standby | State::Armed => {
-                self.state = State::Armed;
-                self.command = Some((t, vx, wz));
-                Ok(())
-            }
+            State::Standby | State::Armed => Ok(()),
             State::Latched { reason, .. } => Err(Refusal::Latched(reason.to_string())),
             State::Resetting { .. } => Err(Refusal::Resetting),
         }
