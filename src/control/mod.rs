@@ -112,6 +112,12 @@ impl fmt::Display for MotionResult {
 pub struct PoseView {
     /// The `odom` frame's pose and speeds.
     pub odom: OdomPose,
+    /// When `odom` was measured (the last wheel reading): drives report less often than
+    /// the control loop runs, so it is up to a feedback period old.
+    pub odom_at: Timestamp,
+    /// When `odom.w` applies (a gyro mean over the last wheel interval applies at its
+    /// middle).
+    pub yaw_rate_at: Timestamp,
     /// The map yaw (rad), while the vehicle is located.
     pub map_yaw: Option<f64>,
     /// Odometry distance per true distance (1 + the wheels' scale error the fusion has

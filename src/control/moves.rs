@@ -8,12 +8,14 @@
 //!   yaw. A turn counts its angle on the same heading source.
 //! - The move follows a time-optimal profile ([`super::profile`]); the command is the
 //!   profile's speed, led by the drives' response time times its acceleration, plus a
-//!   correction proportional to the distance the vehicle lags the profile by. The gain comes
-//!   from the learnt response time (damping about 0.7), not from a plant's figure.
+//!   correction proportional to the distance the vehicle lags the profile by (compared at the
+//!   time the position was measured) and a bounded integral of it. The gains come from the
+//!   learnt response time (damping about 0.7), not from a plant's figure.
 //! - It has arrived once the profile has ended and the point where the vehicle comes to
 //!   rest is within the tolerance: the position plus the speed times the response time (a
 //!   first-order drive coasts that far once its command is zero), with that coast itself
-//!   within the tolerance. It has timed out when the allowance is spent first.
+//!   within a few tolerances (the prediction's error is a share of it). It has timed out
+//!   when the allowance is spent first.
 
 use super::profile::{Limits, Profile};
 use super::{MoveKind, Outcome, PoseView};
@@ -21,9 +23,15 @@ use crate::config::motion::MotionSettings;
 use crate::fusion::ekf::wrap;
 use crate::time::Timestamp;
 
-/// The share of the acceleration limits the profile plans with: the rest is headroom for
-/// the correction, which the drive train's ramps would otherwise clip.
-const PROFILE_ACCEL_SHARE: f64 = 0.95;
+/// The share of the speed and acceleration limits the profile plans with: the rest is
+/// headroom for the correction, which the drive train's limits would otherwise clip (a
+/// profile cruising at the speed limit could never make up a lag, and wheels that read long
+/// reach less than their commanded speed over the ground).
+const PROFILE_SHARE: f64 = 0.95;
+
+/// A move may end while still rolling, by at most this many tolerances of coast: the
+/// first-order model predicts where it comes to rest, and its error is a share of the coast.
+const COAST_TOLERANCES: f64 = 3.0;
 
 /// What the heading is read from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,6 +78,14 @@ pub struct RelativeMove {
     started: Timestamp,
     /// Turned so far on the heading source (unwrapped), rad.
     turned: f64,
+    /// ∫ error dt of the position loop (m·s or rad·s), and the last step's time.
+    integral: f64,
+    last_step: Option<Timestamp>,
+    /// The profile has ended: settling on the goal.
+    settling: bool,
+    /// The most the integral may add to the command: the headroom the profile leaves under
+    /// the speed limit (units/s).
+    integral_limit: f64,
     last_yaw: f64,
     /// Odometry distance per true distance (1 + the wheels' scale error).
     wheel_scale: f64,
@@ -85,8 +101,9 @@ impl RelativeMove {
             None => (HeadingSource::Odom, view.odom.yaw),
         };
         let share = |l: Limits| Limits {
-            accel: l.accel * PROFILE_ACCEL_SHARE,
-            decel: l.decel * PROFILE_ACCEL_SHARE,
+            speed: l.speed * PROFILE_SHARE,
+            accel: l.accel * PROFILE_SHARE,
+            decel: l.decel * PROFILE_SHARE,
             ..l
         };
         let (amount, limits, tolerance) = match kind {
@@ -117,6 +134,10 @@ impl RelativeMove {
             },
             started: t,
             turned: 0.0,
+            integral: 0.0,
+            last_step: None,
+            settling: false,
+            integral_limit: limits.speed / PROFILE_SHARE * (1.0 - PROFILE_SHARE),
             last_yaw: yaw,
             wheel_scale: view.wheel_scale.unwrap_or(1.0),
             tolerance,
@@ -177,22 +198,64 @@ impl RelativeMove {
             ),
             MoveKind::Turn { .. } => (self.sign * self.turned, self.sign * view.odom.w),
         };
+        // The progress is as old as its source: compare it with where the profile was then,
+        // or the staleness reads as lag and the correction overdrives every move.
+        let measured_at = match (self.kind, self.heading) {
+            (MoveKind::Turn { .. }, HeadingSource::Map) => t,
+            _ => view.odom_at.min(t),
+        };
+        let measured_elapsed = measured_at.saturating_since(self.started).as_secs_f64();
         let plan = self.profile.sample(elapsed);
-        let lag = plan.position - progress;
-        let remaining = self.profile.distance() - progress;
+        let lag = self.profile.sample(measured_elapsed).position - progress;
+        // The speed now: as far from the profile's as it was when measured (the measured
+        // speed is a feedback period old or more, which matters while braking).
+        let speed_at = match self.kind {
+            MoveKind::Straight { .. } => view.odom_at,
+            MoveKind::Turn { .. } => view.yaw_rate_at,
+        }
+        .min(t);
+        let speed_elapsed = speed_at.saturating_since(self.started).as_secs_f64();
+        let speed_now = speed_now + self.profile.sample(elapsed).speed
+            - self.profile.sample(speed_elapsed).speed;
+        // What is left now (the vehicle went on since it was measured), and how far it
+        // coasts once its command is zero.
+        let age = elapsed - measured_elapsed;
+        let remaining = self.profile.distance() - progress - speed_now * age;
         let ended = elapsed >= self.profile.duration();
         let coast = speed_now * response_s;
-        if ended && (remaining - coast).abs() <= self.tolerance && coast.abs() <= self.tolerance {
+        if ended
+            && (remaining - coast).abs() <= self.tolerance
+            && coast.abs() <= COAST_TOLERANCES * self.tolerance
+        {
             return Step::Done(Outcome::Succeeded, self.sign * (remaining - coast));
         }
         if elapsed > self.allowance_s {
             return Step::Done(Outcome::TimedOut, self.sign * remaining);
         }
-        let speed = if ended {
-            gain * remaining
+        // After the profile, steer the point it would come to rest at, not where it is: a
+        // vehicle still rolling towards the goal brakes rather than being pushed on.
+        let (feedforward, error) = if ended {
+            (0.0, remaining - coast)
         } else {
-            plan.speed + response_s * plan.accel + gain * lag
+            (plan.speed + response_s * plan.accel, lag)
         };
+        // The integral takes out what the drive model misses (pure delays, a drive that
+        // brakes harder than it speeds up); its zero sits well below the loop's bandwidth.
+        let dt = self
+            .last_step
+            .map_or(0.0, |last| t.saturating_since(last).as_secs_f64());
+        self.last_step = Some(t);
+        // What it held against while tracking the profile is no help settling at the end.
+        if ended && !self.settling {
+            self.settling = true;
+            self.integral = 0.0;
+        }
+        let integral_gain = gain * gain / 4.0;
+        self.integral = (self.integral + error * dt).clamp(
+            -self.integral_limit / integral_gain,
+            self.integral_limit / integral_gain,
+        );
+        let speed = feedforward + gain * error + integral_gain * self.integral;
         let command = self.sign * speed;
         match self.kind {
             MoveKind::Straight { .. } => Step::Drive {
@@ -259,26 +322,39 @@ mod tests {
             yaw: start_yaw,
             ..OdomPose::default()
         };
-        let view = |p: OdomPose| PoseView {
+        let view = |p: OdomPose, at: Timestamp| PoseView {
             odom: p,
+            odom_at: at,
+            yaw_rate_at: at,
             map_yaw: None,
             wheel_scale: None,
         };
-        let mut m = RelativeMove::new(Timestamp::from_micros(0), kind, &view(pose), &s);
+        let mut m = RelativeMove::new(
+            Timestamp::from_micros(0),
+            kind,
+            &view(pose, Timestamp::from_micros(0)),
+            &s,
+        );
         let dt = 0.01;
+        // The plant's step: speeds follow the command (clamped to the limits) with lag τ.
+        let advance = |pose: &mut OdomPose, v: f64, w: f64| {
+            let v = v.clamp(-s.linear.speed, s.linear.speed);
+            let w = w.clamp(-s.angular.speed, s.angular.speed);
+            pose.v += (v - pose.v) * (1.0 - (-dt / tau).exp());
+            pose.w += (w - pose.w) * (1.0 - (-dt / tau).exp());
+            pose.x += pose.v * pose.yaw.cos() * dt;
+            pose.y += pose.v * pose.yaw.sin() * dt;
+            pose.yaw = wrap(pose.yaw + pose.w * dt);
+        };
         for i in 1..2000u64 {
             let t = Timestamp::from_micros(i * 10_000);
-            match m.step(t, &view(pose), tau) {
-                Step::Drive { v, w } => {
-                    let v = v.clamp(-s.linear.speed, s.linear.speed);
-                    let w = w.clamp(-s.angular.speed, s.angular.speed);
-                    pose.v += (v - pose.v) * (1.0 - (-dt / tau).exp());
-                    pose.w += (w - pose.w) * (1.0 - (-dt / tau).exp());
-                    pose.x += pose.v * pose.yaw.cos() * dt;
-                    pose.y += pose.v * pose.yaw.sin() * dt;
-                    pose.yaw = wrap(pose.yaw + pose.w * dt);
-                }
+            match m.step(t, &view(pose, t), tau) {
+                Step::Drive { v, w } => advance(&mut pose, v, w),
                 Step::Done(outcome, _) => {
+                    // It may end still rolling: the error counts where it comes to rest.
+                    for _ in 0..(10.0 * tau / dt) as u64 {
+                        advance(&mut pose, 0.0, 0.0);
+                    }
                     let error = match kind {
                         MoveKind::Straight { distance_m } => {
                             distance_m - (pose.x * start_yaw.cos() + pose.y * start_yaw.sin())

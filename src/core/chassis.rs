@@ -15,7 +15,7 @@ use crate::time::Timestamp;
 /// The control period the engine runs the chassis at.
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
 /// A move's command leads the ramp by the drives' response time, at most this, s.
-const MAX_LEAD_S: f64 = 0.3;
+pub const MAX_LEAD_S: f64 = 0.3;
 
 /// Bits of `robot.robot_status`.
 pub mod status_bits {
@@ -70,6 +70,9 @@ pub struct WheelFeedback {
     pub velocity_rad_s: Option<f64>,
     /// Wheel angle, rad, positive forward (from the encoder, unwrapped by the engine).
     pub angle_rad: Option<f64>,
+    /// When these values arrived from the drive (it reports less often than the control
+    /// loop runs, so they may be a feedback period old).
+    pub received: Option<Timestamp>,
 }
 
 /// The drive train's feedback at a control tick.
@@ -176,7 +179,9 @@ pub struct Chassis {
     config: ChassisConfig,
     mode: DriveMode,
     safety: Safety,
-    /// The command ramped within the acceleration limits (v, w).
+    /// The speed the drives are taken to have (v, w), which changes at most at the
+    /// acceleration limits: for manual commands the command ramped within them; for a move
+    /// a first-order model of the drives (their learnt response time) fed with the setpoint.
     reference: (f64, f64),
     /// What the drives are sent (v, w): the reference, or for a move the move's command
     /// within its lead allowance of the reference.
@@ -336,6 +341,12 @@ impl Chassis {
         Ok(self.safety.may_move()?)
     }
 
+    /// The speed the drives are taken to have (m/s, rad/s): the ramped command, or for a
+    /// move the drive model its command leads (at most [`MAX_LEAD_S`] times the limits).
+    pub fn reference(&self) -> (f64, f64) {
+        self.reference
+    }
+
     /// The drives' speed response time (a first-order lag), s, learnt from commands and
     /// feedback.
     pub fn response_time(&self) -> f64 {
@@ -354,13 +365,14 @@ impl Chassis {
         let verdict = self.safety.tick(t, &self.feedback);
         self.stop = verdict.stop.clone();
         (self.reference, self.setpoint) = match verdict.target {
+            Some(target) if verdict.stop.is_none() && self.autonomous => self.lead(target, dt),
             Some((target_v, target_w)) if verdict.stop.is_none() => {
                 let (v, w) = self.reference;
                 let reference = (
                     self.ramp_speed(v, target_v, dt),
                     approach(w, target_w, self.config.max_yaw_accel_rps2 * dt),
                 );
-                (reference, self.lead(reference, (target_v, target_w)))
+                (reference, reference)
             }
             _ => ((0.0, 0.0), (0.0, 0.0)),
         };
@@ -396,27 +408,43 @@ impl Chassis {
         }
     }
 
-    /// The setpoint for `target` given the ramped `reference`. A move's command may lead the
-    /// reference by the drives' response time times the acceleration limit (capped): a
-    /// drive lagging by that time then moves the vehicle along the ramp, not behind it. A
-    /// manual command gets the reference.
-    fn lead(&self, reference: (f64, f64), target: (f64, f64)) -> (f64, f64) {
-        if !self.autonomous {
-            return reference;
-        }
-        let lead_s = self.response.time_constant().min(MAX_LEAD_S);
-        let lead_v = lead_s * self.config.max_accel_mps2.max(self.config.max_decel_mps2);
+    /// A move's step towards `target` over `dt` s: the new reference and the setpoint.
+    ///
+    /// A drive that lags by τ needs its command to lead the speed wanted by τ times the
+    /// acceleration, or the vehicle falls behind every ramp. So a move's command may lead
+    /// the speed the drives are taken to have (the reference) by τ (at most
+    /// [`MAX_LEAD_S`]) times the limit in that direction, and the reference follows the
+    /// setpoint as a first-order lag of τ. A drive following that model accelerates
+    /// within the limits; the reference itself never changes faster than they allow
+    /// (Δ ≤ lead·(1 − e^(−dt/τ)) ≤ limit·dt).
+    fn lead(&self, target: (f64, f64), dt: f64) -> ((f64, f64), (f64, f64)) {
+        let tau = self.response.time_constant();
+        let follow = 1.0 - (-dt / tau).exp();
+        // The lead that moves the modelled drive by exactly limit·dt in this step (τ plus
+        // about half a step: the setpoint is held for the whole step).
+        let lead_s = if follow > 0.0 {
+            (dt / follow).min(MAX_LEAD_S)
+        } else {
+            0.0
+        };
+        let (v, w) = self.reference;
+        // Away from zero is acceleration, towards it deceleration.
+        let (accel, decel) = (self.config.max_accel_mps2, self.config.max_decel_mps2);
+        let up = if v < 0.0 { decel } else { accel };
+        let down = if v > 0.0 { decel } else { accel };
         let lead_w = lead_s * self.config.max_yaw_accel_rps2;
-        (
+        let setpoint = (
             target
                 .0
-                .clamp(reference.0 - lead_v, reference.0 + lead_v)
+                .clamp(v - lead_s * down, v + lead_s * up)
                 .clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
             target
                 .1
-                .clamp(reference.1 - lead_w, reference.1 + lead_w)
+                .clamp(w - lead_w, w + lead_w)
                 .clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
-        )
+        );
+        let reference = (v + (setpoint.0 - v) * follow, w + (setpoint.1 - w) * follow);
+        (reference, setpoint)
     }
 
     /// One ramp step of the speed from `v` towards `target`: slowing down (towards zero)

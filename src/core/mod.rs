@@ -321,14 +321,25 @@ impl Vehicle {
                         (feedback.left.velocity_rad_s, feedback.right.velocity_rad_s)
                     {
                         let (vl, vr) = (l * cfg.wheel_radius_m, r * cfg.wheel_radius_m);
-                        if let Some(o) = &mut self.odometry {
+                        // A reading counts once, at the time it arrived: the drives report
+                        // less often than the control loop polls them.
+                        let measured = feedback
+                            .left
+                            .received
+                            .max(feedback.right.received)
+                            .map_or(t, |r| r.min(t));
+                        if let Some(o) = self
+                            .odometry
+                            .as_mut()
+                            .filter(|o| o.updated_at().is_none_or(|u| measured > u))
+                        {
                             let travel = feedback
                                 .left
                                 .angle_rad
                                 .zip(feedback.right.angle_rad)
                                 .map(|(a, b)| (a * cfg.wheel_radius_m, b * cfg.wheel_radius_m));
                             o.wheels(
-                                t,
+                                measured,
                                 WheelReading {
                                     speeds: (vl, vr),
                                     travel,
@@ -487,7 +498,9 @@ impl Vehicle {
 
     /// What a move sees: the `odom` pose, and the map yaw while located.
     fn pose_view(&self, t: Timestamp) -> Option<PoseView> {
-        let odom = self.odometry.as_ref().and_then(Odometry::pose)?;
+        let odometry = self.odometry.as_ref()?;
+        let (odom, odom_at) = (odometry.pose()?, odometry.updated_at()?);
+        let yaw_rate_at = odometry.yaw_rate_at().unwrap_or(odom_at);
         let located = self.localizer.locate(t) == LocateState::Good;
         let map_yaw = located
             .then(|| self.localizer.map_pose(t).map(|(_, _, yaw)| yaw))
@@ -495,6 +508,8 @@ impl Vehicle {
         let wheel_scale = located.then(|| self.localizer.wheel_scale()).flatten();
         Some(PoseView {
             odom,
+            odom_at,
+            yaw_rate_at,
             map_yaw,
             wheel_scale,
         })

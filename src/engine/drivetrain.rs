@@ -391,6 +391,7 @@ impl Drivetrain {
                         angle_rad: raw.position.map(|p| {
                             axis.unwrap.update(p) as f64 / units.counts_per_rev * TAU / axis.ratio
                         }),
+                        received: raw.rx,
                     };
                     match axis.wheel {
                         Wheel::Left => fb.left = wheel,

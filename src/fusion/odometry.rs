@@ -83,6 +83,9 @@ pub struct Odometry {
     gyro_period: Option<f64>,
     /// The gyro bias, rad/s, once a standstill has shown it.
     bias: Option<f64>,
+    /// When the pose's yaw rate applies: the middle of the last wheel interval when it is
+    /// the gyro's mean over it, else the reading's time.
+    yaw_rate_at: Option<Timestamp>,
     standstill: Spread,
 }
 
@@ -98,6 +101,17 @@ impl Odometry {
     /// The pose, once the drives have reported.
     pub fn pose(&self) -> Option<OdomPose> {
         self.pose
+    }
+
+    /// When the pose was last moved: the time of the last wheel reading.
+    pub fn updated_at(&self) -> Option<Timestamp> {
+        self.last_wheels.map(|(t, _)| t)
+    }
+
+    /// When the pose's yaw rate applies (a mean over the last interval applies at its
+    /// middle).
+    pub fn yaw_rate_at(&self) -> Option<Timestamp> {
+        self.yaw_rate_at
     }
 
     /// The gyro bias learnt at standstill, rad/s.
@@ -188,13 +202,19 @@ impl Odometry {
             // encoders report less often than the control loop runs, so the travel comes in
             // steps (twice the speed, then nothing).
             p.v = if still { 0.0 } else { (vl + vr) / 2.0 };
+            let mean_over_interval = !still && gyro_live && dt > 0.0;
             p.w = if still {
                 0.0
-            } else if gyro_live && dt > 0.0 {
+            } else if mean_over_interval {
                 turn / dt
             } else {
                 (vr - vl) / self.track_m
             };
+            self.yaw_rate_at = Some(if mean_over_interval {
+                t0.saturating_add(t.saturating_since(t0) / 2)
+            } else {
+                t
+            });
         }
     }
 }
