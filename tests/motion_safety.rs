@@ -172,3 +172,47 @@ fn a_stop_request_ends_the_move_at_rest_without_latching() {
     v.run(2.0);
     assert_eq!(v.result().outcome, Outcome::Succeeded);
 }
+
+/// A goal is in the map frame: it needs the vehicle located, and ends with the reason when
+/// the localisation is lost (here: the receiver loses its fix for good).
+#[test]
+fn a_goal_is_aborted_when_the_localisation_is_lost() {
+    let mut v = Vehicle::new();
+    let goal = r#"{"x":60.0,"y":0.0,"yaw":0.0}"#;
+    let mut accepted = v.send("goal", goal);
+    for _ in 0..30 {
+        if accepted.is_ok() {
+            break;
+        }
+        assert!(
+            accepted.as_ref().is_err_and(|e| e.contains("not located")),
+            "{accepted:?}"
+        );
+        v.run(1.0);
+        accepted = v.send("goal", goal);
+    }
+    accepted.expect("accepted once located");
+    v.run(3.0);
+    assert!(v.speed().abs() > 0.1, "under way");
+    let no_fix = GnssCondition {
+        quality: None,
+        offset: (0.0, 0.0),
+    };
+    for _ in 0..(60.0 / PLANT_STEP.as_secs_f64()) as u64 {
+        v.sim.step(no_fix, &mut v.sink);
+        if !v.sink.results.is_empty() {
+            break;
+        }
+    }
+    let r = v.result();
+    assert_eq!(
+        r.outcome,
+        Outcome::Aborted("localisation lost during the goal".into()),
+        "{r}"
+    );
+    v.run(2.0);
+    assert!(v.speed().abs() < 0.01, "stopped");
+    // Without a location a new goal is refused with the reason.
+    let refused = v.send("goal", goal).expect_err("not located");
+    assert!(refused.contains("not located"), "{refused}");
+}

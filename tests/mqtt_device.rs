@@ -1,6 +1,7 @@
 //! Dialect `device` over a real mosquitto with real clients, the daemon running the simulated
 //! vehicle: every request example of device-mqtt-api.md sent as written gets an ack of the
-//! documented shape on `<topic>/ack` with its msg_id; bad requests get error acks.
+//! documented shape on `<topic>/ack` with its msg_id; the goal example drives the vehicle
+//! there; bad requests get error acks.
 
 mod common;
 
@@ -53,21 +54,87 @@ fn every_request_example_gets_a_documented_ack() {
         })
         .collect();
     assert_eq!(requests.len(), 4);
-    for (command, example) in requests {
+    // The goal is driven (see below); the mapping requests belong to a navigation stack.
+    for (command, example) in requests.into_iter().filter(|(c, _)| *c != "goal") {
         let ack = ask(&broker, &acks, command, &example.to_string());
         for key in failure_example.as_object().unwrap().keys() {
             assert!(ack.get(key).is_some(), "{command}: {key} missing in {ack}");
         }
         assert_eq!(ack["msg_id"], example["msg_id"]);
         assert_eq!(ack["success"], false);
-        let expected = if command == "goal" { 3002 } else { 3003 };
-        assert_eq!(ack["code"], expected, "{command} → {ack}");
+        assert_eq!(ack["code"], 3003, "{command} → {ack}");
         assert!(
             ack["message"].as_str().unwrap().contains("not available"),
             "{ack}"
         );
         assert!(ack["timestamp"].as_u64().is_some_and(|t| t > 1_700_000_000));
     }
+}
+
+/// The status lines' pose: x, y (m) and yaw (rad), map frame.
+fn last_pose(d: &mut Proc) -> (f64, f64, f64) {
+    let s = d
+        .drain_out()
+        .iter()
+        .rev()
+        .find_map(|l| serde_json::from_str::<Value>(l).ok())
+        .expect("a status line");
+    let p = &s["pose"];
+    let get = |k: &str| p[k].as_f64().unwrap_or(f64::NAN);
+    (get("x"), get("y"), get("yaw"))
+}
+
+#[test]
+fn the_goal_example_drives_there_and_a_replaced_goal_is_cancelled() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[&format!("device/{SN}/goal/ack")]);
+    let mut d = Proc::start(&["sim", "--mqtt", &broker.address()]);
+    d.wait_log(WAIT, "MQTT subscribed");
+    d.wait_out(Duration::from_secs(30), "LOCATE_TRUE", |l| {
+        serde_json::from_str::<Value>(l).is_ok_and(|s| s["nav"]["locate"] == "LOCATE_TRUE")
+    });
+    let example = common::markdown_json_examples(&common::shared_spec("device-mqtt-api.md"))
+        .into_iter()
+        .find(|(h, _)| h == "导航到目标点")
+        .expect("the goal example")
+        .1;
+    let topic = format!("device/{SN}/goal");
+    // A far goal first: the example replaces it, so it is answered as cancelled.
+    broker.publish(
+        &topic,
+        r#"{"msg_id": "far", "timestamp": 1757403776, "data": {"x": 40, "y": 0, "z": 0}}"#,
+    );
+    std::thread::sleep(Duration::from_secs(1));
+    broker.publish(&topic, &example.to_string());
+    let first = json(
+        &acks
+            .next_on(&format!("{topic}/ack"), WAIT)
+            .expect("the far goal's ack"),
+    );
+    assert_eq!(first["msg_id"], "far");
+    assert_eq!(first["success"], false);
+    assert_eq!(first["code"], 3001, "{first}");
+    assert!(
+        first["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("replaced")),
+        "{first}"
+    );
+    let done = json(
+        &acks
+            .next_on(&format!("{topic}/ack"), Duration::from_secs(60))
+            .expect("the example goal's ack"),
+    );
+    assert_eq!(done["msg_id"], example["msg_id"]);
+    assert_eq!(done["success"], true, "{done}");
+    // The spec's success ack: msg_id, timestamp, success, nothing else.
+    assert_eq!(done.as_object().map(|o| o.len()), Some(3), "{done}");
+    std::thread::sleep(Duration::from_millis(500));
+    let (x, y, yaw) = last_pose(&mut d);
+    let off = (x - 1.23).hypot(y - 4.56);
+    assert!(off <= 0.05, "the published pose is {off} m from the goal");
+    let heading = (yaw - std::f64::consts::FRAC_PI_2).to_degrees();
+    assert!(heading.abs() <= 2.0, "the heading is {heading}° off 90°");
 }
 
 #[test]
@@ -86,6 +153,12 @@ fn bad_requests_get_error_acks() {
         (
             "goal",
             r#"{"msg_id": "a", "timestamp": 1, "data": {"x": "one", "y": 2, "z": 0}}"#,
+            4000,
+        ),
+        // z is the heading's quaternion z, never radians.
+        (
+            "goal",
+            r#"{"msg_id": "r", "timestamp": 1, "data": {"x": 1, "y": 2, "z": 1.57}}"#,
             4000,
         ),
         (

@@ -2,6 +2,14 @@
 //! `start_mapping`, `stop_mapping` and `use_map`, each answered on `<topic>/ack` as
 //! `{"msg_id", "timestamp" (Unix s), "success", "code"?, "message"?, "data"?}`.
 //!
+//! `goal` drives to `data.x`, `data.y` (m, the map frame: east and north of the datum, as the
+//! status pose) and the heading whose quaternion z is `data.z` (sin(yaw / 2): the example's
+//! 0.7071 is 90°, counter-clockwise from east; `w` = cos(yaw / 2) may be given too). A `z`
+//! outside −1..1 is refused rather than read as an angle. It is answered once, when it ends:
+//! success, 3001 when cancelled (a new goal, a stop, a velocity command, a mode switch) or
+//! 3002 when it failed, with the result in `message`; a goal refused at once (not located,
+//! latched) gets 3002 with the reason.
+//!
 //! Codes: 3001 goal cancelled (and, for start_mapping, already mapping), 3002 goal failed,
 //! 3003 not available in this driver, 4000 a malformed or invalid request, 4004 an unknown
 //! command, 4013 a payload over the size limit. Mapping belongs to the navigation stack above
@@ -12,11 +20,16 @@
 //! engages or releases the software emergency stop, and `reset` (`data: {}`) re-arms a latched
 //! stop once its cause has cleared; a refusal answers 3002 with the reason.
 
+use std::collections::VecDeque;
+
 use serde::Serialize;
 use serde_json::Value;
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
+use crate::control::goal::GoalPose;
+use crate::control::{MotionResult, MotionTag, Outcome};
 use crate::core::{Command, VehicleStatus};
+use crate::fusion::ekf::wrap;
 use crate::time::Timestamp;
 
 /// Goal cancelled (or: already mapping).
@@ -46,11 +59,19 @@ struct Ack<'a> {
     message: Option<&'a str>,
 }
 
+/// Goals answered at their end at most: the oldest request is forgotten beyond this (a
+/// goal replaced by another ends at once, so only a flood could pile them up).
+const MAX_PENDING_GOALS: usize = 16;
+
 /// The `device` dialect.
 pub struct DeviceDialect {
     prefix: String,
     forward: Option<String>,
     max_payload: usize,
+    /// The number of the last goal it started.
+    next_goal: u64,
+    /// Goals under way or ended but not yet answered: number and `msg_id`.
+    goals: VecDeque<(u64, Value)>,
 }
 
 impl DeviceDialect {
@@ -60,6 +81,8 @@ impl DeviceDialect {
             prefix: format!("device/{serial_number}/"),
             forward,
             max_payload,
+            next_goal: 0,
+            goals: VecDeque::new(),
         }
     }
 
@@ -151,19 +174,34 @@ impl Dialect for DeviceDialect {
             return self.ack(t, &command, &msg_id, Some((BAD_REQUEST, reason)), out);
         }
         match command.as_str() {
-            "goal" => {
-                let data = &request["data"];
-                let numbers = ["x", "y", "z"].map(|k| data.get(k).and_then(Value::as_f64));
-                let failure = if numbers.iter().any(|n| !n.is_some_and(f64::is_finite)) {
-                    (BAD_REQUEST, "data needs finite numbers x, y and z (yaw)")
-                } else {
-                    (
-                        FAILED,
-                        "not available: navigation to a goal is not implemented in this chassisd version",
-                    )
-                };
-                self.ack(t, &command, &msg_id, Some(failure), out);
-            }
+            "goal" => match parse_goal(&request["data"]) {
+                Err(reason) => {
+                    self.ack(t, &command, &msg_id, Some((BAD_REQUEST, &reason)), out);
+                }
+                Ok(goal) => {
+                    self.next_goal += 1;
+                    let tag = MotionTag {
+                        owner: "device",
+                        id: self.next_goal,
+                    };
+                    match core.command(Command::Goal {
+                        goal,
+                        tag: Some(tag),
+                    }) {
+                        // Answered when it ends, as the spec's acks are.
+                        Ok(()) => {
+                            if self.goals.len() == MAX_PENDING_GOALS {
+                                self.goals.pop_front();
+                            }
+                            self.goals.push_back((tag.id, msg_id));
+                        }
+                        Err(e) => {
+                            let reason = e.to_string();
+                            self.ack(t, &command, &msg_id, Some((FAILED, &reason)), out);
+                        }
+                    }
+                }
+            },
             "estop" => {
                 let failure = match request["data"].get("engaged").and_then(Value::as_bool) {
                     None => Some((BAD_REQUEST, "data needs a boolean engaged".to_owned())),
@@ -211,6 +249,70 @@ impl Dialect for DeviceDialect {
         _out: &mut Vec<Publish>,
     ) {
     }
+
+    fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Publish>) {
+        let Some(tag) = result.tag else {
+            return;
+        };
+        let Some(at) = self.goals.iter().position(|(id, _)| *id == tag.id) else {
+            return;
+        };
+        let Some((_, msg_id)) = self.goals.remove(at) else {
+            return;
+        };
+        let message = result.to_string();
+        let failure = match &result.outcome {
+            Outcome::Succeeded => None,
+            Outcome::Cancelled(_) => Some((CANCELLED, message.as_str())),
+            Outcome::TimedOut | Outcome::Aborted(_) => Some((FAILED, message.as_str())),
+        };
+        self.ack(t, "goal", &msg_id, failure, out);
+    }
+}
+
+/// A goal's `data`: `x`, `y` in the map frame (m, east and north of the datum) and `z`, the
+/// z of the heading's quaternion (sin(yaw / 2), so 0.7071 is 90°), with `w` (cos(yaw / 2))
+/// optional. A `z` outside −1..1 is refused, not read as radians.
+fn parse_goal(data: &Value) -> Result<GoalPose, String> {
+    let number = |k: &str| {
+        data.get(k)
+            .and_then(Value::as_f64)
+            .filter(|v| v.is_finite())
+    };
+    let (Some(x), Some(y), Some(z)) = (number("x"), number("y"), number("z")) else {
+        return Err(
+            "data needs finite numbers x, y (m, map frame) and z (the heading's \
+                    quaternion z)"
+                .to_owned(),
+        );
+    };
+    let yaw = match data.get("w") {
+        None => {
+            if !(-1.0..=1.0).contains(&z) {
+                return Err(format!(
+                    "z {z} is outside -1..1: z is the quaternion z of the heading \
+                     (sin(yaw/2); 0.7071 is 90°), not an angle"
+                ));
+            }
+            2.0 * z.asin()
+        }
+        Some(w) => {
+            let Some(w) = w.as_f64().filter(|w| w.is_finite()) else {
+                return Err("w must be a finite number".to_owned());
+            };
+            if (z.hypot(w) - 1.0).abs() > 0.01 {
+                return Err(format!(
+                    "z {z} and w {w} are not a unit quaternion of a heading"
+                ));
+            }
+            2.0 * z.atan2(w)
+        }
+    };
+    Ok(GoalPose {
+        x,
+        y,
+        yaw: wrap(yaw),
+    })
 }
 
 impl DeviceDialect {
@@ -267,6 +369,37 @@ mod tests {
         assert_eq!(out[0].payload, ack.as_bytes());
         // Its own ack topics are not commands.
         assert!(!d.owns("device/SN1/start_mapping/ack"));
+    }
+
+    #[test]
+    fn goal_headings_are_quaternion_z_and_nothing_else() {
+        let yaw = |data: &str| parse_goal(&serde_json::from_str(data).unwrap()).map(|g| g.yaw);
+        let close = |r: Result<f64, String>, deg: f64| {
+            let got = r.unwrap();
+            assert!(
+                wrap(got - deg.to_radians()).abs() < 1e-4,
+                "{}° for {deg}°",
+                got.to_degrees()
+            );
+        };
+        close(yaw(r#"{"x":1.23,"y":4.56,"z":0.7071}"#), 90.0);
+        close(yaw(r#"{"x":0,"y":0,"z":0}"#), 0.0);
+        close(yaw(r#"{"x":0,"y":0,"z":-1}"#), -180.0);
+        close(
+            yaw(r#"{"x":0,"y":0,"z":0.7071,"w":-0.7071}"#),
+            270.0 - 360.0,
+        );
+        for bad in [
+            r#"{"x":0,"y":0,"z":1.57}"#,
+            r#"{"x":0,"y":0,"z":0.5,"w":0.5}"#,
+            r#"{"x":0,"y":0}"#,
+            r#"{"x":"1","y":0,"z":0}"#,
+            r#"{"x":0,"y":0,"z":0,"w":"1"}"#,
+        ] {
+            assert!(yaw(bad).is_err(), "{bad}");
+        }
+        let e = yaw(r#"{"x":0,"y":0,"z":1.57}"#).unwrap_err();
+        assert!(e.contains("not an angle"), "{e}");
     }
 
     #[test]

@@ -20,6 +20,9 @@
 //!   cancelled, timed out, aborted, with the reason) is logged. A new move replaces the one
 //!   under way; a `cmd_vel` (in manual mode), `stop` or cmd 5 ends it. Cmd 5 brings the
 //!   vehicle to rest without latching: the next move needs no re-arm.
+//! - `goal {"x": 10.0, "y": 2.0, "yaw": 1.57}` goes to this pose in the map frame (metres east
+//!   and north of the datum, radians counter-clockwise from east), as `device/{serial}/goal`
+//!   does; it needs the vehicle located. Its end is logged the same way.
 //!
 //! Safety:
 //! - `stop {}` stops and latches, as an operator's stop;
@@ -31,7 +34,9 @@
 use serde::Deserialize;
 
 use crate::control::MoveKind;
+use crate::control::goal::GoalPose;
 use crate::core::Command;
+use crate::fusion::ekf::wrap;
 use crate::fusion::geodesy::Geodetic;
 
 /// Topic of velocity commands.
@@ -50,6 +55,8 @@ pub const ESTOP: &str = "estop";
 pub const RESET: &str = "reset";
 /// Topic of distance and angle moves.
 pub const SET_NAVI_CMD: &str = "set_navi_cmd";
+/// Topic of goals.
+pub const GOAL: &str = "goal";
 /// Longest distance move, cm.
 const MAX_MOVE_CM: f64 = 10_000.0;
 /// Largest angle move, degrees.
@@ -116,6 +123,7 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
         ESTOP,
         RESET,
         SET_NAVI_CMD,
+        GOAL,
     ]
     .contains(&topic)
     {
@@ -145,6 +153,20 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
         ESTOP => {
             let e: EStop = serde_json::from_slice(payload).map_err(parse_error)?;
             Ok(Some(Command::EmergencyStop { engaged: e.engaged }))
+        }
+        GOAL => {
+            let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;
+            if ![p.x, p.y, p.yaw].iter().all(|v| v.is_finite()) {
+                return Err(format!("{topic}: x, y and yaw must be finite"));
+            }
+            Ok(Some(Command::Goal {
+                goal: GoalPose {
+                    x: p.x,
+                    y: p.y,
+                    yaw: wrap(p.yaw),
+                },
+                tag: None,
+            }))
         }
         INIT_POSITION => {
             let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;

@@ -4,6 +4,7 @@
 
 use bytes::Bytes;
 
+use crate::control::MotionResult;
 use crate::core::{Command, VehicleStatus, chassis::CommandRejected};
 use crate::time::Timestamp;
 
@@ -83,6 +84,8 @@ pub trait Dialect: Send {
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     );
+    /// A motion ended at `t`: the dialect that tagged it answers its request.
+    fn on_motion_ended(&mut self, _t: Timestamp, _result: &MotionResult, _out: &mut Vec<Publish>) {}
 }
 
 /// The dialects in force, in the order they were configured.
@@ -119,6 +122,16 @@ impl Dialects {
         };
         d.on_message(t, topic, payload, core, out);
         true
+    }
+
+    /// The end of a motion, to the dialect that tagged it.
+    pub fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Publish>) {
+        let Some(tag) = result.tag else {
+            return;
+        };
+        if let Some(d) = self.dialects.iter_mut().find(|d| d.name() == tag.owner) {
+            d.on_motion_ended(t, result, out);
+        }
     }
 
     /// Every dialect's publications at a status tick.

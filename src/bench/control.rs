@@ -52,6 +52,33 @@ pub mod target {
     pub const TURN_DEG: f64 = 0.3;
     /// A move's duration over the time-optimal profile's, at most.
     pub const DURATION_RATIO: f64 = 1.15;
+    /// A goal 10 m away: position against truth, m ...
+    pub const GOAL_M: f64 = 0.05;
+    /// ... and heading, degrees.
+    pub const GOAL_DEG: f64 = 2.0;
+}
+
+/// The goal: this far (m) from where the moves ended, this far off the heading (rad), to
+/// end this far (rad) turned from the line to it.
+const GOAL: (f64, f64, f64) = (10.0, 0.5, 1.2);
+
+/// The goal's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct GoalFigures {
+    /// How it ended.
+    pub outcome: String,
+    /// Distance from the goal against truth after it settled, m.
+    pub truth_error_m: f64,
+    /// Heading off the goal's against truth, degrees.
+    pub truth_heading_deg: f64,
+    /// Distance left in the map frame at its end, m.
+    pub frame_error_m: f64,
+    /// Duration, s.
+    pub duration_s: f64,
+    /// Face, drive and turn under the configured limits, s.
+    pub planned_s: f64,
+    /// Within the targets.
+    pub pass: bool,
 }
 
 /// One move's figures.
@@ -99,6 +126,8 @@ pub struct ControlReport {
     pub response_time_s: f64,
     /// Every move.
     pub moves: Vec<MoveFigures>,
+    /// A goal 10 m away.
+    pub goal: GoalFigures,
     /// The command watchdog.
     pub watchdog: WatchdogFigures,
     /// Parts of the issue's benchmark not measured yet, named.
@@ -274,18 +303,17 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
         moves.push(figures);
     }
     let response_time_s = bench.sim.engine().response_time().unwrap_or(f64::NAN);
+    let goal = goal(&mut bench);
     let watchdog = watchdog(&mut bench, &chassis);
-    let pass = moves.iter().all(|m| m.pass) && watchdog.pass;
+    let pass = moves.iter().all(|m| m.pass) && goal.pass && watchdog.pass;
     Ok(ControlReport {
         plant: plant.name.clone(),
         seed,
         response_time_s,
         moves,
+        goal,
         watchdog,
-        not_measured: vec![
-            "goal 10 m away (go-to-goal is not built yet)",
-            "50 m closed path (trajectory following is not built yet)",
-        ],
+        not_measured: vec!["50 m closed path (trajectory following is not built yet)"],
         pass,
     })
 }
@@ -353,6 +381,63 @@ fn score(kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigure
     }
 }
 
+/// A goal `GOAL` away from where the vehicle stands (through the local channel, in the map
+/// frame it publishes), scored against truth after it settled.
+fn goal(bench: &mut Bench) -> GoalFigures {
+    bench.run_for(0.1);
+    let failed = |outcome: String| GoalFigures {
+        outcome,
+        truth_error_m: f64::NAN,
+        truth_heading_deg: f64::NAN,
+        frame_error_m: f64::NAN,
+        duration_s: f64::NAN,
+        planned_s: f64::NAN,
+        pass: false,
+    };
+    let Some(s) = bench.sink.last_status.as_ref() else {
+        return failed("no status".into());
+    };
+    let (x, y, yaw) = (s.pose.x, s.pose.y, s.pose.yaw);
+    let (distance, off, turn) = GOAL;
+    let bearing = yaw + off;
+    let (gx, gy, gyaw) = (
+        x + distance * bearing.cos(),
+        y + distance * bearing.sin(),
+        wrap(bearing + turn),
+    );
+    bench.sink.results.clear();
+    let request = format!(r#"{{"x":{gx},"y":{gy},"yaw":{gyaw}}}"#);
+    bench.sim.command("goal", &request, &mut bench.sink);
+    let limit = (120.0 / PLANT_STEP.as_secs_f64()) as u64;
+    for _ in 0..limit {
+        bench.sim.step(FIXED, &mut bench.sink);
+        if !bench.sink.results.is_empty() {
+            break;
+        }
+    }
+    let Some(result) = bench.sink.results.pop() else {
+        return failed(format!(
+            "no result (refused: {})",
+            bench.sink.refused.last().map_or("no", String::as_str)
+        ));
+    };
+    bench.run_for(SETTLE_S);
+    let truth = bench.truth();
+    let truth_error_m = (truth.x - gx).hypot(truth.y - gy);
+    let truth_heading_deg = wrap(truth.yaw - gyaw).abs().to_degrees();
+    GoalFigures {
+        outcome: result.outcome.to_string(),
+        truth_error_m,
+        truth_heading_deg,
+        frame_error_m: result.error,
+        duration_s: result.duration_s,
+        planned_s: result.planned_s,
+        pass: result.outcome == Outcome::Succeeded
+            && truth_error_m <= target::GOAL_M
+            && truth_heading_deg <= target::GOAL_DEG,
+    }
+}
+
 /// Drives at full speed, stops commanding, and times the stop; each trial's last command
 /// falls at another millisecond of the control period.
 fn watchdog(bench: &mut Bench, chassis: &crate::config::chassis::ChassisConfig) -> WatchdogFigures {
@@ -413,6 +498,21 @@ impl ControlReport {
                 if m.pass { "ok" } else { "MISSED" },
             );
         }
+        let g = &self.goal;
+        let _ = writeln!(
+            out,
+            "goal {:.0} m away: {}, {:.1} mm and {:.2}° from it against truth (targets {:.0} mm, {:.1}°), {:.1} mm in the map frame, {:.2} s (face, drive, turn at the limits {:.2} s): {}",
+            GOAL.0,
+            g.outcome,
+            g.truth_error_m * 1000.0,
+            g.truth_heading_deg,
+            target::GOAL_M * 1000.0,
+            target::GOAL_DEG,
+            g.frame_error_m * 1000.0,
+            g.duration_s,
+            g.planned_s,
+            if g.pass { "ok" } else { "MISSED" }
+        );
         let _ = writeln!(
             out,
             "watchdog: wheels at rest {:.3} s after the last command at worst of {WATCHDOG_TRIALS} (bound {:.3} s): {}",

@@ -42,6 +42,12 @@ pub struct MotionConfig {
     /// A turn has arrived within this, degrees (default 0.1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angle_tolerance_deg: Option<f64>,
+    /// A goal has arrived within this distance of it, m (default 0.02).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_position_tolerance_m: Option<f64>,
+    /// ... and this far from its heading, degrees (default 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub goal_angle_tolerance_deg: Option<f64>,
     /// A move times out after its profile's duration times this ... (default 1.5)
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_allowance_factor: Option<f64>,
@@ -61,6 +67,10 @@ pub struct MotionSettings {
     pub position_tolerance_m: f64,
     /// Arrival tolerance of a turn, rad.
     pub angle_tolerance_rad: f64,
+    /// Arrival tolerance of a goal's position, m.
+    pub goal_position_tolerance_m: f64,
+    /// Arrival tolerance of a goal's heading, rad.
+    pub goal_angle_tolerance_rad: f64,
     /// Time allowance: the profile's duration times this ...
     pub time_allowance_factor: f64,
     /// ... plus this, s.
@@ -89,6 +99,8 @@ impl MotionConfig {
             },
             position_tolerance_m: self.position_tolerance_m.unwrap_or(0.001),
             angle_tolerance_rad: self.angle_tolerance_deg.unwrap_or(0.1).to_radians(),
+            goal_position_tolerance_m: self.goal_position_tolerance_m.unwrap_or(0.02),
+            goal_angle_tolerance_rad: self.goal_angle_tolerance_deg.unwrap_or(1.0).to_radians(),
             time_allowance_factor: self.time_allowance_factor.unwrap_or(1.5),
             time_allowance_s: self.time_allowance_s.unwrap_or(3.0),
         }
@@ -158,6 +170,18 @@ impl MotionConfig {
                 "angle_tolerance_deg",
                 self.angle_tolerance_deg,
                 0.01..=20.0,
+                "degrees",
+            ),
+            (
+                "goal_position_tolerance_m",
+                self.goal_position_tolerance_m,
+                0.001..=5.0,
+                "m",
+            ),
+            (
+                "goal_angle_tolerance_deg",
+                self.goal_angle_tolerance_deg,
+                0.05..=180.0,
                 "degrees",
             ),
             (

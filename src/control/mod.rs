@@ -2,6 +2,7 @@
 //! results. It proposes a velocity at each control tick; the drive train's arbiter, limits,
 //! ramps and safety supervisor decide what reaches the wheels ([`crate::core::chassis`]).
 
+pub mod goal;
 pub mod moves;
 pub mod profile;
 pub mod response;
@@ -12,6 +13,7 @@ use crate::config::motion::MotionSettings;
 use crate::core::status::Navigation;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use goal::{GoalMove, GoalPose};
 use moves::{RelativeMove, Step};
 
 /// Names one motion from its start to its result.
@@ -47,6 +49,40 @@ impl fmt::Display for MoveKind {
     }
 }
 
+/// Who asked for a motion: a dialect's name and its own number for the request (it keeps
+/// what the number stands for, such as a `msg_id`), so that it can answer at the end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MotionTag {
+    /// The dialect (`device`, `root`, ...).
+    pub owner: &'static str,
+    /// Its number for the request.
+    pub id: u64,
+}
+
+/// What a motion does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotionKind {
+    /// A distance or angle move.
+    Move(MoveKind),
+    /// To a pose in the map frame.
+    Goal(GoalPose),
+}
+
+impl fmt::Display for MotionKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Move(kind) => kind.fmt(f),
+            Self::Goal(g) => write!(
+                f,
+                "goal x {:.3} m, y {:.3} m, heading {:.1}°",
+                g.x,
+                g.y,
+                g.yaw.to_degrees()
+            ),
+        }
+    }
+}
+
 /// How a motion ended.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Outcome {
@@ -77,7 +113,9 @@ pub struct MotionResult {
     /// Which motion.
     pub id: MotionId,
     /// What it was.
-    pub kind: MoveKind,
+    pub kind: MotionKind,
+    /// Who asked for it, as the requester tagged it (a dialect and its request id).
+    pub tag: Option<MotionTag>,
     /// How it ended.
     pub outcome: Outcome,
     /// From acceptance to the end, s.
@@ -85,8 +123,10 @@ pub struct MotionResult {
     /// The time-optimal profile's duration, s.
     pub planned_s: f64,
     /// What was left to go where the vehicle comes to rest, in the frame it closed on (m
-    /// or rad); NaN when it ended before arriving.
+    /// or rad; a goal's distance in m); NaN when it ended before arriving.
     pub error: f64,
+    /// A goal's heading left to turn at its end, rad.
+    pub heading_error: Option<f64>,
     /// Where its heading came from.
     pub heading: moves::HeadingSource,
     /// The wheel scale its distance was corrected by (odometry per true distance).
@@ -96,8 +136,12 @@ pub struct MotionResult {
 impl fmt::Display for MotionResult {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let error = match self.kind {
-            MoveKind::Straight { .. } => format!("{:.1} mm", self.error * 1000.0),
-            MoveKind::Turn { .. } => format!("{:.2}°", self.error.to_degrees()),
+            MotionKind::Move(MoveKind::Turn { .. }) => format!("{:.2}°", self.error.to_degrees()),
+            _ => format!("{:.1} mm", self.error * 1000.0),
+        };
+        let error = match self.heading_error {
+            Some(h) => format!("{error} and {:.2}°", h.to_degrees()),
+            None => error,
         };
         write!(
             f,
@@ -118,6 +162,8 @@ pub struct PoseView {
     /// When `odom.w` applies (a gyro mean over the last wheel interval applies at its
     /// middle).
     pub yaw_rate_at: Timestamp,
+    /// The map position (east, north; m), while the vehicle is located.
+    pub map_xy: Option<(f64, f64)>,
     /// The map yaw (rad), while the vehicle is located.
     pub map_yaw: Option<f64>,
     /// Odometry distance per true distance (1 + the wheels' scale error the fusion has
@@ -125,11 +171,19 @@ pub struct PoseView {
     pub wheel_scale: Option<f64>,
 }
 
+/// A motion under way.
+#[derive(Debug, Clone)]
+enum Active {
+    Move(RelativeMove),
+    Goal(GoalMove),
+}
+
 /// The motion under way, if any, and the last result.
 #[derive(Debug, Clone)]
 pub struct Motion {
     settings: MotionSettings,
-    active: Option<(MotionId, RelativeMove)>,
+    /// Its id, what it is and who tagged it.
+    active: Option<(MotionId, Active, Option<MotionTag>)>,
     last_id: MotionId,
     results: Vec<MotionResult>,
     navigation: Navigation,
@@ -152,29 +206,45 @@ impl Motion {
         self.active.is_some()
     }
 
-    /// Whether the motion under way holds its heading on the map's yaw (a change of the map
-    /// frame would move its goal).
+    /// Whether the motion under way depends on the map frame (a goal in it, or a heading
+    /// held on its yaw): moving the frame would move its goal.
     pub fn uses_map_heading(&self) -> bool {
-        self.active
-            .as_ref()
-            .is_some_and(|(_, m)| m.heading_source() == moves::HeadingSource::Map)
+        self.active.as_ref().is_some_and(|(_, m, _)| match m {
+            Active::Move(m) => m.heading_source() == moves::HeadingSource::Map,
+            Active::Goal(_) => true,
+        })
     }
 
     /// Starts a move at `t` from `view`, replacing (cancelling) the one under way.
     pub fn start(&mut self, t: Timestamp, kind: MoveKind, view: &PoseView) -> MotionId {
+        let m = Active::Move(RelativeMove::new(t, kind, view, &self.settings));
+        self.begin(t, m, None)
+    }
+
+    /// Starts a goal at `t` from `view`, replacing (cancelling) the motion under way; `None`
+    /// (and nothing replaced) when the vehicle is not located.
+    pub fn start_goal(
+        &mut self,
+        t: Timestamp,
+        goal: GoalPose,
+        view: &PoseView,
+        tag: Option<MotionTag>,
+    ) -> Option<MotionId> {
+        let g = GoalMove::new(t, goal, view, &self.settings)?;
+        Some(self.begin(t, Active::Goal(g), tag))
+    }
+
+    fn begin(&mut self, t: Timestamp, m: Active, tag: Option<MotionTag>) -> MotionId {
         self.end(t, Outcome::Cancelled("replaced by a new move".into()), None);
         self.last_id += 1;
-        self.active = Some((
-            self.last_id,
-            RelativeMove::new(t, kind, view, &self.settings),
-        ));
+        self.active = Some((self.last_id, m, tag));
         self.navigation = Navigation::Running;
         self.last_id
     }
 
     /// Ends the motion under way (if any) with `outcome`; `error` when known.
     pub fn end(&mut self, t: Timestamp, outcome: Outcome, error: Option<f64>) {
-        let Some((id, m)) = self.active.take() else {
+        let Some((id, m, tag)) = self.active.take() else {
             return;
         };
         self.navigation = if outcome == Outcome::Succeeded {
@@ -182,16 +252,41 @@ impl Motion {
         } else {
             Navigation::Failed
         };
-        self.results.push(MotionResult {
-            id,
-            kind: m.kind(),
-            outcome,
-            duration_s: t.saturating_since(m.started()).as_secs_f64(),
-            planned_s: m.profile().duration(),
-            error: error.unwrap_or(f64::NAN),
-            heading: m.heading_source(),
-            wheel_scale: m.wheel_scale(),
-        });
+        let result = match m {
+            Active::Move(m) => MotionResult {
+                id,
+                kind: MotionKind::Move(m.kind()),
+                tag,
+                outcome,
+                duration_s: t.saturating_since(m.started()).as_secs_f64(),
+                planned_s: m.profile().duration(),
+                error: error.unwrap_or(f64::NAN),
+                heading_error: None,
+                heading: m.heading_source(),
+                wheel_scale: m.wheel_scale(),
+            },
+            Active::Goal(g) => {
+                let arrived = outcome == Outcome::Succeeded;
+                MotionResult {
+                    id,
+                    kind: MotionKind::Goal(g.goal()),
+                    tag,
+                    duration_s: t.saturating_since(g.started()).as_secs_f64(),
+                    planned_s: g.planned_s(),
+                    // A goal has no coast left at its end: what is left is where it is.
+                    error: if arrived || error.is_some() {
+                        g.left().0
+                    } else {
+                        f64::NAN
+                    },
+                    heading_error: Some(g.left().1),
+                    heading: moves::HeadingSource::Map,
+                    wheel_scale: 1.0,
+                    outcome,
+                }
+            }
+        };
+        self.results.push(result);
     }
 
     /// One control step at `t`: the velocity (m/s, rad/s) the motion asks for, or `None`
@@ -202,12 +297,16 @@ impl Motion {
         view: Option<&PoseView>,
         response_s: f64,
     ) -> Option<(f64, f64)> {
-        let (_, m) = self.active.as_mut()?;
+        let (_, m, _) = self.active.as_mut()?;
         let Some(view) = view else {
             self.end(t, Outcome::Aborted("no odometry".into()), None);
             return None;
         };
-        match m.step(t, view, response_s) {
+        let step = match m {
+            Active::Move(m) => m.step(t, view, response_s),
+            Active::Goal(g) => g.step(t, view, response_s),
+        };
+        match step {
             Step::Drive { v, w } => Some((v, w)),
             Step::Done(outcome, error) => {
                 self.end(t, outcome, Some(error));

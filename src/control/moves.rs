@@ -309,6 +309,8 @@ mod tests {
             },
             position_tolerance_m: 0.001,
             angle_tolerance_rad: 0.1_f64.to_radians(),
+            goal_position_tolerance_m: 0.03,
+            goal_angle_tolerance_rad: 1.0_f64.to_radians(),
             time_allowance_factor: 1.5,
             time_allowance_s: 1.0,
         }
@@ -326,6 +328,7 @@ mod tests {
             odom: p,
             odom_at: at,
             yaw_rate_at: at,
+            map_xy: None,
             map_yaw: None,
             wheel_scale: None,
         };

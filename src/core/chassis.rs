@@ -121,6 +121,9 @@ pub enum CommandRejected {
     /// A move needs the wheel odometry, and the drives have not reported yet.
     #[error("no wheel odometry yet (the drives have not reported)")]
     NoOdometry,
+    /// A goal in the map frame needs the vehicle located.
+    #[error("not located: a goal in the map frame needs a good position and heading (LOCATE_TRUE)")]
+    NotLocated,
     /// The command would move the map frame under a move that holds the map's heading.
     #[error("a move holding the map's heading is under way; stop it first")]
     MoveUnderWay,

@@ -11,7 +11,8 @@ use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
 use crate::config::localization::localizer_config;
 use crate::config::motion::MotionSettings;
-use crate::control::{Motion, MotionResult, MoveKind, Outcome, PoseView};
+use crate::control::goal::GoalPose;
+use crate::control::{Motion, MotionResult, MotionTag, MoveKind, Outcome, PoseView};
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
@@ -175,6 +176,14 @@ pub enum Command {
     /// A closed-loop distance or angle move (`set_navi_cmd` 1–4), replacing the one under
     /// way.
     Move(MoveKind),
+    /// Go to a pose in the map frame (`device/{serial}/goal`, MOVE_TO_POSITION), replacing
+    /// the motion under way; the result carries `tag`.
+    Goal {
+        /// Where.
+        goal: GoalPose,
+        /// Who asked.
+        tag: Option<MotionTag>,
+    },
     /// End the move under way and bring the vehicle to rest, without latching
     /// (`set_navi_cmd` 5).
     CancelMotion,
@@ -374,6 +383,10 @@ impl Vehicle {
                 let result = self.start_move(t, kind);
                 vec![Output::CommandResult(result)]
             }
+            Input::Command(Command::Goal { goal, tag }) => {
+                let result = self.start_goal(t, goal, tag);
+                vec![Output::CommandResult(result)]
+            }
             Input::Command(Command::CancelMotion) => {
                 self.end_motion(t, Outcome::Cancelled("stop requested".into()));
                 let result = self.with_chassis(|c| {
@@ -502,15 +515,14 @@ impl Vehicle {
         let (odom, odom_at) = (odometry.pose()?, odometry.updated_at()?);
         let yaw_rate_at = odometry.yaw_rate_at().unwrap_or(odom_at);
         let located = self.localizer.locate(t) == LocateState::Good;
-        let map_yaw = located
-            .then(|| self.localizer.map_pose(t).map(|(_, _, yaw)| yaw))
-            .flatten();
+        let map = located.then(|| self.localizer.map_pose(t)).flatten();
         let wheel_scale = located.then(|| self.localizer.wheel_scale()).flatten();
         Some(PoseView {
             odom,
             odom_at,
             yaw_rate_at,
-            map_yaw,
+            map_xy: map.map(|(x, y, _)| (x, y)),
+            map_yaw: map.map(|(_, _, yaw)| yaw),
             wheel_scale,
         })
     }
@@ -534,6 +546,30 @@ impl Vehicle {
         };
         motion.start(t, kind, &view);
         Ok(())
+    }
+
+    /// Starts a goal, once the drives can take it and the vehicle is located.
+    fn start_goal(
+        &mut self,
+        t: Timestamp,
+        goal: GoalPose,
+        tag: Option<MotionTag>,
+    ) -> Result<(), CommandRejected> {
+        if !(goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite()) {
+            return Err(CommandRejected::NotFinite);
+        }
+        let view = self.pose_view(t);
+        let (Some(chassis), Some(motion)) = (&mut self.chassis, &mut self.motion) else {
+            return Err(CommandRejected::NoDrives);
+        };
+        chassis.ready_to_move()?;
+        let Some(view) = view else {
+            return Err(CommandRejected::NoOdometry);
+        };
+        motion
+            .start_goal(t, goal, &view, tag)
+            .map(|_| ())
+            .ok_or(CommandRejected::NotLocated)
     }
 
     /// Ends the motion under way, if any.

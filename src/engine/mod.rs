@@ -509,7 +509,12 @@ impl Engine {
                 match output {
                     Output::Wheels(command) => self.drivetrain.command(t, &command),
                     Output::Event(event) => out.push(EngineOutput::Event(event)),
-                    Output::MotionEnded(result) => out.push(EngineOutput::MotionEnded(result)),
+                    Output::MotionEnded(result) => {
+                        let mut replies = Vec::new();
+                        self.dialects.on_motion_ended(t, &result, &mut replies);
+                        out.extend(replies.into_iter().map(EngineOutput::Publish));
+                        out.push(EngineOutput::MotionEnded(result));
+                    }
                     Output::Status(_) | Output::CommandResult(_) => {}
                 }
             }
