@@ -210,7 +210,9 @@ fn a_goal_is_aborted_when_the_localisation_is_lost() {
         Outcome::Aborted("localisation lost during the goal".into()),
         "{r}"
     );
-    v.run(2.0);
+    for _ in 0..(2.0 / PLANT_STEP.as_secs_f64()) as u64 {
+        v.sim.step(no_fix, &mut v.sink);
+    }
     assert!(v.speed().abs() < 0.01, "stopped");
     // Without a location a new goal is refused with the reason.
     let refused = v.send("goal", goal).expect_err("not located");
