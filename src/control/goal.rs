@@ -294,32 +294,9 @@ impl GoalMove {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::profile::Limits;
+    use crate::control::moves::tests::settings;
     use crate::fusion::odometry::OdomPose;
     use std::f64::consts::PI;
-
-    fn settings() -> MotionSettings {
-        MotionSettings {
-            linear: Limits {
-                speed: 1.0,
-                accel: 1.0,
-                decel: 1.5,
-                jerk: f64::INFINITY,
-            },
-            angular: Limits {
-                speed: 1.5,
-                accel: 3.0,
-                decel: 3.0,
-                jerk: f64::INFINITY,
-            },
-            position_tolerance_m: 0.001,
-            angle_tolerance_rad: 0.1_f64.to_radians(),
-            goal_position_tolerance_m: 0.02,
-            goal_angle_tolerance_rad: 1.0_f64.to_radians(),
-            time_allowance_factor: 1.5,
-            time_allowance_s: 3.0,
-        }
-    }
 
     fn view(p: OdomPose, t: Timestamp, located: bool) -> PoseView {
         PoseView {
@@ -346,8 +323,9 @@ mod tests {
             let located = (i as f64) * dt < lost_at;
             match g.step(t, &view(pose, t, located), tau) {
                 Step::Drive { v, w } => {
-                    pose.v += (v.clamp(-1.0, 1.0) - pose.v) * follow;
-                    pose.w += (w.clamp(-1.5, 1.5) - pose.w) * follow;
+                    let (v_max, w_max) = (s.linear.speed, s.angular.speed);
+                    pose.v += (v.clamp(-v_max, v_max) - pose.v) * follow;
+                    pose.w += (w.clamp(-w_max, w_max) - pose.w) * follow;
                     pose.x += pose.v * pose.yaw.cos() * dt;
                     pose.y += pose.v * pose.yaw.sin() * dt;
                     pose.yaw = wrap(pose.yaw + pose.w * dt);

@@ -288,12 +288,13 @@ impl RelativeMove {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::fusion::odometry::OdomPose;
     use std::f64::consts::PI;
 
-    fn settings() -> MotionSettings {
+    /// Limits and tolerances for the controllers' tests.
+    pub(crate) fn settings() -> MotionSettings {
         MotionSettings {
             linear: Limits {
                 speed: 1.0,
@@ -309,7 +310,7 @@ mod tests {
             },
             position_tolerance_m: 0.001,
             angle_tolerance_rad: 0.1_f64.to_radians(),
-            goal_position_tolerance_m: 0.03,
+            goal_position_tolerance_m: 0.02,
             goal_angle_tolerance_rad: 1.0_f64.to_radians(),
             time_allowance_factor: 1.5,
             time_allowance_s: 1.0,

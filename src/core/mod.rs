@@ -533,6 +533,36 @@ impl Vehicle {
             MoveKind::Straight { distance_m } => distance_m.is_finite(),
             MoveKind::Turn { angle_rad } => angle_rad.is_finite(),
         };
+        self.start_motion(t, finite, |motion, view| {
+            motion.start(t, kind, view);
+            Ok(())
+        })
+    }
+
+    /// Starts a goal, once the drives can take it and the vehicle is located.
+    fn start_goal(
+        &mut self,
+        t: Timestamp,
+        goal: GoalPose,
+        tag: Option<MotionTag>,
+    ) -> Result<(), CommandRejected> {
+        let finite = goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite();
+        self.start_motion(t, finite, |motion, view| {
+            motion
+                .start_goal(t, goal, view, tag)
+                .map(|_| ())
+                .ok_or(CommandRejected::NotLocated)
+        })
+    }
+
+    /// Starts a motion with `start` once its values are `finite`, the drives can take it
+    /// and the odometry runs.
+    fn start_motion(
+        &mut self,
+        t: Timestamp,
+        finite: bool,
+        start: impl FnOnce(&mut Motion, &PoseView) -> Result<(), CommandRejected>,
+    ) -> Result<(), CommandRejected> {
         if !finite {
             return Err(CommandRejected::NotFinite);
         }
@@ -544,32 +574,7 @@ impl Vehicle {
         let Some(view) = view else {
             return Err(CommandRejected::NoOdometry);
         };
-        motion.start(t, kind, &view);
-        Ok(())
-    }
-
-    /// Starts a goal, once the drives can take it and the vehicle is located.
-    fn start_goal(
-        &mut self,
-        t: Timestamp,
-        goal: GoalPose,
-        tag: Option<MotionTag>,
-    ) -> Result<(), CommandRejected> {
-        if !(goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite()) {
-            return Err(CommandRejected::NotFinite);
-        }
-        let view = self.pose_view(t);
-        let (Some(chassis), Some(motion)) = (&mut self.chassis, &mut self.motion) else {
-            return Err(CommandRejected::NoDrives);
-        };
-        chassis.ready_to_move()?;
-        let Some(view) = view else {
-            return Err(CommandRejected::NoOdometry);
-        };
-        motion
-            .start_goal(t, goal, &view, tag)
-            .map(|_| ())
-            .ok_or(CommandRejected::NotLocated)
+        start(motion, &view)
     }
 
     /// Ends the motion under way, if any.
