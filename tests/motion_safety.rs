@@ -52,8 +52,16 @@ impl Vehicle {
     }
 
     fn run(&mut self, seconds: f64) {
+        self.run_under(FIXED, seconds, false);
+    }
+
+    /// Steps under `gnss` for `seconds`, or until a motion ends when `until_result`.
+    fn run_under(&mut self, gnss: GnssCondition, seconds: f64, until_result: bool) {
         for _ in 0..(seconds / PLANT_STEP.as_secs_f64()).round() as u64 {
-            self.sim.step(FIXED, &mut self.sink);
+            self.sim.step(gnss, &mut self.sink);
+            if until_result && !self.sink.results.is_empty() {
+                break;
+            }
         }
     }
 
@@ -198,21 +206,14 @@ fn a_goal_is_aborted_when_the_localisation_is_lost() {
         quality: None,
         offset: (0.0, 0.0),
     };
-    for _ in 0..(60.0 / PLANT_STEP.as_secs_f64()) as u64 {
-        v.sim.step(no_fix, &mut v.sink);
-        if !v.sink.results.is_empty() {
-            break;
-        }
-    }
+    v.run_under(no_fix, 60.0, true);
     let r = v.result();
     assert_eq!(
         r.outcome,
         Outcome::Aborted("localisation lost during the goal".into()),
         "{r}"
     );
-    for _ in 0..(2.0 / PLANT_STEP.as_secs_f64()) as u64 {
-        v.sim.step(no_fix, &mut v.sink);
-    }
+    v.run_under(no_fix, 2.0, false);
     assert!(v.speed().abs() < 0.01, "stopped");
     // Without a location a new goal is refused with the reason.
     let refused = v.send("goal", goal).expect_err("not located");

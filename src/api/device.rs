@@ -94,6 +94,21 @@ impl DeviceDialect {
         failure: Option<(u32, &str)>,
         out: &mut Vec<Publish>,
     ) {
+        if let Some((code, reason)) = failure {
+            tracing::warn!(dialect = "device", %command, code, %reason, "request refused");
+        }
+        self.publish_ack(t, command, msg_id, failure, out);
+    }
+
+    /// Publishes an ack (a goal's end, which the core has logged already).
+    fn publish_ack(
+        &self,
+        t: Timestamp,
+        command: &str,
+        msg_id: &Value,
+        failure: Option<(u32, &str)>,
+        out: &mut Vec<Publish>,
+    ) {
         let body = Ack {
             msg_id,
             timestamp: t.as_micros() / 1_000_000,
@@ -101,9 +116,6 @@ impl DeviceDialect {
             code: failure.map(|f| f.0),
             message: failure.map(|f| f.1),
         };
-        if let Some((code, reason)) = failure {
-            tracing::warn!(dialect = "device", %command, code, %reason, "request refused");
-        }
         let json = serde_json::to_string(&body).unwrap_or_default();
         out.push(Publish::reply(
             format!("{}{command}/ack", self.prefix),
@@ -266,7 +278,7 @@ impl Dialect for DeviceDialect {
             Outcome::Cancelled(_) => Some((CANCELLED, message.as_str())),
             Outcome::TimedOut | Outcome::Aborted(_) => Some((FAILED, message.as_str())),
         };
-        self.ack(t, "goal", &msg_id, failure, out);
+        self.publish_ack(t, "goal", &msg_id, failure, out);
     }
 }
 

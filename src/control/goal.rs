@@ -8,22 +8,19 @@
 //!   radius it holds the bearing the goal had on entering it and closes the distance along
 //!   it, so the position's noise cannot swing the heading at the end.
 //! - The speed rises at the acceleration limit, cruises, and brakes on the deceleration
-//!   limit for the distance left (v = √(2·d·s)), led by the drives' response time like every
+//!   limit (95 % of each, as the distance moves plan) for the distance left (v = √(2·d·s)), led by the drives' response time like every
 //!   move; near the goal it closes linearly with the same gain as the distance moves.
 //! - It needs the vehicle located (the goal is in the map frame) and aborts when the
 //!   localisation is lost. A drive that ends outside the position tolerance (an arc cut short
 //!   by slip) faces the goal and tries again, a few times.
 
-use super::moves::{RelativeMove, Step};
+use super::moves::{RelativeMove, Step, planning_limits};
 use super::profile::Profile;
 use super::{MoveKind, Outcome, PoseView};
 use crate::config::motion::MotionSettings;
 use crate::fusion::ekf::wrap;
 use crate::time::Timestamp;
 
-/// The share of the speed and acceleration limits the approach plans with (as the distance
-/// moves): headroom for the correction.
-const SHARE: f64 = 0.95;
 /// Facing the goal is good enough within this, rad (the arc takes out the rest).
 const FACE_TOLERANCE_RAD: f64 = 0.035;
 /// A drive whose goal swings further than this off the heading faces it again, rad.
@@ -65,7 +62,7 @@ pub struct GoalMove {
     started: Timestamp,
     planned_s: f64,
     allowance_s: f64,
-    /// The approach's planned speed, m/s, and when it was set.
+    /// The approach's planned speed, m/s.
     speed: f64,
     last_step: Option<Timestamp>,
     approaches: u32,
@@ -257,21 +254,20 @@ impl GoalMove {
             self.phase = self.approach_or_align(t, view, pose);
             return Step::Drive { v: 0.0, w: 0.0 };
         }
-        let speed_limit = self.settings.linear.speed * SHARE;
-        let accel_limit = self.settings.linear.accel * SHARE;
-        let decel_limit = self.settings.linear.decel * SHARE;
+        let limits = planning_limits(self.settings.linear);
         // Brake for what is left, close linearly at the end (backing up if past it), never
         // faster than the limit; the speed rises no faster than the acceleration limit.
         let wanted = if along > 0.0 {
-            speed_limit
-                .min((2.0 * decel_limit * along).sqrt())
+            limits
+                .speed
+                .min((2.0 * limits.decel * along).sqrt())
                 .min(gain * along)
         } else {
             gain * along
         };
         let before = self.speed;
         self.speed = if wanted > before {
-            before + (wanted - before).min(accel_limit * dt)
+            before + (wanted - before).min(limits.accel * dt)
         } else {
             wanted
         };

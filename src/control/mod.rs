@@ -208,7 +208,7 @@ impl Motion {
 
     /// Whether the motion under way depends on the map frame (a goal in it, or a heading
     /// held on its yaw): moving the frame would move its goal.
-    pub fn uses_map_heading(&self) -> bool {
+    pub fn uses_map_frame(&self) -> bool {
         self.active.as_ref().is_some_and(|(_, m, _)| match m {
             Active::Move(m) => m.heading_source() == moves::HeadingSource::Map,
             Active::Goal(_) => true,

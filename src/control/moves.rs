@@ -29,6 +29,16 @@ use crate::time::Timestamp;
 /// reach less than their commanded speed over the ground).
 const PROFILE_SHARE: f64 = 0.95;
 
+/// The limits a closed-loop motion plans with: [`PROFILE_SHARE`] of the configured ones.
+pub(super) fn planning_limits(limits: Limits) -> Limits {
+    Limits {
+        speed: limits.speed * PROFILE_SHARE,
+        accel: limits.accel * PROFILE_SHARE,
+        decel: limits.decel * PROFILE_SHARE,
+        ..limits
+    }
+}
+
 /// A move may end while still rolling, by at most this many tolerances of coast: the
 /// first-order model predicts where it comes to rest, and its error is a share of the coast.
 const COAST_TOLERANCES: f64 = 3.0;
@@ -76,17 +86,18 @@ pub struct RelativeMove {
     heading: HeadingSource,
     start: Start,
     started: Timestamp,
-    /// Turned so far on the heading source (unwrapped), rad.
+    /// Turned so far on the heading source (unwrapped), rad, and its yaw at the last step.
     turned: f64,
-    /// ∫ error dt of the position loop (m·s or rad·s), and the last step's time.
+    last_yaw: f64,
+    /// ∫ error dt of the position loop (m·s or rad·s).
     integral: f64,
+    /// The last step's time.
     last_step: Option<Timestamp>,
     /// The profile has ended: settling on the goal.
     settling: bool,
     /// The most the integral may add to the command: the headroom the profile leaves under
     /// the speed limit (units/s).
     integral_limit: f64,
-    last_yaw: f64,
     /// Odometry distance per true distance (1 + the wheels' scale error).
     wheel_scale: f64,
     tolerance: f64,
@@ -100,21 +111,15 @@ impl RelativeMove {
             Some(yaw) => (HeadingSource::Map, yaw),
             None => (HeadingSource::Odom, view.odom.yaw),
         };
-        let share = |l: Limits| Limits {
-            speed: l.speed * PROFILE_SHARE,
-            accel: l.accel * PROFILE_SHARE,
-            decel: l.decel * PROFILE_SHARE,
-            ..l
-        };
         let (amount, limits, tolerance) = match kind {
             MoveKind::Straight { distance_m } => (
                 distance_m,
-                share(settings.linear),
+                planning_limits(settings.linear),
                 settings.position_tolerance_m,
             ),
             MoveKind::Turn { angle_rad } => (
                 angle_rad,
-                share(settings.angular),
+                planning_limits(settings.angular),
                 settings.angle_tolerance_rad,
             ),
         };
@@ -215,8 +220,7 @@ impl RelativeMove {
         }
         .min(t);
         let speed_elapsed = speed_at.saturating_since(self.started).as_secs_f64();
-        let speed_now = speed_now + self.profile.sample(elapsed).speed
-            - self.profile.sample(speed_elapsed).speed;
+        let speed_now = speed_now + plan.speed - self.profile.sample(speed_elapsed).speed;
         // What is left now (the vehicle went on since it was measured), and how far it
         // coasts once its command is zero.
         let age = elapsed - measured_elapsed;
@@ -319,8 +323,7 @@ pub(crate) mod tests {
 
     /// A unicycle whose speeds follow the command with a first-order lag `tau`, stepped
     /// every 10 ms; returns the outcome, the true error and the time taken.
-    fn run(kind: MoveKind, tau: f64, start_yaw: f64) -> (Outcome, f64, f64) {
-        let s = settings();
+    fn run(kind: MoveKind, s: &MotionSettings, tau: f64, start_yaw: f64) -> (Outcome, f64, f64) {
         let mut pose = OdomPose {
             yaw: start_yaw,
             ..OdomPose::default()
@@ -337,7 +340,7 @@ pub(crate) mod tests {
             Timestamp::from_micros(0),
             kind,
             &view(pose, Timestamp::from_micros(0)),
-            &s,
+            s,
         );
         let dt = 0.01;
         // The plant's step: speeds follow the command (clamped to the limits) with lag τ.
@@ -374,37 +377,35 @@ pub(crate) mod tests {
 
     #[test]
     fn moves_arrive_within_tolerance_on_lagging_drives() {
-        for tau in [0.02, 0.05, 0.1, 0.2] {
-            for kind in [
-                MoveKind::Straight { distance_m: 1.0 },
-                MoveKind::Straight { distance_m: -0.1 },
-                MoveKind::Turn {
-                    angle_rad: PI / 2.0,
-                },
-                MoveKind::Turn { angle_rad: -PI },
-            ] {
-                let (outcome, error, took) = run(kind, tau, 3.0);
-                assert_eq!(outcome, Outcome::Succeeded, "{kind:?} τ {tau}");
-                let tolerance = match kind {
-                    MoveKind::Straight { .. } => 0.0015,
-                    MoveKind::Turn { .. } => 0.15_f64.to_radians(),
-                };
-                assert!(error.abs() <= tolerance, "{kind:?} τ {tau}: error {error}");
-                let planned = Profile::plan(
-                    match kind {
-                        MoveKind::Straight { distance_m } => distance_m,
-                        MoveKind::Turn { angle_rad } => angle_rad,
+        // Trapezoids, and S-curves under a jerk limit.
+        for jerk in [f64::INFINITY, 5.0] {
+            let mut s = settings();
+            s.linear.jerk = jerk;
+            s.angular.jerk = jerk;
+            for tau in [0.02, 0.05, 0.1, 0.2] {
+                for kind in [
+                    MoveKind::Straight { distance_m: 1.0 },
+                    MoveKind::Straight { distance_m: -0.1 },
+                    MoveKind::Turn {
+                        angle_rad: PI / 2.0,
                     },
-                    match kind {
-                        MoveKind::Straight { .. } => settings().linear,
-                        MoveKind::Turn { .. } => settings().angular,
-                    },
-                )
-                .duration();
-                assert!(
-                    took <= planned * 1.5 + 4.0 * tau,
-                    "{kind:?} τ {tau}: {took} s"
-                );
+                    MoveKind::Turn { angle_rad: -PI },
+                ] {
+                    let case = format!("{kind:?} τ {tau} jerk {jerk}");
+                    let (outcome, error, took) = run(kind, &s, tau, 3.0);
+                    assert_eq!(outcome, Outcome::Succeeded, "{case}");
+                    let tolerance = match kind {
+                        MoveKind::Straight { .. } => 0.0015,
+                        MoveKind::Turn { .. } => 0.15_f64.to_radians(),
+                    };
+                    assert!(error.abs() <= tolerance, "{case}: error {error}");
+                    let planned = match kind {
+                        MoveKind::Straight { distance_m } => Profile::plan(distance_m, s.linear),
+                        MoveKind::Turn { angle_rad } => Profile::plan(angle_rad, s.angular),
+                    }
+                    .duration();
+                    assert!(took <= planned * 1.5 + 4.0 * tau, "{case}: {took} s");
+                }
             }
         }
     }

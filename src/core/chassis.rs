@@ -14,7 +14,8 @@ use crate::time::Timestamp;
 
 /// The control period the engine runs the chassis at.
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
-/// A move's command leads the ramp by the drives' response time, at most this, s.
+/// A move's command leads the modelled drive speed by about the drives' response time, at
+/// most this, s (times the acceleration limit).
 pub const MAX_LEAD_S: f64 = 0.3;
 
 /// Bits of `robot.robot_status`.
@@ -124,8 +125,8 @@ pub enum CommandRejected {
     /// A goal in the map frame needs the vehicle located.
     #[error("not located: a goal in the map frame needs a good position and heading (LOCATE_TRUE)")]
     NotLocated,
-    /// The command would move the map frame under a move that holds the map's heading.
-    #[error("a move holding the map's heading is under way; stop it first")]
+    /// The command would move the map frame under a motion that depends on it.
+    #[error("a move or goal in the map frame is under way; stop it first")]
     MoveUnderWay,
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]

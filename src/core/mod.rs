@@ -432,8 +432,8 @@ impl Vehicle {
             }
             Input::Command(
                 Command::ZeroLocalFrame | Command::SetPose { .. } | Command::SetDatum(_),
-            ) if self.motion.as_ref().is_some_and(Motion::uses_map_heading) => {
-                // The move's heading is the map's: moving the map would move its goal.
+            ) if self.motion.as_ref().is_some_and(Motion::uses_map_frame) => {
+                // The motion's goal or heading is in the map: moving it would move the goal.
                 vec![Output::CommandResult(Err(CommandRejected::MoveUnderWay))]
             }
             Input::Command(Command::ZeroLocalFrame) => {
@@ -509,7 +509,7 @@ impl Vehicle {
         out
     }
 
-    /// What a move sees: the `odom` pose, and the map yaw while located.
+    /// What a move sees: the `odom` pose, and the map pose while located.
     fn pose_view(&self, t: Timestamp) -> Option<PoseView> {
         let odometry = self.odometry.as_ref()?;
         let (odom, odom_at) = (odometry.pose()?, odometry.updated_at()?);
