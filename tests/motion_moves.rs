@@ -1,6 +1,7 @@
-//! Closed-loop moves (`set_navi_cmd`) end to end: `chassisd sim` takes them on its local
-//! command channel, the published pose moves by what was asked, the end is logged with its
-//! result, and the recording replays to the same bytes (the same wheel commands).
+//! Closed-loop moves (`set_navi_cmd`) and a trajectory task (`follow_path`, paused and
+//! continued) end to end: `chassisd sim` takes them on its local command channel, the
+//! published pose moves by what was asked, the end is logged with its result, and the
+//! recording replays to the same bytes (the same wheel commands).
 
 mod common;
 
@@ -35,7 +36,7 @@ fn last(sim: &mut Proc) -> serde_json::Value {
 }
 
 #[test]
-fn a_move_and_a_turn_from_stdin_move_the_published_pose_and_replay() {
+fn moves_and_a_task_from_stdin_move_the_published_pose_and_replay() {
     let dir = common::tempdir("motion-stdin").join("rec");
     let mut sim = Proc::start(&[
         "sim".as_ref(),
@@ -104,6 +105,32 @@ fn a_move_and_a_turn_from_stdin_move_the_published_pose_and_replay() {
         "move 5 (turn right 10.0°): succeeded",
     );
     std::thread::sleep(Duration::from_millis(300));
+
+    // A trajectory task: 1.5 m ahead, then 1 m to the left (a corner turned on the spot),
+    // paused on the way and continued.
+    let (x, y, yaw) = pose(&last(&mut sim));
+    let (s, c) = yaw.sin_cos();
+    let at = |ahead: f64, left: f64| (x + ahead * c - left * s, y + ahead * s + left * c);
+    let points: Vec<String> = [at(0.0, 0.0), at(1.5, 0.0), at(1.5, 1.0)]
+        .iter()
+        .flat_map(|(px, py)| [format!("{px:.4}"), format!("{py:.4}")])
+        .collect();
+    sim.send(&format!(
+        r#"follow_path {{"path": [{}], "speed": 0.5}}"#,
+        points.join(", ")
+    ));
+    std::thread::sleep(Duration::from_millis(1500));
+    sim.send("pause {}");
+    std::thread::sleep(Duration::from_millis(1000));
+    sim.send("continue {}");
+    sim.wait_log(Duration::from_secs(30), "move 6 (path of");
+    let ended = sim.log.last().cloned().unwrap_or_default();
+    assert!(ended.contains("succeeded"), "{ended}");
+    std::thread::sleep(Duration::from_millis(500));
+    let end = pose(&last(&mut sim));
+    let (ex, ey) = at(1.5, 1.0);
+    let off = (end.0 - ex).hypot(end.1 - ey);
+    assert!(off < 0.05, "the task ended {off} m from its end");
 
     let lines = sim.stop();
     let live: Vec<u8> = lines

@@ -2,88 +2,17 @@
 //! path: every stop cause ends the move with its reason, and motion needs the deliberate
 //! re-arm afterwards; a move never re-arms by itself.
 
-use chassisd::control::{MotionResult, Outcome};
+mod common;
+
+use chassisd::control::Outcome;
 use chassisd::devices::gnss::FixQuality;
-use chassisd::engine::EngineOutput;
-use chassisd::record::Record;
-use chassisd::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
+use chassisd::sim::lockstep::Lockstep;
 use chassisd::sim::plant::{GnssCondition, PlantConfig};
-use chassisd::time::Timestamp;
-
-#[derive(Default)]
-struct Collector {
-    results: Vec<MotionResult>,
-    answers: Vec<(String, Result<(), String>)>,
-}
-
-impl Sink for Collector {
-    fn record(&mut self, _: &Record) {}
-
-    fn output(&mut self, output: EngineOutput) {
-        match output {
-            EngineOutput::MotionEnded(r) => self.results.push(r),
-            EngineOutput::CommandResult { topic, result, .. } => self.answers.push((topic, result)),
-            _ => {}
-        }
-    }
-}
-
-const FIXED: GnssCondition = GnssCondition {
-    quality: Some(FixQuality::RtkFixed),
-    offset: (0.0, 0.0),
-};
-
-struct Vehicle {
-    sim: Lockstep,
-    sink: Collector,
-}
-
-impl Vehicle {
-    /// The simulated mower, booted and standing still.
-    fn new() -> Self {
-        let plant = PlantConfig::builtin().expect("plant");
-        let mut v = Self {
-            sim: Lockstep::new(plant, 7, Timestamp::from_micros(1_767_225_600_000_000))
-                .expect("sim"),
-            sink: Collector::default(),
-        };
-        v.run(3.0);
-        v
-    }
-
-    fn run(&mut self, seconds: f64) {
-        self.run_under(FIXED, seconds, false);
-    }
-
-    /// Steps under `gnss` for `seconds`, or until a motion ends when `until_result`.
-    fn run_under(&mut self, gnss: GnssCondition, seconds: f64, until_result: bool) {
-        for _ in 0..(seconds / PLANT_STEP.as_secs_f64()).round() as u64 {
-            self.sim.step(gnss, &mut self.sink);
-            if until_result && !self.sink.results.is_empty() {
-                break;
-            }
-        }
-    }
-
-    /// Sends a command; its answer.
-    fn send(&mut self, topic: &str, payload: &str) -> Result<(), String> {
-        self.sink.answers.clear();
-        self.sim.command(topic, payload, &mut self.sink);
-        self.sink.answers.pop().map(|(_, r)| r).expect("an answer")
-    }
-
-    fn result(&mut self) -> MotionResult {
-        self.sink.results.pop().expect("the move ended")
-    }
-
-    fn speed(&self) -> f64 {
-        self.sim.vehicle().truth().v
-    }
-}
+use common::lockstep::{FIXED, START, SimRun as Vehicle};
 
 #[test]
 fn a_software_estop_aborts_the_move_and_moves_need_a_re_arm() {
-    let mut v = Vehicle::new();
+    let mut v = Vehicle::booted(7);
     v.send("set_navi_cmd", r#"{"cmd":"1","distance":300}"#)
         .expect("accepted");
     v.run(1.0);
@@ -115,7 +44,7 @@ fn a_software_estop_aborts_the_move_and_moves_need_a_re_arm() {
 
 #[test]
 fn an_operator_stop_cancels_the_move_and_latches() {
-    let mut v = Vehicle::new();
+    let mut v = Vehicle::booted(7);
     v.send("set_navi_cmd", r#"{"cmd":"3","distance":720}"#)
         .expect("accepted");
     v.run(1.0);
@@ -140,7 +69,7 @@ fn an_operator_stop_cancels_the_move_and_latches() {
 
 #[test]
 fn a_velocity_command_takes_over_from_a_move_in_manual_mode() {
-    let mut v = Vehicle::new();
+    let mut v = Vehicle::booted(7);
     v.send("set_navi_cmd", r#"{"cmd":"1","distance":300}"#)
         .expect("accepted");
     v.run(0.5);
@@ -162,7 +91,7 @@ fn a_velocity_command_takes_over_from_a_move_in_manual_mode() {
 
 #[test]
 fn a_stop_request_ends_the_move_at_rest_without_latching() {
-    let mut v = Vehicle::new();
+    let mut v = Vehicle::booted(7);
     v.send("set_navi_cmd", r#"{"cmd":"2","distance":300}"#)
         .expect("accepted");
     v.run(1.0);
@@ -185,7 +114,7 @@ fn a_stop_request_ends_the_move_at_rest_without_latching() {
 /// the localisation is lost (here: the receiver loses its fix for good).
 #[test]
 fn a_goal_is_aborted_when_the_localisation_is_lost() {
-    let mut v = Vehicle::new();
+    let mut v = Vehicle::booted(7);
     let goal = r#"{"x":60.0,"y":0.0,"yaw":0.0}"#;
     let mut accepted = v.send("goal", goal);
     for _ in 0..30 {
@@ -218,4 +147,192 @@ fn a_goal_is_aborted_when_the_localisation_is_lost() {
     // Without a location a new goal is refused with the reason.
     let refused = v.send("goal", goal).expect_err("not located");
     assert!(refused.contains("not located"), "{refused}");
+}
+
+/// Starts a straight path task `length` m ahead of `v` (located) in the map frame; the
+/// path's end (map frame).
+fn start_straight_task(v: &mut Vehicle, length: f64) -> (f64, f64) {
+    let pose = v.status().pose;
+    let (s, c) = pose.yaw.sin_cos();
+    let end = (pose.x + length * c, pose.y + length * s);
+    let request = format!(
+        r#"{{"path":[{},{},{},{}],"speed":0.5}}"#,
+        pose.x, pose.y, end.0, end.1
+    );
+    v.send("follow_path", &request).expect("the task starts");
+    end
+}
+
+fn distance(a: (f64, f64), b: (f64, f64)) -> f64 {
+    (a.0 - b.0).hypot(a.1 - b.1)
+}
+
+/// PAUSE holds a task where it is under the operator's stop; CONTINUE is the deliberate act
+/// that re-arms, and the task goes on from there to its end.
+#[test]
+fn a_paused_task_holds_and_continue_goes_on_to_its_end() {
+    let mut v = Vehicle::located(7);
+    let refused = v.send("continue", "{}").expect_err("nothing paused");
+    assert!(refused.contains("no task is paused"), "{refused}");
+    let end = start_straight_task(&mut v, 6.0);
+    v.run(4.0);
+    assert!(v.speed() > 0.3, "under way: {}", v.speed());
+    v.send("pause", "{}").expect("paused");
+    v.run(1.5);
+    assert!(v.sink.results.is_empty(), "a pause does not end the task");
+    assert!(v.speed().abs() < 0.01, "held at rest: {}", v.speed());
+    let held = v.truth_xy();
+    // Held: a move is refused under the operator's stop, and the vehicle stays put.
+    assert!(
+        v.send("set_navi_cmd", r#"{"cmd":"1","distance":10}"#)
+            .is_err()
+    );
+    v.run(3.0);
+    assert!(
+        distance(held, v.truth_xy()) < 0.005,
+        "stayed where it was paused"
+    );
+    v.send("continue", "{}").expect("goes on");
+    v.run_under(FIXED, 30.0, true);
+    let r = v.result();
+    assert_eq!(r.outcome, Outcome::Succeeded, "{r}");
+    v.run(1.0);
+    let off = distance(end, v.truth_xy());
+    assert!(off < 0.05, "ended {off} m from the path's end");
+}
+
+/// Below the configured GNSS quality (RTK fixed) a task waits at rest, and goes on when the
+/// quality is back; the time waited does not count against its allowance.
+#[test]
+fn a_task_waits_at_rest_for_rtk_fixed_and_goes_on() {
+    let mut v = Vehicle::located(7);
+    let end = start_straight_task(&mut v, 6.0);
+    v.run(4.0);
+    assert!(v.speed() > 0.3, "under way");
+    let float = GnssCondition {
+        quality: Some(FixQuality::RtkFloat),
+        offset: (0.0, 0.0),
+    };
+    v.run_under(float, 15.0, true);
+    assert!(v.sink.results.is_empty(), "waiting, not ended");
+    assert!(v.speed().abs() < 0.01, "waits at rest: {}", v.speed());
+    v.run_under(FIXED, 30.0, true);
+    let r = v.result();
+    assert_eq!(r.outcome, Outcome::Succeeded, "{r}");
+    v.run(1.0);
+    assert!(distance(end, v.truth_xy()) < 0.05);
+}
+
+/// A task in the map frame ends with the reason when the localisation is lost.
+#[test]
+fn a_task_is_aborted_when_the_localisation_is_lost() {
+    let mut v = Vehicle::located(7);
+    start_straight_task(&mut v, 60.0);
+    v.run(3.0);
+    let no_fix = GnssCondition {
+        quality: None,
+        offset: (0.0, 0.0),
+    };
+    v.run_under(no_fix, 200.0, true);
+    let r = v.result();
+    assert!(
+        matches!(&r.outcome, Outcome::Aborted(why) if why.contains("localisation lost") || why.contains("GNSS quality")),
+        "{r}"
+    );
+    v.run_under(no_fix, 2.0, false);
+    assert!(v.speed().abs() < 0.01, "stopped");
+}
+
+/// The root heartbeat is the control link: when it falls silent the move under way ends with
+/// that cause, the vehicle stops, and moves stay refused until the deliberate re-arm; the
+/// heartbeat coming back does not re-arm by itself. A mode switch cancels a move too.
+#[test]
+fn a_lost_control_link_aborts_the_move_and_needs_a_re_arm() {
+    use chassisd::api::mqtt::MQTT_SOURCE;
+    use chassisd::api::rtk::trajectory::MemoryStore;
+    use chassisd::config::mqtt::{MqttConfig, RootDialectConfig};
+    use chassisd::record::Payload;
+
+    let mqtt = MqttConfig {
+        root: Some(RootDialectConfig {
+            vehicle_id: "sim".into(),
+            heartbeat_timeout_s: 1.0,
+            require_heartbeat: false,
+            heartbeat_client_id: None,
+        }),
+        ..MqttConfig::default()
+    };
+    let plant = PlantConfig::builtin().expect("plant");
+    let mut v = Vehicle::on(
+        Lockstep::with_mqtt(
+            plant,
+            7,
+            START,
+            Some(mqtt),
+            Box::new(MemoryStore::default()),
+        )
+        .expect("sim"),
+    );
+    let beat = |v: &mut Vehicle| {
+        v.sim.input(
+            MQTT_SOURCE,
+            Payload::Command {
+                topic: "/root/sim/heartbeat/set".into(),
+                payload: br#"{"timestamp": "2026-01-01 00:00:00"}"#.to_vec().into(),
+            },
+            &mut v.sink,
+        );
+    };
+    for _ in 0..30 {
+        beat(&mut v);
+        v.run(0.1);
+    }
+    v.send("set_navi_cmd", r#"{"cmd":"1","distance":500}"#)
+        .expect("accepted");
+    for _ in 0..10 {
+        beat(&mut v);
+        v.run(0.1);
+    }
+    assert!(v.speed() > 0.3, "under way");
+    // Silence: the link is lost after 1 s.
+    v.run_under(FIXED, 1.5, true);
+    let r = v.result();
+    assert_eq!(
+        r.outcome,
+        Outcome::Aborted("safety stop: control link heartbeat lost".into()),
+        "{r}"
+    );
+    v.run(2.0);
+    assert!(v.speed().abs() < 0.01, "stopped");
+    for _ in 0..5 {
+        beat(&mut v);
+        v.run(0.1);
+    }
+    let refused = v
+        .send("set_navi_cmd", r#"{"cmd":"1","distance":10}"#)
+        .expect_err("still latched");
+    assert!(refused.contains("re-arm"), "{refused}");
+    v.send("reset", "{}").expect("re-armed");
+    beat(&mut v);
+    v.sink.results.clear();
+    v.send("set_navi_cmd", r#"{"cmd":"1","distance":100}"#)
+        .expect("accepted after the re-arm");
+    beat(&mut v);
+    v.run(0.3);
+    // SWITCH_MODE to navigation: the switch ends the move under way.
+    v.sim.input(
+        MQTT_SOURCE,
+        Payload::Command {
+            topic: "/root/sim/cmd/navigation/set".into(),
+            payload: br#"{"messageId": 1, "timestamp": "2026-01-01 00:00:00", "messageType": 6, "data": 0}"#
+                .to_vec()
+                .into(),
+        },
+        &mut v.sink,
+    );
+    v.run(0.05);
+    assert_eq!(
+        v.result().outcome,
+        Outcome::Cancelled("the drive mode was switched".into())
+    );
 }

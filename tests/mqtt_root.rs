@@ -136,10 +136,10 @@ fn every_command_example_gets_its_documented_ack() {
     let expected = [
         (0, true),  // INIT_POSITION
         (0, false), // PAUSE: stops the vehicle
-        (3, false), // CONTINUE: no task to continue
+        (4, false), // CONTINUE: refused, no task is paused
         (3, false), // MAPPING_START: the navigation stack's job
         (3, false), // MAPPING_STOP
-        (3, false), // MISSION: not implemented yet
+        (4, false), // MISSION: refused, PAUSE latched the operator's stop
         (0, false), // SWITCH_MODE 0: navigation mode
         (4, false), // DRIVE: refused in navigation mode
         (3, false), // SET_MAP
@@ -579,5 +579,108 @@ fn a_network_outage_stops_the_vehicle_keeps_events_and_drops_old_telemetry() {
     assert!(
         (received as f64) < produced_during_cut,
         "old telemetry dropped: {received} of {produced_during_cut:.0}"
+    );
+}
+
+/// A MISSION with every action over MQTT: acked at once, each step's start and end notified
+/// with the request's messageId, and the end notified with code 0 once the vehicle charges on
+/// the simulated dock.
+#[test]
+fn a_mission_with_every_action_is_notified_step_by_step_to_its_end() {
+    let broker = Mosquitto::start();
+    let notes = broker.subscribe(&[
+        &topic("cmd/navigation/ack"),
+        &topic("cmd/navigation/notify"),
+    ]);
+    let status = broker.subscribe(&["base_status"]);
+    let _d = daemon(&broker);
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let pose = loop {
+        assert!(Instant::now() < deadline, "never located");
+        let s = json(&status.next_on("base_status", WAIT).expect("base_status"));
+        if s["nav"]["locate"] == "LOCATE_TRUE" {
+            break s["pose"].clone();
+        }
+    };
+    let (x, y, yaw) = (
+        pose["x"].as_f64().unwrap(),
+        pose["y"].as_f64().unwrap(),
+        pose["yaw"].as_f64().unwrap(),
+    );
+    let (s, c) = yaw.sin_cos();
+    let at = |ahead: f64, left: f64| {
+        format!(
+            "{:.3}, {:.3}",
+            x + ahead * c - left * s,
+            y + ahead * s + left * c
+        )
+    };
+    let mission = format!(
+        r#"{{"messageId": 77, "timestamp": "2026-11-23 10:00:00", "messageType": 5, "data": [
+        {{"action": "MOVE_TO_POSITION", "parameters": {{"path": [{}, {}]}}}},
+        {{"action": "WAIT", "parameters": {{"seconds": 1}}}},
+        {{"action": "OPEN_CUTTER", "parameters": {{"cutter": true}}}},
+        {{"action": "COVERAGE", "parameters": {{"path": [{}, {}, {}]}}}},
+        {{"action": "CLOSE_CUTTER", "parameters": {{"cutter": false}}}},
+        {{"action": "CHARGING", "parameters": {{"time": 0}}}}]}}"#,
+        at(0.0, 0.0),
+        at(0.8, 0.0),
+        at(0.8, 0.0),
+        at(2.0, 0.0),
+        at(2.0, 0.5),
+    );
+    let ack = request(&broker, &notes, &topic("cmd/navigation/set"), &mission);
+    assert_eq!(ack["data"]["code"], 0, "{ack}");
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let end = loop {
+        assert!(Instant::now() < deadline, "no end; notified {seen:#?}");
+        let Some(n) = notes.next_on(&topic("cmd/navigation/notify"), WAIT) else {
+            continue;
+        };
+        let n = json(&n);
+        assert_eq!(n["messageId"], 77, "{n}");
+        assert_eq!(n["messageType"], 5, "{n}");
+        assert!(is_timestamp(&n["timestamp"]), "{n}");
+        if n["data"].get("state").is_none() {
+            break n;
+        }
+        seen.push(format!(
+            "{} {} {}",
+            n["data"]["step"], n["data"]["action"], n["data"]["state"]
+        ));
+    };
+    assert_eq!(
+        end["data"],
+        serde_json::json!({"code": 0}),
+        "{end} after {seen:#?}"
+    );
+    let actions = [
+        "MOVE_TO_POSITION",
+        "WAIT",
+        "OPEN_CUTTER",
+        "COVERAGE",
+        "CLOSE_CUTTER",
+        "CHARGING",
+    ];
+    let want: Vec<String> = actions
+        .iter()
+        .enumerate()
+        .flat_map(|(i, a)| {
+            [
+                format!("{i} \"{a}\" \"started\""),
+                format!("{i} \"{a}\" \"done\""),
+            ]
+        })
+        .collect();
+    assert_eq!(seen, want);
+    // The Daly BMS is polled one quantity at a time: the current is at most 2.5 s old.
+    std::thread::sleep(Duration::from_secs(3));
+    status.clear();
+    let s = json(&status.next_on("base_status", WAIT).expect("base_status"));
+    assert_eq!(s["nav"]["status"], "NAV_SUCCESS", "{s}");
+    assert!(
+        s["bms"]["current"].as_f64().unwrap() > 0.0,
+        "charging on the dock: {s}"
     );
 }

@@ -166,13 +166,15 @@ fn every_spec_example_gets_its_documented_answer() {
                     "{answer}"
                 );
             }
+            // Nothing named "13" is saved.
             "start_task" => {
                 assert_eq!(answer["cmd"], "start_task_failse", "{answer}");
                 assert!(
                     answer["message"]
                         .as_str()
                         .unwrap()
-                        .contains("not available")
+                        .contains("no trajectory named \"13\""),
+                    "{answer}"
                 );
             }
             _ => {
@@ -206,6 +208,146 @@ fn every_spec_example_gets_its_documented_answer() {
         feedback(&broker, &answers, delete)["cmd"],
         "delete_trajectory_success"
     );
+}
+
+/// The latitude and longitude `east` and `north` metres from `(lat, lon)` (degrees).
+fn offset(lat: f64, lon: f64, east: f64, north: f64) -> (f64, f64) {
+    let phi = lat.to_radians();
+    let per_deg_lat = 111_132.954 - 559.822 * (2.0 * phi).cos() + 1.175 * (4.0 * phi).cos();
+    let per_deg_lon = 111_412.84 * phi.cos() - 93.5 * (3.0 * phi).cos();
+    (lat + north / per_deg_lat, lon + east / per_deg_lon)
+}
+
+/// The simulated mower's GNSS antenna in the vehicle frame (x forward, y left), m.
+fn antenna() -> (f64, f64) {
+    let plant: toml::Value = toml::from_str(
+        &std::fs::read_to_string(common::repo().join("devices/plant.mower.toml")).unwrap(),
+    )
+    .unwrap();
+    let a = &plant["geometry"]["antenna"];
+    (a[0].as_float().unwrap(), a[1].as_float().unwrap())
+}
+
+/// The next base_status.
+fn next_status(status: &Subscriber) -> Value {
+    json(&status.next_on("base_status", WAIT).expect("base_status"))
+}
+
+/// A base_status published from now on.
+fn fresh_status(status: &Subscriber) -> Value {
+    status.clear();
+    next_status(status)
+}
+
+#[test]
+fn start_task_follows_a_saved_trajectory_to_its_end_and_cancel_task_stops_one() {
+    let broker = Mosquitto::start();
+    let status = broker.subscribe(&["base_status"]);
+    let answers = broker.subscribe(&["feedback"]);
+    let _d = daemon(&broker);
+    wait_localised(&status);
+    let s = fresh_status(&status);
+    let (lat, lon) = (
+        s["rtk"]["latitude"].as_f64().unwrap(),
+        s["rtk"]["longitude"].as_f64().unwrap(),
+    );
+    let (x0, y0, yaw0) = (
+        s["pose"]["x"].as_f64().unwrap(),
+        s["pose"]["y"].as_f64().unwrap(),
+        s["pose"]["yaw"].as_f64().unwrap(),
+    );
+    // Recorded as a client would: from 0.5 m ahead of the antenna, 4 m straight, then a
+    // quarter circle of 2 m to the left; points every 0.1 m.
+    let mut local: Vec<(f64, f64)> = (5..45).map(|i| (f64::from(i) * 0.1, 0.0)).collect();
+    for i in 0..=31 {
+        let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::FRAC_PI_2 * f64::from(i) / 31.0;
+        local.push((4.5 + 2.0 * a.cos(), 2.0 + 2.0 * a.sin()));
+    }
+    let (sin, cos) = yaw0.sin_cos();
+    let rotate = |(fx, fy): (f64, f64)| (fx * cos - fy * sin, fx * sin + fy * cos);
+    let points: Vec<Value> = local
+        .iter()
+        .map(|&p| {
+            let (e, n) = rotate(p);
+            let (plat, plon) = offset(lat, lon, e, n);
+            serde_json::json!({"longitude": plon, "latitude": plat, "angle": 0, "x": e, "y": n, "yaw": 0})
+        })
+        .collect();
+    let save = serde_json::json!({
+        "cmd_type": "trajectory_control",
+        "cmd": "save_trajectory",
+        "data": {"name": "lap", "data": points}
+    });
+    assert_eq!(
+        feedback(&broker, &answers, &save.to_string())["cmd"],
+        "save_trajectory_success"
+    );
+    let start = |id: u32| {
+        format!(
+            r#"{{"cmd_type":"task_control","cmd":"start_task","name":"lap","id":{id},"speed":0.5}}"#
+        )
+    };
+    let answer = feedback(&broker, &answers, &start(0));
+    assert_eq!(answer["cmd"], "start_task_success", "{answer}");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut seen_run = false;
+    let last = loop {
+        assert!(Instant::now() < deadline, "the task never ended");
+        let s = next_status(&status);
+        match s["nav"]["status"].as_str() {
+            Some("NAV_RUN") => seen_run = true,
+            Some("NAV_SUCCESS") if seen_run => break s,
+            Some("NAV_ERROR") => panic!("the task failed: {s}"),
+            _ => {}
+        }
+    };
+    std::thread::sleep(Duration::from_millis(500));
+    let end = fresh_status(&status);
+    assert_eq!(end["nav"]["status"], "NAV_SUCCESS", "{last}");
+    // The antenna was 0.5 m behind the path's start; the path ends where it was recorded.
+    let (ax, ay) = rotate(antenna());
+    let (ex, ey) = rotate(*local.last().unwrap());
+    let (want_x, want_y) = (x0 + ax + ex, y0 + ay + ey);
+    let (x, y, yaw) = (
+        end["pose"]["x"].as_f64().unwrap(),
+        end["pose"]["y"].as_f64().unwrap(),
+        end["pose"]["yaw"].as_f64().unwrap(),
+    );
+    let off = (x - want_x).hypot(y - want_y);
+    assert!(off <= 0.05, "ended {off} m from the trajectory's end");
+    let turned = (yaw - yaw0 - std::f64::consts::FRAC_PI_2)
+        .sin()
+        .asin()
+        .to_degrees();
+    assert!(
+        turned.abs() <= 3.0,
+        "heading {turned}° off the trajectory's last direction"
+    );
+    // From there the start is more than motion.task_max_approach_m away.
+    let far = feedback(&broker, &answers, &start(0));
+    assert_eq!(far["cmd"], "start_task_failse", "{far}");
+    assert!(
+        far["message"]
+            .as_str()
+            .unwrap()
+            .contains("task_max_approach_m"),
+        "{far}"
+    );
+    // From point 30 (3.5 m along) it is near enough; cancel_task stops it on the way.
+    assert_eq!(
+        feedback(&broker, &answers, &start(30))["cmd"],
+        "start_task_success"
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    let cancel = r#"{"cmd_type":"task_control","cmd":"cancel_task"}"#;
+    assert_eq!(
+        feedback(&broker, &answers, cancel)["cmd"],
+        "cancel_task_success"
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    let s = fresh_status(&status);
+    assert_eq!(s["nav"]["status"], "NAV_FREE", "{s}");
+    assert!(s["robot"]["vx"].as_f64().unwrap().abs() < 0.01, "{s}");
 }
 
 #[test]

@@ -75,12 +75,14 @@ fn a_pipe_nobody_reads_delays_neither_the_control_loop_nor_the_watchdog() {
     let frames = rpdo1(&std::fs::read_to_string(session.join("sim0.log")).expect("sim0.log"));
     assert!(frames.len() > 500, "{} RPDOs", frames.len());
     // The drive commands kept their rhythm (RPDO at least every 20 ms, on changes more often).
+    // A stalled writer would hold the loop for seconds; 60 ms leaves room for a busy 2-core
+    // machine running the other tests beside this one.
     let worst = frames
         .windows(2)
         .map(|w| w[1].0 - w[0].0)
         .max()
         .unwrap_or(0);
-    assert!(worst <= 25_000, "a {worst} µs gap in the drive commands");
+    assert!(worst <= 60_000, "a {worst} µs gap in the drive commands");
     // The last command, from the recording; within the timeout and one period after it the
     // target is zero.
     let commands = std::fs::read_to_string(session.join("commands.log")).expect("commands.log");

@@ -24,6 +24,17 @@
 //!   and north of the datum, radians counter-clockwise from east), as `device/{serial}/goal`
 //!   does; it needs the vehicle located. Its end is logged the same way.
 //!
+//! - `follow_path {"path": [x0, y0, x1, y1, ...], "speed": 0.5}` follows the path through
+//!   these points of the map frame (metres, the flat list of root MISSION's COVERAGE) at up to
+//!   `speed` m/s, as `start_task` follows a saved trajectory; it needs the vehicle located and
+//!   the GNSS quality of `motion.task_min_gnss`. Its end, with the cross-track error, is
+//!   logged.
+//! - `pause {}` holds a path task where it is and latches the operator's stop (other motion
+//!   ends), as root PAUSE; `continue {}` re-arms and goes on from there, as CONTINUE.
+//!
+//! - `mission [{"action": "WAIT", "parameters": {"seconds": 5}}, ...]` runs root MISSION's
+//!   steps (its `data` array, the same checks); progress and the end are logged.
+//!
 //! Safety:
 //! - `stop {}` stops and latches, as an operator's stop;
 //! - `estop {"engaged":true}` engages the software emergency stop (latches), `{"engaged":false}`
@@ -35,7 +46,7 @@ use serde::Deserialize;
 
 use crate::control::MoveKind;
 use crate::control::goal::GoalPose;
-use crate::core::Command;
+use crate::core::{Command, PathPoints, PathRequest};
 use crate::fusion::ekf::wrap;
 use crate::fusion::geodesy::Geodetic;
 
@@ -57,12 +68,22 @@ pub const RESET: &str = "reset";
 pub const SET_NAVI_CMD: &str = "set_navi_cmd";
 /// Topic of goals.
 pub const GOAL: &str = "goal";
+/// Topic of path tasks.
+pub const FOLLOW_PATH: &str = "follow_path";
+/// Topic that pauses a task.
+pub const PAUSE: &str = "pause";
+/// Topic that goes on with it.
+pub const CONTINUE: &str = "continue";
+/// Topic of missions.
+pub const MISSION: &str = "mission";
 /// Longest distance move, cm.
 const MAX_MOVE_CM: f64 = 10_000.0;
 /// Largest angle move, degrees.
 const MAX_TURN_DEG: f64 = 3_600.0;
-/// Largest payload accepted, bytes.
+/// Largest payload accepted, bytes ...
 pub const MAX_PAYLOAD: usize = 4096;
+/// ... except for a path, bytes (some 10,000 points).
+pub const MAX_PATH_PAYLOAD: usize = 256 * 1024;
 
 #[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
@@ -106,6 +127,13 @@ struct NaviCmd {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct FollowPath {
+    path: Vec<f64>,
+    speed: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct Pose {
     x: f64,
     y: f64,
@@ -124,14 +152,23 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
         RESET,
         SET_NAVI_CMD,
         GOAL,
+        FOLLOW_PATH,
+        PAUSE,
+        CONTINUE,
+        MISSION,
     ]
     .contains(&topic)
     {
         return Ok(None);
     }
-    if payload.len() > MAX_PAYLOAD {
+    let limit = if topic == FOLLOW_PATH || topic == MISSION {
+        MAX_PATH_PAYLOAD
+    } else {
+        MAX_PAYLOAD
+    };
+    if payload.len() > limit {
         return Err(format!(
-            "payload of {} bytes exceeds {MAX_PAYLOAD}",
+            "payload of {} bytes exceeds {limit}",
             payload.len()
         ));
     }
@@ -139,14 +176,35 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     match topic {
         CMD_VEL => velocity(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
         INIT_RTK_DATA => Ok(Some(Command::ZeroLocalFrame)),
-        STOP | RESET => {
+        STOP | RESET | PAUSE | CONTINUE => {
             if !payload.iter().all(u8::is_ascii_whitespace) {
                 serde_json::from_slice::<Empty>(payload).map_err(parse_error)?;
             }
-            Ok(Some(if topic == STOP {
-                Command::Stop
-            } else {
-                Command::Reset
+            Ok(Some(match topic {
+                STOP => Command::Stop,
+                RESET => Command::Reset,
+                PAUSE => Command::Pause,
+                _ => Command::Continue,
+            }))
+        }
+        MISSION => {
+            let data: serde_json::Value = serde_json::from_slice(payload).map_err(parse_error)?;
+            let steps = super::root::mission(&data).map_err(|(_, e)| format!("{topic}: {e}"))?;
+            Ok(Some(Command::Mission {
+                steps: std::sync::Arc::new(steps),
+                tag: None,
+            }))
+        }
+        FOLLOW_PATH => {
+            let f: FollowPath = serde_json::from_slice(payload).map_err(parse_error)?;
+            let points = super::path_points(&f.path).map_err(|e| format!("{topic}: {e}"))?;
+            let speed = super::task_speed(f.speed).map_err(|e| format!("{topic}: {e}"))?;
+            Ok(Some(Command::FollowPath {
+                path: std::sync::Arc::new(PathRequest {
+                    points: PathPoints::Map(points),
+                    speed,
+                }),
+                tag: None,
             }))
         }
         SET_NAVI_CMD => navi_cmd(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),

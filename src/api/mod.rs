@@ -5,3 +5,36 @@ pub mod local;
 pub mod mqtt;
 pub mod root;
 pub mod rtk;
+
+/// Most points in one path.
+pub const MAX_PATH_POINTS: usize = rtk::trajectory::MAX_POINTS;
+
+/// The points of a flat `[x0, y0, x1, y1, ...]` list (root MISSION paths, the local
+/// channel's `follow_path`): an even number of finite values, at least one point.
+pub fn path_points(flat: &[f64]) -> Result<Vec<(f64, f64)>, String> {
+    if flat.is_empty() || !flat.len().is_multiple_of(2) {
+        return Err(format!(
+            "path must hold x, y pairs: {} values given",
+            flat.len()
+        ));
+    }
+    if flat.len() / 2 > MAX_PATH_POINTS {
+        return Err(format!(
+            "path has {} points, more than {MAX_PATH_POINTS}",
+            flat.len() / 2
+        ));
+    }
+    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+        return Err(format!("path value {i} is not a finite number"));
+    }
+    Ok(flat.chunks_exact(2).map(|p| (p[0], p[1])).collect())
+}
+
+/// A task's speed: a finite number above zero, m/s (the motion limits cap it).
+pub fn task_speed(speed: f64) -> Result<f64, String> {
+    if speed.is_finite() && speed > 0.0 {
+        Ok(speed)
+    } else {
+        Err(format!("speed must be a number above 0 m/s, not {speed}"))
+    }
+}

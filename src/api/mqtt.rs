@@ -4,7 +4,8 @@
 
 use bytes::Bytes;
 
-use crate::control::MotionResult;
+use crate::control::mission::MissionEvent;
+use crate::control::{MotionResult, MotionTag};
 use crate::core::{Command, VehicleStatus, chassis::CommandRejected};
 use crate::time::Timestamp;
 
@@ -86,6 +87,15 @@ pub trait Dialect: Send {
     );
     /// A motion ended at `t`: the dialect that tagged it answers its request.
     fn on_motion_ended(&mut self, _t: Timestamp, _result: &MotionResult, _out: &mut Vec<Publish>) {}
+    /// A mission it tagged made progress at `t`.
+    fn on_mission_event(
+        &mut self,
+        _t: Timestamp,
+        _id: u64,
+        _event: &MissionEvent,
+        _out: &mut Vec<Publish>,
+    ) {
+    }
 }
 
 /// The dialects in force, in the order they were configured.
@@ -131,6 +141,22 @@ impl Dialects {
         };
         if let Some(d) = self.dialects.iter_mut().find(|d| d.name() == tag.owner) {
             d.on_motion_ended(t, result, out);
+        }
+    }
+
+    /// A mission's progress, to the dialect that tagged it.
+    pub fn on_mission_event(
+        &mut self,
+        t: Timestamp,
+        tag: Option<MotionTag>,
+        event: &MissionEvent,
+        out: &mut Vec<Publish>,
+    ) {
+        let Some(tag) = tag else {
+            return;
+        };
+        if let Some(d) = self.dialects.iter_mut().find(|d| d.name() == tag.owner) {
+            d.on_mission_event(t, tag.id, event, out);
         }
     }
 

@@ -20,6 +20,8 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
+use crate::control::mission::{MissionEvent, MissionStep};
+use crate::control::{MotionTag, Outcome};
 use crate::core::{Command, DriveMode, Localization, VehicleStatus, chassis::status_bits};
 use crate::devices::bms::ChargeState;
 use crate::fusion::geodesy::Geodetic;
@@ -206,7 +208,13 @@ pub struct RootDialect {
     heartbeat_client: Option<String>,
     ticks: u64,
     previous: Option<VehicleStatus>,
+    /// Missions under way or recently ended: their tag id and `messageId`, for notifies.
+    missions: std::collections::VecDeque<(u64, Value)>,
+    last_mission: u64,
 }
+
+/// Mission `messageId`s kept for their notifies.
+const MAX_PENDING_MISSIONS: usize = 16;
 
 impl RootDialect {
     /// The dialect of vehicle `vehicle_id`. Heartbeats feed the core's control-link
@@ -218,7 +226,35 @@ impl RootDialect {
             heartbeat_client,
             ticks: 0,
             previous: None,
+            missions: std::collections::VecDeque::new(),
+            last_mission: 0,
         }
+    }
+
+    /// MISSION: parses the steps and starts them, tagged so that progress is notified with
+    /// the request's `messageId`.
+    fn start_mission(
+        &mut self,
+        data: &Value,
+        id: &Value,
+        core: &mut dyn CoreAccess,
+    ) -> Result<(), (u32, String)> {
+        let steps = mission(data)?;
+        self.last_mission += 1;
+        let tag = MotionTag {
+            owner: "root",
+            id: self.last_mission,
+        };
+        core.command(Command::Mission {
+            steps: std::sync::Arc::new(steps),
+            tag: Some(tag),
+        })
+        .map_err(|e| (REFUSED, e.to_string()))?;
+        if self.missions.len() >= MAX_PENDING_MISSIONS {
+            self.missions.pop_front();
+        }
+        self.missions.push_back((tag.id, id.clone()));
+        Ok(())
     }
 
     fn topic(&self, rest: &str) -> String {
@@ -309,18 +345,12 @@ impl RootDialect {
             (_, None) => Err((INVALID, "messageType must be a number".to_owned())),
             ("cmd/navigation", Some(0)) => self.init_position(t, data, core),
             ("cmd/navigation", Some(1)) => core
-                .command(Command::Stop)
+                .command(Command::Pause)
                 .map_err(|e| (REFUSED, e.to_string())),
-            ("cmd/navigation", Some(2)) => Err((
-                NOT_AVAILABLE,
-                "not available: no task is paused (navigation tasks are not implemented in \
-                 this chassisd version; send DRIVE to move again)"
-                    .to_owned(),
-            )),
-            ("cmd/navigation", Some(5)) => mission(data).and(Err((
-                NOT_AVAILABLE,
-                "not available: missions are not implemented in this chassisd version".to_owned(),
-            ))),
+            ("cmd/navigation", Some(2)) => core
+                .command(Command::Continue)
+                .map_err(|e| (REFUSED, e.to_string())),
+            ("cmd/navigation", Some(5)) => self.start_mission(data, &id, core),
             ("cmd/navigation", Some(6)) => match data.as_u64() {
                 Some(0) => core
                     .command(Command::SetMode(DriveMode::Navigation))
@@ -557,7 +587,13 @@ impl RootDialect {
 }
 
 /// `MISSION` data: an array of `{action, parameters}` steps.
-fn mission(data: &Value) -> Result<(), (u32, String)> {
+///
+/// - MOVE_TO_POSITION and COVERAGE: `path` `[x0, y0, x1, y1, ...]`, m in the map frame,
+///   followed in order (the vehicle drives to the first point first);
+/// - WAIT: `seconds` ≥ 0;
+/// - OPEN_CUTTER and CLOSE_CUTTER: `cutter` true and false (optional; it must match);
+/// - CHARGING: `time`, s charged before the step is done (0: done once charging).
+pub(crate) fn mission(data: &Value) -> Result<Vec<MissionStep>, (u32, String)> {
     const ACTIONS: [&str; 6] = [
         "MOVE_TO_POSITION",
         "WAIT",
@@ -569,9 +605,13 @@ fn mission(data: &Value) -> Result<(), (u32, String)> {
     let Some(steps) = data.as_array() else {
         return Err((INVALID, "data must be an array of steps".to_owned()));
     };
+    if steps.is_empty() {
+        return Err((INVALID, "a mission needs at least one step".to_owned()));
+    }
+    let mut out = Vec::with_capacity(steps.len());
     for (i, step) in steps.iter().enumerate() {
         let action = step.get("action").and_then(Value::as_str).unwrap_or("");
-        if !ACTIONS.contains(&action) || !step.get("parameters").is_some_and(Value::is_object) {
+        let Some(parameters) = step.get("parameters").filter(|p| p.is_object()) else {
             return Err((
                 INVALID,
                 format!(
@@ -579,9 +619,52 @@ fn mission(data: &Value) -> Result<(), (u32, String)> {
                     ACTIONS.join(", ")
                 ),
             ));
-        }
+        };
+        let bad = |what: &str| (INVALID, format!("step {i} ({action}): {what}"));
+        let seconds = |key: &str| {
+            parameters
+                .get(key)
+                .and_then(Value::as_f64)
+                .filter(|s| (0.0..=86_400.0).contains(s))
+                .ok_or_else(|| {
+                    bad(&format!(
+                        "{key} must be a number of seconds from 0 to 86400"
+                    ))
+                })
+        };
+        let path = || {
+            let values: Option<Vec<f64>> = parameters
+                .get("path")
+                .and_then(Value::as_array)
+                .and_then(|a| a.iter().map(Value::as_f64).collect());
+            let values = values
+                .ok_or_else(|| bad("path must be an array of numbers [x0, y0, x1, y1, ...]"))?;
+            super::path_points(&values).map_err(|e| bad(&e))
+        };
+        let cutter = |want: bool| match parameters.get("cutter") {
+            None => Ok(MissionStep::Cutter(want)),
+            Some(v) if v.as_bool() == Some(want) => Ok(MissionStep::Cutter(want)),
+            Some(_) => Err(bad(&format!("cutter must be {want} (or absent)"))),
+        };
+        out.push(match action {
+            "MOVE_TO_POSITION" => MissionStep::MoveTo(path()?),
+            "COVERAGE" => MissionStep::Coverage(path()?),
+            "WAIT" => MissionStep::Wait(seconds("seconds")?),
+            "OPEN_CUTTER" => cutter(true)?,
+            "CLOSE_CUTTER" => cutter(false)?,
+            "CHARGING" => MissionStep::Charge(seconds("time")?),
+            _ => {
+                return Err((
+                    INVALID,
+                    format!(
+                        "step {i}: action {action:?} is not one of {}",
+                        ACTIONS.join(", ")
+                    ),
+                ));
+            }
+        });
     }
-    Ok(())
+    Ok(out)
 }
 
 /// `DRIVE`: `{"linear": m/s, "angular": rad/s}`.
@@ -646,6 +729,43 @@ pub fn timestamp(t: Timestamp) -> String {
 }
 
 impl Dialect for RootDialect {
+    fn on_mission_event(
+        &mut self,
+        t: Timestamp,
+        id: u64,
+        event: &MissionEvent,
+        out: &mut Vec<Publish>,
+    ) {
+        let Some((_, message_id)) = self.missions.iter().find(|(m, _)| *m == id).cloned() else {
+            return;
+        };
+        let data = match event {
+            MissionEvent::StepStarted(step, action) => {
+                json!({"code": OK, "step": step, "action": action, "state": "started"})
+            }
+            MissionEvent::StepDone(step, action) => {
+                json!({"code": OK, "step": step, "action": action, "state": "done"})
+            }
+            MissionEvent::Ended(Outcome::Succeeded) => json!({"code": OK}),
+            MissionEvent::Ended(other) => {
+                json!({"code": REFUSED, "message": format!("mission {other}")})
+            }
+        };
+        if matches!(event, MissionEvent::Ended(_)) {
+            self.missions.retain(|(m, _)| *m != id);
+        }
+        let body = json!({
+            "messageId": message_id,
+            "timestamp": timestamp(t),
+            "messageType": 5,
+            "data": data,
+        });
+        out.push(Publish::reply(
+            self.topic("cmd/navigation/notify"),
+            body.to_string(),
+        ));
+    }
+
     fn name(&self) -> &'static str {
         "root"
     }

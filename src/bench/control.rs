@@ -56,6 +56,40 @@ pub mod target {
     pub const GOAL_M: f64 = 0.05;
     /// ... and heading, degrees.
     pub const GOAL_DEG: f64 = 2.0;
+    /// The closed path: cross-track RMS against truth, m ...
+    pub const PATH_RMS_M: f64 = 0.03;
+    /// ... and its largest, m.
+    pub const PATH_MAX_M: f64 = 0.10;
+}
+
+/// The closed path: a stadium of this length (m) with half circles of this radius (m),
+/// driven at this speed (m/s), its points this far apart (m), as a recorded trajectory has
+/// them.
+const PATH: (f64, f64, f64, f64) = (50.0, 2.0, 0.5, 0.1);
+/// Truth is compared with the path every this many plant steps.
+const PATH_SCORE_EVERY: u64 = 10;
+
+/// The closed path's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct PathFigures {
+    /// How it ended.
+    pub outcome: String,
+    /// Its length, m.
+    pub length_m: f64,
+    /// Cross-track RMS against truth, m.
+    pub truth_rms_m: f64,
+    /// Largest cross-track error against truth, m.
+    pub truth_max_m: f64,
+    /// Cross-track RMS the follower measured in the map frame, m.
+    pub frame_rms_m: f64,
+    /// Where it ended from the last point against truth, m.
+    pub end_error_m: f64,
+    /// Duration, s.
+    pub duration_s: f64,
+    /// Driving it at the speed and curve limits, s.
+    pub planned_s: f64,
+    /// Within the targets.
+    pub pass: bool,
 }
 
 /// The goal: this far (m) from where the moves ended, this far off the heading (rad), to
@@ -128,6 +162,8 @@ pub struct ControlReport {
     pub moves: Vec<MoveFigures>,
     /// A goal 10 m away.
     pub goal: GoalFigures,
+    /// The closed path.
+    pub path: PathFigures,
     /// The command watchdog.
     pub watchdog: WatchdogFigures,
     /// Parts of the issue's benchmark not measured yet, named.
@@ -204,22 +240,42 @@ impl Bench {
         })
     }
 
+    /// Sends `topic` `request` on the local channel and steps until the motion it starts
+    /// ends (at most `limit_s`), calling `watch` with each step's number; its result.
+    fn until_result(
+        &mut self,
+        topic: &str,
+        request: &str,
+        limit_s: f64,
+        mut watch: impl FnMut(&Self, u64),
+    ) -> Option<MotionResult> {
+        self.sink.results.clear();
+        self.sim.command(topic, request, &mut self.sink);
+        for step in 0..(limit_s / PLANT_STEP.as_secs_f64()) as u64 {
+            self.sim.step(FIXED, &mut self.sink);
+            if !self.sink.results.is_empty() {
+                break;
+            }
+            watch(self, step);
+        }
+        self.sink.results.pop()
+    }
+
+    /// What a case without a result reports.
+    fn no_result(&self) -> String {
+        format!(
+            "no result (refused: {})",
+            self.sink.refused.last().map_or("no", String::as_str)
+        )
+    }
+
     /// One move through the local channel; its result once it ended and settled, with the
     /// truth and the frame's pose before and after.
     fn do_move(&mut self, request: &str) -> Option<MoveRun> {
         // A status tick, so the frame's pose is current.
         self.run_for(0.1);
         let before = (self.truth(), self.frame_pose()?);
-        self.sink.results.clear();
-        self.sim.command("set_navi_cmd", request, &mut self.sink);
-        let limit = (60.0 / PLANT_STEP.as_secs_f64()) as u64;
-        for _ in 0..limit {
-            self.sim.step(FIXED, &mut self.sink);
-            if !self.sink.results.is_empty() {
-                break;
-            }
-        }
-        let result = self.sink.results.pop()?;
+        let result = self.until_result("set_navi_cmd", request, 60.0, |_, _| {})?;
         self.run_for(SETTLE_S);
         Some(MoveRun {
             result,
@@ -288,10 +344,7 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
             None => MoveFigures {
                 name: kind.to_string(),
                 turn: matches!(kind, MoveKind::Turn { .. }),
-                outcome: format!(
-                    "no result (refused: {})",
-                    bench.sink.refused.last().map_or("no", String::as_str)
-                ),
+                outcome: bench.no_result(),
                 truth_error: f64::NAN,
                 truth_target: f64::NAN,
                 frame_error: f64::NAN,
@@ -304,16 +357,18 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
     }
     let response_time_s = bench.sim.engine().response_time().unwrap_or(f64::NAN);
     let goal = goal(&mut bench);
+    let path = closed_path(&mut bench);
     let watchdog = watchdog(&mut bench, &chassis);
-    let pass = moves.iter().all(|m| m.pass) && goal.pass && watchdog.pass;
+    let pass = moves.iter().all(|m| m.pass) && goal.pass && path.pass && watchdog.pass;
     Ok(ControlReport {
         plant: plant.name.clone(),
         seed,
         response_time_s,
         moves,
         goal,
+        path,
         watchdog,
-        not_measured: vec!["50 m closed path (trajectory following is not built yet)"],
+        not_measured: Vec::new(),
         pass,
     })
 }
@@ -405,21 +460,9 @@ fn goal(bench: &mut Bench) -> GoalFigures {
         y + distance * bearing.sin(),
         wrap(bearing + turn),
     );
-    bench.sink.results.clear();
     let request = format!(r#"{{"x":{gx},"y":{gy},"yaw":{gyaw}}}"#);
-    bench.sim.command("goal", &request, &mut bench.sink);
-    let limit = (120.0 / PLANT_STEP.as_secs_f64()) as u64;
-    for _ in 0..limit {
-        bench.sim.step(FIXED, &mut bench.sink);
-        if !bench.sink.results.is_empty() {
-            break;
-        }
-    }
-    let Some(result) = bench.sink.results.pop() else {
-        return failed(format!(
-            "no result (refused: {})",
-            bench.sink.refused.last().map_or("no", String::as_str)
-        ));
+    let Some(result) = bench.until_result("goal", &request, 120.0, |_, _| {}) else {
+        return failed(bench.no_result());
     };
     bench.run_for(SETTLE_S);
     let truth = bench.truth();
@@ -435,6 +478,95 @@ fn goal(bench: &mut Bench) -> GoalFigures {
         pass: result.outcome == Outcome::Succeeded
             && truth_error_m <= target::GOAL_M
             && truth_heading_deg <= target::GOAL_DEG,
+    }
+}
+
+/// The stadium of [`PATH`] starting where the vehicle stands, ahead of it, turning left:
+/// points of the map frame.
+fn stadium(x: f64, y: f64, yaw: f64) -> Vec<(f64, f64)> {
+    let (length, radius, _, spacing) = PATH;
+    let straight = (length - 2.0 * PI * radius) / 2.0;
+    let mut local = Vec::new();
+    let n = (straight / spacing).round() as usize;
+    let arc = (PI * radius / spacing).round() as usize;
+    for i in 0..n {
+        local.push((straight * i as f64 / n as f64, 0.0));
+    }
+    for i in 0..arc {
+        let a = -FRAC_PI_2 + PI * i as f64 / arc as f64;
+        local.push((straight + radius * a.cos(), radius + radius * a.sin()));
+    }
+    for i in 0..n {
+        local.push((straight - straight * i as f64 / n as f64, 2.0 * radius));
+    }
+    for i in 0..=arc {
+        let a = FRAC_PI_2 + PI * i as f64 / arc as f64;
+        local.push((radius * a.cos(), radius + radius * a.sin()));
+    }
+    let (s, c) = yaw.sin_cos();
+    local
+        .into_iter()
+        .map(|(lx, ly)| (x + lx * c - ly * s, y + lx * s + ly * c))
+        .collect()
+}
+
+/// Follows the closed path of [`PATH`] from where the vehicle stands (through the local
+/// channel, in the map frame it publishes), scoring the truth's distance from it.
+fn closed_path(bench: &mut Bench) -> PathFigures {
+    bench.run_for(0.1);
+    let failed = |outcome: String| PathFigures {
+        outcome,
+        length_m: f64::NAN,
+        truth_rms_m: f64::NAN,
+        truth_max_m: f64::NAN,
+        frame_rms_m: f64::NAN,
+        end_error_m: f64::NAN,
+        duration_s: f64::NAN,
+        planned_s: f64::NAN,
+        pass: false,
+    };
+    let Some(s) = bench.sink.last_status.as_ref() else {
+        return failed("no status".into());
+    };
+    let path = stadium(s.pose.x, s.pose.y, s.pose.yaw);
+    let flat: Vec<String> = path
+        .iter()
+        .flat_map(|(x, y)| [format!("{x:.4}"), format!("{y:.4}")])
+        .collect();
+    let request = format!(r#"{{"path":[{}],"speed":{}}}"#, flat.join(","), PATH.2);
+    let (mut sum_sq, mut count, mut max) = (0.0, 0u64, 0.0_f64);
+    let scored = bench.until_result("follow_path", &request, 600.0, |bench, step| {
+        if step % PATH_SCORE_EVERY == 0 {
+            let truth = bench.truth();
+            let off = crate::control::track::distance_to_polyline(&path, truth.x, truth.y);
+            sum_sq += off * off;
+            count += 1;
+            max = max.max(off);
+        }
+    });
+    let Some(result) = scored else {
+        return failed(bench.no_result());
+    };
+    bench.run_for(SETTLE_S);
+    let truth = bench.truth();
+    let end = path[path.len() - 1];
+    let truth_rms_m = (sum_sq / count.max(1) as f64).sqrt();
+    let length_m = match result.kind {
+        crate::control::MotionKind::Path { length_m, .. } => length_m,
+        _ => f64::NAN,
+    };
+    PathFigures {
+        outcome: result.outcome.to_string(),
+        length_m,
+        truth_rms_m,
+        truth_max_m: max,
+        frame_rms_m: result.cross_track.map_or(f64::NAN, |c| c.rms_m),
+        end_error_m: (truth.x - end.0).hypot(truth.y - end.1),
+        duration_s: result.duration_s,
+        planned_s: result.planned_s,
+        pass: result.outcome == Outcome::Succeeded
+            && truth_rms_m <= target::PATH_RMS_M
+            && max <= target::PATH_MAX_M,
     }
 }
 
@@ -512,6 +644,24 @@ impl ControlReport {
             g.duration_s,
             g.planned_s,
             if g.pass { "ok" } else { "MISSED" }
+        );
+        let p = &self.path;
+        let _ = writeln!(
+            out,
+            "closed path {:.1} m, {:.0} m curves at {} m/s: {}, cross-track against truth RMS {:.1} mm, max {:.1} mm (targets {:.0} mm, {:.0} mm), RMS {:.1} mm in the map frame, ended {:.1} mm from its end, {:.2} s (at the limits {:.2} s): {}",
+            p.length_m,
+            PATH.1,
+            PATH.2,
+            p.outcome,
+            p.truth_rms_m * 1000.0,
+            p.truth_max_m * 1000.0,
+            target::PATH_RMS_M * 1000.0,
+            target::PATH_MAX_M * 1000.0,
+            p.frame_rms_m * 1000.0,
+            p.end_error_m * 1000.0,
+            p.duration_s,
+            p.planned_s,
+            if p.pass { "ok" } else { "MISSED" }
         );
         let _ = writeln!(
             out,

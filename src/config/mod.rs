@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 pub mod chassis;
 pub mod imu;
 pub mod localization;
+pub mod mission;
 pub mod motion;
 pub mod mqtt;
 
@@ -86,6 +87,12 @@ pub struct VehicleConfig {
     /// Limits and tolerances of closed-loop moves (default: the chassis limits).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<motion::MotionConfig>,
+    /// How root MISSION steps run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mission: Option<mission::MissionConfig>,
+    /// The blade actuator of OPEN_CUTTER and CLOSE_CUTTER.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cutter: Option<mission::CutterConfig>,
     /// Per-wheel direction and gear ratio.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wheels: Option<chassis::WheelsConfig>,
@@ -268,6 +275,12 @@ impl VehicleConfig {
         }
         if let Some(m) = &self.motion {
             m.validate(self.chassis.as_ref(), file)?;
+        }
+        if let Some(m) = &self.mission {
+            m.validate(file)?;
+        }
+        if let Some(c) = &self.cutter {
+            c.validate(self, file)?;
         }
         if let Some(m) = &self.mqtt {
             m.validate(file)?;

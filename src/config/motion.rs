@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::chassis::ChassisConfig;
 use super::{ConfigError, check_range};
 use crate::control::profile::Limits;
+use crate::devices::gnss::FixQuality;
 
 /// `[motion]`
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize, Default)]
@@ -54,6 +55,78 @@ pub struct MotionConfig {
     /// ... plus this, s (default 3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_allowance_s: Option<f64>,
+    /// A trajectory task slows in curves to keep the sideways acceleration within this,
+    /// m/s² (default 0.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_lateral_accel_mps2: Option<f64>,
+    /// The least GNSS fix quality a trajectory task drives on (default `rtk_fixed`): below
+    /// it the task waits at rest, and goes on when the quality is back.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_min_gnss: Option<MinGnss>,
+    /// A task waiting for GNSS quality fails after this, s (default 120).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_gnss_wait_s: Option<f64>,
+    /// A task starts only this close to its first point, m (default 5): the way there is
+    /// driven straight, unplanned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub task_max_approach_m: Option<f64>,
+}
+
+/// The least GNSS fix quality a trajectory task drives on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MinGnss {
+    /// Any localisation the fusion calls good (INIT_POSITION and odometry alone, too).
+    None,
+    /// A satellite fix of any kind.
+    Single,
+    /// Differential (SBAS, DGPS) or better.
+    Dgps,
+    /// RTK float or fixed.
+    RtkFloat,
+    /// RTK fixed.
+    RtkFixed,
+}
+
+impl MinGnss {
+    /// The level `quality` reaches.
+    pub fn of(quality: FixQuality) -> Self {
+        match quality {
+            FixQuality::RtkFixed => Self::RtkFixed,
+            FixQuality::RtkFloat => Self::RtkFloat,
+            FixQuality::Dgps => Self::Dgps,
+            FixQuality::Single | FixQuality::Pps => Self::Single,
+            FixQuality::Invalid
+            | FixQuality::DeadReckoning
+            | FixQuality::Manual
+            | FixQuality::Simulation => Self::None,
+        }
+    }
+}
+
+impl std::fmt::Display for MinGnss {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::None => "none",
+            Self::Single => "single",
+            Self::Dgps => "dgps",
+            Self::RtkFloat => "rtk_float",
+            Self::RtkFixed => "rtk_fixed",
+        })
+    }
+}
+
+/// How trajectory tasks run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TaskSettings {
+    /// Sideways acceleration in curves, m/s².
+    pub max_lateral_accel_mps2: f64,
+    /// The least GNSS quality to drive on.
+    pub min_gnss: MinGnss,
+    /// How long a task waits for it, s.
+    pub gnss_wait_s: f64,
+    /// How far its first point may be, m.
+    pub max_approach_m: f64,
 }
 
 /// The settings a move runs with, resolved against the chassis limits.
@@ -75,6 +148,8 @@ pub struct MotionSettings {
     pub time_allowance_factor: f64,
     /// ... plus this, s.
     pub time_allowance_s: f64,
+    /// Trajectory tasks.
+    pub task: TaskSettings,
 }
 
 impl MotionConfig {
@@ -103,6 +178,12 @@ impl MotionConfig {
             goal_angle_tolerance_rad: self.goal_angle_tolerance_deg.unwrap_or(1.0).to_radians(),
             time_allowance_factor: self.time_allowance_factor.unwrap_or(1.5),
             time_allowance_s: self.time_allowance_s.unwrap_or(3.0),
+            task: TaskSettings {
+                max_lateral_accel_mps2: self.max_lateral_accel_mps2.unwrap_or(0.5),
+                min_gnss: self.task_min_gnss.unwrap_or(MinGnss::RtkFixed),
+                gnss_wait_s: self.task_gnss_wait_s.unwrap_or(120.0),
+                max_approach_m: self.task_max_approach_m.unwrap_or(5.0),
+            },
         }
     }
 
@@ -191,6 +272,24 @@ impl MotionConfig {
                 "times",
             ),
             ("time_allowance_s", self.time_allowance_s, 0.0..=3600.0, "s"),
+            (
+                "max_lateral_accel_mps2",
+                self.max_lateral_accel_mps2,
+                0.01..=10.0,
+                "m/s²",
+            ),
+            (
+                "task_gnss_wait_s",
+                self.task_gnss_wait_s,
+                0.0..=86_400.0,
+                "s",
+            ),
+            (
+                "task_max_approach_m",
+                self.task_max_approach_m,
+                0.0..=1000.0,
+                "m",
+            ),
         ] {
             if let Some(v) = value {
                 check_range(file, &format!("motion.{key}"), v, range, unit)?;

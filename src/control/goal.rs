@@ -14,9 +14,9 @@
 //!   localisation is lost. A drive that ends outside the position tolerance (an arc cut short
 //!   by slip) faces the goal and tries again, a few times.
 
-use super::moves::{RelativeMove, Step, planning_limits};
+use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
 use super::profile::Profile;
-use super::{MoveKind, Outcome, PoseView};
+use super::{Outcome, PoseView};
 use crate::config::motion::MotionSettings;
 use crate::fusion::ekf::wrap;
 use crate::time::Timestamp;
@@ -70,12 +70,6 @@ pub struct GoalMove {
     left: (f64, f64),
 }
 
-/// The map pose in a view, if located.
-fn map_pose(view: &PoseView) -> Option<(f64, f64, f64)> {
-    let (x, y) = view.map_xy?;
-    Some((x, y, view.map_yaw?))
-}
-
 impl GoalMove {
     /// A goal starting at `t` from `view`; `None` when the vehicle is not located.
     pub fn new(
@@ -84,7 +78,7 @@ impl GoalMove {
         view: &PoseView,
         settings: &MotionSettings,
     ) -> Option<Self> {
-        let (x, y, yaw) = map_pose(view)?;
+        let (x, y, yaw) = view.map_pose()?;
         let (dx, dy) = (goal.x - x, goal.y - y);
         let distance = dx.hypot(dy);
         let bearing = dy.atan2(dx);
@@ -138,14 +132,13 @@ impl GoalMove {
         let (x, y, yaw) = pose;
         let (dx, dy) = (self.goal.x - x, self.goal.y - y);
         if dx.hypot(dy) <= self.settings.goal_position_tolerance_m {
-            let turn = MoveKind::Turn {
-                angle_rad: wrap(self.goal.yaw - yaw),
-            };
-            let settings = MotionSettings {
-                angle_tolerance_rad: self.settings.goal_angle_tolerance_rad,
-                ..self.settings
-            };
-            return Phase::Align(Box::new(RelativeMove::new(t, turn, view, &settings)));
+            return Phase::Align(Box::new(turn_on_the_spot(
+                t,
+                wrap(self.goal.yaw - yaw),
+                view,
+                &self.settings,
+                self.settings.goal_angle_tolerance_rad,
+            )));
         }
         self.approaches += 1;
         self.speed = 0.0;
@@ -153,21 +146,18 @@ impl GoalMove {
         if face.abs() <= FACE_TOLERANCE_RAD {
             return Phase::Drive { hold_yaw: None };
         }
-        let settings = MotionSettings {
-            angle_tolerance_rad: FACE_TOLERANCE_RAD / 2.0,
-            ..self.settings
-        };
-        Phase::Face(Box::new(RelativeMove::new(
+        Phase::Face(Box::new(turn_on_the_spot(
             t,
-            MoveKind::Turn { angle_rad: face },
+            face,
             view,
-            &settings,
+            &self.settings,
+            FACE_TOLERANCE_RAD / 2.0,
         )))
     }
 
     /// One control step at `t`, the drives' response time being `response_s`.
     pub fn step(&mut self, t: Timestamp, view: &PoseView, response_s: f64) -> Step {
-        let Some(pose) = map_pose(view) else {
+        let Some(pose) = view.map_pose() else {
             return Step::Done(
                 Outcome::Aborted("localisation lost during the goal".into()),
                 self.left.0,
@@ -265,18 +255,8 @@ impl GoalMove {
         } else {
             gain * along
         };
-        let before = self.speed;
-        self.speed = if wanted > before {
-            before + (wanted - before).min(limits.accel * dt)
-        } else {
-            wanted
-        };
-        let accel = if dt > 0.0 {
-            (self.speed - before) / dt
-        } else {
-            0.0
-        };
-        let v = self.speed + response_s * accel;
+        let (planned, v) = led_speed(self.speed, wanted, limits.accel, dt, response_s);
+        self.speed = planned;
         let w = match held {
             Some(held) => gain * wrap(held - yaw),
             // On the arc through the goal tangent to the heading, turning onto the line to
@@ -302,6 +282,7 @@ mod tests {
             map_xy: located.then_some((p.x, p.y)),
             map_yaw: located.then_some(p.yaw),
             wheel_scale: None,
+            gnss: crate::config::motion::MinGnss::RtkFixed,
         }
     }
 

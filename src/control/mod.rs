@@ -3,18 +3,22 @@
 //! ramps and safety supervisor decide what reaches the wheels ([`crate::core::chassis`]).
 
 pub mod goal;
+pub mod mission;
 pub mod moves;
+pub mod path;
 pub mod profile;
 pub mod response;
+pub mod track;
 
 use std::fmt;
 
-use crate::config::motion::MotionSettings;
+use crate::config::motion::{MinGnss, MotionSettings};
 use crate::core::status::Navigation;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
 use goal::{GoalMove, GoalPose};
 use moves::{RelativeMove, Step};
+use path::{CrossTrack, PathFollow, StartRefusal};
 
 /// Names one motion from its start to its result.
 pub type MotionId = u64;
@@ -66,6 +70,13 @@ pub enum MotionKind {
     Move(MoveKind),
     /// To a pose in the map frame.
     Goal(GoalPose),
+    /// Along a path in the map frame (a trajectory task, a coverage path).
+    Path {
+        /// Its length from where the vehicle started, m.
+        length_m: f64,
+        /// The speed asked for, m/s.
+        speed: f64,
+    },
 }
 
 impl fmt::Display for MotionKind {
@@ -79,6 +90,9 @@ impl fmt::Display for MotionKind {
                 g.y,
                 g.yaw.to_degrees()
             ),
+            Self::Path { length_m, speed } => {
+                write!(f, "path of {length_m:.2} m at {speed:.2} m/s")
+            }
         }
     }
 }
@@ -94,6 +108,17 @@ pub enum Outcome {
     TimedOut,
     /// Ended by a fault or a lost precondition: why.
     Aborted(String),
+}
+
+impl Outcome {
+    /// The `nav.status` it leaves: a cancel is no failure, the vehicle is idle again.
+    pub fn navigation(&self) -> Navigation {
+        match self {
+            Self::Succeeded => Navigation::Succeeded,
+            Self::Cancelled(_) => Navigation::Idle,
+            Self::TimedOut | Self::Aborted(_) => Navigation::Failed,
+        }
+    }
 }
 
 impl fmt::Display for Outcome {
@@ -131,6 +156,8 @@ pub struct MotionResult {
     pub heading: moves::HeadingSource,
     /// The wheel scale its distance was corrected by (odometry per true distance).
     pub wheel_scale: f64,
+    /// A path's cross-track error.
+    pub cross_track: Option<CrossTrack>,
 }
 
 impl fmt::Display for MotionResult {
@@ -141,6 +168,14 @@ impl fmt::Display for MotionResult {
         };
         let error = match self.heading_error {
             Some(h) => format!("{error} and {:.2}°", h.to_degrees()),
+            None => error,
+        };
+        let error = match self.cross_track {
+            Some(c) => format!(
+                "{error}; cross-track RMS {:.1} mm, max {:.1} mm",
+                c.rms_m * 1000.0,
+                c.max_m * 1000.0
+            ),
             None => error,
         };
         write!(
@@ -169,6 +204,16 @@ pub struct PoseView {
     /// Odometry distance per true distance (1 + the wheels' scale error the fusion has
     /// learnt), while the vehicle is located.
     pub wheel_scale: Option<f64>,
+    /// The quality level of the current GNSS fix (`None` without a fresh valid one).
+    pub gnss: MinGnss,
+}
+
+impl PoseView {
+    /// The map pose (x, y, yaw), while located.
+    pub fn map_pose(&self) -> Option<(f64, f64, f64)> {
+        let (x, y) = self.map_xy?;
+        Some((x, y, self.map_yaw?))
+    }
 }
 
 /// A motion under way.
@@ -176,6 +221,7 @@ pub struct PoseView {
 enum Active {
     Move(RelativeMove),
     Goal(GoalMove),
+    Path(Box<PathFollow>),
 }
 
 /// The motion under way, if any, and the last result.
@@ -211,8 +257,48 @@ impl Motion {
     pub fn uses_map_frame(&self) -> bool {
         self.active.as_ref().is_some_and(|(_, m, _)| match m {
             Active::Move(m) => m.heading_source() == moves::HeadingSource::Map,
-            Active::Goal(_) => true,
+            Active::Goal(_) | Active::Path(_) => true,
         })
+    }
+
+    /// Whether a path task is under way.
+    pub fn is_task(&self) -> bool {
+        matches!(self.active, Some((_, Active::Path(_), _)))
+    }
+
+    /// Whether the operator holds the task under way.
+    pub fn is_paused(&self) -> bool {
+        matches!(&self.active, Some((_, Active::Path(p), _)) if p.is_paused())
+    }
+
+    /// Holds the task under way at `t` (PAUSE); `false` when none is under way.
+    pub fn pause(&mut self, t: Timestamp) -> bool {
+        match &mut self.active {
+            Some((_, Active::Path(p), _)) => {
+                p.pause(t);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Goes on with the paused task at `t` from `view`; `false` when none is paused.
+    pub fn resume(&mut self, t: Timestamp, view: &PoseView) -> bool {
+        match &mut self.active {
+            Some((_, Active::Path(p), _)) if p.is_paused() => {
+                p.resume(t, view);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// What the motion under way reported since the last call, for the log.
+    pub fn take_events(&mut self) -> Vec<String> {
+        match &mut self.active {
+            Some((_, Active::Path(p), _)) => p.take_events(),
+            _ => Vec::new(),
+        }
     }
 
     /// Starts a move at `t` from `view`, replacing (cancelling) the one under way.
@@ -234,6 +320,21 @@ impl Motion {
         Some(self.begin(t, Active::Goal(g), tag))
     }
 
+    /// Starts a path task along `points` (map frame) at `speed` at `t` from `view`,
+    /// replacing (cancelling) the motion under way; refused (nothing replaced) when the
+    /// vehicle is not located, the GNSS quality is too low or the path is too far.
+    pub fn start_path(
+        &mut self,
+        t: Timestamp,
+        points: &[(f64, f64)],
+        speed: f64,
+        view: &PoseView,
+        tag: Option<MotionTag>,
+    ) -> Result<MotionId, StartRefusal> {
+        let p = PathFollow::new(t, points, speed, view, &self.settings)?;
+        Ok(self.begin(t, Active::Path(Box::new(p)), tag))
+    }
+
     fn begin(&mut self, t: Timestamp, m: Active, tag: Option<MotionTag>) -> MotionId {
         self.end(t, Outcome::Cancelled("replaced by a new move".into()), None);
         self.last_id += 1;
@@ -247,11 +348,7 @@ impl Motion {
         let Some((id, m, tag)) = self.active.take() else {
             return;
         };
-        self.navigation = if outcome == Outcome::Succeeded {
-            Navigation::Succeeded
-        } else {
-            Navigation::Failed
-        };
+        self.navigation = outcome.navigation();
         let result = match m {
             Active::Move(m) => MotionResult {
                 id,
@@ -264,6 +361,7 @@ impl Motion {
                 heading_error: None,
                 heading: m.heading_source(),
                 wheel_scale: m.wheel_scale(),
+                cross_track: None,
             },
             Active::Goal(g) => {
                 let arrived = outcome == Outcome::Succeeded;
@@ -282,9 +380,26 @@ impl Motion {
                     heading_error: Some(g.left().1),
                     heading: moves::HeadingSource::Map,
                     wheel_scale: 1.0,
+                    cross_track: None,
                     outcome,
                 }
             }
+            Active::Path(p) => MotionResult {
+                id,
+                kind: MotionKind::Path {
+                    length_m: p.length(),
+                    speed: p.requested_speed(),
+                },
+                tag,
+                duration_s: t.saturating_since(p.started()).as_secs_f64(),
+                planned_s: p.planned_s(),
+                error: error.unwrap_or_else(|| p.left_m()),
+                heading_error: None,
+                heading: moves::HeadingSource::Map,
+                wheel_scale: 1.0,
+                cross_track: Some(p.cross_track()),
+                outcome,
+            },
         };
         self.results.push(result);
     }
@@ -305,6 +420,9 @@ impl Motion {
         let step = match m {
             Active::Move(m) => m.step(t, view, response_s),
             Active::Goal(g) => g.step(t, view, response_s),
+            // Held by the operator: the drive train holds zero under its stop.
+            Active::Path(p) if p.is_paused() => return None,
+            Active::Path(p) => p.step(t, view, response_s),
         };
         match step {
             Step::Drive { v, w } => Some((v, w)),
@@ -318,6 +436,11 @@ impl Motion {
     /// The results since the last call.
     pub fn take_results(&mut self) -> Vec<MotionResult> {
         std::mem::take(&mut self.results)
+    }
+
+    /// Sets `nav.status` (a mission's, which spans several motions).
+    pub fn set_navigation(&mut self, navigation: Navigation) {
+        self.navigation = navigation;
     }
 
     /// `nav.status`: running, or how the last motion ended.

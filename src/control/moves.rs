@@ -39,6 +39,44 @@ pub(super) fn planning_limits(limits: Limits) -> Limits {
     }
 }
 
+/// A turn on the spot by `angle_rad` at `t` from `view`, arriving within `tolerance_rad`
+/// (facing a goal or a path, where the drive after it takes out the rest).
+pub(super) fn turn_on_the_spot(
+    t: Timestamp,
+    angle_rad: f64,
+    view: &PoseView,
+    settings: &MotionSettings,
+    tolerance_rad: f64,
+) -> RelativeMove {
+    let settings = MotionSettings {
+        angle_tolerance_rad: tolerance_rad,
+        ..*settings
+    };
+    RelativeMove::new(t, MoveKind::Turn { angle_rad }, view, &settings)
+}
+
+/// A planned speed that rises towards `wanted` at most at `accel` (and falls at once) over
+/// `dt`, and the command that leads it by the drives' response time: (planned, command).
+pub(super) fn led_speed(
+    before: f64,
+    wanted: f64,
+    accel: f64,
+    dt: f64,
+    response_s: f64,
+) -> (f64, f64) {
+    let planned = if wanted > before {
+        before + (wanted - before).min(accel * dt)
+    } else {
+        wanted
+    };
+    let rate = if dt > 0.0 {
+        (planned - before) / dt
+    } else {
+        0.0
+    };
+    (planned, planned + response_s * rate)
+}
+
 /// A move may end while still rolling, by at most this many tolerances of coast: the
 /// first-order model predicts where it comes to rest, and its error is a share of the coast.
 const COAST_TOLERANCES: f64 = 3.0;
@@ -318,6 +356,12 @@ pub(crate) mod tests {
             goal_angle_tolerance_rad: 1.0_f64.to_radians(),
             time_allowance_factor: 1.5,
             time_allowance_s: 1.0,
+            task: crate::config::motion::TaskSettings {
+                max_lateral_accel_mps2: 0.5,
+                min_gnss: crate::config::motion::MinGnss::RtkFixed,
+                gnss_wait_s: 5.0,
+                max_approach_m: 5.0,
+            },
         }
     }
 
@@ -333,6 +377,7 @@ pub(crate) mod tests {
             odom_at: at,
             yaw_rate_at: at,
             map_xy: None,
+            gnss: crate::config::motion::MinGnss::None,
             map_yaw: None,
             wheel_scale: None,
         };

@@ -128,6 +128,12 @@ pub enum CommandRejected {
     /// The command would move the map frame under a motion that depends on it.
     #[error("a move or goal in the map frame is under way; stop it first")]
     MoveUnderWay,
+    /// A task cannot start or go on: why.
+    #[error("{0}")]
+    Task(String),
+    /// CONTINUE with no task paused.
+    #[error("no task is paused")]
+    NothingPaused,
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,

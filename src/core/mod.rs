@@ -10,9 +10,14 @@ use std::time::Duration;
 use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
 use crate::config::localization::localizer_config;
-use crate::config::motion::MotionSettings;
+use crate::config::mission::{MissionConfig, MissionSettings};
+use crate::config::motion::{MinGnss, MotionSettings};
+use crate::control::MotionId;
 use crate::control::goal::GoalPose;
+use crate::control::mission::{Mission, MissionEvent, MissionStep, Request};
+use crate::control::path::StartRefusal;
 use crate::control::{Motion, MotionResult, MotionTag, MoveKind, Outcome, PoseView};
+use crate::devices::bms::ChargeState;
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
@@ -24,7 +29,7 @@ use crate::fusion::odometry::{OdomPose, Odometry, WheelReading};
 use crate::time::Timestamp;
 pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
-use safety::{ControlLinkConfig, SafetyConfig};
+use safety::{Cause, ControlLinkConfig, SafetyConfig};
 pub use status::{
     BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, PoseCovariance,
     VehicleStatus,
@@ -65,6 +70,10 @@ pub struct CoreConfig {
     pub localizer: LocalizerConfig,
     /// Closed-loop moves, when the vehicle has drives.
     pub motion: Option<MotionSettings>,
+    /// Missions.
+    pub mission: MissionSettings,
+    /// Whether a cutter is configured.
+    pub has_cutter: bool,
 }
 
 impl Default for CoreConfig {
@@ -78,6 +87,8 @@ impl Default for CoreConfig {
             imu_timeout: None,
             localizer: LocalizerConfig::default(),
             motion: None,
+            mission: MissionConfig::default().settings(),
+            has_cutter: false,
         }
     }
 }
@@ -114,6 +125,8 @@ impl CoreConfig {
             .map(|b| Duration::from_secs_f64(b.stale_s));
         core.imu_timeout = config.imu.as_ref().map(|i| i.timeout());
         core.localizer = localizer_config(config);
+        core.mission = config.mission.unwrap_or_default().settings();
+        core.has_cutter = config.cutter.is_some();
         core
     }
 }
@@ -136,8 +149,27 @@ pub enum LinkState {
     Down,
 }
 
+/// The points of a path task.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PathPoints {
+    /// East and north in the map frame, m.
+    Map(Vec<(f64, f64)>),
+    /// Latitude and longitude, degrees: placed in the map frame of the datum in force when
+    /// the task starts, so the path stays where it was recorded on the ground.
+    Geodetic(Vec<(f64, f64)>),
+}
+
+/// A path to follow.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PathRequest {
+    /// Its points in driving order (the vehicle drives to the first one first).
+    pub points: PathPoints,
+    /// Speed, m/s (at most the motion speed limit; slower in curves).
+    pub speed: f64,
+}
+
 /// A command from a protocol dialect.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Command {
     /// Drive at forward speed `vx` (m/s) and yaw rate `wz` (rad/s) until the command
     /// times out.
@@ -187,10 +219,32 @@ pub enum Command {
     /// End the move under way and bring the vehicle to rest, without latching
     /// (`set_navi_cmd` 5).
     CancelMotion,
+    /// Follow a path (`start_task`, COVERAGE), replacing the motion under way; the result
+    /// carries `tag`.
+    FollowPath {
+        /// The path (shared: a recorded trajectory can hold many points).
+        path: std::sync::Arc<PathRequest>,
+        /// Who asked.
+        tag: Option<MotionTag>,
+    },
+    /// Run a root MISSION's steps in order, replacing the mission and motion under way;
+    /// progress goes out tagged `tag`.
+    Mission {
+        /// The steps.
+        steps: std::sync::Arc<Vec<MissionStep>>,
+        /// Who asked.
+        tag: Option<MotionTag>,
+    },
+    /// The operator's PAUSE: a task under way is held where it is (other motion ends), and
+    /// the stop latches.
+    Pause,
+    /// The operator's CONTINUE: the deliberate act that re-arms a PAUSE and goes on with the
+    /// held task from where it stopped.
+    Continue,
 }
 
 /// One input to the core.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Input<'a> {
     /// The GNSS receiver's fix changed.
     Gnss(&'a GnssFix),
@@ -225,6 +279,15 @@ pub enum Output {
     Event(String),
     /// A closed-loop motion ended.
     MotionEnded(MotionResult),
+    /// Switch the cutter on (true) or off.
+    Cutter(bool),
+    /// A mission's progress, for the requester.
+    Mission {
+        /// Who asked for the mission.
+        tag: Option<MotionTag>,
+        /// What happened.
+        event: MissionEvent,
+    },
 }
 
 /// The vehicle core.
@@ -249,6 +312,10 @@ pub struct Vehicle {
     host: Option<HostUsage>,
     /// Closed-loop moves; `None` without drives.
     motion: Option<Motion>,
+    /// The root MISSION under way.
+    mission: Option<Mission>,
+    /// Whether the cutter was last switched on.
+    cutter_on: bool,
 }
 
 impl Vehicle {
@@ -279,6 +346,8 @@ impl Vehicle {
             fed_gnss: (None, None, None),
             host: None,
             motion: config.motion.map(Motion::new),
+            mission: None,
+            cutter_on: false,
         }
     }
 
@@ -376,18 +445,62 @@ impl Vehicle {
                 let result = self.with_chassis(|c| c.command(t, vx, wz));
                 if result.is_ok() {
                     self.end_motion(t, Outcome::Cancelled("a velocity command took over".into()));
+                    self.cancel_mission("a velocity command took over");
                 }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Move(kind)) => {
                 let result = self.start_move(t, kind);
+                if result.is_ok() {
+                    self.cancel_mission("a move replaced it");
+                }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Goal { goal, tag }) => {
-                let result = self.start_goal(t, goal, tag);
+                let result = self.start_goal(t, goal, tag).map(|_| ());
+                if result.is_ok() {
+                    self.cancel_mission("a goal replaced it");
+                }
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::FollowPath { path, tag }) => {
+                let result = self.start_path(t, &path, tag).map(|_| ());
+                if result.is_ok() {
+                    self.cancel_mission("a task replaced it");
+                }
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::Mission { steps, tag }) => {
+                let result = self.start_mission(t, &steps, tag);
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::Pause) => {
+                if let Some(m) = &mut self.mission {
+                    m.pause();
+                }
+                let mission = self.mission.is_some();
+                let held = self.motion.as_mut().is_some_and(|m| m.pause(t));
+                if mission && !held {
+                    // A step's goal cannot hold: it ends, and CONTINUE starts the step again.
+                    if let Some(m) = &mut self.mission {
+                        m.restart_step();
+                    }
+                }
+                if !held {
+                    self.end_motion(t, Outcome::Cancelled("paused by the operator".into()));
+                }
+                let result = self.with_chassis(|c| {
+                    c.operator_stop(t);
+                    Ok(())
+                });
+                vec![Output::CommandResult(result)]
+            }
+            Input::Command(Command::Continue) => {
+                let result = self.continue_task(t);
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::CancelMotion) => {
+                self.cancel_mission("stop requested");
                 self.end_motion(t, Outcome::Cancelled("stop requested".into()));
                 let result = self.with_chassis(|c| {
                     c.hold_zero(t);
@@ -396,6 +509,7 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Stop) => {
+                self.cancel_mission("stopped by the operator");
                 self.end_motion(t, Outcome::Cancelled("stopped by the operator".into()));
                 let result = self.with_chassis(|c| {
                     c.operator_stop(t);
@@ -422,6 +536,7 @@ impl Vehicle {
             }
             Input::Command(Command::SetMode(mode)) => {
                 if self.chassis.as_ref().is_some_and(|c| c.mode() != mode) {
+                    self.cancel_mission("the drive mode was switched");
                     self.end_motion(t, Outcome::Cancelled("the drive mode was switched".into()));
                 }
                 let result = self.with_chassis(|c| {
@@ -485,9 +600,20 @@ impl Vehicle {
             return Vec::new();
         };
         let mut out = Vec::new();
+        let mut results = Vec::new();
         if let Some(motion) = &mut self.motion {
-            if let Some(cause) = chassis.safety().latched() {
-                motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+            // A task the operator paused waits under the operator's stop; any other stop
+            // ends the motion.
+            let held = motion.is_paused() || self.mission.as_ref().is_some_and(Mission::is_paused);
+            match chassis.safety().latched() {
+                Some(Cause::Operator) if held => {}
+                Some(cause) => {
+                    motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+                    if let Some(m) = &mut self.mission {
+                        m.end(Outcome::Aborted(format!("safety stop: {cause}")));
+                    }
+                }
+                None => {}
             }
             if motion.is_active() {
                 match motion.step(t, view.as_ref(), chassis.response_time()) {
@@ -500,12 +626,15 @@ impl Vehicle {
                     None => chassis.hold_zero(t),
                 }
             }
-            for result in motion.take_results() {
-                out.push(Output::Event(result.to_string()));
-                out.push(Output::MotionEnded(result));
-            }
+            out.extend(motion.take_events().into_iter().map(Output::Event));
+            results = motion.take_results();
         }
         out.insert(0, Output::Wheels(chassis.tick(t)));
+        self.mission_tick(t, &results, &mut out);
+        for result in results {
+            out.push(Output::Event(result.to_string()));
+            out.push(Output::MotionEnded(result));
+        }
         out
     }
 
@@ -524,6 +653,7 @@ impl Vehicle {
             map_xy: map.map(|(x, y, _)| (x, y)),
             map_yaw: map.map(|(_, _, yaw)| yaw),
             wheel_scale,
+            gnss: MinGnss::of(self.fresh_fix_quality(t)),
         })
     }
 
@@ -533,10 +663,8 @@ impl Vehicle {
             MoveKind::Straight { distance_m } => distance_m.is_finite(),
             MoveKind::Turn { angle_rad } => angle_rad.is_finite(),
         };
-        self.start_motion(t, finite, |motion, view| {
-            motion.start(t, kind, view);
-            Ok(())
-        })
+        self.start_motion(t, finite, |motion, view| Ok(motion.start(t, kind, view)))
+            .map(|_| ())
     }
 
     /// Starts a goal, once the drives can take it and the vehicle is located.
@@ -545,14 +673,211 @@ impl Vehicle {
         t: Timestamp,
         goal: GoalPose,
         tag: Option<MotionTag>,
-    ) -> Result<(), CommandRejected> {
+    ) -> Result<MotionId, CommandRejected> {
         let finite = goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite();
         self.start_motion(t, finite, |motion, view| {
             motion
                 .start_goal(t, goal, view, tag)
-                .map(|_| ())
                 .ok_or(CommandRejected::NotLocated)
         })
+    }
+
+    /// Starts a path task, once the drives can take it, the vehicle is located and the fix
+    /// is good enough. Geodetic points are placed with the datum in force now.
+    fn start_path(
+        &mut self,
+        t: Timestamp,
+        path: &PathRequest,
+        tag: Option<MotionTag>,
+    ) -> Result<MotionId, CommandRejected> {
+        let points: Vec<(f64, f64)> = match &path.points {
+            PathPoints::Map(points) => points.clone(),
+            PathPoints::Geodetic(points) => {
+                let Some(frame) = self.localizer.frame() else {
+                    return Err(CommandRejected::NotLocated);
+                };
+                points
+                    .iter()
+                    .map(|&(lat_deg, lon_deg)| {
+                        let enu = frame.to_enu(&Geodetic {
+                            lat_deg,
+                            lon_deg,
+                            h_m: frame.datum().h_m,
+                        });
+                        (enu.x, enu.y)
+                    })
+                    .collect()
+            }
+        };
+        let finite = path.speed.is_finite()
+            && path.speed > 0.0
+            && !points.is_empty()
+            && points.iter().all(|(x, y)| x.is_finite() && y.is_finite());
+        let speed = path.speed;
+        self.start_motion(t, finite, |motion, view| {
+            motion
+                .start_path(t, &points, speed, view, tag)
+                .map_err(|refusal| match refusal {
+                    StartRefusal::NotLocated => CommandRejected::NotLocated,
+                    other => CommandRejected::Task(other.to_string()),
+                })
+        })
+    }
+
+    /// CONTINUE: re-arms the operator's stop and goes on with the paused task.
+    fn continue_task(&mut self, t: Timestamp) -> Result<(), CommandRejected> {
+        let task = self.motion.as_ref().is_some_and(Motion::is_paused);
+        let mission = self.mission.as_ref().is_some_and(Mission::is_paused);
+        if !task && !mission {
+            return Err(CommandRejected::NothingPaused);
+        }
+        self.with_chassis(|c| c.reset(t))?;
+        if task {
+            let view = self.pose_view(t).ok_or(CommandRejected::NoOdometry)?;
+            if let Some(m) = &mut self.motion {
+                m.resume(t, &view);
+            }
+        }
+        if let Some(m) = &mut self.mission {
+            m.resume();
+        }
+        Ok(())
+    }
+
+    /// Starts a mission, replacing the one (and the motion) under way.
+    fn start_mission(
+        &mut self,
+        t: Timestamp,
+        steps: &[MissionStep],
+        tag: Option<MotionTag>,
+    ) -> Result<(), CommandRejected> {
+        let (Some(chassis), Some(_)) = (&self.chassis, &self.motion) else {
+            return Err(CommandRejected::NoDrives);
+        };
+        chassis.ready_to_move()?;
+        if steps.is_empty() {
+            return Err(CommandRejected::Task(
+                "a mission needs at least one step".into(),
+            ));
+        }
+        for (i, step) in steps.iter().enumerate() {
+            let problem = match step {
+                MissionStep::Cutter(_) if !self.config.has_cutter => {
+                    Some("needs a [cutter] in the configuration")
+                }
+                MissionStep::Charge(_) if self.config.mission.dock.is_none() => {
+                    Some("needs a dock pose (mission.dock)")
+                }
+                MissionStep::Charge(_) if self.config.bms_stale_after.is_none() => {
+                    Some("needs a BMS to report charging ([bms])")
+                }
+                _ => None,
+            };
+            if let Some(problem) = problem {
+                return Err(CommandRejected::Task(format!(
+                    "step {i} ({}) {problem}",
+                    step.action()
+                )));
+            }
+        }
+        self.cancel_mission("replaced by a new mission");
+        self.end_motion(t, Outcome::Cancelled("a mission replaced it".into()));
+        self.mission = Some(Mission::new(steps.to_vec(), self.config.mission, tag));
+        if let Some(m) = &mut self.motion {
+            m.set_navigation(Navigation::Running);
+        }
+        Ok(())
+    }
+
+    /// Cancels the mission under way, if any: `why`.
+    fn cancel_mission(&mut self, why: &str) {
+        if let Some(m) = &mut self.mission {
+            m.end(Outcome::Cancelled(why.to_owned()));
+        }
+    }
+
+    /// The mission's part of a control tick: the ends of its motions, its timers, what it
+    /// asks for next, and its progress out.
+    fn mission_tick(&mut self, t: Timestamp, results: &[MotionResult], out: &mut Vec<Output>) {
+        let Some(mission) = &mut self.mission else {
+            return;
+        };
+        for r in results {
+            mission.motion_ended(r.id, &r.outcome);
+        }
+        let charging = self.bms.is_some_and(|b| {
+            b.charge_state == Some(ChargeState::Charging)
+                && self
+                    .config
+                    .bms_stale_after
+                    .is_some_and(|stale| !is_stale(&b, t, stale))
+        });
+        // Instant steps (the cutter) run in the same tick as the next one starts.
+        while let Some(request) = self.mission.as_mut().and_then(|m| m.tick(t, charging)) {
+            let started = match request {
+                Request::Path(points, speed) => {
+                    let path = PathRequest {
+                        points: PathPoints::Map(points),
+                        speed,
+                    };
+                    self.start_path(t, &path, None)
+                }
+                Request::Goal(goal) => self.start_goal(t, goal, None),
+                Request::Cutter(on) => {
+                    self.cutter_on = on;
+                    out.push(Output::Cutter(on));
+                    continue;
+                }
+            };
+            if let Some(m) = &mut self.mission {
+                match started {
+                    Ok(id) => m.started(id),
+                    Err(e) => m.end(Outcome::Aborted(format!("a step could not start: {e}"))),
+                }
+            }
+        }
+        let Some(mission) = &mut self.mission else {
+            return;
+        };
+        let tag = mission.tag();
+        for event in mission.take_events() {
+            out.push(Output::Event(event.to_string()));
+            out.push(Output::Mission { tag, event });
+        }
+        let ended = mission.ended().cloned();
+        let Some(motion) = &mut self.motion else {
+            return;
+        };
+        match ended {
+            None => motion.set_navigation(Navigation::Running),
+            Some(outcome) => {
+                if outcome != Outcome::Succeeded {
+                    motion.end(t, Outcome::Cancelled("the mission ended".into()), None);
+                    if self.cutter_on {
+                        // The blade stops with a mission that did not finish.
+                        self.cutter_on = false;
+                        out.push(Output::Cutter(false));
+                    }
+                }
+                motion.set_navigation(outcome.navigation());
+                self.mission = None;
+            }
+        }
+    }
+
+    /// The quality of the GNSS fix at `t`: `Invalid` once stale or with the link down.
+    fn fresh_fix_quality(&self, t: Timestamp) -> FixQuality {
+        let Some(fix) = &self.gnss_fix else {
+            return FixQuality::Invalid;
+        };
+        let fresh = fix
+            .position
+            .is_some_and(|p| t.saturating_since(p.rx) <= self.config.gnss_fix_timeout);
+        if !self.gnss_link_down && fix.quality.is_valid() && fresh {
+            fix.quality
+        } else {
+            FixQuality::Invalid
+        }
     }
 
     /// Starts a motion with `start` once its values are `finite`, the drives can take it
@@ -561,8 +886,8 @@ impl Vehicle {
         &mut self,
         t: Timestamp,
         finite: bool,
-        start: impl FnOnce(&mut Motion, &PoseView) -> Result<(), CommandRejected>,
-    ) -> Result<(), CommandRejected> {
+        start: impl FnOnce(&mut Motion, &PoseView) -> Result<MotionId, CommandRejected>,
+    ) -> Result<MotionId, CommandRejected> {
         if !finite {
             return Err(CommandRejected::NotFinite);
         }
@@ -753,8 +1078,8 @@ impl Vehicle {
         };
         let timeout = self.config.gnss_fix_timeout;
         let fresh = |rx: Timestamp| t.saturating_since(rx) <= timeout;
-        let position_fresh = fix.position.is_some_and(|p| fresh(p.rx));
-        let ok = !self.gnss_link_down && fix.quality.is_valid() && position_fresh;
+        let quality = self.fresh_fix_quality(t);
+        let ok = quality.is_valid();
 
         let dual_antenna = fix
             .heading_deg
@@ -775,7 +1100,7 @@ impl Vehicle {
             .unwrap_or((0.0, 0.0));
         GnssStatus {
             ok,
-            quality: if ok { fix.quality } else { FixQuality::Invalid },
+            quality,
             latitude_deg,
             longitude_deg,
             heading_deg: self.held_heading_deg,

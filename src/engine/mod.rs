@@ -24,6 +24,7 @@ use crate::api::rtk::RtkDialect;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
+use crate::config::mission::CutterConfig;
 use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
 use crate::core::{
     CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
@@ -156,6 +157,8 @@ pub struct Engine {
     stop_reason: Option<String>,
     /// The MQTT protocol dialects.
     dialects: Dialects,
+    /// The cutter's frames, when one is configured.
+    cutter: Option<CutterConfig>,
     stats: EngineStats,
 }
 
@@ -253,6 +256,7 @@ impl Engine {
             drive_states: Vec::new(),
             stop_reason: None,
             dialects: dialects(config, trajectories),
+            cutter: config.cutter.clone(),
             stats: EngineStats::default(),
         }
     }
@@ -514,6 +518,21 @@ impl Engine {
                         self.dialects.on_motion_ended(t, &result, &mut replies);
                         out.extend(replies.into_iter().map(EngineOutput::Publish));
                         out.push(EngineOutput::MotionEnded(result));
+                    }
+                    Output::Cutter(on) => match &self.cutter {
+                        Some(c) => {
+                            if let Some(frame) = c.frame(on) {
+                                tx.push((c.bus.clone(), frame));
+                            }
+                        }
+                        None => out.push(EngineOutput::Event(
+                            "cutter switch asked for, but no [cutter] is configured".into(),
+                        )),
+                    },
+                    Output::Mission { tag, event } => {
+                        let mut replies = Vec::new();
+                        self.dialects.on_mission_event(t, tag, &event, &mut replies);
+                        out.extend(replies.into_iter().map(EngineOutput::Publish));
                     }
                     Output::Status(_) | Output::CommandResult(_) => {}
                 }

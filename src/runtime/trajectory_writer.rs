@@ -162,6 +162,10 @@ impl TrajectoryStore for QueuedStore {
         self.mirror.all()
     }
 
+    fn get(&mut self, name: &str) -> Result<Trajectory, TrajectoryError> {
+        TrajectoryStore::get(&mut self.mirror, name)
+    }
+
     fn save(&mut self, trajectory: &Trajectory) -> Result<(), TrajectoryError> {
         let existing = self.mirror.get(&trajectory.name).map(|t| t.data.len());
         let count = self.mirror.len();

@@ -14,9 +14,11 @@ use super::scenario::Scenario;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::chassis::ProfileRef;
+use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
+use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
 use crate::devices::cia402::DriveProfile;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
 use crate::record::{Payload, Record, SourceKind, SourceMeta};
@@ -141,6 +143,31 @@ wheels = ["right"]
     let profile = drive_profile()?;
     for drive in &mut config.drive {
         drive.profile = ProfileRef::Inline(Box::new(profile.clone()));
+    }
+    if let Some(yard) = plant.yard {
+        // The yard's pack, dock and blade, configured as an integrator would.
+        config.bms = Some(crate::config::chassis::BmsConfig {
+            profile: ProfileRef::Inline(Box::new(BmsProfile::Daly(DalyProfile {
+                name: "simulated Daly".into(),
+                host_address: 0x40,
+                current_above_offset: CurrentAboveOffset::Charge,
+            }))),
+            bus: SIM_BUS.into(),
+            address: yard.bms_address,
+            poll_hz: 2.0,
+            stale_s: 3.0,
+        });
+        config.mission = Some(MissionConfig {
+            dock: Some(yard.dock),
+            ..MissionConfig::default()
+        });
+        config.cutter = Some(CutterConfig {
+            bus: SIM_BUS.into(),
+            can_id: yard.cutter_can_id,
+            extended: false,
+            on: vec![1],
+            off: vec![0],
+        });
     }
     config.validate(file)?;
     Ok(config)

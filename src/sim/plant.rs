@@ -63,6 +63,39 @@ pub struct PlantConfig {
     pub imu: ImuModel,
     /// GNSS receiver.
     pub gnss: GnssModel,
+    /// The charging dock, the battery and the cutter, when the vehicle has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub yard: Option<Yard>,
+}
+
+/// `[yard]`: a Daly BMS on the drives' bus that charges while the vehicle rests on the dock,
+/// and a blade switched by a CAN frame.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Yard {
+    /// The dock: east, north (m from the datum) and the heading to dock with (degrees).
+    pub dock: [f64; 3],
+    /// The vehicle charges at rest within this of the dock, m.
+    #[serde(default = "default_dock_radius")]
+    pub dock_radius_m: f64,
+    /// The Daly BMS's address.
+    #[serde(default = "default_bms_address")]
+    pub bms_address: u8,
+    /// The blade's switch frame (standard id): data `[1]` on, `[0]` off.
+    pub cutter_can_id: u32,
+    /// Charging current on the dock, A.
+    #[serde(default = "default_charge_current")]
+    pub charge_current_a: f64,
+}
+
+fn default_dock_radius() -> f64 {
+    0.15
+}
+fn default_bms_address() -> u8 {
+    1
+}
+fn default_charge_current() -> f64 {
+    10.0
 }
 
 /// `[geometry]`
@@ -272,6 +305,10 @@ pub struct SimVehicle {
     imu_count: u32,
     /// A recorded motion played through the simulator, in place of the motors and the gyro.
     forced: Option<ForcedMotion>,
+    /// The yard's battery pack.
+    bms: Option<super::bms::SimDaly>,
+    /// Whether the blade runs.
+    cutter_on: bool,
 }
 
 /// A motion imposed on the simulated vehicle (a real robot's recorded wheel odometry and
@@ -293,6 +330,7 @@ impl SimVehicle {
             accel_rpm_per_s: plant.motors.accel_rpm_per_s,
             time_constant_s: plant.motors.time_constant_s,
         };
+        let yard = plant.yard;
         let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
             .map(|d| d.naive_utc())
             .unwrap_or_default();
@@ -315,7 +353,37 @@ impl SimVehicle {
             pending_gnss: VecDeque::new(),
             imu_count: 0,
             forced: None,
+            bms: yard.map(|y| {
+                super::bms::SimDaly::new(
+                    &crate::devices::bms::profile::DalyProfile {
+                        name: "simulated Daly".into(),
+                        host_address: 0x40,
+                        current_above_offset:
+                            crate::devices::bms::profile::CurrentAboveOffset::Charge,
+                    },
+                    y.bms_address,
+                )
+            }),
+            cutter_on: false,
         }
+    }
+
+    /// Whether the blade runs (the last switch frame said so).
+    pub fn cutter_on(&self) -> bool {
+        self.cutter_on
+    }
+
+    /// The battery, when the yard has one.
+    pub fn battery(&self) -> Option<super::bms::Battery> {
+        self.bms.as_ref().map(|b| b.battery)
+    }
+
+    /// Whether the vehicle rests on the dock.
+    pub fn docked(&self) -> bool {
+        self.plant.yard.is_some_and(|y| {
+            (self.truth.x - y.dock[0]).hypot(self.truth.y - y.dock[1]) <= y.dock_radius_m
+                && self.truth.v.abs() < 0.01
+        })
     }
 
     /// The true state.
@@ -418,6 +486,16 @@ impl SimVehicle {
         let accel = (v - tr.v) / dt.max(1e-6);
         tr.v = v;
         tr.w = w;
+        let docked = self.docked();
+        if let (Some(b), Some(y)) = (&mut self.bms, self.plant.yard) {
+            // On the dock the charger feeds the pack; elsewhere the drives and the blade draw.
+            b.battery.current_a = if docked {
+                y.charge_current_a
+            } else {
+                -(2.0 + 4.0 * v.abs() + if self.cutter_on { 6.0 } else { 0.0 })
+            };
+            b.battery.step(Duration::from_secs_f64(dt));
+        }
         self.gyro_bias += self.normal(self.plant.imu.gyro_bias_walk * dt.sqrt());
         if t >= self.next_imu {
             self.next_imu = t.saturating_add(Duration::from_secs_f64(1.0 / self.plant.imu.rate_hz));
@@ -447,6 +525,16 @@ impl SimVehicle {
         let mut frames = Vec::new();
         self.left.on_frame(t, frame, &mut frames);
         self.right.on_frame(t, frame, &mut frames);
+        if let Some(b) = &mut self.bms {
+            b.on_frame(frame, &mut frames);
+        }
+        if let Some(y) = self.plant.yard
+            && !frame.is_extended()
+            && frame.id() == y.cutter_can_id
+            && let Some(&on) = frame.data().first()
+        {
+            self.cutter_on = on != 0;
+        }
         out.extend(frames.into_iter().map(|f| can_record(t, f)));
     }
 

@@ -6,6 +6,15 @@
 //! whose command cannot be read is answered `mqtt_control_failse`; an unknown command
 //! `<cmd>_failse`. `get_all_trajectory` answers with `trajectory_data` (an array, possibly
 //! empty); the protocol has no success feedback for it.
+//!
+//! `start_task` follows the saved trajectory `name` from its point `id` (0-based index into
+//! `data`) at up to `speed` m/s; `start_task_success` means the task started, and its end
+//! shows in `base_status`'s `nav.status` (NAV_SUCCESS or NAV_ERROR, the reason in the log).
+//! The points' latitude and longitude rule: they are placed in the map frame of the datum in
+//! force when the task starts, so the path stays where it was recorded on the ground after
+//! `init_rtk_data` or SET_LNG_LAT moved the frame; the stored `x`, `y`, `yaw` and `angle` are
+//! kept as recorded and not driven on. `cancel_task` ends the motion under way and brings the
+//! vehicle to rest (done when none is under way).
 
 pub mod status;
 pub mod trajectory;
@@ -17,7 +26,9 @@ pub use status::BaseStatus;
 use trajectory::{Trajectory, TrajectoryError, TrajectoryStore};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
-use crate::core::{Command, VehicleStatus};
+use crate::control::MotionTag;
+use crate::core::chassis::CommandRejected;
+use crate::core::{Command, PathPoints, PathRequest, VehicleStatus};
 use crate::time::Timestamp;
 
 /// Status topic.
@@ -28,10 +39,6 @@ pub const MQTT_CONTROL: &str = "mqtt_control";
 pub const FEEDBACK: &str = "feedback";
 /// Trajectory listing.
 pub const TRAJECTORY_DATA: &str = "trajectory_data";
-
-/// Why tasks are refused until trajectory following exists.
-const NO_TASKS: &str =
-    "not available: trajectory following is not implemented in this chassisd version";
 
 #[derive(Serialize)]
 struct Feedback<'a> {
@@ -157,9 +164,27 @@ impl RtkDialect {
                     .map_err(|e| e.to_string());
                 Self::feedback(&cmd, result, out);
             }
-            "start_task" => Self::feedback(&cmd, Err(NO_TASKS.into()), out),
-            // No task can be running, so there is nothing to cancel: done.
-            "cancel_task" => Self::feedback(&cmd, Ok(()), out),
+            "start_task" => {
+                let result = self.start_task(&message).and_then(|request| {
+                    core.command(Command::FollowPath {
+                        path: std::sync::Arc::new(request),
+                        tag: Some(MotionTag {
+                            owner: "rtk",
+                            id: 0,
+                        }),
+                    })
+                    .map_err(|e| e.to_string())
+                });
+                Self::feedback(&cmd, result, out);
+            }
+            "cancel_task" => {
+                let result = match core.command(Command::CancelMotion) {
+                    // Without drives no task can run: there is nothing to cancel.
+                    Ok(()) | Err(CommandRejected::NoDrives) => Ok(()),
+                    Err(e) => Err(e.to_string()),
+                };
+                Self::feedback(&cmd, result, out);
+            }
             _ => {
                 let result = core
                     .command(Command::ZeroLocalFrame)
@@ -167,6 +192,45 @@ impl RtkDialect {
                 Self::feedback(&cmd, result, out);
             }
         }
+    }
+}
+
+impl RtkDialect {
+    /// The path of a `start_task` message: the named trajectory from point `id` on.
+    fn start_task(&mut self, message: &Value) -> Result<PathRequest, String> {
+        let name = message
+            .get("name")
+            .and_then(Value::as_str)
+            .ok_or("no \"name\" string")?;
+        let id = match message.get("id") {
+            None => 0,
+            Some(v) => v
+                .as_u64()
+                .and_then(|id| usize::try_from(id).ok())
+                .ok_or("\"id\" must be a point index (a whole number from 0)")?,
+        };
+        let speed = message
+            .get("speed")
+            .and_then(Value::as_f64)
+            .ok_or("no \"speed\" number (m/s)")
+            .map_err(str::to_owned)
+            .and_then(crate::api::task_speed)?;
+        let trajectory = self.store.get(name).map_err(|e| e.to_string())?;
+        if id >= trajectory.data.len() {
+            return Err(format!(
+                "trajectory {name:?} has {} points; id {id} is past its end (ids count from 0)",
+                trajectory.data.len()
+            ));
+        }
+        Ok(PathRequest {
+            points: PathPoints::Geodetic(
+                trajectory.data[id..]
+                    .iter()
+                    .map(|p| (p.latitude, p.longitude))
+                    .collect(),
+            ),
+            speed,
+        })
     }
 }
 

@@ -149,6 +149,13 @@ impl Trajectory {
 pub trait TrajectoryStore: Send {
     /// Every readable trajectory, by name.
     fn all(&mut self) -> Result<Vec<Trajectory>, TrajectoryError>;
+    /// The trajectory named `name`.
+    fn get(&mut self, name: &str) -> Result<Trajectory, TrajectoryError> {
+        self.all()?
+            .into_iter()
+            .find(|t| t.name == name)
+            .ok_or_else(|| TrajectoryError::NotFound(name.to_owned()))
+    }
     /// Saves (replaces) a checked trajectory.
     fn save(&mut self, trajectory: &Trajectory) -> Result<(), TrajectoryError>;
     /// Deletes one.
@@ -215,6 +222,13 @@ impl MemoryStore {
 impl TrajectoryStore for MemoryStore {
     fn all(&mut self) -> Result<Vec<Trajectory>, TrajectoryError> {
         Ok(self.trajectories.values().cloned().collect())
+    }
+
+    fn get(&mut self, name: &str) -> Result<Trajectory, TrajectoryError> {
+        self.trajectories
+            .get(name)
+            .cloned()
+            .ok_or_else(|| TrajectoryError::NotFound(name.to_owned()))
     }
 
     fn save(&mut self, trajectory: &Trajectory) -> Result<(), TrajectoryError> {
@@ -302,6 +316,22 @@ impl DirStore {
 impl TrajectoryStore for DirStore {
     fn all(&mut self) -> Result<Vec<Trajectory>, TrajectoryError> {
         self.read_all()
+    }
+
+    fn get(&mut self, name: &str) -> Result<Trajectory, TrajectoryError> {
+        check_name(name)?;
+        let path = self.path(name);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(TrajectoryError::NotFound(name.to_owned()));
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let t: Trajectory = serde_json::from_slice(&bytes)
+            .map_err(|e| std::io::Error::other(format!("{} is corrupt: {e}", path.display())))?;
+        t.check()?;
+        Ok(t)
     }
 
     fn save(&mut self, trajectory: &Trajectory) -> Result<(), TrajectoryError> {
