@@ -1,5 +1,5 @@
 //! Root MISSION on the simulated mower (its yard: a Daly BMS on the drives' bus that charges
-//! on the dock, and a blade switched by a CAN frame), through the local command channel and
+//! on the dock, and a CiA 402 blade drive), through the local command channel and
 //! the whole engine: every action runs in order, the blade runs during the coverage only, and
 //! the mission ends charging on the dock; a mission stops its blade when it fails.
 
@@ -63,9 +63,10 @@ fn a_mission_with_every_action_runs_in_order_and_ends_charging_on_the_dock() {
         "{:?}",
         v.sink.events
     );
-    v.run(0.1);
+    // The blade drive brakes its disc to rest.
+    v.run(1.5);
     assert!(
-        !v.sim.vehicle().cutter_on(),
+        v.sim.vehicle().blade_rpm().abs() < 1.0,
         "the blade stops after the coverage"
     );
     assert!(

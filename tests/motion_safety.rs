@@ -7,7 +7,7 @@ mod common;
 use chassisd::control::Outcome;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::sim::lockstep::Lockstep;
-use chassisd::sim::plant::{GnssCondition, PlantConfig};
+use chassisd::sim::plant::{GnssCondition, LEFT_NODE, PlantConfig};
 use common::lockstep::{FIXED, START, SimRun as Vehicle};
 
 #[test]
@@ -335,4 +335,58 @@ fn a_lost_control_link_aborts_the_move_and_needs_a_re_arm() {
         v.result().outcome,
         Outcome::Cancelled("the drive mode was switched".into())
     );
+}
+
+/// A drive fault (an overcurrent on the left wheel's drive) during a move or a task: the
+/// motion is aborted with the drive's fault as its reason, the vehicle stops, and motion is
+/// refused until the deliberate reset clears the fault and re-arms.
+#[test]
+fn a_drive_fault_aborts_a_move_or_a_task_and_needs_a_reset() {
+    let mut v = Vehicle::located(8);
+    let overcurrent = 0x2310;
+    for start in ["move", "task"] {
+        v.sink.results.clear();
+        match start {
+            "move" => {
+                v.send("set_navi_cmd", r#"{"cmd":"1","distance":400}"#)
+                    .expect("the move starts");
+            }
+            _ => {
+                start_straight_task(&mut v, 6.0);
+            }
+        }
+        v.run(2.5);
+        assert!(v.speed() > 0.3, "{start}: under way at {}", v.speed());
+        v.sim
+            .inject_drive_fault(LEFT_NODE, overcurrent, &mut v.sink);
+        v.run_under(FIXED, 0.5, true);
+        let r = v.result();
+        assert!(
+            matches!(&r.outcome, Outcome::Aborted(why) if why.starts_with("safety stop: left: EMCY 0x2310")),
+            "{start}: {r}"
+        );
+        v.run(2.0);
+        assert!(v.speed().abs() < 0.01, "{start}: stopped at {}", v.speed());
+        let refused = v
+            .send("set_navi_cmd", r#"{"cmd":"1","distance":10}"#)
+            .expect_err("latched by the fault");
+        assert!(
+            refused.contains("fault") || refused.contains("re-arm"),
+            "{start}: {refused}"
+        );
+        let at_rest = v.truth_xy();
+        v.run(1.0);
+        assert!(
+            distance(at_rest, v.truth_xy()) < 0.002,
+            "{start}: stays put"
+        );
+        v.send("reset", "{}")
+            .expect("the reset clears the fault and re-arms");
+        v.run(1.5);
+        v.send("set_navi_cmd", r#"{"cmd":"1","distance":10}"#)
+            .unwrap_or_else(|e| panic!("{start}: accepted after the reset: {e}"));
+        v.run_under(FIXED, 10.0, true);
+        let r = v.result();
+        assert_eq!(r.outcome, Outcome::Succeeded, "{start}: {r}");
+    }
 }

@@ -595,7 +595,33 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
                 "name a profile file",
             ));
         };
-        if d.wheels.len() != usize::from(profile.axes) {
+        let blade = config
+            .cutter
+            .as_ref()
+            .and_then(|c| c.drive_name())
+            .is_some_and(|name| name == d.name);
+        if blade {
+            if !d.wheels.is_empty() {
+                return Err(invalid(
+                    "cutter.drive",
+                    format!("names {:?}, which turns wheels", d.name),
+                    "give the blade its own [[drive]] with wheels = []",
+                ));
+            }
+            if profile.axes != 1 {
+                return Err(invalid(
+                    &key("profile"),
+                    format!("the blade drive has {} axes", profile.axes),
+                    "give the blade a one-axis drive profile",
+                ));
+            }
+        } else if d.wheels.is_empty() {
+            return Err(invalid(
+                &key("wheels"),
+                "is empty, and [cutter] does not name this drive".into(),
+                "list the wheel of each axis, or set cutter.drive to this drive's name",
+            ));
+        } else if d.wheels.len() != usize::from(profile.axes) {
             return Err(invalid(
                 &key("wheels"),
                 format!(

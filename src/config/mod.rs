@@ -384,6 +384,13 @@ mod tests {
         assert!(c.gnss.is_some());
         let mqtt = c.mqtt.expect("[mqtt]");
         assert!(mqtt.rtk.is_some() && mqtt.root.is_some() && mqtt.device.is_some());
+        assert_eq!(
+            c.cutter.expect("[cutter]").cutter().map_err(|e| e.0),
+            Ok(mission::Cutter::Drive {
+                name: "blade".into(),
+                rpm: 3000.0
+            })
+        );
         let estop = c.estop[0].profile.get().expect("e-stop profile loaded");
         assert_eq!((estop.id, estop.timeout_ms), (0x18A, 300));
     }
@@ -435,6 +442,19 @@ mod tests {
             "heartbeat_timeout_ms = 150",
             "drive[0].heartbeat_timeout_ms",
         );
+        check(
+            "drive = \"blade\"\nrpm",
+            "drive = \"wheels\"\nrpm",
+            "cutter.drive",
+        );
+        check("name = \"blade\"", "name = \"blades\"", "drive[1].wheels");
+        // A drive with no wheels is the cutter's, or a mistake.
+        check(
+            "drive = \"blade\"\nrpm = 3000",
+            "bus = \"can0\"",
+            "drive[1].wheels",
+        );
+        check("rpm = 3000", "rpm = 0", "cutter.rpm");
         check("track_m = 0.42", "track_m = 0.0", "chassis.track_m");
         check("direction = -1", "direction = 0", "wheels.right.direction");
         check(

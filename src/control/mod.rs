@@ -148,7 +148,8 @@ pub struct MotionResult {
     /// The time-optimal profile's duration, s.
     pub planned_s: f64,
     /// What was left to go where the vehicle comes to rest, in the frame it closed on (m
-    /// or rad; a goal's distance in m); NaN when it ended before arriving.
+    /// or rad; a goal's distance in m); for a motion that ended early, what was left at
+    /// its last step.
     pub error: f64,
     /// A goal's heading left to turn at its end, rad.
     pub heading_error: Option<f64>,
@@ -357,26 +358,22 @@ impl Motion {
                 outcome,
                 duration_s: t.saturating_since(m.started()).as_secs_f64(),
                 planned_s: m.profile().duration(),
-                error: error.unwrap_or(f64::NAN),
+                error: error.unwrap_or_else(|| m.left()),
                 heading_error: None,
                 heading: m.heading_source(),
                 wheel_scale: m.wheel_scale(),
                 cross_track: None,
             },
             Active::Goal(g) => {
-                let arrived = outcome == Outcome::Succeeded;
                 MotionResult {
                     id,
                     kind: MotionKind::Goal(g.goal()),
                     tag,
                     duration_s: t.saturating_since(g.started()).as_secs_f64(),
                     planned_s: g.planned_s(),
-                    // A goal has no coast left at its end: what is left is where it is.
-                    error: if arrived || error.is_some() {
-                        g.left().0
-                    } else {
-                        f64::NAN
-                    },
+                    // A goal has no coast left at its end: what is left is where it is (at
+                    // its last step, when it ended early).
+                    error: g.left().0,
                     heading_error: Some(g.left().1),
                     heading: moves::HeadingSource::Map,
                     wheel_scale: 1.0,

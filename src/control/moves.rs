@@ -140,6 +140,8 @@ pub struct RelativeMove {
     wheel_scale: f64,
     tolerance: f64,
     allowance_s: f64,
+    /// What was left to go at the last step (m or rad, signed as the move).
+    left: f64,
 }
 
 impl RelativeMove {
@@ -184,7 +186,14 @@ impl RelativeMove {
             last_yaw: yaw,
             wheel_scale: view.wheel_scale.unwrap_or(1.0),
             tolerance,
+            left: amount,
         }
+    }
+
+    /// What was left to go at the last step (m or rad, signed as the move): all of it
+    /// before the first.
+    pub fn left(&self) -> f64 {
+        self.left
     }
 
     /// What it is.
@@ -230,6 +239,7 @@ impl RelativeMove {
         };
         self.turned += wrap(yaw - self.last_yaw);
         self.last_yaw = yaw;
+        self.left = self.remaining(view);
         let elapsed = t.saturating_since(self.started).as_secs_f64();
         // Damping ≈ 0.7 of the position loop around a first-order drive of this lag.
         let gain = 1.0 / (2.0 * response_s);

@@ -314,8 +314,11 @@ pub struct Vehicle {
     motion: Option<Motion>,
     /// The root MISSION under way.
     mission: Option<Mission>,
-    /// Whether the cutter was last switched on.
+    /// Whether a mission switched the cutter on (and nothing has switched it off since).
     cutter_on: bool,
+    /// Whether the blade was last told to run: only while the cutter is on and nothing is
+    /// latched, so a stop or a pause stops the blade and only a deliberate act restarts it.
+    blade_running: bool,
 }
 
 impl Vehicle {
@@ -348,6 +351,7 @@ impl Vehicle {
             motion: config.motion.map(Motion::new),
             mission: None,
             cutter_on: false,
+            blade_running: false,
         }
     }
 
@@ -631,6 +635,7 @@ impl Vehicle {
         }
         out.insert(0, Output::Wheels(chassis.tick(t)));
         self.mission_tick(t, &results, &mut out);
+        self.cutter_tick(&mut out);
         for result in results {
             out.push(Output::Event(result.to_string()));
             out.push(Output::MotionEnded(result));
@@ -796,6 +801,27 @@ impl Vehicle {
         }
     }
 
+    /// Runs the blade while the cutter is on and nothing is latched. A stop other than the
+    /// operator's pause of a task switches the cutter off for good; the pause only holds it.
+    fn cutter_tick(&mut self, out: &mut Vec<Output>) {
+        let latched = self
+            .chassis
+            .as_ref()
+            .and_then(|c| c.safety().latched().cloned());
+        let paused = self.motion.as_ref().is_some_and(Motion::is_paused)
+            || self.mission.as_ref().is_some_and(Mission::is_paused);
+        match latched {
+            Some(Cause::Operator) if paused => {}
+            Some(_) => self.cutter_on = false,
+            None => {}
+        }
+        let run = self.cutter_on && latched.is_none();
+        if run != self.blade_running {
+            self.blade_running = run;
+            out.push(Output::Cutter(run));
+        }
+    }
+
     /// The mission's part of a control tick: the ends of its motions, its timers, what it
     /// asks for next, and its progress out.
     fn mission_tick(&mut self, t: Timestamp, results: &[MotionResult], out: &mut Vec<Output>) {
@@ -825,7 +851,7 @@ impl Vehicle {
                 Request::Goal(goal) => self.start_goal(t, goal, None),
                 Request::Cutter(on) => {
                     self.cutter_on = on;
-                    out.push(Output::Cutter(on));
+                    self.cutter_tick(out);
                     continue;
                 }
             };
@@ -853,11 +879,8 @@ impl Vehicle {
             Some(outcome) => {
                 if outcome != Outcome::Succeeded {
                     motion.end(t, Outcome::Cancelled("the mission ended".into()), None);
-                    if self.cutter_on {
-                        // The blade stops with a mission that did not finish.
-                        self.cutter_on = false;
-                        out.push(Output::Cutter(false));
-                    }
+                    // The blade stops with a mission that did not finish.
+                    self.cutter_on = false;
                 }
                 motion.set_navigation(outcome.navigation());
                 self.mission = None;

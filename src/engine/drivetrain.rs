@@ -5,6 +5,7 @@ use std::f64::consts::TAU;
 
 use crate::config::VehicleConfig;
 use crate::config::chassis::{Wheel, WheelConfig};
+use crate::config::mission::Cutter;
 use crate::core::chassis::{ChassisFeedback, DriveSummary, WheelCommand, WheelFeedback};
 use crate::core::safety::Power;
 use crate::devices::bms::daly::DalyBms;
@@ -82,7 +83,17 @@ struct Drive {
     name: String,
     node: DriveNode,
     axes: Vec<Axis>,
+    /// The blade drive's motor speed while the cutter is on, r/min (`None`: a wheel drive).
+    blade_rpm: Option<f64>,
     started: bool,
+}
+
+/// The cutter's switch state, and for a switch frame when it is next repeated.
+#[derive(Debug, Clone)]
+struct CutterState {
+    cutter: Cutter,
+    on: bool,
+    next_repeat: Option<Timestamp>,
 }
 
 /// What chassisd produces on a bus so that its drives notice when it is gone.
@@ -127,6 +138,7 @@ pub struct Bus {
 #[derive(Debug, Clone, Default)]
 pub struct Drivetrain {
     buses: Vec<Bus>,
+    cutter: Option<CutterState>,
 }
 
 impl Drivetrain {
@@ -149,6 +161,11 @@ impl Drivetrain {
                 Wheel::Left => wheels.left,
                 Wheel::Right => wheels.right,
             }
+        };
+        let cutter = config.cutter.as_ref().and_then(|c| c.cutter().ok());
+        let blade_rpm = |name: &str| match &cutter {
+            Some(Cutter::Drive { name: blade, rpm }) if blade == name => Some(*rpm),
+            _ => None,
         };
         let buses = config
             .can
@@ -193,6 +210,7 @@ impl Drivetrain {
                             name: d.name.clone(),
                             node,
                             axes,
+                            blade_rpm: blade_rpm(&d.name),
                             started: false,
                         })
                     })
@@ -248,7 +266,69 @@ impl Drivetrain {
                 }
             })
             .collect();
-        Self { buses }
+        Self {
+            buses,
+            cutter: cutter.map(|cutter| CutterState {
+                cutter,
+                on: false,
+                next_repeat: None,
+            }),
+        }
+    }
+
+    /// Switches the cutter: a blade drive runs at its speed from the next command on, while
+    /// the drives are enabled; a switch frame leaves now (into `tx`). False without a cutter.
+    pub fn set_cutter(&mut self, t: Timestamp, on: bool, tx: &mut Vec<(String, Frame)>) -> bool {
+        let Some(state) = &mut self.cutter else {
+            return false;
+        };
+        state.on = on;
+        if let Cutter::Frame {
+            bus,
+            on: on_frame,
+            off,
+            repeat,
+        } = &state.cutter
+        {
+            state.next_repeat = repeat.filter(|_| on).map(|r| t.saturating_add(r));
+            let frame = if on { *on_frame } else { *off };
+            if let Some(bus) = self.buses.iter_mut().find(|b| &b.name == bus) {
+                bus.emit(vec![frame], tx);
+            }
+        }
+        true
+    }
+
+    /// Whether the cutter is switched on.
+    pub fn cutter_on(&self) -> bool {
+        self.cutter.as_ref().is_some_and(|c| c.on)
+    }
+
+    /// A switch frame's repeat, when due.
+    fn repeat_cutter(&mut self, t: Timestamp, tx: &mut Vec<(String, Frame)>) {
+        let Some(state) = &mut self.cutter else {
+            return;
+        };
+        let Cutter::Frame {
+            bus,
+            on,
+            repeat: Some(repeat),
+            ..
+        } = &state.cutter
+        else {
+            return;
+        };
+        if !state.on || state.next_repeat.is_some_and(|next| t < next) {
+            return;
+        }
+        state.next_repeat = Some(t.saturating_add(*repeat));
+        if let Some(bus) = self
+            .buses
+            .iter_mut()
+            .find(|b| &b.name == bus && b.link != BusLink::Down)
+        {
+            bus.emit(vec![*on], tx);
+        }
     }
 
     /// Whether `source` names one of the interfaces.
@@ -333,6 +413,7 @@ impl Drivetrain {
 
     /// Runs every device's timers; starts nodes on interfaces not known to be down.
     pub fn poll(&mut self, t: Timestamp, tx: &mut Vec<(String, Frame)>) {
+        self.repeat_cutter(t, tx);
         for bus in &mut self.buses {
             if bus.link == BusLink::Down {
                 continue;
@@ -421,10 +502,16 @@ impl Drivetrain {
             Power::QuickStop => Goal::QuickStop,
             Power::Disabled => Goal::Disabled,
         };
+        let cutter_on = self.cutter_on();
         for bus in &mut self.buses {
             for d in &mut bus.drives {
                 if command.reset_faults && d.node.fault().is_some() && !d.node.reset_fault(t) {
                     tracing::warn!(drive = %d.name, "fault cannot be reset yet");
+                }
+                if let Some(blade) = d.blade_rpm {
+                    d.node
+                        .command(t, goal, &[if cutter_on { blade } else { 0.0 }]);
+                    continue;
                 }
                 let rpm: Vec<f64> = d
                     .axes
@@ -445,7 +532,8 @@ impl Drivetrain {
     /// The frames that quick-stop every drive with zero targets, by interface (for a panic
     /// hook: computed ahead, sent without the engine).
     pub fn stop_frames(&self) -> Vec<(String, Frame)> {
-        self.buses
+        let mut frames: Vec<(String, Frame)> = self
+            .buses
             .iter()
             .filter(|b| !b.listen_only)
             .flat_map(|b| {
@@ -456,12 +544,30 @@ impl Drivetrain {
                         .map(|f| (b.name.clone(), f))
                 })
             })
-            .collect()
+            .collect();
+        if let Some((bus, off)) = self.cutter_off_frame()
+            && !self.is_listen_only(bus)
+        {
+            frames.push((bus.to_owned(), off));
+        }
+        frames
+    }
+
+    /// A switch-frame cutter's bus and off frame.
+    fn cutter_off_frame(&self) -> Option<(&str, Frame)> {
+        match &self.cutter.as_ref()?.cutter {
+            Cutter::Frame { bus, off, .. } => Some((bus, *off)),
+            Cutter::Drive { .. } => None,
+        }
     }
 
     /// The daemon is exiting: every running drive quick-stops with zero targets now; the
     /// frames go to `tx`.
     pub fn shut_down(&mut self, tx: &mut Vec<(String, Frame)>) {
+        if self.cutter_on() {
+            // A switch frame's blade is switched off; a blade drive quick-stops below.
+            self.set_cutter(Timestamp::default(), false, tx);
+        }
         for bus in &mut self.buses {
             if bus.link == BusLink::Down {
                 continue;
@@ -583,6 +689,49 @@ mod tests {
         let heartbeat = deadman_frames("heartbeat");
         assert_eq!(count(&heartbeat, 0x080), 0);
         assert_eq!(count(&heartbeat, 0x77F), 2);
+    }
+
+    #[test]
+    fn a_switch_frame_cutter_is_sent_repeated_while_on_and_switched_off_to_stop() {
+        let text = "[[can]]\ninterface = \"can0\"\n\
+                    [cutter]\nbus = \"can0\"\ncan_id = 0x6A0\non = [1]\noff = [0]\nrepeat_ms = 100\n";
+        let config = VehicleConfig::from_toml(text, std::path::Path::new("test.toml")).unwrap();
+        let mut train = Drivetrain::new(&config);
+        let ms = |ms: u64| Timestamp::from_micros(ms * 1000);
+        let sent = |tx: &mut Vec<(String, Frame)>| -> Vec<Vec<u8>> {
+            tx.drain(..)
+                .inspect(|(bus, f)| assert_eq!((bus.as_str(), f.id()), ("can0", 0x6A0)))
+                .map(|(_, f)| f.data().to_vec())
+                .collect()
+        };
+        let mut tx = Vec::new();
+        train.poll(ms(0), &mut tx);
+        assert!(sent(&mut tx).is_empty(), "off: nothing is sent");
+        assert!(train.set_cutter(ms(10), true, &mut tx));
+        assert_eq!(sent(&mut tx), [vec![1]]);
+        train.poll(ms(60), &mut tx);
+        assert!(sent(&mut tx).is_empty());
+        train.poll(ms(110), &mut tx);
+        train.poll(ms(150), &mut tx);
+        train.poll(ms(210), &mut tx);
+        assert_eq!(sent(&mut tx), [vec![1], vec![1]], "every 100 ms while on");
+        assert!(train.set_cutter(ms(220), false, &mut tx));
+        assert_eq!(sent(&mut tx), [vec![0]]);
+        train.poll(ms(500), &mut tx);
+        assert!(sent(&mut tx).is_empty(), "no repeats once off");
+        // The panic hook's frames and the exit switch it off.
+        assert!(train.stop_frames().iter().any(|(_, f)| f.data() == [0]));
+        train.set_cutter(ms(600), true, &mut tx);
+        tx.clear();
+        train.shut_down(&mut tx);
+        assert_eq!(sent(&mut tx), [vec![0]]);
+        assert!(!train.cutter_on());
+        // Without a cutter there is nothing to switch.
+        let mut bare = Drivetrain::new(
+            &VehicleConfig::from_toml("[[can]]\ninterface = \"can0\"\n", std::path::Path::new("t"))
+                .unwrap(),
+        );
+        assert!(!bare.set_cutter(ms(0), true, &mut tx));
     }
 
     #[test]

@@ -24,7 +24,6 @@ use crate::api::rtk::RtkDialect;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
-use crate::config::mission::CutterConfig;
 use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
 use crate::core::{
     CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
@@ -157,8 +156,6 @@ pub struct Engine {
     stop_reason: Option<String>,
     /// The MQTT protocol dialects.
     dialects: Dialects,
-    /// The cutter's frames, when one is configured.
-    cutter: Option<CutterConfig>,
     stats: EngineStats,
 }
 
@@ -256,7 +253,6 @@ impl Engine {
             drive_states: Vec::new(),
             stop_reason: None,
             dialects: dialects(config, trajectories),
-            cutter: config.cutter.clone(),
             stats: EngineStats::default(),
         }
     }
@@ -519,16 +515,14 @@ impl Engine {
                         out.extend(replies.into_iter().map(EngineOutput::Publish));
                         out.push(EngineOutput::MotionEnded(result));
                     }
-                    Output::Cutter(on) => match &self.cutter {
-                        Some(c) => {
-                            if let Some(frame) = c.frame(on) {
-                                tx.push((c.bus.clone(), frame));
-                            }
-                        }
-                        None => out.push(EngineOutput::Event(
-                            "cutter switch asked for, but no [cutter] is configured".into(),
-                        )),
-                    },
+                    Output::Cutter(on) => {
+                        let event = if self.drivetrain.set_cutter(t, on, &mut tx) {
+                            format!("cutter {}", if on { "on" } else { "off" })
+                        } else {
+                            "cutter switch asked for, but no [cutter] is configured".into()
+                        };
+                        out.push(EngineOutput::Event(event));
+                    }
                     Output::Mission { tag, event } => {
                         let mut replies = Vec::new();
                         self.dialects.on_mission_event(t, tag, &event, &mut replies);

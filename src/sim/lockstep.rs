@@ -19,6 +19,7 @@ use crate::config::mqtt::MqttConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
 use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
+use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
 use crate::record::{Payload, Record, SourceKind, SourceMeta};
@@ -161,17 +162,34 @@ wheels = ["right"]
             dock: Some(yard.dock),
             ..MissionConfig::default()
         });
-        config.cutter = Some(CutterConfig {
-            bus: SIM_BUS.into(),
-            can_id: yard.cutter_can_id,
-            extended: false,
-            on: vec![1],
-            off: vec![0],
+        config.cutter = Some(match (yard.blade_node, yard.cutter_can_id) {
+            (Some(node), _) => {
+                let mut blade = config.drive[0].clone();
+                blade.name = BLADE_DRIVE.into();
+                blade.node = node;
+                blade.wheels.clear();
+                config.drive.push(blade);
+                CutterConfig {
+                    drive: Some(BLADE_DRIVE.into()),
+                    rpm: Some(yard.blade_rpm),
+                    ..CutterConfig::default()
+                }
+            }
+            (None, can_id) => CutterConfig {
+                bus: Some(SIM_BUS.into()),
+                can_id,
+                on: Some(vec![1]),
+                off: Some(vec![0]),
+                ..CutterConfig::default()
+            },
         });
     }
     config.validate(file)?;
     Ok(config)
 }
+
+/// The name of the simulated blade's drive.
+pub const BLADE_DRIVE: &str = "blade";
 
 /// The profile of the simulated drives.
 pub fn drive_profile() -> Result<DriveProfile, ConfigError> {
@@ -354,6 +372,24 @@ impl Lockstep {
         self.engine.advance_to(self.t, &mut self.outputs);
         self.dispatch(self.t, sink);
         self.drain(sink);
+    }
+
+    /// Puts the drive at `node` into fault with the EMCY `code`, now.
+    pub fn inject_drive_fault(&mut self, node: NodeId, code: u16, sink: &mut impl Sink) {
+        let mut produced = Vec::new();
+        self.vehicle
+            .inject_drive_fault(self.t, node, code, &mut produced);
+        self.queue.extend(produced);
+        self.drain(sink);
+    }
+
+    /// Advances one plant step with chassisd gone (killed, hung): the vehicle's devices run
+    /// on, and nothing reaches them from the engine.
+    pub fn step_unattended(&mut self, gnss: GnssCondition) {
+        self.t = self.t.saturating_add(PLANT_STEP);
+        self.steps += 1;
+        let mut produced = Vec::new();
+        self.vehicle.step(self.t, gnss, &mut produced);
     }
 
     /// Feeds queued records to the engine, and the drives' replies to what it sends.

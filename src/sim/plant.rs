@@ -69,7 +69,7 @@ pub struct PlantConfig {
 }
 
 /// `[yard]`: a Daly BMS on the drives' bus that charges while the vehicle rests on the dock,
-/// and a blade switched by a CAN frame.
+/// and a blade: a CiA 402 drive on the drives' bus, or a motor switched by a CAN frame.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Yard {
@@ -81,8 +81,16 @@ pub struct Yard {
     /// The Daly BMS's address.
     #[serde(default = "default_bms_address")]
     pub bms_address: u8,
-    /// The blade's switch frame (standard id): data `[1]` on, `[0]` off.
-    pub cutter_can_id: u32,
+    /// The blade's switch frame (standard id): data `[1]` on, `[0]` off. Give this or
+    /// `blade_node`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cutter_can_id: Option<u32>,
+    /// The blade's CiA 402 drive node on the drives' bus (the wheel drives' profile).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blade_node: Option<u8>,
+    /// The blade motor's speed while the cutter is on, r/min.
+    #[serde(default = "default_blade_rpm")]
+    pub blade_rpm: f64,
     /// Charging current on the dock, A.
     #[serde(default = "default_charge_current")]
     pub charge_current_a: f64,
@@ -96,6 +104,9 @@ fn default_bms_address() -> u8 {
 }
 fn default_charge_current() -> f64 {
     10.0
+}
+fn default_blade_rpm() -> f64 {
+    3000.0
 }
 
 /// `[geometry]`
@@ -236,6 +247,23 @@ impl PlantConfig {
             0.1..=600.0,
             "s",
         )?;
+        if let Some(y) = p.yard {
+            match (y.cutter_can_id, y.blade_node) {
+                (Some(id), None) if id <= 0x7FF => {}
+                (None, Some(node)) if (3..=126).contains(&node) => {
+                    check_range(file, "yard.blade_rpm", y.blade_rpm, 1.0..=30_000.0, "r/min")?;
+                }
+                _ => {
+                    return Err(ConfigError::invalid(
+                        file,
+                        "yard",
+                        "needs one blade: cutter_can_id (a standard id) or blade_node",
+                        "give cutter_can_id up to 0x7FF, or blade_node 3 to 126 (1 and 2 are \
+                         the wheels)",
+                    ));
+                }
+            }
+        }
         Ok(p)
     }
 
@@ -307,8 +335,10 @@ pub struct SimVehicle {
     forced: Option<ForcedMotion>,
     /// The yard's battery pack.
     bms: Option<super::bms::SimDaly>,
-    /// Whether the blade runs.
+    /// Whether the blade's switch frame last said on.
     cutter_on: bool,
+    /// The blade's drive, when the yard has one.
+    blade: Option<SimDrive>,
 }
 
 /// A motion imposed on the simulated vehicle (a real robot's recorded wheel odometry and
@@ -331,6 +361,7 @@ impl SimVehicle {
             time_constant_s: plant.motors.time_constant_s,
         };
         let yard = plant.yard;
+        let blade_profile = profile.clone();
         let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
             .map(|d| d.naive_utc())
             .unwrap_or_default();
@@ -365,12 +396,54 @@ impl SimVehicle {
                 )
             }),
             cutter_on: false,
+            blade: yard
+                .and_then(|y| y.blade_node)
+                .and_then(NodeId::new)
+                .map(|node| SimDrive::new(node, blade_profile, model)),
         }
     }
 
-    /// Whether the blade runs (the last switch frame said so).
+    /// Whether the blade runs: the last switch frame said so, or its drive turns it at more
+    /// than half its speed.
     pub fn cutter_on(&self) -> bool {
-        self.cutter_on
+        match (&self.blade, self.plant.yard) {
+            (Some(_), Some(y)) => self.blade_rpm().abs() > 0.5 * y.blade_rpm.abs(),
+            _ => self.cutter_on,
+        }
+    }
+
+    /// Puts axis 0 of the drive at `node` (a wheel's or the blade's) into fault with the EMCY
+    /// `code`, as an overcurrent or an encoder failure would; its frames go to `out`.
+    pub fn inject_drive_fault(
+        &mut self,
+        t: Timestamp,
+        node: NodeId,
+        code: u16,
+        out: &mut Vec<Record>,
+    ) {
+        let mut frames = Vec::new();
+        for drive in [&mut self.left, &mut self.right]
+            .into_iter()
+            .chain(self.blade.as_mut())
+        {
+            if drive.node() == node {
+                drive.inject_fault(0, code, &mut frames);
+            }
+        }
+        out.extend(frames.into_iter().map(|f| can_record(t, f)));
+    }
+
+    /// The blade drive's motor speed, r/min (0 without one).
+    pub fn blade_rpm(&self) -> f64 {
+        self.blade
+            .as_ref()
+            .and_then(|b| b.motor_rpm().first().copied())
+            .unwrap_or(0.0)
+    }
+
+    /// The blade's drive, when the yard has one.
+    pub fn blade_drive(&self) -> Option<&SimDrive> {
+        self.blade.as_ref()
     }
 
     /// The battery, when the yard has one.
@@ -463,6 +536,9 @@ impl SimVehicle {
         let mut frames = Vec::new();
         self.left.step(t, &mut frames);
         self.right.step(t, &mut frames);
+        if let Some(b) = &mut self.blade {
+            b.step(t, &mut frames);
+        }
         for f in frames {
             out.push(can_record(t, f));
         }
@@ -487,12 +563,13 @@ impl SimVehicle {
         tr.v = v;
         tr.w = w;
         let docked = self.docked();
+        let cutting = self.cutter_on();
         if let (Some(b), Some(y)) = (&mut self.bms, self.plant.yard) {
             // On the dock the charger feeds the pack; elsewhere the drives and the blade draw.
             b.battery.current_a = if docked {
                 y.charge_current_a
             } else {
-                -(2.0 + 4.0 * v.abs() + if self.cutter_on { 6.0 } else { 0.0 })
+                -(2.0 + 4.0 * v.abs() + if cutting { 6.0 } else { 0.0 })
             };
             b.battery.step(Duration::from_secs_f64(dt));
         }
@@ -525,12 +602,15 @@ impl SimVehicle {
         let mut frames = Vec::new();
         self.left.on_frame(t, frame, &mut frames);
         self.right.on_frame(t, frame, &mut frames);
+        if let Some(b) = &mut self.blade {
+            b.on_frame(t, frame, &mut frames);
+        }
         if let Some(b) = &mut self.bms {
             b.on_frame(frame, &mut frames);
         }
         if let Some(y) = self.plant.yard
             && !frame.is_extended()
-            && frame.id() == y.cutter_can_id
+            && Some(frame.id()) == y.cutter_can_id
             && let Some(&on) = frame.data().first()
         {
             self.cutter_on = on != 0;
