@@ -134,6 +134,11 @@ pub struct MoveFigures {
     pub duration_s: f64,
     /// The time-optimal profile under the configured limits, s.
     pub optimal_s: f64,
+    /// The wheel scale the move's distance was corrected by (odometry per true distance).
+    pub wheel_scale: f64,
+    /// A distance's odometry per true distance over the move itself, as the plant's slip
+    /// made it (NaN for turns).
+    pub slip_scale: f64,
     /// Met every target.
     pub pass: bool,
 }
@@ -350,6 +355,8 @@ pub fn run(plant: &PlantConfig, seed: u64) -> Result<ControlReport, ConfigError>
                 frame_error: f64::NAN,
                 duration_s: f64::NAN,
                 optimal_s: f64::NAN,
+                wheel_scale: f64::NAN,
+                slip_scale: f64::NAN,
                 pass: false,
             },
         };
@@ -388,6 +395,7 @@ fn navi_cmd(kind: MoveKind) -> String {
 fn score(kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigures {
     let result = &run.result;
     let ((before, frame_before), (after, frame_after)) = (run.before, run.after);
+    let mut slip_scale = f64::NAN;
     let (truth_error, truth_target, frame_error, frame_target, optimal_s) = match kind {
         MoveKind::Straight { distance_m } => {
             let (s, c) = before.yaw.sin_cos();
@@ -396,6 +404,7 @@ fn score(kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigure
             let frame_along = ((frame_after.x - frame_before.x) * c
                 + (frame_after.y - frame_before.y) * s)
                 / result.wheel_scale;
+            slip_scale = frame_along * result.wheel_scale / along;
             (
                 (along - distance_m).abs(),
                 target::DISTANCE_ABS_M + target::DISTANCE_REL * distance_m.abs(),
@@ -432,6 +441,8 @@ fn score(kind: MoveKind, run: &MoveRun, settings: &MotionSettings) -> MoveFigure
         frame_error,
         duration_s: result.duration_s,
         optimal_s,
+        wheel_scale: result.wheel_scale,
+        slip_scale,
         pass,
     }
 }

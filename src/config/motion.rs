@@ -150,6 +150,20 @@ pub struct MotionSettings {
     pub time_allowance_s: f64,
     /// Trajectory tasks.
     pub task: TaskSettings,
+    /// The slowest speed and yaw rate a move settling on its goal commands (m/s, rad/s):
+    /// twice what the odometry and the localiser take for standing still, so a move never
+    /// creeps unseen (its measured progress frozen) while off its goal.
+    pub creep: (f64, f64),
+}
+
+/// The creep speeds of a vehicle of track `track_m`: each wheel at twice the standstill
+/// speed, and a turn on the spot above the standstill yaw rate too.
+pub fn creep(track_m: f64) -> (f64, f64) {
+    use crate::fusion::{localizer::STILL_RPS, odometry::STILL_MPS};
+    (
+        2.0 * STILL_MPS,
+        (2.0 * 2.0 * STILL_MPS / track_m).max(2.0 * STILL_RPS),
+    )
 }
 
 impl MotionConfig {
@@ -184,6 +198,7 @@ impl MotionConfig {
                 gnss_wait_s: self.task_gnss_wait_s.unwrap_or(120.0),
                 max_approach_m: self.task_max_approach_m.unwrap_or(5.0),
             },
+            creep: creep(chassis.track_m),
         }
     }
 

@@ -139,6 +139,8 @@ pub struct RelativeMove {
     /// Odometry distance per true distance (1 + the wheels' scale error).
     wheel_scale: f64,
     tolerance: f64,
+    /// The slowest command while settling off the goal (m/s or rad/s).
+    creep: f64,
     allowance_s: f64,
     /// What was left to go at the last step (m or rad, signed as the move).
     left: f64,
@@ -151,16 +153,18 @@ impl RelativeMove {
             Some(yaw) => (HeadingSource::Map, yaw),
             None => (HeadingSource::Odom, view.odom.yaw),
         };
-        let (amount, limits, tolerance) = match kind {
+        let (amount, limits, tolerance, creep) = match kind {
             MoveKind::Straight { distance_m } => (
                 distance_m,
                 planning_limits(settings.linear),
                 settings.position_tolerance_m,
+                settings.creep.0,
             ),
             MoveKind::Turn { angle_rad } => (
                 angle_rad,
                 planning_limits(settings.angular),
                 settings.angle_tolerance_rad,
+                settings.creep.1,
             ),
         };
         let profile = Profile::plan(amount, limits);
@@ -186,6 +190,7 @@ impl RelativeMove {
             last_yaw: yaw,
             wheel_scale: view.wheel_scale.unwrap_or(1.0),
             tolerance,
+            creep,
             left: amount,
         }
     }
@@ -307,7 +312,14 @@ impl RelativeMove {
             -self.integral_limit / integral_gain,
             self.integral_limit / integral_gain,
         );
-        let speed = feedforward + gain * error + integral_gain * self.integral;
+        let mut speed = feedforward + gain * error + integral_gain * self.integral;
+        // Settling off the goal, no slower than the odometry sees (below it the measured
+        // progress freezes and the move stalls until the integral grows), and no faster than
+        // coasts past the tolerance.
+        let creep = self.creep.min(self.tolerance / response_s);
+        if ended && error.abs() > self.tolerance && speed * error >= 0.0 && speed.abs() < creep {
+            speed = creep.copysign(error);
+        }
         let command = self.sign * speed;
         match self.kind {
             MoveKind::Straight { .. } => Step::Drive {
@@ -372,6 +384,7 @@ pub(crate) mod tests {
                 gnss_wait_s: 5.0,
                 max_approach_m: 5.0,
             },
+            creep: crate::config::motion::creep(0.5),
         }
     }
 

@@ -31,10 +31,9 @@ const GATE_2: f64 = 13.82;
 const GYRO_LIVE_PERIODS: f64 = 5.0;
 /// ... and never younger than this.
 const GYRO_LIVE_MIN: Duration = Duration::from_millis(50);
-/// Wheels slower than this stand still, m/s ...
-const STILL_MPS: f64 = 0.002;
-/// ... and rad/s.
-const STILL_RPS: f64 = 0.005;
+use crate::fusion::odometry::STILL_MPS;
+/// A vehicle slower than [`STILL_MPS`] and turning slower than this stands still, rad/s.
+pub const STILL_RPS: f64 = 0.005;
 /// The yaw rate of standing wheels, 1σ rad/s.
 const STILL_YAW_RATE_SIGMA: f64 = 0.002;
 /// A fix whose σ is below this fraction of the last one's marks a better fix quality ...
