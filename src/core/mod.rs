@@ -801,13 +801,15 @@ impl Vehicle {
         }
     }
 
-    /// Runs the blade while the cutter is on and nothing is latched. A stop other than the
+    /// Runs the blade while the cutter is on and the supervisor is armed. A stop other than the
     /// operator's pause of a task switches the cutter off for good; the pause only holds it.
     fn cutter_tick(&mut self, out: &mut Vec<Output>) {
-        let latched = self
-            .chassis
-            .as_ref()
-            .and_then(|c| c.safety().latched().cloned());
+        let Some(safety) = self.chassis.as_ref().map(|c| c.safety()) else {
+            return;
+        };
+        let latched = safety.latched().cloned();
+        // Armed: the drives are enabled (not in standby before the first arm, nor latched).
+        let armed = matches!(safety.state(), safety::State::Armed);
         let paused = self.motion.as_ref().is_some_and(Motion::is_paused)
             || self.mission.as_ref().is_some_and(Mission::is_paused);
         match latched {
@@ -815,7 +817,7 @@ impl Vehicle {
             Some(_) => self.cutter_on = false,
             None => {}
         }
-        let run = self.cutter_on && latched.is_none();
+        let run = self.cutter_on && armed;
         if run != self.blade_running {
             self.blade_running = run;
             out.push(Output::Cutter(run));

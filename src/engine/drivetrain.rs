@@ -565,7 +565,8 @@ impl Drivetrain {
     /// frames go to `tx`.
     pub fn shut_down(&mut self, tx: &mut Vec<(String, Frame)>) {
         if self.cutter_on() {
-            // A switch frame's blade is switched off; a blade drive quick-stops below.
+            // A switch frame's blade is switched off (the time only schedules repeats while
+            // on); a blade drive quick-stops below.
             self.set_cutter(Timestamp::default(), false, tx);
         }
         for bus in &mut self.buses {
