@@ -194,6 +194,16 @@ fn every_command_example_gets_its_documented_ack() {
         request(&broker, &acks, &topic("cmd/chassis/set"), reset)["data"]["code"],
         0
     );
+    // Beyond the limits: refused as invalid, naming the limit and its key; nothing moves.
+    let wild = r#"{"messageId": 11, "timestamp": "2026-11-22 03:00:02", "messageType": 100, "data": {"linear": 1e308, "angular": -1e308}}"#;
+    let refused = request(&broker, &acks, &drive.topic, wild);
+    assert_eq!(refused["data"]["code"], 1, "{refused}");
+    assert!(
+        refused["data"]["message"].as_str().is_some_and(|m| {
+            m.contains("beyond the limit of 1.5 m/s") && m.contains("chassis.max_speed_mps")
+        }),
+        "{refused}"
+    );
     for _ in 0..20 {
         broker.publish(&drive.topic, &drive.text);
         broker.publish(&heartbeat.topic, &heartbeat.text);

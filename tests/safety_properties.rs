@@ -147,11 +147,13 @@ impl Plant {
                 velocity_rad_s: speed.map(|s| s.0),
                 angle_rad: None,
                 received: None,
+                velocity_received: None,
             },
             right: chassisd::core::chassis::WheelFeedback {
                 velocity_rad_s: speed.map(|s| s.1),
                 angle_rad: None,
                 received: None,
+                velocity_received: None,
             },
             drives: vec![DriveSummary {
                 name: "drive".into(),

@@ -683,7 +683,8 @@ fn drive(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, String)> {
         wz: angular,
     })
     .map_err(|e| match e {
-        crate::core::chassis::CommandRejected::NotFinite => (INVALID, e.to_string()),
+        crate::core::chassis::CommandRejected::NotFinite
+        | crate::core::chassis::CommandRejected::BeyondLimit { .. } => (INVALID, e.to_string()),
         _ => (REFUSED, e.to_string()),
     })
 }

@@ -9,8 +9,9 @@
 //! - The move follows a time-optimal profile ([`super::profile`]); the command is the
 //!   profile's speed, led by the drives' response time times its acceleration, plus a
 //!   correction proportional to the distance the vehicle lags the profile by (compared at the
-//!   time the position was measured) and a bounded integral of it. The gains come from the
-//!   learnt response time (damping about 0.7), not from a plant's figure.
+//!   time the position was measured) and a bounded integral of it, learnt and applied in
+//!   proportion to the profile's speed (slip and scale errors grow with it). The gains come
+//!   from the learnt response time (damping about 0.7), not from a plant's figure.
 //! - It has arrived once the profile has ended and the point where the vehicle comes to
 //!   rest is within the tolerance: the position plus the speed times the response time (a
 //!   first-order drive coasts that far once its command is zero), with that coast itself
@@ -307,12 +308,20 @@ impl RelativeMove {
             self.settling = true;
             self.integral = 0.0;
         }
+        // What it makes up for while tracking grows with the speed (slip, a track or tyre
+        // scale error): it is learnt and applied in proportion to the profile's speed, so a
+        // share held at cruise does not push the vehicle past the goal while braking.
+        let share = if ended {
+            1.0
+        } else {
+            (plan.speed.abs() / self.profile.peak_speed().max(f64::EPSILON)).min(1.0)
+        };
         let integral_gain = gain * gain / 4.0;
-        self.integral = (self.integral + error * dt).clamp(
+        self.integral = (self.integral + error * dt * share).clamp(
             -self.integral_limit / integral_gain,
             self.integral_limit / integral_gain,
         );
-        let mut speed = feedforward + gain * error + integral_gain * self.integral;
+        let mut speed = feedforward + gain * error + integral_gain * self.integral * share;
         // Settling off the goal, no slower than the odometry sees (below it the measured
         // progress freezes and the move stalls until the integral grows), and no faster than
         // coasts past the tolerance.
@@ -388,9 +397,16 @@ pub(crate) mod tests {
         }
     }
 
-    /// A unicycle whose speeds follow the command with a first-order lag `tau`, stepped
-    /// every 10 ms; returns the outcome, the true error and the time taken.
-    fn run(kind: MoveKind, s: &MotionSettings, tau: f64, start_yaw: f64) -> (Outcome, f64, f64) {
+    /// A unicycle whose speeds follow `scale` times the command (slip, a track error) with a
+    /// first-order lag `tau`, stepped every 10 ms; returns the outcome, the true error and the
+    /// time taken.
+    fn run(
+        kind: MoveKind,
+        s: &MotionSettings,
+        tau: f64,
+        scale: f64,
+        start_yaw: f64,
+    ) -> (Outcome, f64, f64) {
         let mut pose = OdomPose {
             yaw: start_yaw,
             ..OdomPose::default()
@@ -413,8 +429,8 @@ pub(crate) mod tests {
         let dt = 0.01;
         // The plant's step: speeds follow the command (clamped to the limits) with lag τ.
         let advance = |pose: &mut OdomPose, v: f64, w: f64| {
-            let v = v.clamp(-s.linear.speed, s.linear.speed);
-            let w = w.clamp(-s.angular.speed, s.angular.speed);
+            let v = v.clamp(-s.linear.speed, s.linear.speed) * scale;
+            let w = w.clamp(-s.angular.speed, s.angular.speed) * scale;
             pose.v += (v - pose.v) * (1.0 - (-dt / tau).exp());
             pose.w += (w - pose.w) * (1.0 - (-dt / tau).exp());
             pose.x += pose.v * pose.yaw.cos() * dt;
@@ -460,7 +476,7 @@ pub(crate) mod tests {
                     MoveKind::Turn { angle_rad: -PI },
                 ] {
                     let case = format!("{kind:?} τ {tau} jerk {jerk}");
-                    let (outcome, error, took) = run(kind, &s, tau, 3.0);
+                    let (outcome, error, took) = run(kind, &s, tau, 1.0, 3.0);
                     assert_eq!(outcome, Outcome::Succeeded, "{case}");
                     let tolerance = match kind {
                         MoveKind::Straight { .. } => 0.0015,
@@ -474,6 +490,35 @@ pub(crate) mod tests {
                     .duration();
                     assert!(took <= planned * 1.5 + 4.0 * tau, "{case}: {took} s");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_vehicle_that_moves_short_or_long_of_its_command_settles_at_once() {
+        // What the loop learns to make up for grows with the speed: held as a fixed offset,
+        // it would push on past the goal while braking and leave a long settle.
+        let s = settings();
+        for scale in [0.9, 0.97, 1.03, 1.1] {
+            for kind in [
+                MoveKind::Straight { distance_m: 2.0 },
+                MoveKind::Turn { angle_rad: PI },
+            ] {
+                let tau = 0.1;
+                let case = format!("{kind:?} at {scale} of the command");
+                let (outcome, error, took) = run(kind, &s, tau, scale, 0.0);
+                assert_eq!(outcome, Outcome::Succeeded, "{case}");
+                let (tolerance, planned) = match kind {
+                    MoveKind::Straight { distance_m } => {
+                        (0.0015, Profile::plan(distance_m, s.linear).duration())
+                    }
+                    MoveKind::Turn { angle_rad } => (
+                        0.15_f64.to_radians(),
+                        Profile::plan(angle_rad, s.angular).duration(),
+                    ),
+                };
+                assert!(error.abs() <= tolerance, "{case}: error {error}");
+                assert!(took <= planned * 1.1 + tau, "{case}: {took} s of {planned}");
             }
         }
     }

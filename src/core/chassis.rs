@@ -14,6 +14,10 @@ use crate::time::Timestamp;
 
 /// The control period the engine runs the chassis at.
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
+
+/// A velocity command this share over a limit is taken as the limit (a sender's rounding);
+/// further over, it is refused.
+const LIMIT_ROUNDING: f64 = 1e-6;
 /// A move's command leads the modelled drive speed by about the drives' response time, at
 /// most this, s (times the acceleration limit).
 pub const MAX_LEAD_S: f64 = 0.3;
@@ -74,6 +78,9 @@ pub struct WheelFeedback {
     /// When these values arrived from the drive (it reports less often than the control
     /// loop runs, so they may be a feedback period old).
     pub received: Option<Timestamp>,
+    /// When the wheel speed arrived (the response estimate pairs it with the commands
+    /// before it).
+    pub velocity_received: Option<Timestamp>,
 }
 
 /// The drive train's feedback at a control tick.
@@ -105,7 +112,7 @@ pub struct WheelCommand {
 }
 
 /// Why a velocity command was refused.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CommandRejected {
     /// The vehicle has no drives configured.
     #[error("no drives are configured")]
@@ -134,12 +141,36 @@ pub enum CommandRejected {
     /// CONTINUE with no task paused.
     #[error("no task is paused")]
     NothingPaused,
+    /// A velocity beyond the configured limit: refused rather than clamped, so the sender
+    /// learns the vehicle cannot do what it asked.
+    #[error("{what} {} {unit} is beyond the limit of {limit} {unit} (chassis.{key})", compact(*.value))]
+    BeyondLimit {
+        /// What: speed or yaw rate.
+        what: &'static str,
+        /// The value asked for.
+        value: f64,
+        /// The configured limit.
+        limit: f64,
+        /// Its unit.
+        unit: &'static str,
+        /// The configuration key that sets it.
+        key: &'static str,
+    },
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,
     /// The safety supervisor holds the vehicle.
     #[error("{0}")]
     Safety(#[from] Refusal),
+}
+
+/// A number as a person reads it: huge and tiny ones in exponent form (1e308, not 309 digits).
+fn compact(v: f64) -> String {
+    if v != 0.0 && !(1e-3..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
 }
 
 /// Who may drive: the operator by velocity commands (manual), or autonomous moves
@@ -305,6 +336,7 @@ impl Chassis {
         if self.mode == DriveMode::Navigation {
             return Err(CommandRejected::NavigationMode);
         }
+        self.within_limits(vx, wz)?;
         self.drives_reachable()?;
         if self.autonomous {
             // The ramp goes on from what the drives were sent, the move's lead included.
@@ -316,6 +348,38 @@ impl Chassis {
             vx.clamp(-self.config.max_speed_mps, self.config.max_speed_mps),
             wz.clamp(-self.config.max_yaw_rate_rps, self.config.max_yaw_rate_rps),
         )?;
+        Ok(())
+    }
+
+    /// Refuses a velocity command beyond the configured limits (a rounding error's worth
+    /// over them is taken, and clamped).
+    fn within_limits(&self, vx: f64, wz: f64) -> Result<(), CommandRejected> {
+        for (what, value, limit, unit, key) in [
+            (
+                "speed",
+                vx,
+                self.config.max_speed_mps,
+                "m/s",
+                "max_speed_mps",
+            ),
+            (
+                "yaw rate",
+                wz,
+                self.config.max_yaw_rate_rps,
+                "rad/s",
+                "max_yaw_rate_rps",
+            ),
+        ] {
+            if value.abs() > limit * (1.0 + LIMIT_ROUNDING) {
+                return Err(CommandRejected::BeyondLimit {
+                    what,
+                    value,
+                    limit,
+                    unit,
+                    key,
+                });
+            }
+        }
         Ok(())
     }
 
@@ -403,14 +467,16 @@ impl Chassis {
     /// on, while the drives follow commands.
     fn learn_response(&mut self, t: Timestamp, command: &WheelCommand) {
         let r = self.config.wheel_radius_m;
-        let measured = self
-            .feedback
-            .left
-            .velocity_rad_s
-            .zip(self.feedback.right.velocity_rad_s);
+        // A speed is paired with the commands up to when it arrived.
+        let reading = |wheel: &WheelFeedback| {
+            wheel
+                .velocity_rad_s
+                .map(|v| (wheel.velocity_received.map_or(t, |at| at.min(t)), v * r))
+        };
+        let measured = reading(&self.feedback.left).zip(reading(&self.feedback.right));
         match measured {
-            Some((l, rr)) if command.power == Power::Enabled => {
-                self.response.feedback(t, (l * r, rr * r));
+            Some((left, right)) if command.power == Power::Enabled => {
+                self.response.feedback(left, right);
                 self.response
                     .command(t, (command.left_rad_s * r, command.right_rad_s * r));
             }
@@ -591,10 +657,10 @@ mod tests {
     }
 
     #[test]
-    fn ramps_within_limits_and_clamps() {
+    fn ramps_within_limits() {
         let mut c = chassis();
         c.feedback(ok_feedback());
-        c.command(ms(0), 5.0, 0.0).unwrap();
+        c.command(ms(0), 1.0, 0.0).unwrap();
         let mut last = 0.0;
         for i in 1..=300 {
             let cmd = c.tick(ms(i * 10));
@@ -602,10 +668,10 @@ mod tests {
             assert!(v - last <= 0.5 * 0.01 + 1e-12, "accel limit");
             last = v;
             if i % 40 == 0 {
-                c.command(ms(i * 10), 5.0, 0.0).unwrap();
+                c.command(ms(i * 10), 1.0, 0.0).unwrap();
             }
         }
-        assert!((last - 1.0).abs() < 1e-9, "clamped to max speed: {last}");
+        assert!((last - 1.0).abs() < 1e-9, "at max speed: {last}");
     }
 
     #[test]
@@ -681,6 +747,24 @@ mod tests {
             c.command(ms(0), f64::NAN, 0.0),
             Err(CommandRejected::NotFinite)
         );
+        // Beyond a limit is refused, naming it; a rounding error over it is taken.
+        let refused = c.command(ms(0), 1e308, -1e308).unwrap_err();
+        assert!(matches!(
+            refused,
+            CommandRejected::BeyondLimit { what: "speed", .. }
+        ));
+        assert_eq!(
+            refused.to_string(),
+            "speed 1e308 m/s is beyond the limit of 1 m/s (chassis.max_speed_mps)"
+        );
+        assert!(matches!(
+            c.command(ms(0), 0.5, -1.01),
+            Err(CommandRejected::BeyondLimit {
+                key: "max_yaw_rate_rps",
+                ..
+            })
+        ));
+        c.command(ms(0), -1.0 - 1e-9, 1.0).unwrap();
     }
 
     #[test]

@@ -473,6 +473,7 @@ impl Drivetrain {
                             axis.unwrap.update(p) as f64 / units.counts_per_rev * TAU / axis.ratio
                         }),
                         received: raw.rx,
+                        velocity_received: raw.velocity_rx,
                     };
                     match axis.wheel {
                         Wheel::Left => fb.left = wheel,

@@ -12,13 +12,13 @@
 //! While an interface is down the drives on it keep running (their motors turn, their
 //! watchdogs count) with nothing to hear: a cut cable, as the drives see it.
 
+use crate::runtime::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
 use std::time::Duration;
 
 use anyhow::Context;
 use serde_json::json;
 use socketcan::tokio::CanSocket;
 use socketcan::{CanAnyFrame, CanFrame};
-use tokio::io::AsyncBufReadExt;
 use tokio::sync::mpsc;
 
 use super::can::{interface_up, open};
@@ -98,12 +98,22 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
         !tasks.is_empty(),
         "the configuration has no [[can]] interface to simulate"
     );
-    let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    let mut lines = InputLines::new(
+        tokio::io::BufReader::new(tokio::io::stdin()),
+        MAX_LINE_BYTES,
+    );
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     loop {
         tokio::select! {
-            line = lines.next_line() => {
-                let Ok(Some(line)) = line else { break };
+            line = lines.next() => {
+                let line = match line {
+                    Ok(Some(InputLine::Text(line))) => line,
+                    Ok(Some(refused)) => {
+                        eprintln!("can-sim: line refused: {refused:?}");
+                        continue;
+                    }
+                    _ => break,
+                };
                 match parse(&line) {
                     Ok(Some(cmd)) => {
                         for tx in &senders {

@@ -1,6 +1,7 @@
 //! Live mode: drivers feed the engine task, which owns the core, runs the 10 ms control loop,
 //! sends the drives' frames, and writes a base_status line every 100 ms.
 
+use crate::runtime::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
@@ -8,7 +9,6 @@ use std::time::Duration;
 
 use anyhow::Context;
 use bytes::Bytes;
-use tokio::io::AsyncBufReadExt;
 use tokio::sync::mpsc;
 
 use super::broker;
@@ -346,32 +346,48 @@ fn dispatch(
     }
 }
 
-/// Reads `TOPIC JSON` lines from standard input as commands.
+/// Reads `TOPIC JSON` lines from standard input as commands. A line that is not UTF-8 or
+/// longer than [`MAX_LINE_BYTES`] is refused with a warning, and reading goes on.
 pub(crate) async fn read_commands(clock: RecordClock, tx: mpsc::Sender<Record>) {
-    let mut lines = tokio::io::BufReader::new(tokio::io::stdin()).lines();
+    let mut lines = InputLines::new(
+        tokio::io::BufReader::new(tokio::io::stdin()),
+        MAX_LINE_BYTES,
+    );
     loop {
-        match lines.next_line().await {
-            Ok(Some(line)) => {
-                let Some((topic, payload)) = local::split_line(&line) else {
-                    continue;
-                };
-                let record = Record {
-                    t: clock.now(),
-                    source: STDIN_SOURCE.into(),
-                    payload: Payload::Command {
-                        topic: topic.to_owned(),
-                        payload: Bytes::copy_from_slice(payload.as_bytes()),
-                    },
-                };
-                if tx.send(record).await.is_err() {
-                    return;
-                }
+        let line = match lines.next().await {
+            Ok(Some(InputLine::Text(line))) => line,
+            Ok(Some(InputLine::NotUtf8(number))) => {
+                tracing::warn!(line = number, "standard input: line refused, not UTF-8");
+                continue;
+            }
+            Ok(Some(InputLine::TooLong(number, bytes))) => {
+                tracing::warn!(
+                    line = number,
+                    bytes,
+                    limit = MAX_LINE_BYTES,
+                    "standard input: line refused, too long"
+                );
+                continue;
             }
             Ok(None) => return,
             Err(e) => {
                 tracing::warn!(error = %e, "standard input unreadable; no more commands");
                 return;
             }
+        };
+        let Some((topic, payload)) = local::split_line(&line) else {
+            continue;
+        };
+        let record = Record {
+            t: clock.now(),
+            source: STDIN_SOURCE.into(),
+            payload: Payload::Command {
+                topic: topic.to_owned(),
+                payload: Bytes::copy_from_slice(payload.as_bytes()),
+            },
+        };
+        if tx.send(record).await.is_err() {
+            return;
         }
     }
 }

@@ -5,6 +5,7 @@ pub mod can;
 pub mod can_sim;
 pub mod clock;
 pub mod host;
+pub mod input_lines;
 pub mod live;
 pub mod lossy;
 pub mod mqtt;

@@ -109,6 +109,14 @@ impl Proc {
         }
     }
 
+    /// Writes raw bytes to its standard input.
+    pub fn send_bytes(&mut self, bytes: &[u8]) {
+        if let Some(stdin) = &mut self.stdin {
+            stdin.write_all(bytes).expect("write to stdin");
+            stdin.flush().expect("flush stdin");
+        }
+    }
+
     /// Waits for a stdout line matching `want`.
     pub fn wait_out(&mut self, wait: Duration, what: &str, want: impl Fn(&str) -> bool) {
         wait_for(&self.stdout, &mut self.out, wait, what, want);

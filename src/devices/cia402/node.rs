@@ -103,6 +103,8 @@ pub struct AxisFeedback {
     pub position: Option<i32>,
     /// When the last value arrived.
     pub rx: Option<Timestamp>,
+    /// When the last actual velocity arrived.
+    pub velocity_rx: Option<Timestamp>,
 }
 
 /// Counters of a node.

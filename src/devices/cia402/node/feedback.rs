@@ -39,6 +39,7 @@ impl DriveNode {
             if objects.actual_velocity.get(a) == Some(&object) {
                 axis.velocity = Some(value as i32);
                 axis.rx = Some(t);
+                axis.velocity_rx = Some(t);
             }
             if objects.actual_position.get(a) == Some(&object) {
                 axis.position = Some(value as i32);
