@@ -45,6 +45,10 @@ enum Command {
         /// starts a new segment instead of ticking through the gap.
         #[arg(long, default_value = "10", value_parser = seconds_arg)]
         max_gap: Duration,
+        /// Accept records that go back in time within a file (they are reported either way;
+        /// without this the replay exits 1).
+        #[arg(long)]
+        lenient: bool,
     },
     /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
     Run {
@@ -235,6 +239,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             config,
             stamped,
             max_gap,
+            lenient,
         } => {
             let options = replay::ReplayOptions {
                 config: config.map(|p| VehicleConfig::load(&p)).transpose()?,
@@ -249,6 +254,12 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             for skip in &summary.skipped_lines.0 {
                 eprintln!("skipped {}:{}: {}", skip.file, skip.line, skip.reason);
             }
+            for late in &summary.out_of_order.0 {
+                eprintln!(
+                    "out of time order {}:{}: {}",
+                    late.file, late.line, late.reason
+                );
+            }
             for (name, protocol) in &summary.sources_without_decoder {
                 eprintln!(
                     "source {name:?} is not decoded ({protocol}); its frames are counted only"
@@ -260,7 +271,14 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 eprintln!("no RMC or ZDA date in the log; 1970-01-01 assumed");
             }
             eprintln!("{}", summary.one_line());
-            Ok(true)
+            let late = summary.out_of_order.1;
+            if late > 0 && !lenient {
+                eprintln!(
+                    "{late} records go back in time within their file: the recording was \
+                     edited or its clock stepped; exit status 1 (--lenient accepts them)"
+                );
+            }
+            Ok(late == 0 || lenient)
         }
         Command::Run {
             config,

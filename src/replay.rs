@@ -41,6 +41,12 @@ pub struct ReplaySummary {
     pub buses: Vec<(String, BusStats)>,
     /// Malformed recording lines that were skipped (the first hundred) and their count.
     pub skipped_lines: (Vec<SkippedLine>, u64),
+    /// Records earlier than the one before them in their file (the first hundred; played
+    /// all the same) and their count.
+    pub out_of_order: (Vec<SkippedLine>, u64),
+    /// A recording without a clean end: the last moment every file covers (the replay
+    /// stopped there) and how many records after it were left out.
+    pub cut: Option<(Timestamp, u64)>,
     /// Present when the input was a plain NMEA log.
     pub import: Option<ImportReport>,
     /// Sources in the recording that no decoder handles (name, protocol).
@@ -269,9 +275,15 @@ fn run<W: Write>(
         out.statuses(&mut outputs, offset)?;
         offset = input.logged_offset_ns();
     }
-    // Tick to the session's recorded end, else to the period boundary after the last record.
+    // Tick to the session's recorded end, else to where an unclean end's files all end,
+    // else to the period boundary after the last record.
+    let cut = match &input {
+        Input::Recording(reader) => reader.cut().map(|(until, _)| until),
+        Input::Log(_) => None,
+    };
     let end = session
         .end
+        .or(cut)
         .or(span.map(|(_, last)| last.ceil_to(STATUS_PERIOD)));
     if let Some(end) = end {
         advance(&mut engine, end, &mut outputs, &mut out, offset)?;
@@ -291,6 +303,9 @@ fn run<W: Write>(
         Input::Recording(reader) => {
             let (skipped, count) = reader.skipped();
             summary.skipped_lines = (skipped.to_vec(), count);
+            let (late, count) = reader.out_of_order();
+            summary.out_of_order = (late.to_vec(), count);
+            summary.cut = reader.cut();
         }
         Input::Log(reader) => summary.import = Some(reader.report().clone()),
     }
@@ -395,6 +410,16 @@ impl ReplaySummary {
             let _ = write!(s, "; the log ended early: {e}");
         }
         let _ = write!(s, "; skipped lines {}", self.skipped_lines.1);
+        if self.out_of_order.1 > 0 {
+            let _ = write!(s, "; records out of time order {}", self.out_of_order.1);
+        }
+        if let Some((until, left_out)) = self.cut {
+            let _ = write!(
+                s,
+                "; no clean end (the recorder was stopped abruptly): replayed up to ({until}), \
+                 the last moment every file covers, {left_out} records after it left out"
+            );
+        }
         if let Some(bytes) = self.peak_memory {
             let _ = write!(s, "; peak memory {:.1} MB", bytes as f64 / 1e6);
         }

@@ -131,3 +131,96 @@ fn durations_that_are_not_a_span_of_seconds_are_refused_without_a_panic() {
         assert!(!stderr.contains("panicked"), "{bad}: {stderr}");
     }
 }
+
+/// Killed (SIGKILL) while recording: every file of the recording was flushed on one
+/// schedule, so the replay plays to the last moment they all cover, says so, and prints the
+/// live output up to there exactly.
+#[test]
+fn a_killed_recording_replays_to_the_last_moment_every_file_covers() {
+    let dir = common::tempdir("sim-killed").join("rec");
+    let mut sim = Proc::start(&[
+        "sim".as_ref(),
+        "--no-mqtt".as_ref(),
+        "--scenario".as_ref(),
+        "turns".as_ref(),
+        "--duration".as_ref(),
+        "60".as_ref(),
+        "--record".as_ref(),
+        dir.as_os_str(),
+    ]);
+    // Past the scenario's first commands (it turns after a few seconds).
+    let seen = std::cell::Cell::new(0);
+    sim.wait_out(Duration::from_secs(20), "40 status lines", |_| {
+        seen.set(seen.get() + 1);
+        seen.get() >= 40
+    });
+    sim.child.kill().expect("SIGKILL");
+    sim.child.wait().expect("exit status");
+    std::thread::sleep(Duration::from_millis(200));
+    sim.drain_out();
+    let live: Vec<String> = sim.out.clone();
+    let (replayed, summary) = replay(&dir);
+    assert!(summary.contains("no clean end"), "{summary}");
+    let replayed: Vec<&str> = std::str::from_utf8(&replayed)
+        .expect("UTF-8")
+        .lines()
+        .collect();
+    // The files end within a flush period (100 ms) of each other and of the kill; the live
+    // pipe may hold a line or two more.
+    assert!(
+        replayed.len() + 3 >= live.len() && replayed.len() <= live.len(),
+        "replayed {} status lines of {} live; {summary}",
+        replayed.len(),
+        live.len()
+    );
+    for (i, (r, l)) in replayed.iter().zip(&live).enumerate() {
+        assert_eq!(r, l, "status line {} differs; {summary}", i + 1);
+    }
+    let commands = std::fs::read_to_string(dir.join("commands.log")).expect("commands.log");
+    assert!(commands.lines().count() > 0, "no command reached the disk");
+}
+
+/// A recording whose file goes back in time is reported with the file and line, and the
+/// replay exits 1 unless `--lenient` is given.
+#[test]
+fn records_out_of_time_order_are_reported_and_fail_the_replay() {
+    let dir = common::tempdir("sim-out-of-order").join("rec");
+    let out = Command::new(common::chassisd())
+        .args(["sim", "--no-mqtt", "--scenario", "turns", "--duration", "3"])
+        .arg("--record")
+        .arg(&dir)
+        .output()
+        .expect("chassisd runs");
+    assert!(out.status.success());
+    common::replay(&dir);
+    // Move the last 20 lines of the IMU file to its start.
+    let imu = dir.join("imu.log");
+    let text = std::fs::read_to_string(&imu).expect("imu.log");
+    let lines: Vec<&str> = text.lines().collect();
+    let (head, tail) = lines.split_at(lines.len() - 20);
+    let edited: Vec<&str> = tail.iter().chain(head).copied().collect();
+    std::fs::write(&imu, edited.join("\n") + "\n").expect("write imu.log");
+
+    let strict = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&dir)
+        .output()
+        .expect("chassisd runs");
+    let stderr = String::from_utf8_lossy(&strict.stderr);
+    assert_eq!(strict.status.code(), Some(1), "{stderr}");
+    // The first record after the moved block goes back: line 21.
+    assert!(stderr.contains("out of time order imu.log:21:"), "{stderr}");
+    assert!(stderr.contains("records out of time order 1"), "{stderr}");
+    assert!(stderr.contains("--lenient"), "{stderr}");
+    let lenient = Command::new(common::chassisd())
+        .arg("replay")
+        .arg("--lenient")
+        .arg(&dir)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        lenient.status.success(),
+        "{}",
+        String::from_utf8_lossy(&lenient.stderr)
+    );
+}

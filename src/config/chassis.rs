@@ -226,11 +226,13 @@ impl LoadProfile for EStopProfile {
 
 impl<T: LoadProfile> ProfileRef<T> {
     /// Reads a file reference, relative to `base`; checks an inline profile. `file` is the
-    /// configuration, for errors.
-    pub fn resolve(&mut self, base: &Path, file: &Path) -> Result<(), ConfigError> {
+    /// configuration and `key` the reference's key, for errors.
+    pub fn resolve(&mut self, base: &Path, file: &Path, key: &str) -> Result<(), ConfigError> {
         match self {
             Self::File(name) => {
-                *self = Self::Inline(Box::new(T::load_file(&base.join(name.as_str()))?));
+                let profile =
+                    T::load_file(&base.join(name.as_str())).map_err(|e| e.named_by(file, key))?;
+                *self = Self::Inline(Box::new(profile));
                 Ok(())
             }
             Self::Inline(profile) => profile.check(file),

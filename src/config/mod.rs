@@ -16,12 +16,14 @@ pub mod mqtt;
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The file could not be read.
-    #[error("{file}: cannot read: {source}")]
+    #[error("{}: cannot read: {reason}{}", .file.display(), describe_named_by(.named_by))]
     Read {
-        /// The file.
+        /// The file, as a full path.
         file: PathBuf,
-        /// Why.
-        source: std::io::Error,
+        /// Why (the operating system's word, once).
+        reason: String,
+        /// The configuration file and key that named it, when one did.
+        named_by: Option<(PathBuf, String)>,
     },
     /// The file is not valid TOML or does not match the schema.
     #[error("{file}: {message}")]
@@ -47,13 +49,37 @@ pub enum ConfigError {
 
 /// Reads a configuration-type file (vehicle, profile, plant, calibration, DBC) as text.
 pub fn read_text(path: &Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-        file: path.to_owned(),
-        source,
+    std::fs::read_to_string(path).map_err(|e| ConfigError::Read {
+        file: std::path::absolute(path).unwrap_or_else(|_| path.to_owned()),
+        reason: e.to_string(),
+        named_by: None,
+    })
+}
+
+/// " (named by `key` in FILE)" for a file a configuration named.
+fn describe_named_by(by: &Option<(PathBuf, String)>) -> String {
+    by.as_ref().map_or(String::new(), |(config, key)| {
+        format!(" (named by `{key}` in {})", config.display())
     })
 }
 
 impl ConfigError {
+    /// Says which key of which configuration named a file that could not be read.
+    pub fn named_by(self, config: &Path, key: &str) -> Self {
+        match self {
+            Self::Read {
+                file,
+                reason,
+                named_by: None,
+            } => Self::Read {
+                file,
+                reason,
+                named_by: Some((config.to_owned(), key.to_owned())),
+            },
+            other => other,
+        }
+    }
+
     /// An invalid value in `file` at `key`, with what is wrong and how to fix it.
     pub fn invalid(file: &Path, key: &str, problem: impl Into<String>, fix: &str) -> Self {
         Self::Invalid {
@@ -229,20 +255,37 @@ impl VehicleConfig {
             message: e.to_string(),
         })?;
         let base = file.parent().unwrap_or(Path::new("."));
-        for drive in &mut config.drive {
-            drive.profile.resolve(base, file)?;
+        for (i, drive) in config.drive.iter_mut().enumerate() {
+            drive
+                .profile
+                .resolve(base, file, &format!("drive[{i}].profile"))?;
         }
-        for estop in &mut config.estop {
-            estop.profile.resolve(base, file)?;
+        for (i, estop) in config.estop.iter_mut().enumerate() {
+            estop
+                .profile
+                .resolve(base, file, &format!("estop[{i}].profile"))?;
         }
         if let Some(bms) = &mut config.bms {
-            bms.profile.resolve(base, file)?;
+            bms.profile.resolve(base, file, "bms.profile")?;
         }
         if let Some(imu) = &mut config.imu {
-            imu.resolve(base)?;
+            imu.resolve(base)
+                .map_err(|e| e.named_by(file, "imu.calibration"))?;
         }
         if let Some(mqtt) = &mut config.mqtt {
             mqtt.resolve(base);
+            // Found now, not after the devices are opened and the broker is dialled.
+            if let Some(tls) = &mqtt.tls {
+                for (key, path) in [
+                    ("mqtt.tls.ca_file", Some(&tls.ca_file)),
+                    ("mqtt.tls.client_cert_file", tls.client_cert_file.as_ref()),
+                    ("mqtt.tls.client_key_file", tls.client_key_file.as_ref()),
+                ] {
+                    if let Some(path) = path {
+                        read_text(Path::new(path)).map_err(|e| e.named_by(file, key))?;
+                    }
+                }
+            }
         }
         config.validate(file)?;
         Ok(config)
@@ -393,6 +436,47 @@ mod tests {
         );
         let estop = c.estop[0].profile.get().expect("e-stop profile loaded");
         assert_eq!((estop.id, estop.timeout_ms), (0x18A, 300));
+    }
+
+    #[test]
+    fn a_missing_file_is_named_once_with_its_full_path_and_the_key_that_named_it() {
+        let devices = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let example = std::fs::read_to_string(devices.join("vehicle.example.toml")).unwrap();
+        let text = example.replace("profile = \"zlac8015d.toml\"", "profile = \"nope.toml\"");
+        let config = devices.join("vehicle.example.toml");
+        let msg = VehicleConfig::from_toml(&text, &config)
+            .unwrap_err()
+            .to_string();
+        let full = devices.join("nope.toml");
+        assert_eq!(
+            msg,
+            format!(
+                "{}: cannot read: No such file or directory (os error 2) (named by \
+                 `drive[0].profile` in {})",
+                full.display(),
+                config.display()
+            )
+        );
+        // Not a source either: a caller's error chain would print it a second time.
+        let e = VehicleConfig::load(Path::new("nope.toml")).unwrap_err();
+        assert!(std::error::Error::source(&e).is_none());
+        let cwd = std::env::current_dir().unwrap();
+        assert!(
+            e.to_string()
+                .starts_with(&format!("{}: ", cwd.join("nope.toml").display())),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_missing_broker_certificate_is_found_when_the_configuration_loads() {
+        let text = "[mqtt]\nhost = \"broker\"\nport = 8883\n[mqtt.tls]\nca_file = \"ca.pem\"\n";
+        let msg = load(text).unwrap_err().to_string();
+        assert!(
+            msg.contains("ca.pem: cannot read: No such file")
+                && msg.ends_with("(named by `mqtt.tls.ca_file` in test.toml)"),
+            "{msg}"
+        );
     }
 
     #[test]

@@ -2,7 +2,10 @@
 //!
 //! Each source file is read lazily and the sources are merged by time, ties going to the
 //! source whose name sorts first and, within a source, to file order. A malformed line is
-//! counted and skipped; the rest of the recording still plays.
+//! counted and skipped; the rest of the recording still plays. A record earlier than the one
+//! before it in the same file is played but noted (a recording's files only ever go
+//! forward). A recording without a clean end (chassisd was killed) plays up to the last
+//! moment every file was flushed together ([`COVERED_FILE`]); what lies beyond is counted.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader};
@@ -13,6 +16,7 @@ use socketcan::dump::{Direction, Reader as CandumpReader};
 
 use super::envelope::{self, EnvelopeError};
 use super::meta::{Meta, SourceKind};
+use super::writer::COVERED_FILE;
 use super::{Payload, Record, RecordError};
 use crate::core::LinkState;
 use crate::time::Timestamp;
@@ -35,8 +39,30 @@ pub struct SkippedLine {
 pub struct RecordingReader {
     sources: Vec<SourceReader>,
     heads: Vec<Option<Record>>,
-    skipped: Vec<SkippedLine>,
-    skipped_count: u64,
+    /// Each source's last record time: a record before it is a step back in time.
+    latest: Vec<Option<Timestamp>>,
+    skipped: Noted,
+    out_of_order: Noted,
+    /// Records after this time are not played: what an unclean end left of every file.
+    until: Option<Timestamp>,
+    /// Records left out past `until`.
+    beyond: u64,
+}
+
+/// Lines noted for the report: the first [`KEEP_SKIPPED`], and how many in all.
+#[derive(Debug, Default)]
+struct Noted {
+    kept: Vec<SkippedLine>,
+    count: u64,
+}
+
+impl Noted {
+    fn note(&mut self, line: SkippedLine) {
+        self.count += 1;
+        if self.kept.len() < KEEP_SKIPPED {
+            self.kept.push(line);
+        }
+    }
 }
 
 enum SourceReader {
@@ -95,7 +121,11 @@ impl RecordingReader {
                 },
             });
         }
-        Ok((meta, Self::from_sources(sources)))
+        let mut reader = Self::from_sources(sources);
+        if meta.end_us.is_none() {
+            reader.until = read_covered(dir)?;
+        }
+        Ok((meta, reader))
     }
 
     /// A reader over records already in memory (an imported log). They are merged like file
@@ -107,9 +137,12 @@ impl RecordingReader {
     fn from_sources(sources: Vec<SourceReader>) -> Self {
         let mut reader = Self {
             heads: Vec::with_capacity(sources.len()),
+            latest: vec![None; sources.len()],
             sources,
-            skipped: Vec::new(),
-            skipped_count: 0,
+            skipped: Noted::default(),
+            out_of_order: Noted::default(),
+            until: None,
+            beyond: 0,
         };
         for i in 0..reader.sources.len() {
             let head = reader.pull(i);
@@ -120,20 +153,45 @@ impl RecordingReader {
 
     /// Lines skipped so far (the first [`KEEP_SKIPPED`]) and their total count.
     pub fn skipped(&self) -> (&[SkippedLine], u64) {
-        (&self.skipped, self.skipped_count)
+        (&self.skipped.kept, self.skipped.count)
     }
 
-    /// The next valid record of source `i`, skipping and noting malformed lines.
+    /// Steps back in time so far: records earlier than the one before them in their file
+    /// (the first [`KEEP_SKIPPED`], played all the same), and their total count.
+    pub fn out_of_order(&self) -> (&[SkippedLine], u64) {
+        (&self.out_of_order.kept, self.out_of_order.count)
+    }
+
+    /// For a recording without a clean end: the last moment every file covers, and how many
+    /// records after it were left out.
+    pub fn cut(&self) -> Option<(Timestamp, u64)> {
+        self.until.map(|t| (t, self.beyond))
+    }
+
+    /// The next valid record of source `i`, skipping and noting malformed lines, and noting
+    /// one earlier than the record before it.
     fn pull(&mut self, i: usize) -> Option<Record> {
         loop {
             match self.sources[i].next_line()? {
-                Ok(record) => return Some(record),
-                Err(skip) => {
-                    self.skipped_count += 1;
-                    if self.skipped.len() < KEEP_SKIPPED {
-                        self.skipped.push(skip);
+                Ok(record) => {
+                    if let Some(latest) = self.latest[i]
+                        && record.t < latest
+                        && let Some((file, line)) = self.sources[i].position()
+                    {
+                        self.out_of_order.note(SkippedLine {
+                            file: file.to_owned(),
+                            line,
+                            reason: format!("time ({}) goes back from ({latest})", record.t),
+                        });
                     }
+                    self.latest[i] = Some(record.t);
+                    if self.until.is_some_and(|until| record.t > until) {
+                        self.beyond += 1;
+                        continue;
+                    }
+                    return Some(record);
                 }
+                Err(skip) => self.skipped.note(skip),
             }
         }
     }
@@ -161,6 +219,15 @@ impl Iterator for RecordingReader {
 }
 
 impl SourceReader {
+    /// The file and line number of the last line read (none for records in memory).
+    fn position(&self) -> Option<(&str, u64)> {
+        match self {
+            SourceReader::Envelope { file, line_no, .. }
+            | SourceReader::Candump { file, line_no, .. } => Some((file, *line_no)),
+            SourceReader::Memory(_) => None,
+        }
+    }
+
     /// The next line's record, `Err` for a malformed line, `None` at the end.
     fn next_line(&mut self) -> Option<Result<Record, SkippedLine>> {
         match self {
@@ -225,6 +292,23 @@ impl SourceReader {
             },
         }
     }
+}
+
+/// The time every file of a recording was flushed up to together, if it says.
+fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
+    let path = dir.join(COVERED_FILE);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(source) => return Err(RecordError::Io { path, source }),
+    };
+    text.trim()
+        .parse::<u64>()
+        .map(|us| Some(Timestamp::from_micros(us)))
+        .map_err(|_| RecordError::Meta {
+            path,
+            message: format!("expected a time in microseconds, found {:?}", text.trim()),
+        })
 }
 
 fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError> {

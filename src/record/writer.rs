@@ -18,12 +18,18 @@ use crate::time::Timestamp;
 pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";
 /// The file holding the trajectories at a session's start.
 pub const TRAJECTORIES_FILE: &str = "trajectories.json";
+/// The file holding the time every file was last flushed up to together (microseconds):
+/// how far a recording whose writer was killed can be trusted.
+pub const COVERED_FILE: &str = "covered";
 
 /// An open recording folder.
 pub struct RecordingWriter {
     dir: PathBuf,
     meta: Meta,
     sources: BTreeMap<String, SourceFiles>,
+    covered: File,
+    /// The latest record time written.
+    latest: Option<Timestamp>,
 }
 
 impl RecordingWriter {
@@ -96,10 +102,14 @@ impl RecordingWriter {
                 },
             );
         }
+        let path = dir.join(COVERED_FILE);
+        let covered = File::create(&path).map_err(io(&path))?;
         Ok(Self {
             dir: dir.to_owned(),
             meta,
             sources: files,
+            covered,
+            latest: None,
         })
     }
 
@@ -185,6 +195,25 @@ impl RecordingWriter {
         out.write_all(line.as_bytes())
             .map_err(|source| RecordError::Io {
                 path: self.dir.clone(),
+                source,
+            })?;
+        self.latest = self.latest.max(Some(record.t));
+        Ok(())
+    }
+
+    /// Flushes every file, then notes the time they all cover in [`COVERED_FILE`] (one
+    /// fixed-width write in place, so the file never grows and a kill leaves it whole).
+    pub fn checkpoint(&mut self) -> Result<(), RecordError> {
+        use std::os::unix::fs::FileExt;
+        self.flush()?;
+        let Some(latest) = self.latest else {
+            return Ok(());
+        };
+        let line = format!("{:020}\n", latest.as_micros());
+        self.covered
+            .write_all_at(line.as_bytes(), 0)
+            .map_err(|source| RecordError::Io {
+                path: self.dir.join(COVERED_FILE),
                 source,
             })
     }

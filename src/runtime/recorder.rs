@@ -3,16 +3,17 @@
 
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::lossy::LossySender;
-use crate::record::{Record, RecordingWriter};
+use crate::record::{Payload, Record, RecordingWriter};
 use crate::time::Timestamp;
 
 /// Records queued for the writer thread before new ones are dropped (and counted).
 const QUEUE: usize = 65_536;
-/// How often buffered lines reach the file system.
-const FLUSH_EVERY: Duration = Duration::from_secs(1);
+/// How often every file's buffered lines reach the file system, together: a killed
+/// recording's files then end within this of each other, and replay cuts them there.
+const FLUSH_EVERY: Duration = Duration::from_millis(100);
 
 /// Handle to the recorder thread.
 pub struct Recorder {
@@ -61,11 +62,23 @@ impl Recorder {
 
 fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) -> RecordingWriter {
     let mut failures: u64 = 0;
+    let mut next_flush = Instant::now() + FLUSH_EVERY;
     loop {
-        let result = match rx.recv_timeout(FLUSH_EVERY) {
-            Ok(record) => writer.write(&record),
-            Err(RecvTimeoutError::Timeout) => writer.flush(),
+        let wait = next_flush.saturating_duration_since(Instant::now());
+        let (result, flush_now) = match rx.recv_timeout(wait) {
+            // A command is rare and matters most to a replay: on disk at once.
+            Ok(record) => {
+                let command = matches!(record.payload, Payload::Command { .. });
+                (writer.write(&record), command)
+            }
+            Err(RecvTimeoutError::Timeout) => (Ok(()), false),
             Err(RecvTimeoutError::Disconnected) => break,
+        };
+        let result = if flush_now || Instant::now() >= next_flush {
+            next_flush = Instant::now() + FLUSH_EVERY;
+            result.and_then(|()| writer.checkpoint())
+        } else {
+            result
         };
         if let Err(e) = result {
             failures += 1;

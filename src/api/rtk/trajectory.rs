@@ -111,7 +111,18 @@ pub fn check_name(name: &str) -> Result<(), TrajectoryError> {
     if name.starts_with('.') || name.chars().any(char::is_control) {
         return bad("it starts with a dot or contains a control character");
     }
+    if name.chars().any(is_bidi_control) {
+        return bad(
+            "it contains a bidirectional-text control character (U+202A-U+202E, U+2066-U+2069)",
+        );
+    }
     Ok(())
+}
+
+/// The bidirectional embedding, override and isolate controls: they make a name display
+/// differently from what it is (a list or a log line that reads backwards).
+fn is_bidi_control(c: char) -> bool {
+    matches!(c, '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}')
 }
 
 impl Trajectory {
@@ -424,6 +435,8 @@ mod tests {
             "x..y",
             "a\nb",
             &"n".repeat(65),
+            "lawn\u{202E}1.txt",
+            "\u{2066}north\u{2069}",
         ] {
             assert!(check_name(bad).is_err(), "{bad:?}");
         }

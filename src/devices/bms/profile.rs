@@ -119,7 +119,8 @@ impl BmsProfile {
             && let Some(file) = &p.dbc
         {
             let dbc_path = path.parent().unwrap_or(Path::new(".")).join(file);
-            p.dbc_text = crate::config::read_text(&dbc_path)?;
+            p.dbc_text =
+                crate::config::read_text(&dbc_path).map_err(|e| e.named_by(path, "dbc"))?;
         }
         profile.validate(path)?;
         Ok(profile)
