@@ -17,13 +17,15 @@ const WAIT: Duration = Duration::from_secs(15);
 const USER: &str = "chassisd";
 const PASSWORD: &str = "s3cret";
 
-/// A vehicle with no devices, only the MQTT link and the rtk dialect.
+/// A vehicle with the MQTT link and the rtk dialect, and a receiver on a port that is not
+/// there (a run needs a device; an absent port is retried, and the link works regardless).
 fn config(dir: &Path, name: &str, port: u16, password: &str, ca: &Path) -> PathBuf {
     let path = dir.join(format!("{name}.toml"));
     let text = format!(
-        "[vehicle]\nname = \"{name}\"\n\n[mqtt]\nhost = \"127.0.0.1\"\nport = {port}\n\
+        "[vehicle]\nname = \"{name}\"\n\n[gnss]\nport = \"{}\"\n\n[mqtt]\nhost = \"127.0.0.1\"\nport = {port}\n\
          username = \"{USER}\"\npassword = \"{password}\"\nreconnect_max_s = 0.5\n\n\
          [mqtt.tls]\nca_file = \"{}\"\n\n[mqtt.rtk]\n",
+        dir.join("no-such-receiver").display(),
         ca.display()
     );
     std::fs::write(&path, text).expect("config written");

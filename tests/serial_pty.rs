@@ -194,6 +194,8 @@ fn a_missing_port_is_retried_not_fatal() {
             status(l).is_some_and(|s| s["sensor"]["gnss"] == false)
         });
     }
+    // A reminder a second into the outage (then at 10 s, then every minute), not silence.
+    daemon.wait_log("the 1 s reminder", "port still unavailable");
     let mut port = Port::open_at(&link);
     daemon.wait_log("link up", "link up");
     port.send(&gga(4, "08.98071170"));
@@ -265,4 +267,23 @@ fn invalid_config_names_the_key() {
         stderr.contains("`gnss.baud`") && stderr.contains("vehicle.toml"),
         "{stderr}"
     );
+}
+
+#[test]
+fn a_run_without_devices_is_refused_with_the_smallest_configuration() {
+    let dir = common::tempdir("pty-empty");
+    let config = dir.join("vehicle.toml");
+    std::fs::write(&config, "[vehicle]\nname = \"empty\"\n").unwrap();
+    let out = Command::new(common::chassisd())
+        .args(["run", "--config"])
+        .arg(&config)
+        .output()
+        .expect("chassisd runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("names no device") && stderr.contains("[gnss]\nport = \"/dev/ttyUSB0\""),
+        "{stderr}"
+    );
+    assert!(out.stdout.is_empty(), "no status without devices");
 }

@@ -241,6 +241,11 @@ impl GnssConfig {
 }
 
 impl VehicleConfig {
+    /// Whether it names a device to read or drive: a receiver, an IMU or a CAN interface.
+    pub fn has_devices(&self) -> bool {
+        self.gnss.is_some() || self.imu.is_some() || !self.can.is_empty()
+    }
+
     /// Reads and validates a TOML file. Device profiles it names are read relative to it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = read_text(path)?;

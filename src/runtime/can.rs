@@ -6,13 +6,14 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use socketcan::tokio::CanSocket;
 use socketcan::{CanAnyFrame, CanError, CanFrame, SocketOptions};
 use tokio::sync::mpsc;
 
 use super::clock::RecordClock;
+use super::outage_log::{OutageLog, Say};
 use crate::core::LinkState;
 use crate::devices::can::Frame;
 use crate::record::{Payload, Record};
@@ -185,11 +186,15 @@ async fn run(
     let name = spec.interface.clone();
     let mut backoff = BACKOFF_START;
     let mut failures: u64 = 0;
+    let mut outage = OutageLog::default();
+    let mut outage_since: Option<Instant> = None;
     loop {
         match open(&name) {
             Ok(socket) => {
                 tracing::info!(device = %name, after_failed_attempts = failures, "link up");
                 failures = 0;
+                outage.recovered();
+                outage_since = None;
                 backoff = BACKOFF_START;
                 if send(&records, &clock, &name, Payload::Link(LinkState::Up))
                     .await
@@ -212,10 +217,16 @@ async fn run(
             }
             Err(e) => {
                 failures += 1;
-                if failures == 1 {
-                    tracing::warn!(device = %name, error = %e, "cannot open CAN interface; retrying");
-                } else if failures.is_multiple_of(50) {
-                    tracing::warn!(device = %name, error = %e, attempts = failures, "CAN interface still unavailable");
+                let since = *outage_since.get_or_insert_with(Instant::now);
+                match outage.failed(since.elapsed()) {
+                    Say::First => {
+                        tracing::warn!(device = %name, error = %e, "cannot open CAN interface; retrying");
+                    }
+                    Say::Still(attempts) => {
+                        tracing::warn!(device = %name, error = %e, attempts,
+                            for_s = since.elapsed().as_secs(), "CAN interface still unavailable; retrying");
+                    }
+                    Say::Quiet => {}
                 }
             }
         }

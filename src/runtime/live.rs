@@ -57,6 +57,14 @@ pub struct LiveOptions {
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out` (from a thread of its
 /// own: a stalled `out` never holds up the control loop).
 pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        options.config.has_devices(),
+        "the configuration names no device ([gnss], [imu] or a [[can]] interface), so there \
+         is nothing to run. The smallest working configuration is a receiver:\n\n\
+         [gnss]\nport = \"/dev/ttyUSB0\"\n\n\
+         devices/vehicle.example.toml is a complete one, and `chassisd sim` runs a simulated \
+         vehicle without hardware"
+    );
     let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();
@@ -178,9 +186,6 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         }
         None => None,
     };
-    if source_meta.is_empty() {
-        tracing::warn!("no devices configured; status will show every sensor absent");
-    }
     let drivers_running = !source_meta.is_empty();
     drop(tx);
 

@@ -9,6 +9,7 @@ pub mod input_lines;
 pub mod live;
 pub mod lossy;
 pub mod mqtt;
+pub mod outage_log;
 pub mod recorder;
 pub mod serial;
 pub mod sim;

@@ -1,7 +1,7 @@
 //! Serial driver: one task per port. Reads, timestamps and forwards raw chunks; reports the
 //! link state; reconnects with back-off when the port disappears or fails.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use bytes::{Bytes, BytesMut};
 use tokio::io::AsyncReadExt;
@@ -9,6 +9,7 @@ use tokio::sync::mpsc;
 use tokio_serial::SerialPortBuilderExt;
 
 use super::clock::RecordClock;
+use super::outage_log::{OutageLog, Say};
 use crate::core::LinkState;
 use crate::record::{Payload, Record};
 
@@ -34,12 +35,16 @@ pub struct SerialSpec {
 pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>) {
     let mut backoff = BACKOFF_START;
     let mut failed_attempts: u64 = 0;
+    let mut outage = OutageLog::default();
+    let mut outage_since: Option<Instant> = None;
     loop {
         match tokio_serial::new(&spec.port, spec.baud).open_native_async() {
             Ok(mut port) => {
                 tracing::info!(device = %spec.source, port = %spec.port, baud = spec.baud,
                     after_failed_attempts = failed_attempts, "link up");
                 failed_attempts = 0;
+                outage.recovered();
+                outage_since = None;
                 if send(&tx, &spec, &clock, Payload::Link(LinkState::Up))
                     .await
                     .is_err()
@@ -64,14 +69,18 @@ pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>)
             }
             Err(e) => {
                 failed_attempts += 1;
-                // The first failure is worth a warning; the rest are summarised.
-                if failed_attempts == 1 {
-                    tracing::warn!(device = %spec.source, port = %spec.port, error = %e, "cannot open port; retrying");
-                } else if failed_attempts.is_multiple_of(50) {
-                    tracing::warn!(device = %spec.source, port = %spec.port, error = %e,
-                        attempts = failed_attempts, "port still unavailable");
-                } else {
-                    tracing::debug!(device = %spec.source, port = %spec.port, error = %e, "open failed");
+                let since = *outage_since.get_or_insert_with(Instant::now);
+                match outage.failed(since.elapsed()) {
+                    Say::First => {
+                        tracing::warn!(device = %spec.source, port = %spec.port, error = %e, "cannot open port; retrying");
+                    }
+                    Say::Still(attempts) => {
+                        tracing::warn!(device = %spec.source, port = %spec.port, error = %e,
+                            attempts, for_s = since.elapsed().as_secs(), "port still unavailable; retrying");
+                    }
+                    Say::Quiet => {
+                        tracing::debug!(device = %spec.source, port = %spec.port, error = %e, "open failed");
+                    }
                 }
             }
         }
