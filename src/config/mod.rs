@@ -26,7 +26,7 @@ pub enum ConfigError {
         named_by: Option<(PathBuf, String)>,
     },
     /// The file is not valid TOML or does not match the schema.
-    #[error("{file}: {message}")]
+    #[error("{file}: {message}\nfix: {}", parse_fix(.message))]
     Parse {
         /// The file.
         file: PathBuf,
@@ -54,6 +54,20 @@ pub fn read_text(path: &Path) -> Result<String, ConfigError> {
         reason: e.to_string(),
         named_by: None,
     })
+}
+
+/// How to mend what the TOML parser found, from its message.
+fn parse_fix(message: &str) -> &'static str {
+    if message.contains("unknown field") {
+        "remove the key or correct its spelling; the keys allowed there are listed above"
+    } else if message.contains("missing field") {
+        "add the key; devices/vehicle.example.toml shows every key with a working value"
+    } else if message.contains("invalid type") || message.contains("invalid value") {
+        "give the value the type named above (text in quotes, numbers and true/false without)"
+    } else {
+        "correct the TOML at the line shown (each key = value on its own line, [sections] and \
+         [[lists]] in brackets)"
+    }
 }
 
 /// " (named by `key` in FILE)" for a file a configuration named.
@@ -482,6 +496,26 @@ mod tests {
                 && msg.ends_with("(named by `mqtt.tls.ca_file` in test.toml)"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn parse_errors_say_how_to_fix_them() {
+        for (text, key, fix) in [
+            (
+                "[gnss]\nprot = \"/dev/x\"\n",
+                "prot",
+                "correct its spelling",
+            ),
+            ("[gnss]\nbaud = 9600\n", "port", "add the key"),
+            ("[gnss]\nport = 5\n", "port", "text in quotes"),
+            ("[gnss\nport = \"/dev/x\"\n", "gnss", "correct the TOML"),
+        ] {
+            let msg = load(text).unwrap_err().to_string();
+            assert!(
+                msg.starts_with("test.toml: ") && msg.contains(key) && msg.contains(fix),
+                "{msg}"
+            );
+        }
     }
 
     #[test]
