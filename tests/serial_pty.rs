@@ -250,19 +250,27 @@ fn imu_over_pty_reports_health() {
     drop(port);
 }
 
-#[test]
-fn invalid_config_names_the_key() {
-    let _turn = one_at_a_time();
-    let dir = common::tempdir("pty");
+/// `chassisd run` on a configuration of `text`, which must be refused: its stderr and stdout.
+fn refused_run(dir_name: &str, text: &str) -> (String, Vec<u8>) {
+    let dir = common::tempdir(dir_name);
     let config = dir.join("vehicle.toml");
-    std::fs::write(&config, "[gnss]\nport = \"/dev/null\"\nbaud = 1234\n").unwrap();
+    std::fs::write(&config, text).unwrap();
     let out = Command::new(common::chassisd())
         .args(["run", "--config"])
         .arg(&config)
         .output()
         .expect("chassisd runs");
     assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    (
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+        out.stdout,
+    )
+}
+
+#[test]
+fn invalid_config_names_the_key() {
+    let _turn = one_at_a_time();
+    let (stderr, _) = refused_run("pty", "[gnss]\nport = \"/dev/null\"\nbaud = 1234\n");
     assert!(
         stderr.contains("`gnss.baud`") && stderr.contains("vehicle.toml"),
         "{stderr}"
@@ -271,19 +279,10 @@ fn invalid_config_names_the_key() {
 
 #[test]
 fn a_run_without_devices_is_refused_with_the_smallest_configuration() {
-    let dir = common::tempdir("pty-empty");
-    let config = dir.join("vehicle.toml");
-    std::fs::write(&config, "[vehicle]\nname = \"empty\"\n").unwrap();
-    let out = Command::new(common::chassisd())
-        .args(["run", "--config"])
-        .arg(&config)
-        .output()
-        .expect("chassisd runs");
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (stderr, stdout) = refused_run("pty-empty", "[vehicle]\nname = \"empty\"\n");
     assert!(
         stderr.contains("names no device") && stderr.contains("[gnss]\nport = \"/dev/ttyUSB0\""),
         "{stderr}"
     );
-    assert!(out.stdout.is_empty(), "no status without devices");
+    assert!(stdout.is_empty(), "no status without devices");
 }

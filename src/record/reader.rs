@@ -294,7 +294,9 @@ impl SourceReader {
     }
 }
 
-/// The time every file of a recording was flushed up to together, if it says.
+/// The time every file of a recording was flushed up to together, if it says. A file the
+/// recorder never got to write (killed within its first flush period), or one that is not
+/// a time, cuts nothing: the recording plays whole rather than not at all.
 fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
     let path = dir.join(COVERED_FILE);
     let text = match std::fs::read_to_string(&path) {
@@ -302,13 +304,18 @@ fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(source) => return Err(RecordError::Io { path, source }),
     };
-    text.trim()
-        .parse::<u64>()
-        .map(|us| Some(Timestamp::from_micros(us)))
-        .map_err(|_| RecordError::Meta {
-            path,
-            message: format!("expected a time in microseconds, found {:?}", text.trim()),
-        })
+    let text = text.trim();
+    if text.is_empty() {
+        return Ok(None);
+    }
+    match text.parse::<u64>() {
+        Ok(us) => Ok(Some(Timestamp::from_micros(us))),
+        Err(_) => {
+            tracing::warn!(file = %path.display(), found = %text.escape_debug(),
+                "not a time in microseconds; the recording plays whole");
+            Ok(None)
+        }
+    }
 }
 
 fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError> {
@@ -352,4 +359,26 @@ fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeE
         source: env.source.to_owned(),
         payload,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_covered_time_cuts_only_when_it_is_one() {
+        let dir = std::env::temp_dir().join(format!("chassisd-covered-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        assert_eq!(read_covered(&dir).unwrap(), None, "no file");
+        for (text, want) in [
+            ("00000000000000000042\n", Some(Timestamp::from_micros(42))),
+            ("", None),
+            ("\0\0\0", None),
+            ("12ab", None),
+        ] {
+            std::fs::write(dir.join(COVERED_FILE), text).unwrap();
+            assert_eq!(read_covered(&dir).unwrap(), want, "{text:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

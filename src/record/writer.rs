@@ -30,6 +30,8 @@ pub struct RecordingWriter {
     covered: File,
     /// The latest record time written.
     latest: Option<Timestamp>,
+    /// The time last noted in `covered`.
+    noted: Option<Timestamp>,
 }
 
 impl RecordingWriter {
@@ -110,6 +112,7 @@ impl RecordingWriter {
             sources: files,
             covered,
             latest: None,
+            noted: None,
         })
     }
 
@@ -206,7 +209,8 @@ impl RecordingWriter {
     pub fn checkpoint(&mut self) -> Result<(), RecordError> {
         use std::os::unix::fs::FileExt;
         self.flush()?;
-        let Some(latest) = self.latest else {
+        // Nothing new since the last note (an idle recording): no write.
+        let Some(latest) = self.latest.filter(|&t| Some(t) != self.noted) else {
             return Ok(());
         };
         let line = format!("{:020}\n", latest.as_micros());
@@ -215,7 +219,9 @@ impl RecordingWriter {
             .map_err(|source| RecordError::Io {
                 path: self.dir.join(COVERED_FILE),
                 source,
-            })
+            })?;
+        self.noted = Some(latest);
+        Ok(())
     }
 
     /// Flushes every file to the operating system.
