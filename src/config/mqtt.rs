@@ -38,6 +38,12 @@ pub struct MqttConfig {
     /// Command replies kept while the broker is away.
     #[serde(default = "default_reply_queue")]
     pub reply_queue: usize,
+    /// Commands accepted per second on each topic; beyond it they are refused unanswered.
+    #[serde(default = "default_command_rate_hz")]
+    pub command_rate_hz: f64,
+    /// Commands accepted at once on a topic before `command_rate_hz` applies.
+    #[serde(default = "default_command_burst")]
+    pub command_burst: u32,
     /// Incoming messages larger than this are refused, bytes.
     #[serde(default = "default_max_payload")]
     pub max_payload: usize,
@@ -144,6 +150,12 @@ fn default_telemetry_queue() -> usize {
 fn default_reply_queue() -> usize {
     1024
 }
+fn default_command_rate_hz() -> f64 {
+    50.0
+}
+fn default_command_burst() -> u32 {
+    50
+}
 fn default_max_payload() -> usize {
     1 << 20
 }
@@ -163,6 +175,8 @@ impl Default for MqttConfig {
             reconnect_max_s: default_reconnect_max_s(),
             telemetry_queue: default_telemetry_queue(),
             reply_queue: default_reply_queue(),
+            command_rate_hz: default_command_rate_hz(),
+            command_burst: default_command_burst(),
             max_payload: default_max_payload(),
             status_topic: default_status_topic(),
             embedded_broker: false,
@@ -268,7 +282,15 @@ impl MqttConfig {
             0.1..=300.0,
             "s",
         )?;
+        check_range(
+            file,
+            "mqtt.command_rate_hz",
+            self.command_rate_hz,
+            0.1..=100_000.0,
+            "per s",
+        )?;
         for (key, n, max) in [
+            ("command_burst", self.command_burst as usize, 100_000),
             ("telemetry_queue", self.telemetry_queue, 100_000),
             ("reply_queue", self.reply_queue, 100_000),
             ("max_payload", self.max_payload, 64 << 20),

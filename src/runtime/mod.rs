@@ -4,6 +4,7 @@ pub mod broker;
 pub mod can;
 pub mod can_sim;
 pub mod clock;
+pub mod command_rate;
 pub mod host;
 pub mod input_lines;
 pub mod live;

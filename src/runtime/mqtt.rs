@@ -11,7 +11,7 @@
 //! are ignored for the same reason.
 
 use std::collections::VecDeque;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use bytes::Bytes;
@@ -22,6 +22,7 @@ use rumqttc::{
 use tokio::sync::mpsc;
 
 use super::clock::RecordClock;
+use super::command_rate::{CommandRate, RateReport};
 use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
 use crate::config::mqtt::MqttConfig;
 use crate::core::LinkState;
@@ -98,9 +99,10 @@ impl Outbox {
         queue.push_back(message);
     }
 
-    /// Hands queued messages to rumqttc, replies first, while it takes them.
+    /// Hands queued messages to rumqttc while it takes them: telemetry first (at most a few
+    /// status messages, whose period matters), then replies.
     fn flush(&mut self, client: &AsyncClient) {
-        for queue in [&mut self.replies, &mut self.telemetry] {
+        for queue in [&mut self.telemetry, &mut self.replies] {
             while let Some(m) = queue.pop_front() {
                 let qos = match m.qos {
                     Qos::AtMostOnce => QoS::AtMostOnce,
@@ -239,6 +241,7 @@ async fn run(
         replies_max: c.reply_queue,
         dropped: Dropped::default(),
     };
+    let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst);
     let mut connected = false;
     let mut last_failure: Option<String> = None;
     let mut backoff = FIRST_BACKOFF;
@@ -248,6 +251,9 @@ async fn run(
         payload: Payload::Link(state),
     };
     loop {
+        if let Some(report) = rate.due_summary(Instant::now()) {
+            log_rate(&report, c);
+        }
         tokio::select! {
             event = eventloop.poll() => match event {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
@@ -265,10 +271,18 @@ async fn run(
                         tracing::error!(error = %e, "MQTT subscribe failed");
                     }
                     // `online` goes first, tracked like a reply.
-                    outbox.replies.push_front(Publish {
+                    let online = Publish {
                         retain: true,
                         ..Publish::reply(status_topic.clone(), Bytes::from_static(b"online"))
-                    });
+                    };
+                    if client
+                        .try_publish(online.topic.clone(), QoS::AtLeastOnce, true, online.payload.clone())
+                        .is_ok()
+                    {
+                        outbox.handed.push_back(online);
+                    } else {
+                        outbox.replies.push_front(online);
+                    }
                     outbox.flush(&client);
                     if records.send(link(LinkState::Up)).await.is_err() {
                         return;
@@ -278,6 +292,13 @@ async fn run(
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
                         tracing::warn!(topic = %p.topic, "retained command ignored: commands must be live");
+                        continue;
+                    }
+                    let (admitted, report) = rate.admit(&p.topic, Instant::now());
+                    if let Some(report) = report {
+                        log_rate(&report, c);
+                    }
+                    if !admitted {
                         continue;
                     }
                     let record = Record {
@@ -339,6 +360,27 @@ async fn run(
                     outbox.flush(&client);
                 }
             }
+        }
+    }
+}
+
+/// One line when a flood starts on a topic, then one per period while it lasts.
+fn log_rate(report: &RateReport, c: &MqttConfig) {
+    match report {
+        RateReport::Started(topic) => tracing::warn!(
+            %topic,
+            limit_hz = c.command_rate_hz,
+            burst = c.command_burst,
+            "MQTT commands over the rate limit are refused unanswered; a summary follows every 5 s while it lasts"
+        ),
+        RateReport::Summary(counts) => {
+            let refused: u64 = counts.iter().map(|(_, n)| n).sum();
+            let topics = counts
+                .iter()
+                .map(|(t, n)| format!("{t}: {n}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            tracing::warn!(refused, %topics, "MQTT commands refused over the rate limit in the last 5 s");
         }
     }
 }
@@ -408,7 +450,7 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn flushing_sends_replies_first_and_keeps_what_the_client_cannot_take() {
+    async fn flushing_sends_telemetry_first_and_keeps_what_the_client_cannot_take() {
         // A client whose event loop never runs takes exactly its queue's capacity.
         let (client, _eventloop) = AsyncClient::new(MqttOptions::new("t", "127.0.0.1", 1), 3);
         let mut o = outbox(10, 10);
@@ -416,12 +458,9 @@ mod tests {
         o.push(Publish::reply("ack1", "{}"));
         o.push(Publish::telemetry("status2", "{}"));
         o.push(Publish::reply("ack2", "{}"));
+        o.push(Publish::reply("ack3", "{}"));
         o.flush(&client);
-        assert!(o.replies.is_empty());
-        assert_eq!(
-            topics(&o.telemetry),
-            ["status2"],
-            "status1 went after the replies"
-        );
+        assert!(o.telemetry.is_empty(), "status went ahead of the replies");
+        assert_eq!(topics(&o.replies), ["ack2", "ack3"]);
     }
 }
