@@ -78,8 +78,9 @@ enum Command {
         /// Read commands from standard input, one `TOPIC JSON` per line.
         #[arg(long)]
         commands_stdin: bool,
-        /// Drive a scripted scenario of `chassisd bench fusion` and stop at its end.
-        #[arg(long)]
+        /// Drive a scripted scenario (also those of `chassisd bench fusion`) and stop at its
+        /// end. Each starts with 5 s standing still and 10 s straight.
+        #[arg(long, value_parser = scenario_names())]
         scenario: Option<String>,
         /// Stop after this many seconds.
         #[arg(long, value_parser = seconds_arg)]
@@ -127,9 +128,8 @@ enum BenchCommand {
         /// (the outage drift is the RMS over runs, the jump figure the worst run's).
         #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=1000))]
         runs: u32,
-        /// Run only these scenarios (repeatable): straight, turns, loop-10min, float,
-        /// outage-30s, jump-5m, bias-drift.
-        #[arg(long)]
+        /// Run only these scenarios (repeatable).
+        #[arg(long, value_parser = scenario_names())]
         scenario: Vec<String>,
         /// The receiver's rate, Hz, instead of the plant's.
         #[arg(long, value_parser = gnss_rate_arg)]
@@ -386,6 +386,15 @@ fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {
         Some(path) => PlantConfig::load(&path)?,
         None => PlantConfig::builtin()?,
     })
+}
+
+/// The scenarios' names, each with what it drives, for `--help` and argument checking.
+fn scenario_names() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(
+        Scenario::all()
+            .into_iter()
+            .map(|s| clap::builder::PossibleValue::new(s.name).help(s.about)),
+    )
 }
 
 fn find_scenario(name: &str) -> anyhow::Result<Scenario> {

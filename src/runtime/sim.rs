@@ -22,10 +22,10 @@ use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
-use crate::engine::EngineOutput;
+use crate::engine::{EngineOutput, EngineStats};
 use crate::record::{Record, RecordingWriter};
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
-use crate::sim::plant::{GnssCondition, PlantConfig};
+use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
 
@@ -154,6 +154,10 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         drop(tx);
     }
     let mut commands_open = options.commands_stdin || options.mqtt.is_some();
+    eprintln!(
+        "{}",
+        start_line(&options, sim.config().vehicle.name.as_str())
+    );
     let end = options
         .duration
         .or(options
@@ -165,18 +169,22 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         .context("cannot install the SIGTERM handler")?;
     let mut pace = tokio::time::interval(PACE);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut summary = Summary::new(sim.vehicle().truth());
     'run: loop {
         tokio::select! {
             _ = pace.tick() => {
                 let now = clock.now();
                 while sim.time().saturating_add(PLANT_STEP) <= now {
                     if end.is_some_and(|end| sim.time() >= end) {
+                        // `--duration` wins over the scenario's own length.
+                        summary.ended = if options.duration.is_some() { Ended::Duration } else { Ended::Scenario };
                         break 'run;
                     }
                     match &options.scenario {
                         Some(scenario) => sim.step_scripted(scenario, &mut sink),
                         None => sim.step(RTK_FIXED, &mut sink),
                     }
+                    summary.track(sim.vehicle().truth());
                 }
             }
             command = commands.recv(), if commands_open => match command {
@@ -194,12 +202,99 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     }
     finish(sink.recorder.take(), sim.time());
     sink.out.finish(Duration::from_millis(500));
+    let elapsed = sim.time().saturating_since(start);
+    eprintln!("{}", summary.line(&options, elapsed, sim.engine().stats()));
     // The simulation holds the trajectory queue; once it is gone the writer drains and ends.
     drop(sim);
     if let Some(writer) = writer {
         writer.finish(Duration::from_millis(500));
     }
     Ok(())
+}
+
+/// The line a person reads first: what runs, where to watch it, how to stop it.
+fn start_line(options: &SimOptions, vehicle: &str) -> String {
+    let mut line = format!(
+        "chassisd sim: simulated vehicle {vehicle:?} (seed {})",
+        options.seed
+    );
+    if let Some(s) = &options.scenario {
+        line += &format!(
+            ", scenario {} ({:.0} s: {})",
+            s.name,
+            s.duration_s(),
+            s.about
+        );
+    }
+    if let Some(d) = options.duration {
+        line += &format!(", for {:.1} s", d.as_secs_f64());
+    }
+    line += "; base_status JSON lines on stdout";
+    if let Some(m) = &options.mqtt {
+        line += &format!(
+            " and over MQTT (watch: mosquitto_sub -h {} -p {} -t base_status)",
+            m.host, m.port
+        );
+    }
+    if let Some(dir) = &options.record {
+        line += &format!("; recording into {}", dir.display());
+    }
+    line + "; Ctrl-C stops"
+}
+
+/// Why the simulation ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ended {
+    Scenario,
+    Duration,
+    Stopped,
+}
+
+/// What the closing line sums up.
+struct Summary {
+    ended: Ended,
+    start: Truth,
+    last: Truth,
+    distance_m: f64,
+}
+
+impl Summary {
+    fn new(start: Truth) -> Self {
+        Self {
+            ended: Ended::Stopped,
+            start,
+            last: start,
+            distance_m: 0.0,
+        }
+    }
+
+    fn track(&mut self, now: Truth) {
+        self.distance_m += (now.x - self.last.x).hypot(now.y - self.last.y);
+        self.last = now;
+    }
+
+    fn line(&self, options: &SimOptions, elapsed: Duration, stats: &EngineStats) -> String {
+        let why = match (self.ended, &options.scenario) {
+            (Ended::Scenario, Some(s)) => format!("scenario {} complete", s.name),
+            (Ended::Duration, _) | (Ended::Scenario, None) => "duration reached".to_owned(),
+            (Ended::Stopped, _) => "stopped".to_owned(),
+        };
+        let mut line = format!(
+            "chassisd sim: {why} after {:.1} s simulated; drove {:.1} m, ending ({:.2}, {:.2}) m from the start, heading {:.0}°; {} commands ({} refused), {} status lines",
+            elapsed.as_secs_f64(),
+            self.distance_m,
+            self.last.x - self.start.x,
+            self.last.y - self.start.y,
+            self.last.yaw.to_degrees().rem_euclid(360.0),
+            stats.commands,
+            stats.commands_rejected,
+            stats.ticks,
+        );
+        if let Some(dir) = &options.record {
+            line += &format!("; recorded in {}", dir.display());
+        }
+        line
+    }
 }
 
 fn finish(recorder: Option<Recorder>, end: Timestamp) {

@@ -49,6 +49,27 @@ pub trait Sink {
     fn output(&mut self, output: EngineOutput);
 }
 
+/// Passes everything on but the answers to a scenario's own commands: ten a second of the
+/// script talking to itself would bury what a person needs to see, so they go to the debug
+/// log, labelled as the scenario's.
+struct ScriptSink<'a, S: Sink>(&'a mut S);
+
+impl<S: Sink> Sink for ScriptSink<'_, S> {
+    fn record(&mut self, record: &Record) {
+        self.0.record(record);
+    }
+
+    fn output(&mut self, output: EngineOutput) {
+        match output {
+            EngineOutput::CommandResult { topic, result, .. } => match result {
+                Ok(()) => tracing::debug!(%topic, "scenario command accepted"),
+                Err(reason) => tracing::debug!(%topic, %reason, "scenario command refused"),
+            },
+            other => self.0.output(other),
+        }
+    }
+}
+
 /// The chassisd configuration of a simulated vehicle: its GNSS receiver and IMU, and one
 /// generic CiA 402 drive per wheel (nodes 1 and 2) on the simulated bus. The receiver's and
 /// gyro's noise figures go into `[localization]` as an integrator copies a datasheet's.
@@ -354,7 +375,7 @@ impl Lockstep {
         if self.steps.is_multiple_of(SCRIPT_COMMAND_EVERY) && s >= SCRIPT_COMMANDS_FROM_S {
             let (v, w) = scenario.command_at(s);
             let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
-            self.command("cmd_vel", &twist, sink);
+            self.command("cmd_vel", &twist, &mut ScriptSink(sink));
         }
         self.vehicle
             .add_gyro_bias(scenario.gyro_bias_ramp * PLANT_STEP.as_secs_f64());

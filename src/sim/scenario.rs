@@ -53,6 +53,8 @@ pub struct Jump {
 pub struct Scenario {
     /// Name, as `chassisd bench fusion` prints it.
     pub name: &'static str,
+    /// What it drives, in a few words (for `--help`).
+    pub about: &'static str,
     /// Velocity commands, one after another.
     pub legs: Vec<Leg>,
     /// Fix quality over time, in time order; RTK fixed before the first.
@@ -75,12 +77,13 @@ pub enum Regime {
 }
 
 impl Scenario {
-    fn new(name: &'static str, body: Vec<Leg>) -> Self {
+    fn new(name: &'static str, about: &'static str, body: Vec<Leg>) -> Self {
         let mut legs = vec![leg(STILL_S, 0.0, 0.0), leg(WARMUP_RUN_S, WARMUP_SPEED, 0.0)];
         legs.extend(body);
         legs.push(leg(2.0, 0.0, 0.0));
         Self {
             name,
+            about,
             legs,
             gnss: Vec::new(),
             jump: None,
@@ -100,13 +103,25 @@ impl Scenario {
                 .collect()
         };
         vec![
-            Self::new("straight", {
-                let mut l = vec![leg(60.0, 1.0, 0.0), leg(5.0, 0.0, 0.0)];
-                l.push(leg(30.0, 0.5, 0.0));
-                l
-            }),
-            Self::new("turns", turns()),
-            Self::new("loop-10min", laps(600.0, 1.0)),
+            Self::new(
+                "straight",
+                "60 s straight at 1 m/s, a stop, 30 s at 0.5 m/s",
+                {
+                    let mut l = vec![leg(60.0, 1.0, 0.0), leg(5.0, 0.0, 0.0)];
+                    l.push(leg(30.0, 0.5, 0.0));
+                    l
+                },
+            ),
+            Self::new(
+                "turns",
+                "squares with turns on the spot both ways, then a circle each way",
+                turns(),
+            ),
+            Self::new(
+                "loop-10min",
+                "10 minutes of laps, RTK fixed",
+                laps(600.0, 1.0),
+            ),
             Self {
                 gnss: segments(&[
                     (75.0, float),
@@ -116,11 +131,19 @@ impl Scenario {
                     (255.0, float),
                     (285.0, fixed),
                 ]),
-                ..Self::new("float", laps(300.0, 1.0))
+                ..Self::new(
+                    "float",
+                    "5 minutes of laps through RTK float, single, DGPS and back to fixed",
+                    laps(300.0, 1.0),
+                )
             },
             Self {
                 gnss: segments(&[(75.0, None), (105.0, fixed)]),
-                ..Self::new("outage-30s", laps(150.0, 1.0))
+                ..Self::new(
+                    "outage-30s",
+                    "laps with a 30 s GNSS outage",
+                    laps(150.0, 1.0),
+                )
             },
             Self {
                 jump: Some(Jump {
@@ -128,12 +151,20 @@ impl Scenario {
                     to_s: 61.0,
                     offset: (3.0, 4.0),
                 }),
-                ..Self::new("jump-5m", laps(120.0, 1.0))
+                ..Self::new(
+                    "jump-5m",
+                    "laps; the GNSS position jumps 5 m for 1 s",
+                    laps(120.0, 1.0),
+                )
             },
             Self {
                 gnss: segments(&[(100.0, float), (160.0, fixed)]),
                 gyro_bias_ramp: 1e-4,
-                ..Self::new("bias-drift", laps(300.0, 1.0))
+                ..Self::new(
+                    "bias-drift",
+                    "5 minutes of laps with a drifting gyro bias and a minute of RTK float",
+                    laps(300.0, 1.0),
+                )
             },
         ]
     }
@@ -247,7 +278,7 @@ mod tests {
 
     #[test]
     fn commands_follow_the_legs() {
-        let s = Scenario::new("t", vec![leg(10.0, 1.0, 0.5)]);
+        let s = Scenario::new("t", "test", vec![leg(10.0, 1.0, 0.5)]);
         assert_eq!(s.command_at(0.0), (0.0, 0.0));
         assert_eq!(s.command_at(STILL_S + 1.0), (WARMUP_SPEED, 0.0));
         assert_eq!(s.command_at(WARMUP_S + 5.0), (1.0, 0.5));

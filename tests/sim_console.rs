@@ -1,0 +1,83 @@
+//! `chassisd sim` speaks to a person (issue 11, item 11): one line at start saying what runs,
+//! where to watch and how to stop; the scenario's own commands kept out of the info log; a
+//! summary at the end of a run or on Ctrl-C; `sim --help` lists the scenarios.
+
+mod common;
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use chassisd::sim::scenario::Scenario;
+use common::process::Proc;
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+#[test]
+fn sim_help_lists_every_scenario_with_what_it_drives() {
+    let out = Command::new(common::chassisd())
+        .args(["sim", "--help"])
+        .output()
+        .expect("runs");
+    assert!(out.status.success());
+    let help = String::from_utf8_lossy(&out.stdout);
+    for s in Scenario::all() {
+        assert!(
+            help.lines()
+                .any(|l| l.contains(&format!("{}:", s.name)) && l.contains(s.about)),
+            "{} missing from:\n{help}",
+            s.name
+        );
+    }
+}
+
+#[test]
+fn a_scenario_run_says_what_runs_keeps_its_own_commands_quiet_and_sums_up() {
+    let out = Command::new(common::chassisd())
+        .args([
+            "sim",
+            "--no-mqtt",
+            "--scenario",
+            "straight",
+            "--duration",
+            "4",
+        ])
+        .env("RUST_LOG", "info")
+        .output()
+        .expect("runs");
+    assert!(out.status.success());
+    let log = String::from_utf8_lossy(&out.stderr);
+    let first = log
+        .lines()
+        .find(|l| l.starts_with("chassisd sim:"))
+        .expect("a start line");
+    for part in [
+        "scenario straight",
+        "base_status JSON lines on stdout",
+        "Ctrl-C stops",
+    ] {
+        assert!(first.contains(part), "{first}");
+    }
+    // The scenario commands from 1 s on, ten a second: none in the info log.
+    assert!(!log.contains("command accepted"), "{log}");
+    let last = log.lines().last().expect("a summary");
+    assert!(
+        last.starts_with("chassisd sim: duration reached after 4.0 s simulated"),
+        "{last}"
+    );
+    assert!(last.contains("commands (0 refused)"), "{last}");
+    assert!(last.contains("40 status lines"), "{last}");
+}
+
+#[test]
+fn ctrl_c_ends_with_a_summary_too() {
+    let mut sim = Proc::start(&["sim", "--no-mqtt", "--scenario", "turns"]);
+    sim.wait_log(Duration::from_secs(10), "Ctrl-C stops");
+    std::thread::sleep(Duration::from_millis(1500));
+    kill(Pid::from_raw(sim.child.id() as i32), Signal::SIGINT).expect("signal");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while sim.child.try_wait().expect("status").is_none() {
+        assert!(Instant::now() < deadline, "still running after Ctrl-C");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    sim.wait_log(Duration::from_secs(5), "chassisd sim: stopped after");
+}
