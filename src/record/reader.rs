@@ -288,7 +288,7 @@ impl SourceReader {
                 if line.trim().is_empty() {
                     continue;
                 }
-                return Some(parse_envelope_line(*kind, line).map_err(|e| skip(e.to_string())));
+                return Some(parse_line(*kind, line).map_err(|e| skip(e.to_string())));
             },
         }
     }
@@ -318,7 +318,8 @@ fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
     }
 }
 
-fn parse_envelope_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError> {
+/// One line of an envelope file (serial, commands, or a CAN source's events) as a record.
+pub fn parse_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError> {
     let env = envelope::split(line)?;
     let payload = match kind {
         SourceKind::Serial => match env.payload {

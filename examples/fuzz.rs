@@ -1,0 +1,1260 @@
+//! The fuzzing campaign (stable toolchain): a mutation loop over every parser that takes
+//! outside bytes. Each target starts from a seed corpus of real bytes (the fixtures, the
+//! shipped device files, `../shared/data` and the protocol documents), mutates them (bit and
+//! byte changes, cuts, copies, splices, protocol tokens, extreme numbers), and keeps an input
+//! in its corpus when it makes the parser behave in a way not seen before (a new signature
+//! of its counters and outcome). A panic is caught, counted, and its input saved under
+//! `fuzz/crashes/` to become a regression test.
+//!
+//! cargo run --release --example fuzz -- [--seconds S | --inputs N] [--jobs J] [--seed K] [TARGET...]
+//! cargo run --release --example fuzz -- --replay DIR
+//!
+//! Without targets it runs all of them; the last line is JSON with the figures per target.
+//! `--replay DIR` runs each `TARGET-*.bin` of DIR once through its target (the regression
+//! inputs in `fuzz/regressions/`, where a fixed crash's input goes) and fails on a panic.
+
+use std::collections::{HashMap, HashSet};
+use std::hash::{DefaultHasher, Hash, Hasher};
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use bytes::Bytes;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use chassisd::api::mqtt::MQTT_SOURCE;
+use chassisd::api::rtk::trajectory::MemoryStore;
+use chassisd::config::VehicleConfig;
+use chassisd::config::imu::ImuProtocol;
+use chassisd::config::mqtt::{
+    DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
+};
+use chassisd::devices::bms::profile::BmsProfile;
+use chassisd::devices::can::{Frame, Received};
+use chassisd::devices::cia402::profile::DriveProfile;
+use chassisd::devices::gnss::NmeaReceiver;
+use chassisd::devices::imu::ImuDecoder;
+use chassisd::devices::imu::{hipnuc::HiPnuc, witmotion::WitMotion};
+use chassisd::engine::EngineOutput;
+use chassisd::engine::drivetrain::Drivetrain;
+use chassisd::record::meta::Meta;
+use chassisd::record::reader::parse_line;
+use chassisd::record::{Payload, Record, RecordingReader, SourceKind};
+use chassisd::sim::lockstep::{Lockstep, Sink, vehicle_config};
+use chassisd::sim::plant::{GnssCondition, PlantConfig};
+use chassisd::time::Timestamp;
+
+/// Longest input a mutation makes.
+const MAX_INPUT: usize = 8192;
+/// Inputs kept per target's corpus (seeds included).
+const MAX_CORPUS: usize = 4096;
+/// Signatures remembered per target.
+const MAX_SIGNATURES: usize = 1 << 16;
+/// An input slower than this is reported (a hang in the making).
+const SLOW: Duration = Duration::from_millis(200);
+
+/// Feeds one input and returns a signature of what happened.
+type Runner = Box<dyn FnMut(&[u8]) -> u64>;
+
+/// One parser under test: its seeds, its tokens, and a runner made once per job.
+struct Target {
+    name: &'static str,
+    about: &'static str,
+    seeds: fn() -> Vec<Vec<u8>>,
+    tokens: &'static [&'static [u8]],
+    /// A mutation that knows the input's structure, used for half of the inputs.
+    structured: Option<fn(&mut ChaCha8Rng, &mut Vec<u8>)>,
+    /// Makes the runner: it feeds one input and returns a signature of what happened.
+    runner: fn() -> Runner,
+}
+
+fn targets() -> Vec<Target> {
+    vec![
+        Target {
+            name: "nmea",
+            about: "NMEA framer, sentence decoders and fix assembly (NmeaReceiver)",
+            seeds: nmea_seeds,
+            tokens: NMEA_TOKENS,
+            structured: None,
+            runner: nmea_runner,
+        },
+        Target {
+            name: "witmotion",
+            about: "WitMotion 0x55 framer and decoder",
+            seeds: || imu_seeds(ImuProtocol::Witmotion),
+            tokens: &[b"\x55\x51", b"\x55\x52", b"\x55\x53", b"\x55\x59", b"\x55"],
+            structured: None,
+            runner: || imu_runner(ImuProtocol::Witmotion),
+        },
+        Target {
+            name: "hipnuc",
+            about: "HiPNUC 0x5A 0xA5 framer (CRC-16) and decoder",
+            seeds: || imu_seeds(ImuProtocol::Hipnuc),
+            tokens: &[b"\x5a\xa5", b"\x91", b"\x00\x00", b"\xff\xff"],
+            structured: None,
+            runner: || imu_runner(ImuProtocol::Hipnuc),
+        },
+        Target {
+            name: "candump",
+            about: "candump -L reader of the recording's CAN files",
+            seeds: candump_seeds,
+            tokens: &[b"(", b")", b"#", b"##", b"R", b" T", b"\n", b"vcan0 ", b"."],
+            structured: None,
+            runner: candump_runner,
+        },
+        Target {
+            name: "recording",
+            about: "recording envelope lines (serial, commands, CAN events) and meta.toml",
+            seeds: recording_seeds,
+            tokens: &[
+                b"(",
+                b")",
+                b"#",
+                b"!link-up",
+                b"!link-down",
+                b"\\",
+                b"%",
+                b"\n",
+            ],
+            structured: None,
+            runner: recording_runner,
+        },
+        Target {
+            name: "config",
+            about: "vehicle configuration loader (profiles, calibration, TLS files named by it)",
+            seeds: config_seeds,
+            tokens: TOML_TOKENS,
+            structured: None,
+            runner: config_runner,
+        },
+        Target {
+            name: "profiles",
+            about: "CiA 402 drive, BMS and e-stop profile loaders",
+            seeds: profile_seeds,
+            tokens: TOML_TOKENS,
+            structured: None,
+            runner: profile_runner,
+        },
+        Target {
+            name: "dbc",
+            about: "DBC loader and its BMS mapping",
+            seeds: dbc_seeds,
+            tokens: &[
+                b"BO_ ", b"SG_ ", b" : ", b"@1+", b"@0-", b"|", b"(", b")", b"[", b"]", b"\"",
+                b"\n",
+            ],
+            structured: None,
+            runner: dbc_runner,
+        },
+        Target {
+            name: "dialects",
+            about: "MQTT payloads of the rtk, root and device dialects, through the engine",
+            seeds: dialect_seeds,
+            tokens: JSON_TOKENS,
+            structured: Some(mutate_json_command),
+            runner: dialect_runner,
+        },
+        Target {
+            name: "canopen",
+            about: "CAN frames into the drive train: NMT, SDO, PDO, EMCY, heartbeat, Daly BMS, e-stop",
+            seeds: canopen_seeds,
+            tokens: &[
+                b"\x81\x00",
+                b"\x01\x07",
+                b"\x02\x07",
+                b"\x81\x01",
+                b"\x82\x01",
+                b"\x81\x05",
+                b"\x18\x00",
+            ],
+            structured: None,
+            runner: canopen_runner,
+        },
+    ]
+}
+
+const NMEA_TOKENS: &[&[u8]] = &[
+    b"$GPGGA,", b"$GNRMC,", b"$GPVTG,", b"$GPGST,", b"$GNGNS,", b"$GPHDT,", b"$GPZDA,", b"$PSTI,",
+    b"$GPTHS,", b"*", b"\r\n", b",,", b",A,", b",N,", b",E,", b"-", b".",
+];
+const TOML_TOKENS: &[&[u8]] = &[
+    b"[", b"]", b"[[", b"]]", b" = ", b"\"", b"'''", b"\n", b"true", b"-1", b"1e308", b"nan",
+    b"inf", b"{", b"}", b",", b"#",
+];
+const JSON_TOKENS: &[&[u8]] = &[
+    b"{",
+    b"}",
+    b"[",
+    b"]",
+    b"\"",
+    b":",
+    b",",
+    b"null",
+    b"true",
+    b"-1",
+    b"1e308",
+    b"-1e308",
+    b"18446744073709551616",
+    b"\"cmd\"",
+    b"\"data\"",
+    b"\"messageType\"",
+    b"\\u0000",
+];
+/// Numbers that break arithmetic, put in place of a number.
+const NUMBERS: &[&[u8]] = &[
+    b"0",
+    b"-0",
+    b"-1",
+    b"1e308",
+    b"-1e308",
+    b"NaN",
+    b"inf",
+    b"4294967296",
+    b"9223372036854775808",
+    b"99999999999999999999999",
+    b"0.0000000001",
+    b"255",
+    b"65535",
+    b"-32768",
+];
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn shared() -> PathBuf {
+    std::env::var_os("CHASSISD_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("../shared/data"))
+}
+
+fn files_in(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    files.retain(|p| p.extension().is_some_and(|e| e == ext));
+    files.sort();
+    files
+}
+
+/// `bytes` cut into pieces of about `size`, at most `n` of them, spread over the whole.
+fn pieces(bytes: &[u8], size: usize, n: usize) -> Vec<Vec<u8>> {
+    if bytes.is_empty() {
+        return Vec::new();
+    }
+    let count = bytes.len().div_ceil(size);
+    let step = count.div_ceil(n).max(1);
+    (0..count)
+        .step_by(step)
+        .map(|i| bytes[i * size..((i + 1) * size).min(bytes.len())].to_vec())
+        .collect()
+}
+
+fn signature(parts: &[u64]) -> u64 {
+    let mut h = DefaultHasher::new();
+    parts.hash(&mut h);
+    h.finish()
+}
+
+// ---- targets -------------------------------------------------------------------------------
+
+fn nmea_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = Vec::new();
+    for log in files_in(&shared().join("gnss"), "log") {
+        if let Ok(bytes) = std::fs::read(&log) {
+            seeds.extend(pieces(&bytes, 1024, 40));
+        }
+    }
+    seeds
+}
+
+fn nmea_runner() -> Runner {
+    Box::new(|input| {
+        let mut receiver = NmeaReceiver::new();
+        let mut fixes = 0u64;
+        // Two chunks: a sentence split across reads is the framer's daily work.
+        let cut = input.len() / 2;
+        receiver.push(Timestamp::default(), &input[..cut], |_| fixes += 1);
+        receiver.push(Timestamp::from_micros(500_000), &input[cut..], |_| {
+            fixes += 1
+        });
+        let s = receiver.stats();
+        let f = s.framer;
+        signature(&[
+            fixes.min(8),
+            f.sentences.min(16),
+            f.checksum_errors.min(4),
+            f.missing_checksum.min(4),
+            f.truncated.min(4),
+            f.overlong.min(4),
+            s.sentences_by_kind.len() as u64,
+            s.decode_errors.min(4),
+        ])
+    })
+}
+
+/// IMU bytes from the simulator's plant speaking `protocol`.
+fn imu_seeds(protocol: ImuProtocol) -> Vec<Vec<u8>> {
+    let Ok(mut plant) = PlantConfig::builtin() else {
+        return Vec::new();
+    };
+    plant.imu.protocol = protocol;
+    let Ok(mut sim) = Lockstep::new(plant, 7, Timestamp::from_micros(1_000_000)) else {
+        return Vec::new();
+    };
+    let mut sink = Collect::default();
+    let gnss = GnssCondition {
+        quality: None,
+        offset: (0.0, 0.0),
+    };
+    for _ in 0..500 {
+        sim.step(gnss, &mut sink);
+    }
+    let bytes: Vec<u8> = sink
+        .records
+        .iter()
+        .filter(|r| r.source == "imu")
+        .filter_map(|r| match &r.payload {
+            Payload::Serial(b) => Some(b.to_vec()),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    eprintln!(
+        "fuzz: {} bytes of {protocol:?} from the simulator",
+        bytes.len()
+    );
+    pieces(&bytes, 128, 64)
+}
+
+fn imu_runner(protocol: ImuProtocol) -> Runner {
+    Box::new(move |input| {
+        let mut decoder = match protocol {
+            ImuProtocol::Witmotion => ImuDecoder::WitMotion(WitMotion::new()),
+            ImuProtocol::Hipnuc => ImuDecoder::HiPnuc(HiPnuc::new()),
+        };
+        let mut plausible = 0u64;
+        let cut = input.len() / 3;
+        decoder.push(Timestamp::default(), &input[..cut], |s| {
+            plausible += u64::from(s.is_plausible())
+        });
+        decoder.push(Timestamp::from_micros(10_000), &input[cut..], |s| {
+            plausible += u64::from(s.is_plausible())
+        });
+        let s = decoder.stats();
+        signature(&[
+            s.frames.min(16),
+            s.checksum_errors.min(4),
+            s.samples.min(16),
+            plausible.min(16),
+            (s.bytes_skipped > 0) as u64,
+        ])
+    })
+}
+
+#[derive(Default)]
+struct Collect {
+    records: Vec<Record>,
+    outputs: u64,
+    /// What the replies said, numbers left out: a new error text is a new behaviour.
+    replies: u64,
+}
+
+impl Sink for Collect {
+    fn record(&mut self, record: &Record) {
+        if self.records.len() < 100_000 {
+            self.records.push(record.clone());
+        }
+    }
+
+    fn output(&mut self, output: EngineOutput) {
+        self.outputs += 1;
+        if let EngineOutput::Publish(p) = output {
+            if std::env::var_os("FUZZ_DEBUG").is_some() {
+                eprintln!("reply {} {}", p.topic, String::from_utf8_lossy(&p.payload));
+            }
+            let text: Vec<u8> = p
+                .payload
+                .iter()
+                .copied()
+                .filter(|b| !b.is_ascii_digit())
+                .collect();
+            self.replies = self.replies.rotate_left(7) ^ (p.topic.as_str(), text).hash_u64();
+        }
+    }
+}
+
+fn fixture_files(name: &str) -> Vec<Vec<u8>> {
+    ["rtk-drive", "can-drive", "sim-drive"]
+        .iter()
+        .filter_map(|f| std::fs::read(repo().join("fixtures").join(f).join(name)).ok())
+        .collect()
+}
+
+fn candump_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = Vec::new();
+    for name in ["can0.log", "vcan0.log", "sim0.log"] {
+        for bytes in fixture_files(name) {
+            seeds.extend(pieces(&bytes, 512, 30));
+        }
+    }
+    seeds
+}
+
+fn candump_runner() -> Runner {
+    Box::new(|input| {
+        let mut reader = socketcan::dump::Reader::from_reader(input);
+        let (mut ok, mut bad) = (0u64, 0u64);
+        // The recording reader's loop: a parse error skips the line, the end stops.
+        for _ in 0..10_000 {
+            match reader.next_record() {
+                Ok(Some(_)) => ok += 1,
+                Ok(None) => break,
+                Err(socketcan::dump::ParseError::Io(_)) => break,
+                Err(_) => bad += 1,
+            }
+        }
+        signature(&[ok.min(16), bad.min(16)])
+    })
+}
+
+fn recording_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = Vec::new();
+    for name in [
+        "commands.log",
+        "gnss.log",
+        "imu.log",
+        "mqtt.log",
+        "host.log",
+        "process.log",
+        "sim0.events.log",
+        "vcan0.events.log",
+        "meta.toml",
+    ] {
+        for bytes in fixture_files(name) {
+            seeds.extend(pieces(&bytes, 400, 12));
+        }
+    }
+    seeds
+}
+
+fn recording_runner() -> Runner {
+    Box::new(|input| {
+        let text = String::from_utf8_lossy(input);
+        let mut parts = Vec::new();
+        for kind in [SourceKind::Serial, SourceKind::Commands, SourceKind::Can] {
+            let (mut ok, mut bad) = (0u64, 0u64);
+            for line in text.lines() {
+                match parse_line(kind, line) {
+                    Ok(_) => ok += 1,
+                    Err(_) => bad += 1,
+                }
+            }
+            parts.extend([ok.min(8), bad.min(8)]);
+        }
+        let meta = toml::from_str::<Meta>(&text).map(|m| m.check().is_ok());
+        parts.push(match meta {
+            Ok(true) => 2,
+            Ok(false) => 1,
+            Err(_) => 0,
+        });
+        // The reader that merges the files, on records rebuilt from what parsed.
+        let records: Vec<Record> = text
+            .lines()
+            .filter_map(|l| parse_line(SourceKind::Commands, l).ok())
+            .collect();
+        parts.push(RecordingReader::from_records(records).count().min(8) as u64);
+        signature(&parts)
+    })
+}
+
+fn config_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = fixture_files("vehicle.toml");
+    seeds.extend(std::fs::read(repo().join("devices/vehicle.example.toml")));
+    for dir in ["tests/vm"] {
+        for file in files_in(&repo().join(dir), "toml") {
+            seeds.extend(std::fs::read(file));
+        }
+    }
+    seeds
+}
+
+fn config_runner() -> Runner {
+    // Profiles named by the configuration are found beside the shipped examples.
+    let file = repo().join("devices/fuzzed.toml");
+    Box::new(move |input| {
+        let text = String::from_utf8_lossy(input);
+        match VehicleConfig::from_toml(&text, &file) {
+            Ok(config) => {
+                // A configuration that loads also starts a drive train.
+                let mut drivetrain = Drivetrain::new(&config);
+                signature(&[
+                    1,
+                    config.drive.len() as u64,
+                    drivetrain.feedback().drives.len() as u64,
+                ])
+            }
+            Err(e) => signature(&[0, std::mem::discriminant(&e).hash_u64()]),
+        }
+    })
+}
+
+trait HashU64 {
+    fn hash_u64(&self) -> u64;
+}
+
+impl<T: Hash> HashU64 for T {
+    fn hash_u64(&self) -> u64 {
+        let mut h = DefaultHasher::new();
+        self.hash(&mut h);
+        h.finish()
+    }
+}
+
+fn profile_seeds() -> Vec<Vec<u8>> {
+    files_in(&repo().join("devices"), "toml")
+        .into_iter()
+        .filter(|p| {
+            !p.file_name().is_some_and(|n| {
+                n.to_string_lossy().starts_with("plant")
+                    || n.to_string_lossy().starts_with("vehicle")
+            })
+        })
+        .filter_map(|p| std::fs::read(p).ok())
+        .collect()
+}
+
+fn profile_runner() -> Runner {
+    let file = repo().join("devices/fuzzed.toml");
+    Box::new(move |input| {
+        let text = String::from_utf8_lossy(input);
+        let drive = DriveProfile::from_toml(&text, &file).is_ok();
+        let bms = toml::from_str::<BmsProfile>(&text).map(|p| p.validate(&file).is_ok());
+        let plant = PlantConfig::from_toml(&text, &file).is_ok();
+        signature(&[
+            u64::from(drive),
+            match bms {
+                Ok(true) => 2,
+                Ok(false) => 1,
+                Err(_) => 0,
+            },
+            u64::from(plant),
+        ])
+    })
+}
+
+fn dbc_seeds() -> Vec<Vec<u8>> {
+    let mut seeds: Vec<Vec<u8>> = std::fs::read(repo().join("devices/pylontech.dbc"))
+        .into_iter()
+        .collect();
+    if let Some(whole) = seeds.first().cloned() {
+        seeds.extend(pieces(&whole, 700, 8));
+    }
+    seeds
+}
+
+fn dbc_runner() -> Runner {
+    let profile_text =
+        std::fs::read_to_string(repo().join("devices/pylontech-bms.toml")).unwrap_or_default();
+    Box::new(move |input| {
+        let Ok(BmsProfile::Dbc(mut profile)) = toml::from_str::<BmsProfile>(&profile_text) else {
+            return 0;
+        };
+        profile.dbc_text = String::from_utf8_lossy(input).into_owned();
+        // The loader's check of a DBC is this mapping (the rest of it reads the profile).
+        let mapped = chassisd::devices::bms::dbc::DbcBms::new(&profile);
+        let checked = mapped.is_ok();
+        let mut updates = 0u64;
+        if let Ok(mut bms) = mapped {
+            // Frames on every id the input names, with data from the input itself.
+            for (i, chunk) in input.chunks(8).take(64).enumerate() {
+                let id = 0x350 + (i as u32 % 0x30);
+                if let Some(frame) = Frame::standard(id, chunk) {
+                    let t = Timestamp::from_micros(i as u64 * 1000);
+                    updates += u64::from(bms.on_frame(t, &frame));
+                }
+            }
+        }
+        signature(&[u64::from(checked), updates.min(16)])
+    })
+}
+
+/// The topics the simulated vehicle's dialects answer (vehicle id `sim`, serial `SIM0001`),
+/// each with the document whose examples are its seeds.
+const DIALECT_TOPICS: &[(&str, &str)] = &[
+    ("mqtt_control", "rtk-mqtt-protocol.md"),
+    ("/root/sim/cmd/chassis/set", "root-mqtt-api.rst"),
+    ("/root/sim/cmd/navigation/set", "root-mqtt-api.rst"),
+    ("/root/sim/cmd/map/set", "root-mqtt-api.rst"),
+    ("/root/sim/setting/navigation/set", "root-mqtt-api.rst"),
+    ("/root/sim/setting/map/set", "root-mqtt-api.rst"),
+    ("/root/sim/heartbeat/set", "root-mqtt-api.rst"),
+    ("device/SIM0001/goal", "device-mqtt-api.md"),
+    ("device/SIM0001/start_mapping", "device-mqtt-api.md"),
+    ("device/SIM0001/stop_mapping", "device-mqtt-api.md"),
+    ("device/SIM0001/use_map", "device-mqtt-api.md"),
+];
+
+fn dialect_seeds() -> Vec<Vec<u8>> {
+    // Every JSON example of the protocol documents that parses (comments and trailing commas
+    // taken out), behind each topic of its document.
+    let spec = std::env::var_os("CHASSISD_SHARED_SPEC")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("../shared/spec"));
+    let mut seeds = Vec::new();
+    for (i, (_, doc)) in DIALECT_TOPICS.iter().enumerate() {
+        let Ok(text) = std::fs::read_to_string(spec.join(doc)) else {
+            continue;
+        };
+        for block in json_blocks(&text) {
+            let clean = strip_comments_and_trailing_commas(&block);
+            let Ok(value) = serde_json::from_str::<serde_json::Value>(&clean) else {
+                continue;
+            };
+            let mut seed = vec![i as u8];
+            seed.extend(serde_json::to_vec(&value).unwrap_or_default());
+            seeds.push(seed);
+        }
+    }
+    seeds
+}
+
+/// `//` comments (outside strings) and commas before a closing bracket removed.
+fn strip_comments_and_trailing_commas(text: &str) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let mut in_string = false;
+        let mut escaped = false;
+        let mut prev = ' ';
+        let mut cut = line.len();
+        for (at, c) in line.char_indices() {
+            match c {
+                '\\' if in_string => escaped = !escaped,
+                '"' if !escaped => in_string = !in_string,
+                '/' if !in_string && prev == '/' => {
+                    cut = at - 1;
+                    break;
+                }
+                _ => escaped = false,
+            }
+            prev = c;
+        }
+        out.push_str(&line[..cut]);
+        out.push('\n');
+    }
+    let mut cleaned = String::new();
+    let chars: Vec<char> = out.chars().collect();
+    for (i, &c) in chars.iter().enumerate() {
+        if c == ',' {
+            let next = chars[i + 1..].iter().find(|c| !c.is_whitespace());
+            if matches!(next, Some('}') | Some(']')) {
+                continue;
+            }
+        }
+        cleaned.push(c);
+    }
+    cleaned
+}
+
+/// Text from each `{` at a line start to its matching `}` (the documents' examples).
+fn json_blocks(text: &str) -> Vec<String> {
+    let mut blocks = Vec::new();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut i = 0;
+    while i < lines.len() {
+        if lines[i].trim_start().starts_with('{') {
+            let mut depth = 0i32;
+            let mut block = String::new();
+            for line in &lines[i..] {
+                block.push_str(line);
+                block.push('\n');
+                depth += line.matches('{').count() as i32 - line.matches('}').count() as i32;
+                i += 1;
+                if depth <= 0 || block.len() > 6000 {
+                    break;
+                }
+            }
+            blocks.push(block);
+        } else {
+            i += 1;
+        }
+    }
+    blocks
+}
+
+fn dialect_runner() -> Runner {
+    let fresh = || {
+        let mqtt = MqttConfig {
+            rtk: Some(RtkDialectConfig::default()),
+            root: Some(RootDialectConfig {
+                vehicle_id: "sim".into(),
+                heartbeat_timeout_s: 3.0,
+                require_heartbeat: false,
+                heartbeat_client_id: None,
+            }),
+            device: Some(DeviceDialectConfig {
+                serial_number: "SIM0001".into(),
+                mapping_forward: None,
+            }),
+            ..MqttConfig::default()
+        };
+        let plant = PlantConfig::builtin().expect("built-in plant");
+        Lockstep::with_mqtt(
+            plant,
+            3,
+            Timestamp::from_micros(1_000_000),
+            Some(mqtt),
+            Box::new(MemoryStore::default()),
+        )
+        .expect("simulated vehicle")
+    };
+    let mut sim = fresh();
+    let mut n = 0u64;
+    Box::new(move |input| {
+        n += 1;
+        // A fresh vehicle now and then: saved trajectories and missions pile up otherwise.
+        if n.is_multiple_of(2000) {
+            sim = fresh();
+        }
+        let Some((&which, payload)) = input.split_first() else {
+            return 0;
+        };
+        let (topic, _) = DIALECT_TOPICS[usize::from(which) % DIALECT_TOPICS.len()];
+        let mut sink = Collect::default();
+        sim.input(
+            MQTT_SOURCE,
+            Payload::Command {
+                topic: topic.into(),
+                payload: Bytes::copy_from_slice(payload),
+            },
+            &mut sink,
+        );
+        // Let what the command started run a little.
+        if n.is_multiple_of(50) {
+            let gnss = GnssCondition {
+                quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
+                offset: (0.0, 0.0),
+            };
+            for _ in 0..10 {
+                sim.step(gnss, &mut sink);
+            }
+        }
+        signature(&[
+            u64::from(which) % DIALECT_TOPICS.len() as u64,
+            sink.outputs.min(8),
+        ])
+    })
+}
+
+/// A dialect input (topic byte, JSON payload) with one value of its JSON changed: a number
+/// made extreme, a string made odd, a key dropped, a value's type swapped. Inputs that are not
+/// JSON get a new topic byte.
+fn mutate_json_command(rng: &mut ChaCha8Rng, input: &mut Vec<u8>) {
+    if input.is_empty() {
+        input.push(rng.random());
+        return;
+    }
+    let Ok(mut value) = serde_json::from_slice::<serde_json::Value>(&input[1..]) else {
+        input[0] = rng.random();
+        return;
+    };
+    for _ in 0..rng.random_range(1..=3) {
+        mutate_json_value(rng, &mut value, 0);
+    }
+    if rng.random_bool(0.2) {
+        input[0] = rng.random();
+    }
+    input.truncate(1);
+    input.extend(serde_json::to_vec(&value).unwrap_or_default());
+}
+
+fn mutate_json_value(rng: &mut ChaCha8Rng, value: &mut serde_json::Value, depth: u32) {
+    use serde_json::{Value, json};
+    // Walk down to a random node.
+    let children = match value {
+        Value::Object(map) => map.len(),
+        Value::Array(items) => items.len(),
+        _ => 0,
+    };
+    if children > 0 && depth < 8 && rng.random_bool(0.7) {
+        let i = rng.random_range(0..children);
+        match value {
+            Value::Object(map) => {
+                if rng.random_bool(0.1) {
+                    let key = map.keys().nth(i).cloned().unwrap_or_default();
+                    map.remove(&key);
+                } else if let Some(child) = map.values_mut().nth(i) {
+                    mutate_json_value(rng, child, depth + 1);
+                }
+            }
+            Value::Array(items) => mutate_json_value(rng, &mut items[i], depth + 1),
+            _ => {}
+        }
+        return;
+    }
+    let odd_strings = [
+        "",
+        " ",
+        "\u{0}",
+        "\u{202e}",
+        "../../etc/passwd",
+        "9999999999",
+        "-1",
+        "NaN",
+        "true",
+        "é",
+    ];
+    let new = match rng.random_range(0..9) {
+        0 => json!(null),
+        1 => json!(rng.random::<bool>()),
+        2 => json!([1e308, -1e308, f64::MAX, f64::MIN_POSITIVE, 0.0, -0.0][rng.random_range(0..6)]),
+        3 => json!([i64::MIN, i64::MAX, -1, 0, 1, 255, 65536][rng.random_range(0..7)]),
+        4 => json!(u64::MAX),
+        5 => json!(odd_strings[rng.random_range(0..odd_strings.len())]),
+        6 => json!([]),
+        7 => json!({}),
+        8 if rng.random_bool(0.2) => json!("x".repeat(300)),
+        _ => match &*value {
+            Value::Number(n) => {
+                json!(n.as_f64().unwrap_or(0.0) * [-1.0, 10.0, 0.1, 1e6][rng.random_range(0..4)])
+            }
+            Value::String(s) => json!(format!("{s}{s}")),
+            other => other.clone(),
+        },
+    };
+    *value = new;
+}
+
+/// Input encoding: per frame, two bytes of id (little-endian, 11 bits used), a length byte,
+/// then the data (cut to 8).
+fn canopen_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = Vec::new();
+    for name in ["can0.log", "vcan0.log", "sim0.log"] {
+        for bytes in fixture_files(name) {
+            let mut reader = socketcan::dump::Reader::from_reader(&bytes[..]);
+            let mut seed = Vec::new();
+            while let Ok(Some(record)) = reader.next_record() {
+                use socketcan::{EmbeddedFrame, Frame as _};
+                let socketcan::CanAnyFrame::Normal(f) = record.frame else {
+                    continue;
+                };
+                let id = f.raw_id() as u16;
+                seed.extend(id.to_le_bytes());
+                seed.push(f.dlc() as u8);
+                seed.extend(f.data());
+                if seed.len() > 600 {
+                    seeds.push(std::mem::take(&mut seed));
+                    if seeds.len() > 100 {
+                        return seeds;
+                    }
+                }
+            }
+            if !seed.is_empty() {
+                seeds.push(seed);
+            }
+        }
+    }
+    seeds
+}
+
+fn canopen_runner() -> Runner {
+    // The simulated vehicle's configuration: two CiA 402 wheel drives and a blade, a Daly
+    // BMS and an e-stop input on one bus.
+    let plant = PlantConfig::builtin().expect("built-in plant");
+    let config = vehicle_config(&plant).expect("simulated vehicle's configuration");
+    let bus = config
+        .can
+        .first()
+        .map(|c| c.interface.clone())
+        .unwrap_or_default();
+    Box::new(move |input| {
+        let mut drivetrain = Drivetrain::new(&config);
+        let mut tx = Vec::new();
+        let mut rest = input;
+        let (mut frames, mut updates) = (0u64, 0u64);
+        while rest.len() >= 3 {
+            let id = u32::from(u16::from_le_bytes([rest[0], rest[1]])) & 0x7ff;
+            let len = usize::from(rest[2] % 9).min(rest.len() - 3);
+            let frame = Frame::standard(id, &rest[3..3 + len]);
+            rest = &rest[3 + len..];
+            let Some(frame) = frame else { continue };
+            let t = Timestamp::from_micros(1_000_000 + frames * 1000);
+            updates += u64::from(drivetrain.on_frame(t, &bus, &Received::Data(frame), &mut tx));
+            frames += 1;
+        }
+        signature(&[frames.min(8), updates.min(8), tx.len().min(16) as u64])
+    })
+}
+
+// ---- the loop ------------------------------------------------------------------------------
+
+fn mutate(rng: &mut ChaCha8Rng, input: &mut Vec<u8>, corpus: &[Vec<u8>], tokens: &[&[u8]]) {
+    for _ in 0..rng.random_range(1..=6) {
+        let len = input.len();
+        match rng.random_range(0..10) {
+            0 if len > 0 => {
+                let i = rng.random_range(0..len);
+                input[i] ^= 1 << rng.random_range(0..8);
+            }
+            1 if len > 0 => {
+                let i = rng.random_range(0..len);
+                input[i] = *[
+                    0u8, 0xff, 0x7f, 0x80, b'$', b'*', b',', b'\r', b'\n', b'"', b'{',
+                ]
+                .get(rng.random_range(0..12))
+                .unwrap_or(&rng.random());
+            }
+            2 if len > 0 => {
+                let a = rng.random_range(0..len);
+                let b = (a + rng.random_range(1..=32)).min(len);
+                input.drain(a..b);
+            }
+            3 => {
+                let at = rng.random_range(0..=len);
+                let n = rng.random_range(1..=16);
+                let bytes: Vec<u8> = (0..n).map(|_| rng.random()).collect();
+                input.splice(at..at, bytes);
+            }
+            4 if len > 0 => {
+                let a = rng.random_range(0..len);
+                let b = (a + rng.random_range(1..=64)).min(len);
+                let copy = input[a..b].to_vec();
+                let at = rng.random_range(0..=len);
+                input.splice(at..at, copy);
+            }
+            5 if !tokens.is_empty() => {
+                let token = tokens[rng.random_range(0..tokens.len())];
+                let at = rng.random_range(0..=len);
+                input.splice(at..at, token.iter().copied());
+            }
+            6 if !corpus.is_empty() => {
+                let other = &corpus[rng.random_range(0..corpus.len())];
+                if !other.is_empty() {
+                    let at = rng.random_range(0..=len);
+                    let from = rng.random_range(0..other.len());
+                    input.truncate(at);
+                    input.extend_from_slice(&other[from..]);
+                }
+            }
+            7 if len > 0 => input.truncate(rng.random_range(0..len)),
+            8 => replace_number(rng, input),
+            _ => {
+                let at = rng.random_range(0..=len);
+                let number = NUMBERS[rng.random_range(0..NUMBERS.len())];
+                input.splice(at..at, number.iter().copied());
+            }
+        }
+    }
+    input.truncate(MAX_INPUT);
+}
+
+/// Replaces one run of digits with an extreme number.
+fn replace_number(rng: &mut ChaCha8Rng, input: &mut Vec<u8>) {
+    let starts: Vec<usize> = (0..input.len())
+        .filter(|&i| input[i].is_ascii_digit() && (i == 0 || !input[i - 1].is_ascii_digit()))
+        .collect();
+    if starts.is_empty() {
+        return;
+    }
+    let a = starts[rng.random_range(0..starts.len())];
+    let b = (a..input.len())
+        .find(|&i| !(input[i].is_ascii_digit() || input[i] == b'.'))
+        .unwrap_or(input.len());
+    let number = NUMBERS[rng.random_range(0..NUMBERS.len())];
+    input.splice(a..b, number.iter().copied());
+}
+
+#[derive(Debug, Default, Clone, serde::Serialize)]
+struct Figures {
+    target: &'static str,
+    inputs: u64,
+    panics: u64,
+    slow: u64,
+    seeds: usize,
+    corpus: usize,
+    signatures: usize,
+    seconds: f64,
+    per_second: f64,
+}
+
+fn run_target(target: &Target, budget: Budget, seed: u64, crashes: &Path) -> Figures {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ target.name.hash_u64());
+    let seeds = (target.seeds)();
+    let mut corpus: Vec<Vec<u8>> = seeds.clone();
+    if corpus.is_empty() {
+        corpus.push(Vec::new());
+    }
+    let mut runner = (target.runner)();
+    let mut seen: HashSet<u64> = HashSet::new();
+    let mut figures = Figures {
+        target: target.name,
+        seeds: seeds.len(),
+        ..Figures::default()
+    };
+    let start = Instant::now();
+    let mut last_report = start;
+    let mut input = Vec::with_capacity(MAX_INPUT);
+    // The seeds run as they are first.
+    let mut next_seed = 0usize;
+    loop {
+        if budget.done(figures.inputs, start.elapsed()) {
+            break;
+        }
+        input.clear();
+        if next_seed < corpus.len().min(seeds.len()) {
+            input.extend_from_slice(&corpus[next_seed]);
+            next_seed += 1;
+        } else {
+            input.extend_from_slice(&corpus[rng.random_range(0..corpus.len())]);
+            match target.structured {
+                Some(structured) if rng.random_bool(0.5) => structured(&mut rng, &mut input),
+                _ => mutate(&mut rng, &mut input, &corpus, target.tokens),
+            }
+        }
+        let began = Instant::now();
+        let outcome = catch_unwind(AssertUnwindSafe(|| runner(&input)));
+        let took = began.elapsed();
+        figures.inputs += 1;
+        match outcome {
+            Ok(sig) => {
+                if seen.len() < MAX_SIGNATURES && seen.insert(sig) && corpus.len() < MAX_CORPUS {
+                    corpus.push(input.clone());
+                }
+            }
+            Err(_) => {
+                figures.panics += 1;
+                save(crashes, target.name, "panic", &input);
+                // The runner may hold broken state after a panic.
+                runner = (target.runner)();
+            }
+        }
+        if took > SLOW {
+            figures.slow += 1;
+            save(crashes, target.name, "slow", &input);
+        }
+        if last_report.elapsed() > Duration::from_secs(30) {
+            last_report = Instant::now();
+            eprintln!(
+                "fuzz {}: {} inputs, {} panics, corpus {}, {:.0}/s",
+                target.name,
+                figures.inputs,
+                figures.panics,
+                corpus.len(),
+                figures.inputs as f64 / start.elapsed().as_secs_f64()
+            );
+        }
+    }
+    figures.seconds = start.elapsed().as_secs_f64();
+    figures.per_second = figures.inputs as f64 / figures.seconds.max(1e-9);
+    figures.corpus = corpus.len();
+    figures.signatures = seen.len();
+    figures
+}
+
+fn save(dir: &Path, target: &str, kind: &str, input: &[u8]) {
+    let _ = std::fs::create_dir_all(dir);
+    let path = dir.join(format!("{target}-{kind}-{:016x}.bin", input.hash_u64()));
+    match std::fs::write(&path, input) {
+        Ok(()) => eprintln!("fuzz {target}: {kind}, input saved to {}", path.display()),
+        Err(e) => eprintln!("fuzz {target}: {kind}; cannot save {}: {e}", path.display()),
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Budget {
+    Seconds(Duration),
+    Inputs(u64),
+}
+
+impl Budget {
+    fn done(self, inputs: u64, elapsed: Duration) -> bool {
+        match self {
+            Self::Seconds(d) => elapsed >= d,
+            Self::Inputs(n) => inputs >= n,
+        }
+    }
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mut budget = Budget::Seconds(Duration::from_secs(60));
+    let mut jobs = 1usize;
+    let mut seed = 1u64;
+    let mut wanted: Vec<String> = Vec::new();
+    while let Some(arg) = args.next() {
+        let mut value = |what: &str| {
+            args.next()
+                .unwrap_or_else(|| fail(&format!("{arg} needs {what}")))
+        };
+        match arg.as_str() {
+            "--seconds" => {
+                let s: f64 = value("seconds")
+                    .parse()
+                    .unwrap_or_else(|_| fail("--seconds: a number"));
+                if !(s.is_finite() && s > 0.0 && s < 1e7) {
+                    fail("--seconds: a positive number");
+                }
+                budget = Budget::Seconds(Duration::from_secs_f64(s));
+            }
+            "--inputs" => {
+                budget = Budget::Inputs(
+                    value("a count")
+                        .parse()
+                        .unwrap_or_else(|_| fail("--inputs: a count")),
+                )
+            }
+            "--jobs" => {
+                jobs = value("a count")
+                    .parse()
+                    .unwrap_or_else(|_| fail("--jobs: a count"))
+            }
+            "--seed" => {
+                seed = value("a number")
+                    .parse()
+                    .unwrap_or_else(|_| fail("--seed: a number"))
+            }
+            "--replay" => {
+                let dir = PathBuf::from(value("a folder"));
+                std::process::exit(replay(&dir));
+            }
+            "--list" => {
+                for t in targets() {
+                    println!("{:10} {}", t.name, t.about);
+                }
+                return;
+            }
+            "-h" | "--help" => {
+                println!(
+                    "cargo run --release --example fuzz -- [--seconds S | --inputs N] [--jobs J] [--seed K] [--list] [TARGET...]"
+                );
+                return;
+            }
+            name => wanted.push(name.to_owned()),
+        }
+    }
+    let all = targets();
+    for w in &wanted {
+        if !all.iter().any(|t| t.name == w) {
+            let names: Vec<&str> = all.iter().map(|t| t.name).collect();
+            fail(&format!("no target {w:?}; there are {}", names.join(", ")));
+        }
+    }
+    let chosen: Vec<usize> = (0..all.len())
+        .filter(|&i| wanted.is_empty() || wanted.iter().any(|w| w == all[i].name))
+        .collect();
+    // The panics are expected to be caught; their messages would drown the progress lines.
+    std::panic::set_hook(Box::new(|info| {
+        let location = info.location().map(|l| l.to_string()).unwrap_or_default();
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        eprintln!("fuzz: panic at {location}: {message}");
+    }));
+    let crashes = repo().join("fuzz/crashes");
+    let queue = Arc::new(Mutex::new(chosen));
+    let results = Arc::new(Mutex::new(HashMap::new()));
+    let workers: Vec<_> = (0..jobs.max(1))
+        .map(|_| {
+            let queue = Arc::clone(&queue);
+            let results = Arc::clone(&results);
+            let crashes = crashes.clone();
+            std::thread::spawn(move || {
+                let targets = targets();
+                loop {
+                    let next = queue.lock().ok().and_then(|mut q| q.pop());
+                    let Some(i) = next else { break };
+                    let figures = run_target(&targets[i], budget, seed, &crashes);
+                    eprintln!(
+                        "fuzz {}: done, {} inputs in {:.0} s ({:.0}/s), {} panics, {} slow, corpus {} from {} seeds",
+                        figures.target,
+                        figures.inputs,
+                        figures.seconds,
+                        figures.per_second,
+                        figures.panics,
+                        figures.slow,
+                        figures.corpus,
+                        figures.seeds
+                    );
+                    if let Ok(mut r) = results.lock() {
+                        r.insert(i, figures);
+                    }
+                }
+            })
+        })
+        .collect();
+    for w in workers {
+        let _ = w.join();
+    }
+    let results = results.lock().map(|r| r.clone()).unwrap_or_default();
+    let mut ordered: Vec<(usize, Figures)> = results.into_iter().collect();
+    ordered.sort_by_key(|(i, _)| *i);
+    let figures: Vec<Figures> = ordered.into_iter().map(|(_, f)| f).collect();
+    println!("| target | inputs | panics | slow (>200 ms) | inputs/s | corpus (seeds) |");
+    println!("|---|---|---|---|---|---|");
+    for f in &figures {
+        println!(
+            "| {} | {} | {} | {} | {:.0} | {} ({}) |",
+            f.target, f.inputs, f.panics, f.slow, f.per_second, f.corpus, f.seeds
+        );
+    }
+    let clean = figures.iter().all(|f| f.panics == 0 && f.seeds > 0);
+    println!(
+        "{}",
+        serde_json::json!({ "targets": figures, "pass": clean })
+    );
+    if !clean {
+        std::process::exit(1);
+    }
+}
+
+/// Runs every saved input of `dir` once through the target its name starts with; the exit
+/// status.
+fn replay(dir: &Path) -> i32 {
+    let all = targets();
+    let mut runners: HashMap<&str, Runner> = HashMap::new();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    files.sort();
+    let (mut ran, mut panics) = (0, 0);
+    for file in files {
+        let name = file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let Some(target) = all
+            .iter()
+            .find(|t| name.starts_with(&format!("{}-", t.name)))
+        else {
+            continue;
+        };
+        let Ok(input) = std::fs::read(&file) else {
+            eprintln!("fuzz: cannot read {}", file.display());
+            return 1;
+        };
+        let runner = runners
+            .entry(target.name)
+            .or_insert_with(|| (target.runner)());
+        ran += 1;
+        if catch_unwind(AssertUnwindSafe(|| runner(&input))).is_err() {
+            panics += 1;
+            eprintln!("fuzz: {} panics", file.display());
+            runners.remove(target.name);
+        }
+    }
+    println!(
+        "fuzz: {ran} saved inputs replayed from {}, {panics} panics",
+        dir.display()
+    );
+    i32::from(panics > 0)
+}
+
+fn fail(message: &str) -> ! {
+    eprintln!("fuzz: {message}");
+    std::process::exit(2);
+}
