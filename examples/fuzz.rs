@@ -46,6 +46,9 @@ use chassisd::sim::lockstep::{Lockstep, Sink, vehicle_config};
 use chassisd::sim::plant::{GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
 
+#[path = "../tests/common/spec.rs"]
+mod spec;
+
 /// Longest input a mutation makes.
 const MAX_INPUT: usize = 8192;
 /// Inputs kept per target's corpus (seeds included).
@@ -372,9 +375,6 @@ impl Sink for Collect {
     fn output(&mut self, output: EngineOutput) {
         self.outputs += 1;
         if let EngineOutput::Publish(p) = output {
-            if std::env::var_os("FUZZ_DEBUG").is_some() {
-                eprintln!("reply {} {}", p.topic, String::from_utf8_lossy(&p.payload));
-            }
             let text: Vec<u8> = p
                 .payload
                 .iter()
@@ -598,90 +598,39 @@ const DIALECT_TOPICS: &[(&str, &str)] = &[
 ];
 
 fn dialect_seeds() -> Vec<Vec<u8>> {
-    // Every JSON example of the protocol documents that parses (comments and trailing commas
-    // taken out), behind each topic of its document.
+    // Every JSON example of the protocol documents, as the protocol tests read them: a root
+    // example behind the topic the document names for it, the others behind each topic of
+    // their document.
     let spec = std::env::var_os("CHASSISD_SHARED_SPEC")
         .map(PathBuf::from)
         .unwrap_or_else(|| repo().join("../shared/spec"));
+    let read = |doc: &str| std::fs::read_to_string(spec.join(doc)).unwrap_or_default();
+    let topic_index = |topic: &str| DIALECT_TOPICS.iter().position(|(t, _)| *t == topic);
     let mut seeds = Vec::new();
-    for (i, (_, doc)) in DIALECT_TOPICS.iter().enumerate() {
-        let Ok(text) = std::fs::read_to_string(spec.join(doc)) else {
-            continue;
-        };
-        for block in json_blocks(&text) {
-            let clean = strip_comments_and_trailing_commas(&block);
-            let Ok(value) = serde_json::from_str::<serde_json::Value>(&clean) else {
-                continue;
-            };
-            let mut seed = vec![i as u8];
-            seed.extend(serde_json::to_vec(&value).unwrap_or_default());
-            seeds.push(seed);
+    let mut push = |index: usize, value: &serde_json::Value| {
+        let mut seed = vec![index as u8];
+        seed.extend(serde_json::to_vec(value).unwrap_or_default());
+        seeds.push(seed);
+    };
+    for example in spec::rst_json_examples(&read("root-mqtt-api.rst"), "sim") {
+        let json = spec::strip_json_comments(&example.text);
+        if let (Some(i), Ok(value)) = (topic_index(&example.topic), serde_json::from_str(&json)) {
+            push(i, &value);
+        }
+    }
+    for doc in ["rtk-mqtt-protocol.md", "device-mqtt-api.md"] {
+        let examples = spec::markdown_json_examples(&read(doc));
+        for (i, _) in DIALECT_TOPICS
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, d))| *d == doc)
+        {
+            for (_, value) in &examples {
+                push(i, value);
+            }
         }
     }
     seeds
-}
-
-/// `//` comments (outside strings) and commas before a closing bracket removed.
-fn strip_comments_and_trailing_commas(text: &str) -> String {
-    let mut out = String::new();
-    for line in text.lines() {
-        let mut in_string = false;
-        let mut escaped = false;
-        let mut prev = ' ';
-        let mut cut = line.len();
-        for (at, c) in line.char_indices() {
-            match c {
-                '\\' if in_string => escaped = !escaped,
-                '"' if !escaped => in_string = !in_string,
-                '/' if !in_string && prev == '/' => {
-                    cut = at - 1;
-                    break;
-                }
-                _ => escaped = false,
-            }
-            prev = c;
-        }
-        out.push_str(&line[..cut]);
-        out.push('\n');
-    }
-    let mut cleaned = String::new();
-    let chars: Vec<char> = out.chars().collect();
-    for (i, &c) in chars.iter().enumerate() {
-        if c == ',' {
-            let next = chars[i + 1..].iter().find(|c| !c.is_whitespace());
-            if matches!(next, Some('}') | Some(']')) {
-                continue;
-            }
-        }
-        cleaned.push(c);
-    }
-    cleaned
-}
-
-/// Text from each `{` at a line start to its matching `}` (the documents' examples).
-fn json_blocks(text: &str) -> Vec<String> {
-    let mut blocks = Vec::new();
-    let lines: Vec<&str> = text.lines().collect();
-    let mut i = 0;
-    while i < lines.len() {
-        if lines[i].trim_start().starts_with('{') {
-            let mut depth = 0i32;
-            let mut block = String::new();
-            for line in &lines[i..] {
-                block.push_str(line);
-                block.push('\n');
-                depth += line.matches('{').count() as i32 - line.matches('}').count() as i32;
-                i += 1;
-                if depth <= 0 || block.len() > 6000 {
-                    break;
-                }
-            }
-            blocks.push(block);
-        } else {
-            i += 1;
-        }
-    }
-    blocks
 }
 
 fn dialect_runner() -> Runner {

@@ -33,7 +33,7 @@ fn every_request_example_gets_a_documented_ack() {
     let acks = broker.subscribe(&[&format!("device/{SN}/+/ack")]);
     let mut d = Proc::start(&["sim", "--mqtt", &broker.address()]);
     d.wait_log(WAIT, "MQTT subscribed");
-    let examples = common::markdown_json_examples(&common::shared_spec("device-mqtt-api.md"));
+    let examples = common::spec::markdown_json_examples(&common::shared_spec("device-mqtt-api.md"));
     let failure_example = &examples
         .iter()
         .find(|(h, v)| h.contains("ACK") && v["success"] == false)
@@ -93,7 +93,7 @@ fn the_goal_example_drives_there_and_a_replaced_goal_is_cancelled() {
     d.wait_out(Duration::from_secs(30), "LOCATE_TRUE", |l| {
         serde_json::from_str::<Value>(l).is_ok_and(|s| s["nav"]["locate"] == "LOCATE_TRUE")
     });
-    let example = common::markdown_json_examples(&common::shared_spec("device-mqtt-api.md"))
+    let example = common::spec::markdown_json_examples(&common::shared_spec("device-mqtt-api.md"))
         .into_iter()
         .find(|(h, _)| h == "导航到目标点")
         .expect("the goal example")

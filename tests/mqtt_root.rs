@@ -96,7 +96,7 @@ fn every_command_example_gets_its_documented_ack() {
     let status = broker.subscribe(&["base_status"]);
     let _d = daemon(&broker);
     let spec = common::shared_spec("root-mqtt-api.rst");
-    let examples = common::rst_json_examples(&spec, ID);
+    let examples = common::spec::rst_json_examples(&spec, ID);
     let ack_example = json(
         &examples
             .iter()
@@ -218,7 +218,7 @@ fn reports_arrive_with_the_spec_keys() {
     let reports = broker.subscribe(&[&topic("report/#")]);
     let _d = daemon(&broker);
     let spec = common::shared_spec("root-mqtt-api.rst");
-    let examples = common::rst_json_examples(&spec, ID);
+    let examples = common::spec::rst_json_examples(&spec, ID);
     let mut seen = std::collections::BTreeMap::new();
     let deadline = Instant::now() + Duration::from_secs(4);
     while let Some(left) = deadline.checked_duration_since(Instant::now()) {
@@ -250,7 +250,7 @@ fn reports_arrive_with_the_spec_keys() {
                     })
             })
             .map(|e| {
-                common::strip_json_comments(&e.text)
+                common::spec::strip_json_comments(&e.text)
                     .replace(",\n}", "\n}")
                     .replace(",\n    }", "\n    }")
             })

@@ -87,7 +87,7 @@ fn base_status_matches_the_spec_key_by_key() {
     let broker = Mosquitto::start();
     let status = broker.subscribe(&["base_status"]);
     let _d = daemon(&broker);
-    let spec = common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"));
+    let spec = common::spec::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"));
     let example = &spec
         .iter()
         .find(|(h, _)| h.contains("base_status"))
@@ -120,7 +120,7 @@ fn every_spec_example_gets_its_documented_answer() {
     let _d = daemon(&broker);
     wait_localised(&status);
     let examples: Vec<(String, Value)> =
-        common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
+        common::spec::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
             .into_iter()
             .filter(|(_, v)| {
                 ["trajectory_control", "task_control"]
@@ -195,7 +195,7 @@ fn every_spec_example_gets_its_documented_answer() {
     let (topic, list) = ask(&broker, &answers, &examples[0].1.to_string());
     assert_eq!(topic, "trajectory_data");
     let spec_listing =
-        &common::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
+        &common::spec::markdown_json_examples(&common::shared_spec("rtk-mqtt-protocol.md"))
             .into_iter()
             .find(|(h, _)| h.contains("trajectory_data"))
             .expect("the trajectory_data example")

@@ -102,24 +102,41 @@ impl Outbox {
     /// Hands queued messages to rumqttc while it takes them: telemetry first (at most a few
     /// status messages, whose period matters), then replies.
     fn flush(&mut self, client: &AsyncClient) {
-        for queue in [&mut self.telemetry, &mut self.replies] {
-            while let Some(m) = queue.pop_front() {
-                let qos = match m.qos {
-                    Qos::AtMostOnce => QoS::AtMostOnce,
-                    Qos::AtLeastOnce => QoS::AtLeastOnce,
-                };
-                if client
-                    .try_publish(m.topic.clone(), qos, m.retain, m.payload.clone())
-                    .is_err()
-                {
-                    queue.push_front(m);
+        for qos in [Qos::AtMostOnce, Qos::AtLeastOnce] {
+            while let Some(m) = self.queue(qos).pop_front() {
+                if let Err(m) = self.hand(client, m) {
+                    self.queue(qos).push_front(m);
                     return;
-                }
-                if m.qos == Qos::AtLeastOnce {
-                    self.handed.push_back(m);
                 }
             }
         }
+    }
+
+    /// The queue of messages sent at `qos`: telemetry, or replies and events.
+    fn queue(&mut self, qos: Qos) -> &mut VecDeque<Publish> {
+        match qos {
+            Qos::AtMostOnce => &mut self.telemetry,
+            Qos::AtLeastOnce => &mut self.replies,
+        }
+    }
+
+    /// Gives one message to rumqttc, tracking a QoS 1 one until its PubAck; gives it back if
+    /// rumqttc's queue is full.
+    fn hand(&mut self, client: &AsyncClient, m: Publish) -> Result<(), Publish> {
+        let qos = match m.qos {
+            Qos::AtMostOnce => QoS::AtMostOnce,
+            Qos::AtLeastOnce => QoS::AtLeastOnce,
+        };
+        if client
+            .try_publish(m.topic.clone(), qos, m.retain, m.payload.clone())
+            .is_err()
+        {
+            return Err(m);
+        }
+        if m.qos == Qos::AtLeastOnce {
+            self.handed.push_back(m);
+        }
+        Ok(())
     }
 
     /// rumqttc wrote a publish with packet id `pkid` (0 for QoS 0).
@@ -275,12 +292,7 @@ async fn run(
                         retain: true,
                         ..Publish::reply(status_topic.clone(), Bytes::from_static(b"online"))
                     };
-                    if client
-                        .try_publish(online.topic.clone(), QoS::AtLeastOnce, true, online.payload.clone())
-                        .is_ok()
-                    {
-                        outbox.handed.push_back(online);
-                    } else {
+                    if let Err(online) = outbox.hand(&client, online) {
                         outbox.replies.push_front(online);
                     }
                     outbox.flush(&client);
