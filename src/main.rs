@@ -150,6 +150,20 @@ enum BenchCommand {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+    /// Time plain-log replay against gpsd's gpsdecode on real receiver logs repeated to a
+    /// size (all concatenated, then each receiver alone), with peak memory; the last line
+    /// is JSON with "pass". Exits with status 1 when a target is missed.
+    Replay {
+        /// Folder of receiver logs (*.log).
+        #[arg(long, default_value = "../shared/data/gnss")]
+        data: PathBuf,
+        /// Size each input is repeated up to, MB.
+        #[arg(long, default_value_t = 70, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        megabytes: u64,
+        /// Timed runs of each command (the fastest counts).
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+        runs: u32,
+    },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
     Mqtt {
@@ -222,6 +236,27 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         } => {
             let plant = load_plant(plant)?;
             let report = chassisd::bench::control::run(&plant, seed)?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
+        Command::Bench {
+            which:
+                BenchCommand::Replay {
+                    data,
+                    megabytes,
+                    runs,
+                },
+        } => {
+            let exe = std::env::current_exe().context("finding this program")?;
+            let report = chassisd::bench::replay::run(
+                &chassisd::bench::replay::ReplayBenchOptions {
+                    data,
+                    bytes: megabytes * 1_000_000,
+                    runs,
+                },
+                &exe,
+            )?;
             print!("{}", report.table());
             println!("{}", report.json());
             Ok(report.pass)

@@ -130,7 +130,8 @@ pub fn replay(
     let output = Output {
         out,
         stamped: options.stamped,
-        line: String::with_capacity(512),
+        line: Vec::with_capacity(1024),
+        json: Vec::with_capacity(1024),
     };
     run(
         reader,
@@ -190,7 +191,9 @@ impl Input {
 struct Output<'a, W: Write> {
     out: &'a mut W,
     stamped: bool,
-    line: String,
+    line: Vec<u8>,
+    /// The status object before its stamp goes in front.
+    json: Vec<u8>,
 }
 
 impl<W: Write> Output<'_, W> {
@@ -204,24 +207,26 @@ impl<W: Write> Output<'_, W> {
             let EngineOutput::Status(status) = output else {
                 continue;
             };
-            let json = BaseStatus::from_status(&status).to_json();
             self.line.clear();
-            match json.strip_prefix('{').filter(|_| self.stamped) {
-                Some(rest) => {
-                    let nanos = i128::from(status.time.as_nanos()) + offset_ns;
-                    let micros = nanos.div_euclid(1_000);
-                    let _ = write!(
-                        self.line,
-                        "{{\"stamp\":{}.{:06},",
-                        micros.div_euclid(1_000_000),
-                        micros.rem_euclid(1_000_000)
-                    );
-                    self.line.push_str(rest);
-                }
-                None => self.line.push_str(&json),
+            if self.stamped {
+                let nanos = i128::from(status.time.as_nanos()) + offset_ns;
+                let micros = nanos.div_euclid(1_000);
+                let _ = write!(
+                    self.line,
+                    "{{\"stamp\":{}.{:06},",
+                    micros.div_euclid(1_000_000),
+                    micros.rem_euclid(1_000_000)
+                );
+                BaseStatus::from_status(&status).write_json(&mut self.json);
+                // The object's own '{' gives way to the stamp's.
+                self.line
+                    .extend_from_slice(self.json.get(1..).unwrap_or_default());
+                self.json.clear();
+            } else {
+                BaseStatus::from_status(&status).write_json(&mut self.line);
             }
-            self.line.push('\n');
-            self.out.write_all(self.line.as_bytes())?;
+            self.line.push(b'\n');
+            self.out.write_all(&self.line)?;
         }
         Ok(())
     }

@@ -4,3 +4,4 @@
 pub mod control;
 pub mod fusion;
 pub mod mqtt;
+pub mod replay;

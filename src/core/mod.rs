@@ -648,9 +648,12 @@ impl Vehicle {
         let odometry = self.odometry.as_ref()?;
         let (odom, odom_at) = (odometry.pose()?, odometry.updated_at()?);
         let yaw_rate_at = odometry.yaw_rate_at().unwrap_or(odom_at);
-        let located = self.localizer.locate(t) == LocateState::Good;
-        let map = located.then(|| self.localizer.map_pose(t)).flatten();
-        let wheel_scale = located.then(|| self.localizer.wheel_scale()).flatten();
+        let located = self
+            .localizer
+            .published(t)
+            .filter(|p| p.locate == LocateState::Good);
+        let map = located.map(|p| p.map_pose);
+        let wheel_scale = located.map(|p| p.wheel_scale);
         Some(PoseView {
             odom,
             odom_at,
@@ -959,7 +962,8 @@ impl Vehicle {
                     .imu
                     .is_some_and(|s| t.saturating_since(s.rx) <= timeout)
         });
-        let localization = match self.localizer.locate(t) {
+        let published = self.localizer.published(t);
+        let localization = match published.map_or(LocateState::Uninitialized, |p| p.locate) {
             LocateState::Uninitialized => Localization::Uninitialized,
             LocateState::Good => Localization::Good,
             LocateState::Lost => Localization::Lost,
@@ -967,7 +971,7 @@ impl Vehicle {
         // The map pose once GNSS (or INIT_POSITION) has placed the vehicle; before that the
         // odom frame's, which LOCATE_UNINIT marks.
         let odom = self.odometry.as_ref().and_then(Odometry::pose);
-        let pose = match (self.localizer.map_pose(t), odom) {
+        let pose = match (published.map(|p| p.map_pose), odom) {
             (Some((x, y, yaw)), _) => Pose2D { x, y, yaw },
             (None, Some(o)) => Pose2D {
                 x: o.x,
@@ -983,10 +987,10 @@ impl Vehicle {
             battery,
             gnss: self.gnss_status(t),
             pose,
-            pose_covariance: self
-                .localizer
-                .map_covariance(t)
-                .map(|[xx, xy, yy, yaw]| PoseCovariance { xx, xy, yy, yaw }),
+            pose_covariance: published.map(|p| {
+                let [xx, xy, yy, yaw] = p.map_covariance;
+                PoseCovariance { xx, xy, yy, yaw }
+            }),
             odom,
             localization,
             navigation: self

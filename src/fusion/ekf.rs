@@ -92,6 +92,62 @@ pub struct Ekf {
     pub p: Cov,
 }
 
+/// A state transition's Jacobian that differs from the identity in a few entries.
+#[derive(Debug, Clone, Copy, Default)]
+struct Transition {
+    entries: [(usize, usize, f64); 8],
+    len: usize,
+}
+
+impl Transition {
+    /// Sets entry (`row`, `col`); each entry is set at most once.
+    fn set(&mut self, row: usize, col: usize, value: f64) {
+        self.entries[self.len] = (row, col, value);
+        self.len += 1;
+    }
+
+    fn entries(&self) -> &[(usize, usize, f64)] {
+        &self.entries[..self.len]
+    }
+
+    /// F P Fᵀ, with row and column operations for the entries that differ from the
+    /// identity: each row of F P is d·(its row of P) plus the off-diagonal terms, each
+    /// read from P as it was.
+    fn congruence(&self, p: &Cov) -> Cov {
+        let mut fp = *p;
+        for &(i, j, v) in self.entries() {
+            for k in 0..N {
+                if i == j {
+                    fp[(i, k)] *= v;
+                }
+            }
+        }
+        for &(i, j, v) in self.entries() {
+            if i != j {
+                for k in 0..N {
+                    fp[(i, k)] += v * p[(j, k)];
+                }
+            }
+        }
+        let mut fpf = fp;
+        for &(i, j, v) in self.entries() {
+            if i == j {
+                for k in 0..N {
+                    fpf[(k, i)] *= v;
+                }
+            }
+        }
+        for &(i, j, v) in self.entries() {
+            if i != j {
+                for k in 0..N {
+                    fpf[(k, i)] += v * fp[(k, j)];
+                }
+            }
+        }
+        fpf
+    }
+}
+
 impl Ekf {
     /// A filter at `x` with covariance `p`.
     pub fn new(x: State, p: Cov) -> Self {
@@ -115,17 +171,19 @@ impl Ekf {
         }
         let (yaw, v, w) = (self.x[YAW], self.x[V], self.x[W]);
         let (s, c) = yaw.sin_cos();
-        let mut f = Cov::identity();
+        // The transition's Jacobian is the identity but for these entries (row, column,
+        // value); the covariance follows them alone rather than through a dense product.
+        let mut f = Transition::default();
         let mut qm = Cov::zeros();
         if moving {
             self.x[X] += v * c * dt;
             self.x[Y] += v * s * dt;
             self.x[YAW] = wrap(yaw + w * dt);
-            f[(X, YAW)] = -v * s * dt;
-            f[(X, V)] = c * dt;
-            f[(Y, YAW)] = v * c * dt;
-            f[(Y, V)] = s * dt;
-            f[(YAW, W)] = dt;
+            f.set(X, YAW, -v * s * dt);
+            f.set(X, V, c * dt);
+            f.set(Y, YAW, v * c * dt);
+            f.set(Y, V, s * dt);
+            f.set(YAW, W, dt);
             // Wheel slip errs along the wheels' direction; across it only the vehicle's
             // sideways slip (slopes, skids) moves it.
             let along = (q.position + q.position_per_speed * v.abs()).powi(2) * dt;
@@ -136,10 +194,10 @@ impl Ekf {
             qm[(Y, X)] = qm[(X, Y)];
         }
         self.x[BIAS] += self.x[BIAS_RATE] * dt;
-        f[(BIAS, BIAS_RATE)] = dt;
+        f.set(BIAS, BIAS_RATE, dt);
         let phi = (-dt / q.gnss_correlation_s.max(1e-3)).exp();
-        f[(GNSS_E, GNSS_E)] = phi;
-        f[(GNSS_N, GNSS_N)] = phi;
+        f.set(GNSS_E, GNSS_E, phi);
+        f.set(GNSS_N, GNSS_N, phi);
         self.x[GNSS_E] *= phi;
         self.x[GNSS_N] *= phi;
         qm[(V, V)] = q.accel.powi(2) * dt;
@@ -149,7 +207,7 @@ impl Ekf {
         qm[(SCALE, SCALE)] = q.scale_walk.powi(2) * dt;
         qm[(GNSS_E, GNSS_E)] = q.gnss_error.0.powi(2) * (1.0 - phi * phi);
         qm[(GNSS_N, GNSS_N)] = q.gnss_error.1.powi(2) * (1.0 - phi * phi);
-        self.p = f * self.p * f.transpose() + qm;
+        self.p = f.congruence(&self.p) + qm;
         self.symmetrise();
     }
 
@@ -225,7 +283,13 @@ impl Ekf {
     }
 
     fn symmetrise(&mut self) {
-        self.p = (self.p + self.p.transpose()) * 0.5;
+        for i in 0..N {
+            for j in i + 1..N {
+                let mean = (self.p[(i, j)] + self.p[(j, i)]) * 0.5;
+                self.p[(i, j)] = mean;
+                self.p[(j, i)] = mean;
+            }
+        }
     }
 
     /// The 1σ position uncertainty: the square root of the largest eigenvalue of the
@@ -258,6 +322,30 @@ mod tests {
             scale_walk: 1e-4,
             gnss_correlation_s: 30.0,
             gnss_error: (0.0, 0.0),
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn sparse_congruence_is_the_dense_product(
+            values in proptest::collection::vec(-10.0f64..10.0, N * N),
+            entries in proptest::collection::vec((0..N, 0..N, -3.0f64..3.0), 0..8),
+        ) {
+            let a = Cov::from_iterator(values);
+            let p = a * a.transpose();
+            let mut f = Transition::default();
+            let mut dense = Cov::identity();
+            let mut seen = std::collections::BTreeSet::new();
+            for (i, j, v) in entries {
+                if seen.insert((i, j)) {
+                    f.set(i, j, v);
+                    dense[(i, j)] = v;
+                }
+            }
+            let want = dense * p * dense.transpose();
+            let got = f.congruence(&p);
+            let scale = want.amax().max(1.0);
+            proptest::prop_assert!((got - want).amax() <= 1e-12 * scale, "{got} vs {want}");
         }
     }
 

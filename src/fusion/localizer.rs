@@ -171,6 +171,19 @@ pub enum LocateState {
     Lost,
 }
 
+/// The localiser's answer at one time, from a single prediction of its filter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Published {
+    /// x, y (m), yaw (rad) in the map frame.
+    pub map_pose: (f64, f64, f64),
+    /// var x, cov xy, var y (m²), var yaw (rad²) in the map frame.
+    pub map_covariance: [f64; 4],
+    /// Whether the pose is good enough to publish as located.
+    pub locate: LocateState,
+    /// Odometry distance per true distance.
+    pub wheel_scale: f64,
+}
+
 /// Counters.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LocalizerStats {
@@ -297,24 +310,41 @@ impl Localizer {
         self.ekf().map(|e| 1.0 + e.x[SCALE])
     }
 
-    /// The published pose at `t`: the filter predicted to `t`, in the map frame
-    /// (INIT_POSITION's frame; the ENU frame of the datum until then): x, y (m), yaw (rad).
-    pub fn map_pose(&self, t: Timestamp) -> Option<(f64, f64, f64)> {
+    /// What the vehicle publishes about its place at `t`, from one prediction of the
+    /// filter to `t`; `None` before the filter starts.
+    pub fn published(&self, t: Timestamp) -> Option<Published> {
         let e = self.predicted(t)?;
-        Some(self.map.pose_of(e.x[X], e.x[Y], e.x[YAW]))
-    }
-
-    /// The covariance of [`Localizer::map_pose`] at `t`: var x, cov xy, var y (m²), var yaw
-    /// (rad²), turned into the map frame.
-    pub fn map_covariance(&self, t: Timestamp) -> Option<[f64; 4]> {
-        let e = self.predicted(t)?;
+        let locate = if e.position_sigma() <= self.config.locate_bound_m
+            && e.yaw_sigma() <= self.config.converged_yaw_rad
+        {
+            LocateState::Good
+        } else {
+            LocateState::Lost
+        };
         let (s, c) = self.map.rotation.sin_cos();
         let (a, b, d) = (e.p[(X, X)], e.p[(X, Y)], e.p[(Y, Y)]);
         // Rᵀ P R with R the rotation by `rotation`.
         let xx = c * c * a + 2.0 * c * s * b + s * s * d;
         let yy = s * s * a - 2.0 * c * s * b + c * c * d;
         let xy = -c * s * a + (c * c - s * s) * b + c * s * d;
-        Some([xx, xy, yy, e.p[(YAW, YAW)]])
+        Some(Published {
+            map_pose: self.map.pose_of(e.x[X], e.x[Y], e.x[YAW]),
+            map_covariance: [xx, xy, yy, e.p[(YAW, YAW)]],
+            locate,
+            wheel_scale: 1.0 + e.x[SCALE],
+        })
+    }
+
+    /// The published pose at `t`: the filter predicted to `t`, in the map frame
+    /// (INIT_POSITION's frame; the ENU frame of the datum until then): x, y (m), yaw (rad).
+    pub fn map_pose(&self, t: Timestamp) -> Option<(f64, f64, f64)> {
+        self.published(t).map(|p| p.map_pose)
+    }
+
+    /// The covariance of [`Localizer::map_pose`] at `t`: var x, cov xy, var y (m²), var yaw
+    /// (rad²), turned into the map frame.
+    pub fn map_covariance(&self, t: Timestamp) -> Option<[f64; 4]> {
+        self.published(t).map(|p| p.map_covariance)
     }
 
     /// The filter predicted to `t` (no measurement since then), without changing it.
@@ -335,16 +365,8 @@ impl Localizer {
     /// The `nav.locate` state at `t`: uninitialised without a map pose, good while both the
     /// position and the heading are within their bounds, else lost.
     pub fn locate(&self, t: Timestamp) -> LocateState {
-        let Some(ekf) = self.predicted(t) else {
-            return LocateState::Uninitialized;
-        };
-        if ekf.position_sigma() <= self.config.locate_bound_m
-            && ekf.yaw_sigma() <= self.config.converged_yaw_rad
-        {
-            LocateState::Good
-        } else {
-            LocateState::Lost
-        }
+        self.published(t)
+            .map_or(LocateState::Uninitialized, |p| p.locate)
     }
 
     /// Adds a measurement that describes time `t`.

@@ -154,9 +154,20 @@ impl Lines {
     }
 }
 
-/// The time of day (and date, where given) of a timed sentence.
+/// The time of day (and date, where given) of a timed sentence. The engine decodes every
+/// sentence again, so those whose time is their first field and that carry no date are
+/// read only that far.
 fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
-    match decode(&Sentence::parse(body)) {
+    let sentence = Sentence::parse(body);
+    if sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "GST") {
+        return sentence
+            .fields()
+            .next_time()
+            .ok()
+            .flatten()
+            .map(|t| (t, None));
+    }
+    match decode(&sentence) {
         Ok(Some(GnssSentence::Gga(r) | GnssSentence::Gns(r))) => r.time.map(|t| (t, None)),
         Ok(Some(GnssSentence::Rmc(r))) => r.time.map(|t| (t, r.date)),
         Ok(Some(GnssSentence::Gst(g))) => g.time.map(|t| (t, None)),

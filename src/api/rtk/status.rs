@@ -173,10 +173,22 @@ impl BaseStatus {
 
     /// One line of JSON (no trailing newline).
     pub fn to_json(&self) -> String {
-        // Serialising plain structs of numbers, bools and static strings cannot fail.
-        serde_json::to_string(self).unwrap_or_default()
+        let mut out = Vec::with_capacity(JSON_CAPACITY);
+        self.write_json(&mut out);
+        String::from_utf8(out).unwrap_or_default()
+    }
+
+    /// Appends the JSON object to `out` (a buffer kept across calls saves growing one per
+    /// status).
+    pub fn write_json(&self, out: &mut Vec<u8>) {
+        // Serialising plain structs of numbers, bools and static strings into memory
+        // cannot fail.
+        let _ = serde_json::to_writer(out, self);
     }
 }
+
+/// Room for one base_status object, which is about 450 bytes.
+const JSON_CAPACITY: usize = 640;
 
 /// A number JSON can carry: NaN and infinities become 0, and negative zero is written 0.
 fn num(v: f64) -> f64 {

@@ -293,12 +293,13 @@ fn crate_error(kind: &str, e: nmea::Error<'_>) -> DecodeError {
 }
 
 /// Widens an `f32` from the `nmea` crate through its shortest round-trip decimal, which is
-/// the decimal the receiver sent whenever it had at most seven significant digits.
+/// the decimal the receiver sent whenever it had at most six significant digits (and
+/// mostly when it had seven).
 fn widen(v: f32) -> Option<f64> {
     if !v.is_finite() {
         return None;
     }
-    v.to_string().parse().ok()
+    zmij::Buffer::new().format_finite(v).parse().ok()
 }
 
 fn decode_gga(sentence: &Sentence<'_>) -> Result<PositionReport, DecodeError> {
@@ -493,6 +494,24 @@ mod tests {
 
     fn decode_body(body: &str) -> Result<Option<GnssSentence>, DecodeError> {
         decode(&Sentence::parse(body))
+    }
+
+    proptest::proptest! {
+        /// Any decimal of up to six significant digits (what f32 is sure to keep) comes
+        /// back exactly as sent.
+        #[test]
+        fn widen_gives_back_the_sent_decimal(
+            mantissa in 0u32..1_000_000,
+            point in 0usize..9,
+            negative in proptest::bool::ANY,
+        ) {
+            let digits = format!("{mantissa:0>width$}", width = point + 1);
+            let (whole, frac) = digits.split_at(digits.len() - point);
+            let sign = if negative { "-" } else { "" };
+            let sent = if point == 0 { format!("{sign}{whole}") } else { format!("{sign}{whole}.{frac}") };
+            let received: f32 = sent.parse().unwrap();
+            proptest::prop_assert_eq!(widen(received), Some(sent.parse::<f64>().unwrap()), "{}", sent);
+        }
     }
 
     #[test]
