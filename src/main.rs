@@ -173,10 +173,24 @@ enum BenchCommand {
         /// How long to measure, s.
         #[arg(long, default_value = "60", value_parser = seconds_arg)]
         seconds: Duration,
-        /// Use the MQTT broker at HOST:PORT (default: an embedded one on a free port).
-        #[arg(long, value_name = "HOST:PORT")]
+        /// Use the MQTT broker at HOST:PORT instead of starting one.
+        #[arg(long, value_name = "HOST:PORT", conflicts_with = "broker")]
         mqtt: Option<String>,
+        /// The broker to start on a free port: the embedded one, mosquitto, or each in turn.
+        #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
+        broker: BenchBroker,
     },
+}
+
+/// Brokers `chassisd bench mqtt` can start.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum BenchBroker {
+    /// The embedded rumqttd.
+    Embedded,
+    /// mosquitto (with set_tcp_nodelay).
+    Mosquitto,
+    /// The embedded broker, then mosquitto.
+    Both,
 }
 
 /// Log lines waiting for stderr before new ones are dropped.
@@ -267,8 +281,9 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     plant,
                     seconds,
                     mqtt,
+                    broker,
                 },
-        } => bench_mqtt(plant, seconds, mqtt.as_deref()),
+        } => bench_mqtt(plant, seconds, mqtt.as_deref(), broker),
         Command::Replay {
             path,
             config,
@@ -470,30 +485,69 @@ fn bench_fusion(
 fn bench_mqtt(
     plant: Option<PathBuf>,
     seconds: Duration,
-    broker: Option<&str>,
+    external: Option<&str>,
+    broker: BenchBroker,
 ) -> anyhow::Result<bool> {
+    use chassisd::bench::mosquitto::Mosquitto;
+    use chassisd::bench::mqtt::{BrokerRun, MqttBenchOptions, MqttComparison};
+
     let plant = load_plant(plant)?;
-    let mut mqtt = sim_mqtt(broker)?;
-    if broker.is_none() {
-        // A port of its own, so a broker already on 1883 is no obstacle.
-        mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .context("no free port for the embedded broker")?
-            .port();
+    let mut brokers: Vec<&str> = Vec::new();
+    let mut skipped = None;
+    if external.is_some() {
+        brokers.push("external");
+    } else {
+        if broker != BenchBroker::Mosquitto {
+            brokers.push("embedded");
+        }
+        if broker != BenchBroker::Embedded {
+            match Mosquitto::missing() {
+                None => brokers.push("mosquitto"),
+                Some(why) if broker == BenchBroker::Both => skipped = Some(why),
+                Some(why) => anyhow::bail!(why),
+            }
+        }
     }
-    let runtime = async_runtime(2)?;
-    let report = runtime.block_on(chassisd::bench::mqtt::run(
-        chassisd::bench::mqtt::MqttBenchOptions {
-            plant,
+    let mut runs = Vec::new();
+    for name in brokers {
+        let mut mqtt = sim_mqtt(external)?;
+        let mut mosquitto = None;
+        match name {
+            "embedded" => {
+                // A port of its own, so a broker already on 1883 is no obstacle.
+                mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
+                    .and_then(|l| l.local_addr())
+                    .context("no free port for the embedded broker")?
+                    .port();
+            }
+            "mosquitto" => {
+                let m = Mosquitto::start(&std::env::temp_dir())?;
+                mqtt.embedded_broker = false;
+                mqtt.host = "127.0.0.1".into();
+                mqtt.port = m.port();
+                mosquitto = Some(m);
+            }
+            _ => {}
+        }
+        let runtime = async_runtime(2)?;
+        let report = runtime.block_on(chassisd::bench::mqtt::run(MqttBenchOptions {
+            plant: plant.clone(),
             duration: seconds,
             mqtt,
-        },
-    ));
-    runtime.shutdown_background();
-    let report = report?;
-    print!("{}", report.table());
-    println!("{}", report.json());
-    Ok(true)
+        }));
+        runtime.shutdown_background();
+        drop(mosquitto);
+        let run = BrokerRun::new(name, report?);
+        println!("broker: {name}");
+        print!("{}", run.report.table());
+        runs.push(run);
+    }
+    let comparison = MqttComparison::new(runs, skipped);
+    if let Some(why) = &comparison.skipped {
+        println!("mosquitto not compared: {why}");
+    }
+    println!("{}", comparison.json());
+    Ok(comparison.pass)
 }
 
 /// A multi-threaded tokio runtime with `threads` workers, timers and I/O enabled.

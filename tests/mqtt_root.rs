@@ -487,46 +487,36 @@ fn bad_requests_get_error_acks_and_change_nothing() {
     assert!(ack["data"]["message"].as_str().unwrap().contains("exceeds"));
 }
 
-/// `chassisd bench mqtt` against mosquitto: every DRIVE it sends is acknowledged and reaches
-/// the CAN bus, and the status period is measured. Figures only; no timing is asserted.
+/// `chassisd bench mqtt` on both brokers it starts (the embedded one, then mosquitto):
+/// every DRIVE it sends is acknowledged and reaches the CAN bus, and the status period is
+/// measured. Figures only; no timing is asserted.
 #[test]
-fn bench_mqtt_measures_every_drive_end_to_end() {
-    let broker = Mosquitto::start();
+fn bench_mqtt_measures_every_drive_end_to_end_on_both_brokers() {
     let out = std::process::Command::new(common::chassisd())
-        .args([
-            "bench",
-            "mqtt",
-            "--seconds",
-            "3",
-            "--mqtt",
-            &broker.address(),
-        ])
+        .args(["bench", "mqtt", "--seconds", "3", "--broker", "both"])
         .output()
         .expect("chassisd runs");
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let report = json(stdout.lines().last().unwrap_or_default());
-    let sent = report["drives"][0].as_u64().expect("drives sent");
-    assert!(sent >= 5, "{report}");
-    assert_eq!(
-        report["drives"][1], sent,
-        "every DRIVE acknowledged: {report}"
-    );
-    assert_eq!(report["drive_round_trip_ms"]["n"], sent, "{report}");
-    assert_eq!(
-        report["command_to_rpdo_ms"]["n"], sent,
-        "every DRIVE on the bus: {report}"
-    );
+    assert!(report["skipped"].is_null(), "{report}");
+    let runs = report["runs"].as_array().expect("runs");
+    let brokers: Vec<&str> = runs.iter().filter_map(|r| r["broker"].as_str()).collect();
+    assert_eq!(brokers, ["embedded", "mosquitto"], "{report}");
+    for run in runs {
+        let sent = run["drives"][0].as_u64().expect("drives sent");
+        assert!(sent >= 5, "{run}");
+        assert_eq!(run["drives"][1], sent, "every DRIVE acknowledged: {run}");
+        assert_eq!(run["drive_round_trip_ms"]["n"], sent, "{run}");
+        assert_eq!(
+            run["command_to_rpdo_ms"]["n"], sent,
+            "every DRIVE on the bus: {run}"
+        );
+        assert!(run["status_period_ms"]["n"].as_u64() >= Some(25), "{run}");
+    }
     assert!(
-        report["status_period_ms"]["n"].as_u64() >= Some(25),
-        "{report}"
-    );
-    assert!(
-        stdout.contains("base_status period") && stdout.contains("DRIVE publish -> ack"),
+        stdout.contains("broker: embedded")
+            && stdout.contains("broker: mosquitto")
+            && stdout.contains("DRIVE publish -> ack"),
         "{stdout}"
     );
 }

@@ -188,7 +188,15 @@ fn an_hour_long_log_replays_in_bounded_memory() {
 #[test]
 fn bench_replay_compares_every_receiver_with_gpsdecode() {
     let out = Command::new(common::chassisd())
-        .args(["bench", "replay", "--megabytes", "3", "--runs", "1", "--data"])
+        .args([
+            "bench",
+            "replay",
+            "--megabytes",
+            "3",
+            "--runs",
+            "1",
+            "--data",
+        ])
         .arg(common::shared_gnss_dir())
         .output()
         .expect("chassisd runs");
@@ -197,15 +205,25 @@ fn bench_replay_compares_every_receiver_with_gpsdecode() {
         serde_json::from_str(stdout.lines().last().unwrap_or_default()).expect("JSON last line");
     println!("{stdout}");
     let inputs = report["inputs"].as_array().expect("inputs");
-    assert_eq!(inputs.len(), common::shared_gnss_logs().len() + 1, "{report}");
+    assert_eq!(
+        inputs.len(),
+        common::shared_gnss_logs().len() + 1,
+        "{report}"
+    );
     assert_eq!(inputs[0]["input"], "all");
     assert!(report["gpsdecode_missing"].is_null(), "{report}");
     for input in inputs {
         assert!(input["bytes"].as_u64() >= Some(3_000_000), "{input}");
-        assert!(input["speedup"].as_f64().is_some_and(|s| s > 0.0), "{input}");
+        assert!(
+            input["speedup"].as_f64().is_some_and(|s| s > 0.0),
+            "{input}"
+        );
         assert!(input["chassisd_peak_bytes"].as_u64().is_some(), "{input}");
     }
     let full = inputs[0]["chassisd_peak_bytes"].as_u64().unwrap();
     let tenth = report["tenth_peak_bytes"].as_u64().expect("tenth's peak");
-    assert!(full <= tenth + 2_000_000, "peak {full} vs {tenth} on a tenth");
+    assert!(
+        full <= tenth + 2_000_000,
+        "peak {full} vs {tenth} on a tenth"
+    );
 }

@@ -3,5 +3,6 @@
 
 pub mod control;
 pub mod fusion;
+pub mod mosquitto;
 pub mod mqtt;
 pub mod replay;

@@ -81,6 +81,72 @@ pub struct MqttReport {
     pub drives: (usize, usize),
 }
 
+/// The DRIVE round trip's p99 a broker must keep within, ms.
+pub const DRIVE_P99_TARGET_MS: f64 = 5.0;
+/// The largest deviation of the base_status period from 100 ms a broker may show, ms.
+pub const PERIOD_DEVIATION_TARGET_MS: f64 = 5.0;
+
+/// One broker's figures and verdict.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BrokerRun {
+    /// `embedded`, `mosquitto` or `external`.
+    pub broker: String,
+    /// The figures.
+    #[serde(flatten)]
+    pub report: MqttReport,
+    /// Every DRIVE acknowledged, its p99 round trip and the period's largest deviation
+    /// within their targets.
+    pub pass: bool,
+}
+
+impl BrokerRun {
+    /// `report`'s verdict against the targets.
+    pub fn new(broker: &str, report: MqttReport) -> Self {
+        let pass = report.drives.0 > 0
+            && report.drives.0 == report.drives.1
+            && report
+                .drive_round_trip_ms
+                .as_ref()
+                .is_some_and(|s| s.p99 <= DRIVE_P99_TARGET_MS)
+            && report
+                .status_max_jitter_ms
+                .is_some_and(|j| j <= PERIOD_DEVIATION_TARGET_MS);
+        Self {
+            broker: broker.to_owned(),
+            report,
+            pass,
+        }
+    }
+}
+
+/// Every broker's run: the JSON line of `chassisd bench mqtt`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MqttComparison {
+    /// The runs, in order.
+    pub runs: Vec<BrokerRun>,
+    /// Why a broker asked for was left out.
+    pub skipped: Option<String>,
+    /// Every run passed.
+    pub pass: bool,
+}
+
+impl MqttComparison {
+    /// The comparison of `runs`.
+    pub fn new(runs: Vec<BrokerRun>, skipped: Option<String>) -> Self {
+        let pass = !runs.is_empty() && runs.iter().all(|r| r.pass);
+        Self {
+            runs,
+            skipped,
+            pass,
+        }
+    }
+
+    /// The one-line JSON summary.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
 /// Runs the benchmark.
 pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     let vehicle_id = options
@@ -294,10 +360,5 @@ impl MqttReport {
             "DRIVE commands", self.drives.0, self.drives.1
         ));
         out
-    }
-
-    /// The one-line JSON summary.
-    pub fn json(&self) -> String {
-        serde_json::to_string(self).unwrap_or_default()
     }
 }

@@ -1,0 +1,120 @@
+//! A mosquitto broker that a benchmark starts on a free local port, restarts on demand and
+//! stops when dropped. It sets TCP_NODELAY, as a deployment should (see the README).
+
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+
+/// How long mosquitto may take to accept connections.
+const READY_WITHIN: Duration = Duration::from_secs(5);
+
+/// A mosquitto child process.
+pub struct Mosquitto {
+    child: Option<Child>,
+    port: u16,
+    conf: PathBuf,
+}
+
+impl Mosquitto {
+    /// Why mosquitto cannot run here, if it cannot.
+    pub fn missing() -> Option<String> {
+        match Command::new("mosquitto")
+            .arg("-h")
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+        {
+            Ok(_) => None,
+            Err(e) => Some(format!("mosquitto: {e} (Debian: mosquitto)")),
+        }
+    }
+
+    /// Starts mosquitto on a free port with its configuration in `dir`, and waits until it
+    /// accepts connections.
+    pub fn start(dir: &Path) -> anyhow::Result<Self> {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("no free port for mosquitto")?
+            .port();
+        let conf = dir.join(format!("mosquitto-{port}.conf"));
+        std::fs::write(
+            &conf,
+            format!(
+                "listener {port} 127.0.0.1\nallow_anonymous true\nset_tcp_nodelay true\npersistence false\n"
+            ),
+        )
+        .with_context(|| format!("writing {}", conf.display()))?;
+        let mut broker = Self {
+            child: None,
+            port,
+            conf,
+        };
+        broker.restart()?;
+        Ok(broker)
+    }
+
+    /// Its port on 127.0.0.1.
+    pub fn port(&self) -> u16 {
+        self.port
+    }
+
+    /// Whether it is running.
+    pub fn is_running(&self) -> bool {
+        self.child.is_some()
+    }
+
+    /// Kills it (the clients see the connection drop).
+    pub fn stop(&mut self) {
+        if let Some(mut child) = self.child.take() {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+
+    /// Starts it again on the same port (stopping it first if it runs), and waits until
+    /// it accepts connections.
+    pub fn restart(&mut self) -> anyhow::Result<()> {
+        self.stop();
+        let child = Command::new("mosquitto")
+            .arg("-c")
+            .arg(&self.conf)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .context("starting mosquitto")?;
+        self.child = Some(child);
+        let deadline = Instant::now() + READY_WITHIN;
+        while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            let exited = self
+                .child
+                .as_mut()
+                .and_then(|c| c.try_wait().ok().flatten());
+            if let Some(status) = exited {
+                self.child = None;
+                bail!(
+                    "mosquitto exited ({status}) instead of listening on {}",
+                    self.port
+                );
+            }
+            if Instant::now() > deadline {
+                self.stop();
+                bail!(
+                    "mosquitto did not listen on {} within {READY_WITHIN:?}",
+                    self.port
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Mosquitto {
+    fn drop(&mut self) {
+        self.stop();
+        let _ = std::fs::remove_file(&self.conf);
+    }
+}
