@@ -164,6 +164,21 @@ enum BenchCommand {
         #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
         runs: u32,
     },
+    /// Run the simulated vehicle on its brokers for minutes while faults come round
+    /// (command floods, broker restarts, GNSS outage, IMU stall, lost drive heartbeats, CAN
+    /// down): memory slope, base_status gaps, each fault's detection, recovery and stop.
+    /// The last line is JSON with "pass"; exits with status 1 when a target is missed.
+    Soak {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Total length, minutes, shared between the brokers.
+        #[arg(long, default_value = "10", value_parser = minutes_arg)]
+        minutes: Duration,
+        /// The embedded broker, mosquitto, or each for half the time.
+        #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
+        broker: BenchBroker,
+    },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
     Mqtt {
@@ -254,6 +269,14 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             println!("{}", report.json());
             Ok(report.pass)
         }
+        Command::Bench {
+            which:
+                BenchCommand::Soak {
+                    plant,
+                    minutes,
+                    broker,
+                },
+        } => bench_soak(plant, minutes, broker),
         Command::Bench {
             which:
                 BenchCommand::Replay {
@@ -381,6 +404,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     scenario,
                     duration,
                     mqtt,
+                    handle: None,
                 },
                 std::io::stdout(),
             ));
@@ -548,6 +572,51 @@ fn bench_mqtt(
     }
     println!("{}", comparison.json());
     Ok(comparison.pass)
+}
+
+fn bench_soak(
+    plant: Option<PathBuf>,
+    total: Duration,
+    broker: BenchBroker,
+) -> anyhow::Result<bool> {
+    use chassisd::bench::mosquitto::Mosquitto;
+    use chassisd::bench::soak::{SoakBroker, SoakOptions};
+
+    let brokers = match broker {
+        BenchBroker::Embedded => vec![SoakBroker::Embedded],
+        BenchBroker::Mosquitto => vec![SoakBroker::Mosquitto],
+        BenchBroker::Both => vec![SoakBroker::Embedded, SoakBroker::Mosquitto],
+    };
+    if brokers.contains(&SoakBroker::Mosquitto)
+        && let Some(why) = Mosquitto::missing()
+    {
+        anyhow::bail!(why);
+    }
+    let options = SoakOptions {
+        plant: load_plant(plant)?,
+        mqtt: sim_mqtt(None)?,
+        run_for: total / brokers.len() as u32,
+        brokers,
+    };
+    let runtime = async_runtime(2)?;
+    let report = runtime.block_on(chassisd::bench::soak::run(options));
+    runtime.shutdown_background();
+    let report = report?;
+    for run in &report.runs {
+        print!("{}", run.table());
+    }
+    println!("{}", report.json());
+    Ok(report.pass)
+}
+
+/// Parses a positive number of minutes (up to a week).
+fn minutes_arg(s: &str) -> Result<Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 7.0 * 24.0 * 60.0 => Ok(Duration::from_secs_f64(v * 60.0)),
+        _ => Err(format!(
+            "{s:?}: give a positive number of minutes, at most a week"
+        )),
+    }
 }
 
 /// A multi-threaded tokio runtime with `threads` workers, timers and I/O enabled.

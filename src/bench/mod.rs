@@ -6,3 +6,4 @@ pub mod fusion;
 pub mod mosquitto;
 pub mod mqtt;
 pub mod replay;
+pub mod soak;

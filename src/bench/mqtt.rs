@@ -51,7 +51,8 @@ pub struct Spread {
 }
 
 impl Spread {
-    fn of(mut values: Vec<f64>) -> Option<Self> {
+    /// The spread of `values`; `None` when there are none.
+    pub fn of(mut values: Vec<f64>) -> Option<Self> {
         if values.is_empty() {
             return None;
         }
@@ -173,6 +174,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
             scenario: None,
             duration: Some(options.duration + Duration::from_secs(4)),
             mqtt: Some(options.mqtt.clone()),
+            handle: None,
         },
         std::io::sink(),
     ));

@@ -53,6 +53,12 @@ pub fn peak_memory_bytes() -> Option<u64> {
     proc_field(&status, "VmHWM:").map(|kib| (kib * 1024.0) as u64)
 }
 
+/// This process's resident memory now (VmRSS), bytes, where /proc tells it.
+pub fn resident_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    proc_field(&status, "VmRSS:").map(|kib| (kib * 1024.0) as u64)
+}
+
 /// CPU busy between two samples, %.
 fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
     let total = now.1.checked_sub(before.1)?;

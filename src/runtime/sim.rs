@@ -5,10 +5,11 @@
 
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, watch};
 
 use super::broker;
 use super::clock::RecordClock;
@@ -36,6 +37,11 @@ const RTK_FIXED: GnssCondition = GnssCondition {
     quality: Some(FixQuality::RtkFixed),
     offset: (0.0, 0.0),
 };
+/// A GNSS outage: the receiver sends nothing.
+const NO_GNSS: GnssCondition = GnssCondition {
+    quality: None,
+    offset: (0.0, 0.0),
+};
 /// Commands waiting for the simulation.
 const COMMAND_QUEUE: usize = 256;
 
@@ -56,6 +62,61 @@ pub struct SimOptions {
     pub duration: Option<Duration>,
     /// Speak the MQTT dialects of this configuration (its broker embedded or not).
     pub mqtt: Option<MqttConfig>,
+    /// A benchmark's hold on the run: faults to inject, truth to read back.
+    pub handle: Option<SimHandle>,
+}
+
+/// Faults a benchmark injects into a running simulation; each holds while set.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimFaults {
+    /// The receiver sends nothing.
+    pub gnss_outage: bool,
+    /// The IMU sends nothing.
+    pub imu_stall: bool,
+    /// The wheel drives send no heartbeats (their motors still obey).
+    pub drive_heartbeats_lost: bool,
+    /// The CAN interface is down.
+    pub bus_down: bool,
+}
+
+/// A benchmark's hold on a running simulation.
+#[derive(Debug, Clone)]
+pub struct SimHandle {
+    /// The faults to apply, read every pacing tick.
+    pub faults: watch::Receiver<SimFaults>,
+    /// The vehicle's true state, written every pacing tick.
+    pub truth: Arc<watch::Sender<Truth>>,
+}
+
+impl SimHandle {
+    /// A handle, with the sender of its faults and the receiver of the truth.
+    pub fn new() -> (Self, watch::Sender<SimFaults>, watch::Receiver<Truth>) {
+        let (fault_tx, faults) = watch::channel(SimFaults::default());
+        let (truth, truth_rx) = watch::channel(Truth::default());
+        (
+            Self {
+                faults,
+                truth: Arc::new(truth),
+            },
+            fault_tx,
+            truth_rx,
+        )
+    }
+}
+
+/// Applies `faults` where they differ from what the simulation has.
+fn apply_faults(sim: &mut Lockstep, now: SimFaults, was: &mut SimFaults, sink: &mut impl Sink) {
+    if now.imu_stall != was.imu_stall {
+        sim.vehicle_mut().set_imu_stalled(now.imu_stall);
+    }
+    if now.drive_heartbeats_lost != was.drive_heartbeats_lost {
+        sim.vehicle_mut()
+            .set_drive_heartbeats(!now.drive_heartbeats_lost);
+    }
+    if now.bus_down != was.bus_down {
+        sim.set_bus_up(!now.bus_down, sink);
+    }
+    *was = now;
 }
 
 /// Status lines to `out` (from its own thread), records to the recorder.
@@ -170,10 +231,16 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     let mut pace = tokio::time::interval(PACE);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut summary = Summary::new(sim.vehicle().truth());
+    let mut faults = SimFaults::default();
     'run: loop {
         tokio::select! {
             _ = pace.tick() => {
                 let now = clock.now();
+                if let Some(h) = &options.handle {
+                    let wanted = *h.faults.borrow();
+                    apply_faults(&mut sim, wanted, &mut faults, &mut sink);
+                }
+                let gnss = if faults.gnss_outage { NO_GNSS } else { RTK_FIXED };
                 while sim.time().saturating_add(PLANT_STEP) <= now {
                     if end.is_some_and(|end| sim.time() >= end) {
                         // `--duration` wins over the scenario's own length.
@@ -182,9 +249,12 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
                     }
                     match &options.scenario {
                         Some(scenario) => sim.step_scripted(scenario, &mut sink),
-                        None => sim.step(RTK_FIXED, &mut sink),
+                        None => sim.step(gnss, &mut sink),
                     }
                     summary.track(sim.vehicle().truth());
+                }
+                if let Some(h) = &options.handle {
+                    h.truth.send_replace(sim.vehicle().truth());
                 }
             }
             command = commands.recv(), if commands_open => match command {

@@ -270,6 +270,8 @@ pub struct Lockstep {
     queue: VecDeque<Record>,
     outputs: Vec<EngineOutput>,
     replies: Vec<Record>,
+    /// The simulated CAN interface is down: no frame crosses it either way.
+    bus_down: bool,
 }
 
 impl Lockstep {
@@ -316,6 +318,7 @@ impl Lockstep {
             queue,
             outputs: Vec::new(),
             replies: Vec::new(),
+            bus_down: false,
         })
     }
 
@@ -388,11 +391,26 @@ impl Lockstep {
         self.steps += 1;
         let mut produced = Vec::new();
         self.vehicle.step(self.t, gnss, &mut produced);
+        if self.bus_down {
+            produced.retain(|r| r.source != SIM_BUS);
+        }
         self.queue.extend(produced);
         self.drain(sink);
         self.engine.advance_to(self.t, &mut self.outputs);
         self.dispatch(self.t, sink);
         self.drain(sink);
+    }
+
+    /// Takes the simulated CAN interface down or up, now, as an unplugged or restored
+    /// adapter would: the engine hears of the link as from the live driver, and no frame
+    /// crosses the bus while it is down (the drives' own master watchdogs see silence).
+    pub fn set_bus_up(&mut self, up: bool, sink: &mut impl Sink) {
+        if self.bus_down != up {
+            return;
+        }
+        self.bus_down = !up;
+        let state = if up { LinkState::Up } else { LinkState::Down };
+        self.input(SIM_BUS, Payload::Link(state), sink);
     }
 
     /// Puts the drive at `node` into fault with the EMCY `code`, now.
@@ -426,6 +444,8 @@ impl Lockstep {
     fn dispatch(&mut self, t: Timestamp, sink: &mut impl Sink) {
         for output in std::mem::take(&mut self.outputs) {
             match output {
+                // A frame sent while the interface is down never reaches the bus.
+                EngineOutput::CanTx { .. } if self.bus_down => {}
                 EngineOutput::CanTx { bus, frame } => {
                     sink.record(&Record {
                         t,

@@ -331,6 +331,8 @@ pub struct SimVehicle {
     gnss_error: (f64, f64),
     pending_gnss: VecDeque<(Timestamp, Bytes)>,
     imu_count: u32,
+    /// The IMU is stalled: it sends nothing (a hung sensor or a cut cable).
+    imu_stalled: bool,
     /// A recorded motion played through the simulator, in place of the motors and the gyro.
     forced: Option<ForcedMotion>,
     /// The yard's battery pack.
@@ -383,6 +385,7 @@ impl SimVehicle {
             gnss_error: (0.0, 0.0),
             pending_gnss: VecDeque::new(),
             imu_count: 0,
+            imu_stalled: false,
             forced: None,
             bms: yard.map(|y| {
                 super::bms::SimDaly::new(
@@ -431,6 +434,18 @@ impl SimVehicle {
             }
         }
         out.extend(frames.into_iter().map(|f| can_record(t, f)));
+    }
+
+    /// Stalls the IMU (it sends nothing) or lets it run again.
+    pub fn set_imu_stalled(&mut self, stalled: bool) {
+        self.imu_stalled = stalled;
+    }
+
+    /// Stops or restarts the wheel drives' heartbeats (a drive whose CANopen stack hangs
+    /// while its motor still obeys).
+    pub fn set_drive_heartbeats(&mut self, on: bool) {
+        self.left.set_heartbeat(on);
+        self.right.set_heartbeat(on);
     }
 
     /// The blade drive's motor speed, r/min (0 without one).
@@ -576,7 +591,9 @@ impl SimVehicle {
         self.gyro_bias += self.normal(self.plant.imu.gyro_bias_walk * dt.sqrt());
         if t >= self.next_imu {
             self.next_imu = t.saturating_add(Duration::from_secs_f64(1.0 / self.plant.imu.rate_hz));
-            out.push(self.imu_record(t, accel));
+            if !self.imu_stalled {
+                out.push(self.imu_record(t, accel));
+            }
         }
         if t >= self.next_gnss {
             self.next_gnss =

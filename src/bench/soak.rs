@@ -1,0 +1,750 @@
+//! `chassisd bench soak`: the simulated vehicle with its dialects on a broker, driven by a
+//! client for minutes while faults come round in cycles: a command flood, a broker restart
+//! (mosquitto only: the embedded broker lives and dies with chassisd), a GNSS outage, an
+//! IMU stall, lost drive heartbeats and the CAN interface down.
+//!
+//! A client subscribes to base_status and drives the vehicle as an operator would: a
+//! heartbeat and a root DRIVE every 200 ms, and a zero DRIVE (the deliberate re-arm)
+//! whenever the status says a latched stop awaits one. Each fault is injected, held, and
+//! cleared; what base_status shows says when chassisd saw it and when it recovered by
+//! itself. For faults that must stop the vehicle (lost heartbeats, the bus down, the
+//! broker gone so no command arrives) the simulator's truth times the stop. Resident
+//! memory is sampled at the start of every cycle, in the same calm state, so the slope
+//! after the first (warm-up) cycle is not the noise of the faults themselves.
+
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
+use serde::Serialize;
+use serde_json::Value;
+use tokio::sync::watch;
+
+use super::mosquitto::Mosquitto;
+use super::mqtt::Spread;
+use crate::config::mqtt::MqttConfig;
+use crate::core::chassis::{CONTROL_PERIOD, status_bits};
+use crate::runtime::host::resident_memory_bytes;
+use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions};
+use crate::sim::lockstep;
+use crate::sim::plant::{PlantConfig, Truth};
+
+/// No base_status gap may be longer, outside a broker restart.
+pub const GAP_LIMIT: Duration = Duration::from_millis(300);
+/// Resident memory may grow at most this fast after the warm-up cycle, MB per hour.
+pub const RSS_SLOPE_LIMIT_MB_PER_H: f64 = 1.0;
+/// A fault not seen, or not recovered from, within this long is a miss.
+const RECOVERY_LIMIT: Duration = Duration::from_secs(20);
+/// Quiet time after each fault: recovery, the re-arm and the vehicle back at speed.
+const CALM: Duration = Duration::from_secs(6);
+/// The driving client's period.
+const DRIVE_EVERY: Duration = Duration::from_millis(200);
+/// The client drives a circle: forward speed (m/s) and yaw rate (rad/s).
+const DRIVE: (f64, f64) = (0.4, 0.2);
+/// Below this the vehicle counts as stopped, m/s.
+const STOPPED_MPS: f64 = 0.01;
+/// A stop is timed only when the vehicle ran at least this fast as the fault began, m/s.
+const MOVING_MPS: f64 = 0.2;
+/// base_status observations kept per second of the run (10 Hz, with room).
+const OBSERVATIONS_PER_S: u64 = 12;
+
+/// A fault the soak injects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// Two clients publish commands as fast as they can (`mqtt_control` and root).
+    CommandFlood,
+    /// mosquitto killed and started again.
+    BrokerRestart,
+    /// The receiver sends nothing.
+    GnssOutage,
+    /// The IMU sends nothing.
+    ImuStall,
+    /// The wheel drives send no heartbeats.
+    DriveHeartbeatLoss,
+    /// The CAN interface goes down.
+    CanDown,
+}
+
+impl FaultKind {
+    /// How long the fault holds.
+    fn hold(self) -> Duration {
+        Duration::from_secs(match self {
+            Self::CommandFlood | Self::ImuStall => 5,
+            Self::GnssOutage => 8,
+            Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown => 3,
+        })
+    }
+
+    /// The fault must bring the wheels to a stop.
+    fn demands_stop(self) -> bool {
+        matches!(
+            self,
+            Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown
+        )
+    }
+
+    /// Whether base_status can show the fault: a flood is refused silently, and while the
+    /// broker is gone nothing arrives.
+    fn observable(self) -> bool {
+        !matches!(self, Self::CommandFlood | Self::BrokerRestart)
+    }
+
+    /// Whether `o` shows the fault; `None` when base_status cannot show it.
+    fn shown(self, o: &Observation) -> Option<bool> {
+        match self {
+            Self::CommandFlood | Self::BrokerRestart => None,
+            Self::GnssOutage => Some(!o.gnss),
+            Self::ImuStall => Some(!o.imu),
+            Self::DriveHeartbeatLoss => Some(o.bits & status_bits::HEARTBEAT_LOST != 0),
+            Self::CanDown => Some(o.bits & status_bits::BUS_DOWN != 0),
+        }
+    }
+
+    /// Whether `o` shows the vehicle recovered from the fault (the drives enabled again
+    /// after a drive-side fault).
+    fn recovered(self, o: &Observation) -> bool {
+        let enabled = o.bits & status_bits::ENABLED != 0;
+        match self {
+            Self::CommandFlood | Self::BrokerRestart => true,
+            Self::GnssOutage => o.gnss,
+            Self::ImuStall => o.imu,
+            Self::DriveHeartbeatLoss => o.bits & status_bits::HEARTBEAT_LOST == 0 && enabled,
+            Self::CanDown => o.bits & status_bits::BUS_DOWN == 0 && enabled,
+        }
+    }
+
+    fn sim_faults(self) -> SimFaults {
+        SimFaults {
+            gnss_outage: self == Self::GnssOutage,
+            imu_stall: self == Self::ImuStall,
+            drive_heartbeats_lost: self == Self::DriveHeartbeatLoss,
+            bus_down: self == Self::CanDown,
+        }
+    }
+}
+
+/// Which broker a run uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SoakBroker {
+    /// The embedded rumqttd.
+    Embedded,
+    /// A mosquitto the soak starts (and restarts).
+    Mosquitto,
+}
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct SoakOptions {
+    /// The vehicle.
+    pub plant: PlantConfig,
+    /// The dialects (host and port are set per run); root must be on.
+    pub mqtt: MqttConfig,
+    /// Length of each run.
+    pub run_for: Duration,
+    /// The runs, one per broker.
+    pub brokers: Vec<SoakBroker>,
+}
+
+/// One base_status as the client saw it.
+#[derive(Debug, Clone, Copy)]
+struct Observation {
+    at: Instant,
+    bits: u32,
+    gnss: bool,
+    imu: bool,
+}
+
+/// One injected fault.
+#[derive(Debug, Clone, Serialize)]
+pub struct FaultFigures {
+    /// What.
+    pub kind: FaultKind,
+    /// When it began, s from the run's start.
+    pub at_s: f64,
+    /// From injection to the first base_status showing it, s (None if base_status
+    /// cannot show it, or never did).
+    pub detected_s: Option<f64>,
+    /// From clearing it to the first base_status showing the vehicle recovered, s.
+    pub recovered_s: Option<f64>,
+    /// The vehicle's true speed as it began, m/s.
+    pub speed_mps: f64,
+    /// From injection to the true speed below 0.01 m/s, s (timed for faults that demand
+    /// a stop while the vehicle ran).
+    pub stop_s: Option<f64>,
+    /// The bound for that stop: cmd_timeout + one control period + speed / deceleration.
+    pub stop_bound_s: Option<f64>,
+    /// Seen (where base_status can show it), recovered, and stopped within the bound.
+    pub pass: bool,
+}
+
+/// One broker's run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunFigures {
+    /// `embedded` or `mosquitto`.
+    pub broker: String,
+    /// Length, s.
+    pub seconds: f64,
+    /// Fault cycles completed.
+    pub cycles: u32,
+    /// Resident memory at the start and at the end, MB.
+    pub rss_start_mb: f64,
+    pub rss_end_mb: f64,
+    /// Resident memory at the start of each cycle, MB.
+    pub rss_per_cycle_mb: Vec<f64>,
+    /// Least-squares slope of those after the first cycle, MB per hour.
+    pub rss_slope_mb_per_h: Option<f64>,
+    /// The base_status period the client saw, ms.
+    pub status_period_ms: Option<Spread>,
+    /// The largest gap between base_status messages outside broker restarts, ms.
+    pub largest_gap_ms: f64,
+    /// Every fault.
+    pub faults: Vec<FaultFigures>,
+    /// Every target met.
+    pub pass: bool,
+}
+
+/// The soak's figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct SoakReport {
+    /// One run per broker.
+    pub runs: Vec<RunFigures>,
+    /// Every run passed.
+    pub pass: bool,
+}
+
+/// Observations, written into memory taken at the start so that keeping them does not
+/// grow the resident memory the soak measures.
+struct Log {
+    observations: Vec<Observation>,
+    len: usize,
+    acks_ok: Vec<Instant>,
+    acks_len: usize,
+}
+
+impl Log {
+    fn new(run_for: Duration, start: Instant) -> Self {
+        let n = (run_for.as_secs() + 30) * OBSERVATIONS_PER_S;
+        let blank = Observation {
+            at: start,
+            bits: 0,
+            gnss: false,
+            imu: false,
+        };
+        let acks = (run_for.as_secs() + 30) * (1000 / DRIVE_EVERY.as_millis() as u64 + 1);
+        Self {
+            observations: vec![blank; n as usize],
+            len: 0,
+            acks_ok: vec![start; acks as usize],
+            acks_len: 0,
+        }
+    }
+
+    fn observe(&mut self, o: Observation) {
+        if let Some(slot) = self.observations.get_mut(self.len) {
+            *slot = o;
+            self.len += 1;
+        }
+    }
+
+    fn ack(&mut self, at: Instant) {
+        if let Some(slot) = self.acks_ok.get_mut(self.acks_len) {
+            *slot = at;
+            self.acks_len += 1;
+        }
+    }
+
+    fn observations(&self) -> &[Observation] {
+        &self.observations[..self.len]
+    }
+
+    fn last(&self) -> Option<Observation> {
+        self.len.checked_sub(1).map(|i| self.observations[i])
+    }
+}
+
+/// Runs every run in turn.
+pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
+    let mut runs = Vec::new();
+    for &broker in &options.brokers {
+        eprintln!(
+            "chassisd bench soak: {:?} broker for {:.0} s",
+            broker,
+            options.run_for.as_secs_f64()
+        );
+        runs.push(run_one(&options, broker).await?);
+    }
+    let pass = !runs.is_empty() && runs.iter().all(|r| r.pass);
+    Ok(SoakReport { runs, pass })
+}
+
+async fn run_one(options: &SoakOptions, broker: SoakBroker) -> anyhow::Result<RunFigures> {
+    let vehicle_id = options
+        .mqtt
+        .root
+        .as_ref()
+        .map(|r| r.vehicle_id.clone())
+        .context("the root dialect must be on (DRIVE is one of its commands)")?;
+    let mut mqtt = options.mqtt.clone();
+    let mut mosquitto = None;
+    match broker {
+        SoakBroker::Embedded => {
+            mqtt.embedded_broker = true;
+            mqtt.host = "127.0.0.1".into();
+            mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
+                .and_then(|l| l.local_addr())
+                .context("no free port for the embedded broker")?
+                .port();
+        }
+        SoakBroker::Mosquitto => {
+            let m = Mosquitto::start(&std::env::temp_dir())?;
+            mqtt.embedded_broker = false;
+            mqtt.host = "127.0.0.1".into();
+            mqtt.port = m.port();
+            mosquitto = Some(m);
+        }
+    }
+    let chassis = lockstep::vehicle_config(&options.plant)?
+        .chassis
+        .context("the simulated vehicle has a chassis")?;
+    let stop_bound = |speed: f64| {
+        chassis.cmd_timeout_s + CONTROL_PERIOD.as_secs_f64() + speed / chassis.max_decel_mps2
+    };
+
+    let start = Instant::now();
+    let log = Arc::new(Mutex::new(Log::new(options.run_for, start)));
+    let (handle, faults_tx, truth) = SimHandle::new();
+    let sim = tokio::spawn(sim::run(
+        SimOptions {
+            plant: options.plant.clone(),
+            seed: 1,
+            record: None,
+            commands_stdin: false,
+            scenario: None,
+            duration: Some(options.run_for + Duration::from_secs(3)),
+            mqtt: Some(mqtt.clone()),
+            handle: Some(handle),
+        },
+        std::io::sink(),
+    ));
+    let topics = Topics::new(&vehicle_id);
+    let client = tokio::spawn(drive(
+        mqtt.host.clone(),
+        mqtt.port,
+        topics.clone(),
+        log.clone(),
+        start + options.run_for,
+    ));
+
+    // Warm up: the drives enabled and the vehicle at speed.
+    tokio::time::sleep(CALM).await;
+    let schedule: Vec<FaultKind> = [
+        FaultKind::CommandFlood,
+        FaultKind::BrokerRestart,
+        FaultKind::GnssOutage,
+        FaultKind::ImuStall,
+        FaultKind::DriveHeartbeatLoss,
+        FaultKind::CanDown,
+    ]
+    .into_iter()
+    .filter(|k| *k != FaultKind::BrokerRestart || mosquitto.is_some())
+    .collect();
+    let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
+    let rss_start = resident_memory_bytes().unwrap_or(0);
+    let mut rss_per_cycle = Vec::new();
+    let mut injected: Vec<(FaultKind, Instant, Instant, f64, Option<f64>)> = Vec::new();
+    let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
+    let mut cycles = 0;
+    while start.elapsed() + cycle_length <= options.run_for {
+        if sim.is_finished() {
+            anyhow::bail!("the simulation ended early (a signal?)");
+        }
+        rss_per_cycle.push(resident_memory_bytes().unwrap_or(0) as f64 / 1e6);
+        for &kind in &schedule {
+            let speed = truth.borrow().v;
+            let began = Instant::now();
+            let flood = match kind {
+                FaultKind::CommandFlood => Some(tokio::spawn(flood(
+                    mqtt.host.clone(),
+                    mqtt.port,
+                    topics.clone(),
+                    kind.hold(),
+                ))),
+                FaultKind::BrokerRestart => {
+                    if let Some(m) = mosquitto.as_mut() {
+                        m.stop();
+                    }
+                    None
+                }
+                _ => {
+                    faults_tx.send_replace(kind.sim_faults());
+                    None
+                }
+            };
+            let timed = kind.demands_stop() && speed.abs() >= MOVING_MPS;
+            let stop_s = if timed {
+                time_stop(&truth, began, kind.hold()).await
+            } else {
+                None
+            };
+            tokio::time::sleep_until((began + kind.hold()).into()).await;
+            faults_tx.send_replace(SimFaults::default());
+            if let Some(m) = mosquitto
+                .as_mut()
+                .filter(|_| kind == FaultKind::BrokerRestart)
+            {
+                tokio::task::block_in_place(|| m.restart())?;
+            }
+            if let Some(f) = flood {
+                f.await.context("flood task")??;
+            }
+            let cleared = Instant::now();
+            if kind == FaultKind::BrokerRestart {
+                broker_down.push((began, cleared));
+            }
+            injected.push((kind, began, cleared, speed, stop_s));
+            tokio::time::sleep(CALM).await;
+        }
+        cycles += 1;
+    }
+    let rss_end = resident_memory_bytes().unwrap_or(0);
+    let _ = client.await;
+    sim.await.context("simulation task")??;
+    drop(mosquitto);
+
+    let log = log
+        .lock()
+        .map_err(|_| anyhow::anyhow!("the client panicked"))?;
+    let observations = log.observations();
+    let acks = &log.acks_ok[..log.acks_len];
+    let first_status_after = |t: Instant| observations.iter().find(|o| o.at >= t).map(|o| o.at);
+    // A broker restart's window lasts until the first status after it.
+    let windows: Vec<(Instant, Instant)> = broker_down
+        .iter()
+        .map(|&(a, b)| (a, first_status_after(b).unwrap_or(b)))
+        .collect();
+    let periods: Vec<f64> = observations
+        .windows(2)
+        .map(|w| w[1].at.duration_since(w[0].at).as_secs_f64() * 1000.0)
+        .collect();
+    let largest_gap_ms = observations
+        .windows(2)
+        .filter(|w| !windows.iter().any(|&(a, b)| w[1].at >= a && w[0].at <= b))
+        .map(|w| w[1].at.duration_since(w[0].at).as_secs_f64() * 1000.0)
+        .fold(0.0, f64::max);
+    let faults: Vec<FaultFigures> = injected
+        .iter()
+        .map(|&(kind, began, cleared, speed, stop_s)| {
+            let detected_s = observations
+                .iter()
+                .find(|o| o.at >= began && kind.shown(o) == Some(true))
+                .map(|o| o.at.duration_since(began).as_secs_f64());
+            let recovered_at = match kind {
+                // Commands are taken again: the driver's next DRIVE is acknowledged.
+                FaultKind::CommandFlood => acks.iter().find(|&&a| a >= cleared).copied(),
+                // Telemetry is back.
+                FaultKind::BrokerRestart => first_status_after(cleared),
+                _ => observations
+                    .iter()
+                    .find(|o| o.at >= cleared && kind.recovered(o))
+                    .map(|o| o.at),
+            };
+            let recovered_s = recovered_at.map(|a| a.duration_since(cleared).as_secs_f64());
+            let timed = kind.demands_stop() && speed.abs() >= MOVING_MPS;
+            let stop_bound_s = timed.then(|| stop_bound(speed.abs()));
+            let limit = RECOVERY_LIMIT.as_secs_f64();
+            let seen = !kind.observable() || detected_s.is_some_and(|d| d <= limit);
+            let pass = seen
+                && recovered_s.is_some_and(|r| r <= limit)
+                && (!timed || stop_s.zip(stop_bound_s).is_some_and(|(s, b)| s <= b));
+            FaultFigures {
+                kind,
+                at_s: began.duration_since(start).as_secs_f64(),
+                detected_s,
+                recovered_s,
+                speed_mps: speed,
+                stop_s,
+                stop_bound_s,
+                pass,
+            }
+        })
+        .collect();
+    let slope = slope_per_hour(&rss_per_cycle[rss_per_cycle.len().min(1)..], cycle_length);
+    let pass = cycles >= 2
+        && slope.is_some_and(|s| s < RSS_SLOPE_LIMIT_MB_PER_H)
+        && largest_gap_ms <= GAP_LIMIT.as_secs_f64() * 1000.0
+        && faults.iter().all(|f| f.pass);
+    Ok(RunFigures {
+        broker: match broker {
+            SoakBroker::Embedded => "embedded",
+            SoakBroker::Mosquitto => "mosquitto",
+        }
+        .into(),
+        seconds: start.elapsed().as_secs_f64(),
+        cycles,
+        rss_start_mb: rss_start as f64 / 1e6,
+        rss_end_mb: rss_end as f64 / 1e6,
+        rss_per_cycle_mb: rss_per_cycle,
+        rss_slope_mb_per_h: slope,
+        status_period_ms: Spread::of(periods),
+        largest_gap_ms,
+        faults,
+        pass,
+    })
+}
+
+/// The least-squares slope of `samples` taken `every` apart, per hour; `None` with fewer
+/// than two.
+fn slope_per_hour(samples: &[f64], every: Duration) -> Option<f64> {
+    if samples.len() < 2 {
+        return None;
+    }
+    let n = samples.len() as f64;
+    let xs = (0..samples.len()).map(|i| i as f64 * every.as_secs_f64() / 3600.0);
+    let mean_x = xs.clone().sum::<f64>() / n;
+    let mean_y = samples.iter().sum::<f64>() / n;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (x, y) in xs.zip(samples) {
+        sxy += (x - mean_x) * (y - mean_y);
+        sxx += (x - mean_x) * (x - mean_x);
+    }
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// From `began`, how long until the true speed falls below [`STOPPED_MPS`], s; `None` if
+/// it does not within `within`.
+async fn time_stop(
+    truth: &watch::Receiver<Truth>,
+    began: Instant,
+    within: Duration,
+) -> Option<f64> {
+    let mut poll = tokio::time::interval(Duration::from_millis(5));
+    while began.elapsed() < within {
+        poll.tick().await;
+        if truth.borrow().v.abs() < STOPPED_MPS {
+            return Some(began.elapsed().as_secs_f64());
+        }
+    }
+    None
+}
+
+/// The root dialect's topics the client uses.
+#[derive(Debug, Clone)]
+struct Topics {
+    chassis_set: String,
+    chassis_ack: String,
+    heartbeat: String,
+}
+
+impl Topics {
+    fn new(vehicle_id: &str) -> Self {
+        Self {
+            chassis_set: format!("/root/{vehicle_id}/cmd/chassis/set"),
+            chassis_ack: format!("/root/{vehicle_id}/cmd/chassis/ack"),
+            heartbeat: format!("/root/{vehicle_id}/heartbeat/set"),
+        }
+    }
+}
+
+/// The operator's client: watches base_status and drives until `until`.
+async fn drive(
+    host: String,
+    port: u16,
+    topics: Topics,
+    log: Arc<Mutex<Log>>,
+    until: Instant,
+) -> anyhow::Result<()> {
+    let mut o = MqttOptions::new(format!("chassisd-soak-{}", std::process::id()), host, port);
+    o.set_keep_alive(Duration::from_secs(5));
+    let (client, mut events) = AsyncClient::new(o, 64);
+    events.set_network_options(crate::runtime::mqtt::low_latency());
+    let mut next_drive = Instant::now();
+    let mut id = 0u64;
+    while Instant::now() < until {
+        if Instant::now() >= next_drive {
+            next_drive += DRIVE_EVERY;
+            id += 1;
+            let latched = log
+                .lock()
+                .ok()
+                .and_then(|l| l.last())
+                .is_some_and(|o| o.bits & status_bits::AWAITING_COMMAND != 0);
+            let (v, w) = if latched { (0.0, 0.0) } else { DRIVE };
+            let drive = format!(
+                r#"{{"messageId":{id},"timestamp":"soak","messageType":100,"data":{{"linear":{v},"angular":{w}}}}}"#
+            );
+            // A full request queue (the broker gone) loses these; the next ones follow.
+            let _ = client.try_publish(
+                &topics.heartbeat,
+                QoS::AtMostOnce,
+                false,
+                r#"{"timestamp":"soak"}"#,
+            );
+            let _ = client.try_publish(&topics.chassis_set, QoS::AtMostOnce, false, drive);
+        }
+        match tokio::time::timeout(Duration::from_millis(20), events.poll()).await {
+            Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => {
+                // Subscriptions again on every (re)connection: the session is clean.
+                let _ = client.try_subscribe("base_status", QoS::AtMostOnce);
+                let _ = client.try_subscribe(&topics.chassis_ack, QoS::AtMostOnce);
+            }
+            Ok(Ok(Event::Incoming(Packet::Publish(p)))) => {
+                let at = Instant::now();
+                let v: Value = serde_json::from_slice(&p.payload).unwrap_or_default();
+                let Ok(mut log) = log.lock() else {
+                    break;
+                };
+                if p.topic == "base_status" {
+                    log.observe(Observation {
+                        at,
+                        bits: v["robot"]["robot_status"].as_u64().unwrap_or(0) as u32,
+                        gnss: v["sensor"]["gnss"] == true,
+                        imu: v["sensor"]["imu"] == true,
+                    });
+                } else if v["data"]["code"] == 0 {
+                    log.ack(at);
+                }
+            }
+            Ok(Ok(_)) | Err(_) => {}
+            // The broker is gone: try again shortly.
+            Ok(Err(_)) => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
+    }
+    Ok(())
+}
+
+/// Two misbehaving clients' worth of commands, as fast as the connection takes them, for
+/// `hold`: cancel_task on `mqtt_control` and an unknown root message type.
+async fn flood(host: String, port: u16, topics: Topics, hold: Duration) -> anyhow::Result<()> {
+    let o = MqttOptions::new(
+        format!("chassisd-soak-flood-{}", std::process::id()),
+        host,
+        port,
+    );
+    let (client, mut events) = AsyncClient::new(o, 256);
+    events.set_network_options(crate::runtime::mqtt::low_latency());
+    // The flood ends when its time is up, whatever the connection does.
+    let poller = tokio::spawn(async move { while events.poll().await.is_ok() {} });
+    let until = Instant::now() + hold;
+    let rtk = r#"{"cmd":"cancel_task","cmd_type":"task_control"}"#;
+    let root = r#"{"messageId":1,"timestamp":"flood","messageType":999,"data":{}}"#;
+    while Instant::now() < until {
+        if tokio::time::timeout(until.saturating_duration_since(Instant::now()), async {
+            client
+                .publish(crate::api::rtk::MQTT_CONTROL, QoS::AtMostOnce, false, rtk)
+                .await?;
+            client
+                .publish(&topics.chassis_set, QoS::AtMostOnce, false, root)
+                .await
+        })
+        .await
+        .is_err()
+        {
+            break;
+        }
+    }
+    let _ = client.disconnect().await;
+    poller.abort();
+    Ok(())
+}
+
+impl RunFigures {
+    /// Human-readable lines.
+    pub fn table(&self) -> String {
+        use std::fmt::Write;
+        let opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.3}"));
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "soak on {}: {:.0} s, {} cycles; RSS {:.2} -> {:.2} MB, per cycle {:?} MB, slope {} MB/h; base_status p99 {} ms, largest gap {:.1} ms (outside broker restarts)",
+            self.broker,
+            self.seconds,
+            self.cycles,
+            self.rss_start_mb,
+            self.rss_end_mb,
+            self.rss_per_cycle_mb
+                .iter()
+                .map(|m| (m * 100.0).round() / 100.0)
+                .collect::<Vec<_>>(),
+            opt(self.rss_slope_mb_per_h),
+            self.status_period_ms
+                .as_ref()
+                .map_or("-".to_owned(), |s| format!("{:.1}", s.p99)),
+            self.largest_gap_ms,
+        );
+        let _ = writeln!(
+            out,
+            "{:<22} {:>8} {:>10} {:>11} {:>8} {:>8} {:>8} {:>5}",
+            "fault", "at s", "detected s", "recovered s", "speed", "stop s", "bound s", ""
+        );
+        for f in &self.faults {
+            let _ = writeln!(
+                out,
+                "{:<22} {:>8.1} {:>10} {:>11} {:>8.2} {:>8} {:>8} {:>5}",
+                serde_json::to_value(f.kind)
+                    .ok()
+                    .and_then(|v| v.as_str().map(str::to_owned))
+                    .unwrap_or_default(),
+                f.at_s,
+                opt(f.detected_s),
+                opt(f.recovered_s),
+                f.speed_mps,
+                opt(f.stop_s),
+                opt(f.stop_bound_s),
+                if f.pass { "ok" } else { "MISS" },
+            );
+        }
+        out
+    }
+}
+
+impl SoakReport {
+    /// The one-line JSON summary.
+    pub fn json(&self) -> String {
+        serde_json::to_string(self).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slope_of_a_line_and_of_a_flat_series() {
+        let hour = Duration::from_secs(3600);
+        assert_eq!(slope_per_hour(&[1.0], hour), None);
+        let s = slope_per_hour(&[10.0, 11.0, 12.0], hour).unwrap();
+        assert!((s - 1.0).abs() < 1e-12, "{s}");
+        let minute = Duration::from_secs(60);
+        let flat = slope_per_hour(&[10.0, 10.0, 10.0, 10.0], minute).unwrap();
+        assert!(flat.abs() < 1e-12, "{flat}");
+    }
+
+    #[test]
+    fn faults_are_read_from_the_status_flags() {
+        let o = |bits, gnss, imu| Observation {
+            at: Instant::now(),
+            bits,
+            gnss,
+            imu,
+        };
+        let healthy = o(status_bits::ENABLED, true, true);
+        for kind in [
+            FaultKind::GnssOutage,
+            FaultKind::ImuStall,
+            FaultKind::DriveHeartbeatLoss,
+            FaultKind::CanDown,
+        ] {
+            assert_eq!(kind.shown(&healthy), Some(false), "{kind:?}");
+            assert!(kind.recovered(&healthy), "{kind:?}");
+        }
+        assert_eq!(FaultKind::GnssOutage.shown(&o(1, false, true)), Some(true));
+        assert_eq!(FaultKind::ImuStall.shown(&o(1, true, false)), Some(true));
+        let lost = o(status_bits::HEARTBEAT_LOST, true, true);
+        assert_eq!(FaultKind::DriveHeartbeatLoss.shown(&lost), Some(true));
+        // Cleared but not yet enabled again is not recovered.
+        assert!(!FaultKind::CanDown.recovered(&o(0, true, true)));
+        assert_eq!(FaultKind::CommandFlood.shown(&healthy), None);
+    }
+}
