@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use chassisd::config::chassis::LoadProfile;
 use chassisd::devices::bms::dbc::{DbcBms, physical, raw_bits};
 use chassisd::devices::bms::profile::BmsProfile;
 use chassisd::devices::bms::{ChargeState, alarm};
@@ -11,7 +12,7 @@ use chassisd::time::Timestamp;
 
 fn pylontech() -> DbcBms {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/pylontech-bms.toml");
-    let BmsProfile::Dbc(profile) = BmsProfile::load(&path).expect("shipped profile") else {
+    let BmsProfile::Dbc(profile) = BmsProfile::load_file(&path).expect("shipped profile") else {
         panic!("not a DBC profile")
     };
     DbcBms::new(&profile).expect("mapping resolves")

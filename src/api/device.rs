@@ -124,6 +124,16 @@ impl DeviceDialect {
     }
 }
 
+/// The dialect when `[mqtt.device]` is configured.
+pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn Dialect>> {
+    let d = setup.mqtt.device.as_ref()?;
+    Some(Box::new(DeviceDialect::new(
+        &d.serial_number,
+        d.mapping_forward.clone(),
+        setup.mqtt.max_payload,
+    )))
+}
+
 impl Dialect for DeviceDialect {
     fn name(&self) -> &'static str {
         "device"

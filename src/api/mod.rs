@@ -6,6 +6,11 @@ pub mod mqtt;
 pub mod root;
 pub mod rtk;
 
+/// Every MQTT dialect's entry point, in the order incoming topics are offered to them.
+/// A new dialect adds its module and its entry here; the engine lists none of them.
+pub const DIALECTS: &[mqtt::DialectFactory] =
+    &[rtk::from_setup, root::from_setup, device::from_setup];
+
 /// Most points in one path.
 pub const MAX_PATH_POINTS: usize = rtk::trajectory::MAX_POINTS;
 

@@ -4,6 +4,8 @@
 
 use bytes::Bytes;
 
+use crate::api::rtk::trajectory::TrajectoryStore;
+use crate::config::mqtt::MqttConfig;
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};
 use crate::core::{Command, VehicleStatus, chassis::CommandRejected};
@@ -98,6 +100,19 @@ pub trait Dialect: Send {
     }
 }
 
+/// What a dialect is built from: the MQTT configuration, and the trajectory store, which
+/// the dialect that keeps trajectories takes.
+pub struct DialectSetup<'a> {
+    /// The `[mqtt]` configuration; each dialect reads its own table.
+    pub mqtt: &'a MqttConfig,
+    /// The trajectory store, until a dialect takes it.
+    pub trajectories: Option<Box<dyn TrajectoryStore>>,
+}
+
+/// A dialect's entry point: the dialect, when the configuration turns it on. Each dialect
+/// module provides one, and [`crate::api::DIALECTS`] lists them.
+pub type DialectFactory = fn(&mut DialectSetup<'_>) -> Option<Box<dyn Dialect>>;
+
 /// The dialects in force, in the order they were configured.
 #[derive(Default)]
 pub struct Dialects {
@@ -108,6 +123,20 @@ impl Dialects {
     /// `dialects`; each checks its own payload size limit.
     pub fn new(dialects: Vec<Box<dyn Dialect>>) -> Self {
         Self { dialects }
+    }
+
+    /// The dialects `mqtt` turns on, each built by its own entry in `factories`;
+    /// trajectories are kept in `trajectories`.
+    pub fn from_config(
+        mqtt: &MqttConfig,
+        trajectories: Box<dyn TrajectoryStore>,
+        factories: &[DialectFactory],
+    ) -> Self {
+        let mut setup = DialectSetup {
+            mqtt,
+            trajectories: Some(trajectories),
+        };
+        Self::new(factories.iter().filter_map(|f| f(&mut setup)).collect())
     }
 
     /// Every dialect's topic filters.

@@ -729,6 +729,16 @@ pub fn timestamp(t: Timestamp) -> String {
         .unwrap_or_default()
 }
 
+/// The dialect when `[mqtt.root]` is configured.
+pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn Dialect>> {
+    let r = setup.mqtt.root.as_ref()?;
+    Some(Box::new(RootDialect::new(
+        &r.vehicle_id,
+        r.heartbeat_client_id.clone(),
+        setup.mqtt.max_payload,
+    )))
+}
+
 impl Dialect for RootDialect {
     fn on_mission_event(
         &mut self,
@@ -827,5 +837,216 @@ impl Dialect for RootDialect {
         self.reports(status, out);
         self.events(status, out);
         self.ticks += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::chassis::CommandRejected;
+
+    /// The core as a recorder of commands, answering each with a chosen result.
+    #[derive(Default)]
+    struct FakeCore {
+        commands: Vec<Command>,
+        refuse_with: Option<CommandRejected>,
+    }
+
+    impl CoreAccess for FakeCore {
+        fn command(&mut self, command: Command) -> Result<(), CommandRejected> {
+            self.commands.push(command);
+            match self.refuse_with.take() {
+                Some(e) => Err(e),
+                None => Ok(()),
+            }
+        }
+    }
+
+    const T: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
+
+    fn dialect() -> RootDialect {
+        RootDialect::new("v1", None, 4096)
+    }
+
+    /// Sends `payload` on `topic`; the publishes it caused, as (topic, JSON).
+    fn send(
+        d: &mut RootDialect,
+        core: &mut FakeCore,
+        topic: &str,
+        payload: &str,
+    ) -> Vec<(String, Value)> {
+        let mut out = Vec::new();
+        assert!(d.owns(topic), "{topic}");
+        d.on_message(T, topic, payload.as_bytes(), core, &mut out);
+        out.into_iter()
+            .map(|p| (p.topic, serde_json::from_slice(&p.payload).expect("JSON")))
+            .collect()
+    }
+
+    fn only_ack(out: &[(String, Value)], topic: &str) -> Value {
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!(out[0].0, topic);
+        out[0].1.clone()
+    }
+
+    #[test]
+    fn drive_becomes_a_velocity_command_and_is_acknowledged() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/cmd/chassis/set",
+            r#"{"messageId": 7, "timestamp": "x", "messageType": 100, "data": {"linear": 0.3, "angular": -0.1}}"#,
+        );
+        let ack = only_ack(&out, "/root/v1/cmd/chassis/ack");
+        assert_eq!(ack["messageId"], 7);
+        assert_eq!(ack["messageType"], 100);
+        assert_eq!(ack["data"]["code"], OK);
+        assert_eq!(ack["timestamp"], "2026-01-01 00:00:00");
+        assert!(matches!(
+            core.commands.as_slice(),
+            [Command::Velocity { vx, wz }] if *vx == 0.3 && *wz == -0.1
+        ));
+    }
+
+    #[test]
+    fn the_cores_refusal_is_answered_with_its_code_and_reason() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        core.refuse_with = Some(CommandRejected::NotReady("left".into()));
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/cmd/chassis/set",
+            r#"{"messageId": 1, "messageType": 100, "data": {"linear": 0.1, "angular": 0}}"#,
+        );
+        let ack = only_ack(&out, "/root/v1/cmd/chassis/ack");
+        assert_eq!(ack["data"]["code"], REFUSED);
+        assert!(
+            ack["data"]["message"].as_str().unwrap().contains("left"),
+            "{ack}"
+        );
+        // Values out of range are the request's fault, not the vehicle's.
+        core.refuse_with = Some(CommandRejected::NotFinite);
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/cmd/chassis/set",
+            r#"{"messageId": 2, "messageType": 100, "data": {"linear": 1e300, "angular": 0}}"#,
+        );
+        assert_eq!(
+            only_ack(&out, "/root/v1/cmd/chassis/ack")["data"]["code"],
+            INVALID
+        );
+    }
+
+    #[test]
+    fn malformed_requests_reach_no_core_and_get_invalid() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        for payload in [
+            "not json",
+            "[1, 2]",
+            r#"{"messageId": 3, "messageType": "drive", "data": {}}"#,
+            r#"{"messageId": 4, "messageType": 100, "data": {"linear": "fast"}}"#,
+        ] {
+            let out = send(&mut d, &mut core, "/root/v1/cmd/chassis/set", payload);
+            let ack = only_ack(&out, "/root/v1/cmd/chassis/ack");
+            assert_eq!(ack["data"]["code"], INVALID, "{payload}: {ack}");
+            assert!(ack["data"]["message"].is_string(), "{ack}");
+        }
+        let big = format!(
+            r#"{{"messageId": 5, "messageType": 100, "pad": "{}"}}"#,
+            "x".repeat(5000)
+        );
+        let out = send(&mut d, &mut core, "/root/v1/cmd/chassis/set", &big);
+        assert_eq!(
+            only_ack(&out, "/root/v1/cmd/chassis/ack")["data"]["code"],
+            INVALID
+        );
+        assert!(core.commands.is_empty(), "{:?}", core.commands);
+    }
+
+    #[test]
+    fn an_unknown_message_type_gets_code_two_and_its_own_id() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/cmd/chassis/set",
+            r#"{"messageId": "abc", "messageType": 999, "data": {}}"#,
+        );
+        let ack = only_ack(&out, "/root/v1/cmd/chassis/ack");
+        assert_eq!(ack["data"]["code"], UNKNOWN_TYPE);
+        assert_eq!(ack["messageId"], "abc");
+        assert!(core.commands.is_empty());
+    }
+
+    #[test]
+    fn heartbeats_feed_the_watchdog_only_from_the_named_client() {
+        let mut core = FakeCore::default();
+        let mut d = RootDialect::new("v1", Some("operator".into()), 4096);
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/heartbeat/set",
+            r#"{"clientId": "someone"}"#,
+        );
+        assert_eq!(out[0].0, "/root/v1/heartbeat/notify");
+        assert!(
+            core.commands.is_empty(),
+            "another client's heartbeat does not count"
+        );
+        send(
+            &mut d,
+            &mut core,
+            "/root/v1/heartbeat/set",
+            r#"{"clientId": "operator"}"#,
+        );
+        assert!(matches!(
+            core.commands.as_slice(),
+            [Command::ControlHeartbeat]
+        ));
+        // Without a named client, any heartbeat counts, even one that is not JSON.
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        send(&mut d, &mut core, "/root/v1/heartbeat/set", "beat");
+        assert!(matches!(
+            core.commands.as_slice(),
+            [Command::ControlHeartbeat]
+        ));
+    }
+
+    #[test]
+    fn init_position_is_acknowledged_then_notified_with_the_yaw_of_its_quaternion() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        let (s, c) = (std::f64::consts::FRAC_PI_4 / 2.0).sin_cos();
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/cmd/navigation/set",
+            &format!(
+                r#"{{"messageId": 9, "messageType": 0, "data": [1.0, 2.0, 0.0, 0.0, 0.0, {s}, {c}]}}"#
+            ),
+        );
+        let topics: Vec<&str> = out.iter().map(|(t, _)| t.as_str()).collect();
+        assert_eq!(
+            topics,
+            [
+                "/root/v1/cmd/navigation/ack",
+                "/root/v1/cmd/navigation/notify"
+            ]
+        );
+        let [Command::SetPose { x, y, yaw }] = core.commands.as_slice() else {
+            panic!("{:?}", core.commands)
+        };
+        assert_eq!((*x, *y), (1.0, 2.0));
+        assert!((yaw - std::f64::consts::FRAC_PI_4).abs() < 1e-12, "{yaw}");
+    }
+
+    #[test]
+    fn topics_of_other_vehicles_and_shapes_are_not_owned() {
+        let d = dialect();
+        assert!(!d.owns("/root/v2/cmd/chassis/set"));
+        assert!(!d.owns("/root/v1/cmd/chassis/ack"));
+        assert!(!d.owns("/root/v1/a/b/c/set"));
+        assert!(d.owns("/root/v1/setting/navigation/set"));
     }
 }

@@ -205,8 +205,13 @@ impl LoadProfile for DriveProfile {
 }
 
 impl LoadProfile for BmsProfile {
+    /// A DBC file the profile names is read relative to the profile.
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
-        BmsProfile::load(path)
+        let text = super::read_text(path)?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        BmsProfile::from_toml(&text, path, |dbc| {
+            super::read_text(&dir.join(dbc)).map_err(|e| e.named_by(path, "dbc"))
+        })
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {
@@ -216,7 +221,7 @@ impl LoadProfile for BmsProfile {
 
 impl LoadProfile for EStopProfile {
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
-        EStopProfile::load(path)
+        EStopProfile::from_toml(&super::read_text(path)?, path)
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {

@@ -45,14 +45,13 @@ pub struct EStopProfile {
 }
 
 impl EStopProfile {
-    /// Reads and checks a profile file.
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = crate::config::read_text(path)?;
-        let profile: Self = toml::from_str(&text).map_err(|e| ConfigError::Parse {
-            file: path.to_owned(),
+    /// Parses and checks a profile's text; `file` names it in errors.
+    pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        let profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
             message: e.to_string(),
         })?;
-        profile.validate(path, "")?;
+        profile.validate(file, "")?;
         Ok(profile)
     }
 

@@ -16,11 +16,8 @@ pub mod drivetrain;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration;
 
-use crate::api::device::DeviceDialect;
 use crate::api::local;
-use crate::api::mqtt::{CoreAccess, Dialect, Dialects, MQTT_SOURCE, Publish};
-use crate::api::root::RootDialect;
-use crate::api::rtk::RtkDialect;
+use crate::api::mqtt::{CoreAccess, Dialects, MQTT_SOURCE, Publish};
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
@@ -180,28 +177,10 @@ impl CoreAccess for CoreAt<'_> {
 
 /// The dialects a configuration turns on, trajectories kept in `trajectories`.
 fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> Dialects {
-    let Some(mqtt) = &config.mqtt else {
-        return Dialects::default();
-    };
-    let mut list: Vec<Box<dyn Dialect>> = Vec::new();
-    if mqtt.rtk.is_some() {
-        list.push(Box::new(RtkDialect::new(trajectories, mqtt.max_payload)));
+    match &config.mqtt {
+        Some(mqtt) => Dialects::from_config(mqtt, trajectories, crate::api::DIALECTS),
+        None => Dialects::default(),
     }
-    if let Some(r) = &mqtt.root {
-        list.push(Box::new(RootDialect::new(
-            &r.vehicle_id,
-            r.heartbeat_client_id.clone(),
-            mqtt.max_payload,
-        )));
-    }
-    if let Some(d) = &mqtt.device {
-        list.push(Box::new(DeviceDialect::new(
-            &d.serial_number,
-            d.mapping_forward.clone(),
-            mqtt.max_payload,
-        )));
-    }
-    Dialects::new(list)
 }
 
 impl Engine {

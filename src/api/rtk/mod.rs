@@ -248,6 +248,16 @@ impl Trajectory {
     }
 }
 
+/// The dialect when `[mqtt.rtk]` is configured; it takes the trajectory store.
+pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn Dialect>> {
+    setup.mqtt.rtk.as_ref()?;
+    let store = setup
+        .trajectories
+        .take()
+        .unwrap_or_else(|| Box::new(trajectory::MemoryStore::default()));
+    Some(Box::new(RtkDialect::new(store, setup.mqtt.max_payload)))
+}
+
 impl Dialect for RtkDialect {
     fn name(&self) -> &'static str {
         "rtk"

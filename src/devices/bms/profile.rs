@@ -108,21 +108,25 @@ pub struct DbcAlarm {
 }
 
 impl BmsProfile {
-    /// Reads and checks a profile file; a DBC file it names is read relative to it.
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = crate::config::read_text(path)?;
-        let mut profile: Self = toml::from_str(&text).map_err(|e| ConfigError::Parse {
-            file: path.to_owned(),
+    /// Parses a profile's text; `file` names it in errors. A DBC profile that names its DBC
+    /// file (`dbc = "..."`) gets that file's text from `read_dbc`, called with the name as
+    /// written: reading files is the configuration's job, not the profile's. The profile
+    /// is checked once complete.
+    pub fn from_toml(
+        text: &str,
+        file: &Path,
+        read_dbc: impl FnOnce(&str) -> Result<String, ConfigError>,
+    ) -> Result<Self, ConfigError> {
+        let mut profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            file: file.to_owned(),
             message: e.to_string(),
         })?;
         if let Self::Dbc(p) = &mut profile
-            && let Some(file) = &p.dbc
+            && let Some(name) = &p.dbc
         {
-            let dbc_path = path.parent().unwrap_or(Path::new(".")).join(file);
-            p.dbc_text =
-                crate::config::read_text(&dbc_path).map_err(|e| e.named_by(path, "dbc"))?;
+            p.dbc_text = read_dbc(name)?;
         }
-        profile.validate(path)?;
+        profile.validate(file)?;
         Ok(profile)
     }
 
@@ -171,14 +175,27 @@ impl BmsProfile {
 mod tests {
     use super::*;
 
+    /// A shipped profile, its DBC read from beside it.
+    fn shipped(name: &str) -> BmsProfile {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let text = std::fs::read_to_string(dir.join(name)).unwrap();
+        BmsProfile::from_toml(&text, Path::new(name), |dbc| {
+            Ok(std::fs::read_to_string(dir.join(dbc)).unwrap())
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_dbc_profile_without_its_dbc_is_refused_without_reading_files() {
+        let text = "kind = \"dbc\"\nname = \"x\"\n[fields]\nvoltage = \"a.b\"\ncurrent = \"a.c\"\nsoc = \"a.d\"\n";
+        let e = BmsProfile::from_toml(text, Path::new("x.toml"), |_| unreachable!()).unwrap_err();
+        assert!(e.to_string().contains("no DBC given"), "{e}");
+    }
+
     #[test]
     fn shipped_profiles_load() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
-        assert!(matches!(
-            BmsProfile::load(&dir.join("daly-bms.toml")).unwrap(),
-            BmsProfile::Daly(_)
-        ));
-        let BmsProfile::Dbc(p) = BmsProfile::load(&dir.join("pylontech-bms.toml")).unwrap() else {
+        assert!(matches!(shipped("daly-bms.toml"), BmsProfile::Daly(_)));
+        let BmsProfile::Dbc(p) = shipped("pylontech-bms.toml") else {
             panic!("not a DBC profile")
         };
         assert!(p.dbc_text.contains("BO_ 854"));
@@ -186,9 +203,7 @@ mod tests {
 
     #[test]
     fn a_bad_mapping_names_the_key() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
-        let BmsProfile::Dbc(mut p) = BmsProfile::load(&dir.join("pylontech-bms.toml")).unwrap()
-        else {
+        let BmsProfile::Dbc(mut p) = shipped("pylontech-bms.toml") else {
             panic!()
         };
         p.fields.soc = "pylon_soc_soh.state_of_charge".into();

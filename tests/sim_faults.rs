@@ -1,0 +1,130 @@
+//! The simulator's fault hooks that `chassisd bench soak` uses, through the whole engine:
+//! the CAN interface down, lost drive heartbeats and a stalled IMU are each seen in the
+//! status, stop a moving vehicle within the watchdog's bound where they must, and clear by
+//! themselves once the fault ends; motion then needs the deliberate re-arm.
+
+mod common;
+
+use chassisd::core::chassis::{CONTROL_PERIOD, status_bits};
+use chassisd::sim::lockstep::PLANT_STEP;
+use common::lockstep::{FIXED, SimRun as Vehicle};
+
+/// cmd_timeout_s and max_decel_mps2 of the simulated vehicle's configuration.
+const CMD_TIMEOUT_S: f64 = 0.5;
+const MAX_DECEL: f64 = 1.5;
+const SPEED: f64 = 0.4;
+
+fn twist(v: f64) -> String {
+    format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":0.0}}}}"#)
+}
+
+fn bits(v: &Vehicle) -> u32 {
+    v.status().chassis.as_ref().map_or(0, |c| c.status_bits)
+}
+
+/// Commands `speed` every 100 ms for `seconds` (refusals are the point of some tests).
+fn drive(v: &mut Vehicle, speed: f64, seconds: f64) {
+    for _ in 0..(seconds * 10.0).round() as u32 {
+        let _ = v.send("cmd_vel", &twist(speed));
+        v.run(0.1);
+    }
+}
+
+/// Steps until the true speed is below 1 cm/s while commands keep coming; the time taken.
+fn time_to_stop(v: &mut Vehicle, within: f64) -> Option<f64> {
+    let steps = (within / PLANT_STEP.as_secs_f64()).round() as u64;
+    for step in 0..steps {
+        if v.speed().abs() < 0.01 {
+            return Some(step as f64 * PLANT_STEP.as_secs_f64());
+        }
+        // The sender goes on commanding every 100 ms: the fault alone must stop it.
+        if step.is_multiple_of(100) {
+            let _ = v.send("cmd_vel", &twist(SPEED));
+        }
+        v.sim.step(FIXED, &mut v.sink);
+    }
+    None
+}
+
+fn stop_bound() -> f64 {
+    CMD_TIMEOUT_S + CONTROL_PERIOD.as_secs_f64() + SPEED / MAX_DECEL
+}
+
+/// Steps (commanding zero, the re-arm) until `healthy` holds; the time taken.
+fn time_to_recover(
+    v: &mut Vehicle,
+    within: f64,
+    healthy: impl Fn(&Vehicle) -> bool,
+) -> Option<f64> {
+    let mut t = 0.0;
+    while t < within {
+        let _ = v.send("cmd_vel", &twist(0.0));
+        v.run(0.1);
+        t += 0.1;
+        if healthy(v) {
+            return Some(t);
+        }
+    }
+    None
+}
+
+fn enabled_without(flag: u32) -> impl Fn(&Vehicle) -> bool {
+    move |v| bits(v) & flag == 0 && bits(v) & status_bits::ENABLED != 0
+}
+
+#[test]
+fn a_can_interface_down_stops_the_vehicle_and_recovers_when_back() {
+    let mut v = Vehicle::booted(1);
+    drive(&mut v, SPEED, 2.0);
+    assert!(v.speed() > 0.3, "under way: {}", v.speed());
+    v.sim.set_bus_up(false, &mut v.sink);
+    let stop = time_to_stop(&mut v, 3.0).expect("stopped");
+    println!("stopped in {stop:.3} s (bound {:.3} s)", stop_bound());
+    assert!(stop <= stop_bound(), "{stop} s > {} s", stop_bound());
+    assert_ne!(bits(&v) & status_bits::BUS_DOWN, 0, "{:b}", bits(&v));
+    v.sim.set_bus_up(true, &mut v.sink);
+    let back = time_to_recover(&mut v, 20.0, enabled_without(status_bits::BUS_DOWN));
+    assert!(back.is_some(), "not recovered: {:b}", bits(&v));
+    println!("recovered {back:?} s after the fault cleared");
+    drive(&mut v, SPEED, 2.0);
+    assert!(
+        v.speed() > 0.3,
+        "drives again after the re-arm: {}",
+        v.speed()
+    );
+}
+
+#[test]
+fn lost_drive_heartbeats_stop_the_vehicle_and_recover_when_back() {
+    let mut v = Vehicle::booted(2);
+    drive(&mut v, SPEED, 2.0);
+    assert!(v.speed() > 0.3, "under way: {}", v.speed());
+    v.sim.vehicle_mut().set_drive_heartbeats(false);
+    let stop = time_to_stop(&mut v, 3.0).expect("stopped");
+    println!("stopped in {stop:.3} s (bound {:.3} s)", stop_bound());
+    assert!(stop <= stop_bound(), "{stop} s > {} s", stop_bound());
+    assert_ne!(bits(&v) & status_bits::HEARTBEAT_LOST, 0, "{:b}", bits(&v));
+    v.sim.vehicle_mut().set_drive_heartbeats(true);
+    let back = time_to_recover(&mut v, 20.0, enabled_without(status_bits::HEARTBEAT_LOST));
+    assert!(back.is_some(), "not recovered: {:b}", bits(&v));
+    println!("recovered {back:?} s after the fault cleared");
+    drive(&mut v, SPEED, 2.0);
+    assert!(
+        v.speed() > 0.3,
+        "drives again after the re-arm: {}",
+        v.speed()
+    );
+}
+
+#[test]
+fn a_stalled_imu_is_reported_and_clears_when_it_sends_again() {
+    let mut v = Vehicle::booted(3);
+    v.run(1.0);
+    assert!(v.status().imu_ok, "IMU healthy at the start");
+    v.sim.vehicle_mut().set_imu_stalled(true);
+    v.run(2.0);
+    assert!(!v.status().imu_ok, "a silent IMU is reported");
+    v.sim.vehicle_mut().set_imu_stalled(false);
+    v.run(0.5);
+    assert!(v.status().imu_ok, "and clears once it sends again");
+}
