@@ -103,6 +103,9 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
         MAX_LINE_BYTES,
     );
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
+    // signal that arrives between two turns.
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
     loop {
         tokio::select! {
             line = lines.next() => {
@@ -125,7 +128,7 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
                 }
             }
             _ = sigterm.recv() => break,
-            _ = tokio::signal::ctrl_c() => break,
+            _ = sigint.recv() => break,
         }
     }
     Ok(())

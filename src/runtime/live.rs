@@ -215,6 +215,10 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("cannot install the SIGTERM handler")?;
+    // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
+    // signal that arrives between two turns.
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+        .context("cannot install the SIGINT handler")?;
     let mut drivers_running = drivers_running;
     let result = loop {
         let next_tick = engine.next_tick().unwrap_or_else(|| clock.now());
@@ -238,7 +242,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             _ = summary.tick() => {
                 summarise_faults(&engine, &can_tx, &mut reported);
             }
-            _ = tokio::signal::ctrl_c() => break Ok("SIGINT"),
+            _ = sigint.recv() => break Ok("SIGINT"),
             _ = sigterm.recv() => break Ok("SIGTERM"),
         }
         let t = now.unwrap_or_else(|| clock.now());

@@ -228,6 +228,10 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         .map(|d| start.saturating_add(d));
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("cannot install the SIGTERM handler")?;
+    // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
+    // signal that arrives between two turns.
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+        .context("cannot install the SIGINT handler")?;
     let mut pace = tokio::time::interval(PACE);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut summary = Summary::new(sim.vehicle().truth());
@@ -262,7 +266,7 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
                 Some(record) => sim.input(&record.source, record.payload, &mut sink),
                 None => commands_open = false,
             },
-            _ = tokio::signal::ctrl_c() => break,
+            _ = sigint.recv() => break,
             _ = sigterm.recv() => break,
         }
         if let Some(e) = sink.out.take_error() {
