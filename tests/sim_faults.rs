@@ -72,18 +72,20 @@ fn enabled_without(flag: u32) -> impl Fn(&Vehicle) -> bool {
     move |v| bits(v) & flag == 0 && bits(v) & status_bits::ENABLED != 0
 }
 
-#[test]
-fn a_can_interface_down_stops_the_vehicle_and_recovers_when_back() {
-    let mut v = Vehicle::booted(1);
+/// Drives at [`SPEED`], sets the fault with `fault(true)`: the vehicle stops within the
+/// bound and `flag` shows; clears it with `fault(false)`: the flag clears and the drives
+/// are enabled again, and after the zero command motion works again.
+fn stops_and_recovers(seed: u64, flag: u32, fault: impl Fn(&mut Vehicle, bool)) {
+    let mut v = Vehicle::booted(seed);
     drive(&mut v, SPEED, 2.0);
     assert!(v.speed() > 0.3, "under way: {}", v.speed());
-    v.sim.set_bus_up(false, &mut v.sink);
+    fault(&mut v, true);
     let stop = time_to_stop(&mut v, 3.0).expect("stopped");
     println!("stopped in {stop:.3} s (bound {:.3} s)", stop_bound());
     assert!(stop <= stop_bound(), "{stop} s > {} s", stop_bound());
-    assert_ne!(bits(&v) & status_bits::BUS_DOWN, 0, "{:b}", bits(&v));
-    v.sim.set_bus_up(true, &mut v.sink);
-    let back = time_to_recover(&mut v, 20.0, enabled_without(status_bits::BUS_DOWN));
+    assert_ne!(bits(&v) & flag, 0, "{:b}", bits(&v));
+    fault(&mut v, false);
+    let back = time_to_recover(&mut v, 20.0, enabled_without(flag));
     assert!(back.is_some(), "not recovered: {:b}", bits(&v));
     println!("recovered {back:?} s after the fault cleared");
     drive(&mut v, SPEED, 2.0);
@@ -95,25 +97,17 @@ fn a_can_interface_down_stops_the_vehicle_and_recovers_when_back() {
 }
 
 #[test]
+fn a_can_interface_down_stops_the_vehicle_and_recovers_when_back() {
+    stops_and_recovers(1, status_bits::BUS_DOWN, |v, down| {
+        v.sim.set_bus_up(!down, &mut v.sink)
+    });
+}
+
+#[test]
 fn lost_drive_heartbeats_stop_the_vehicle_and_recover_when_back() {
-    let mut v = Vehicle::booted(2);
-    drive(&mut v, SPEED, 2.0);
-    assert!(v.speed() > 0.3, "under way: {}", v.speed());
-    v.sim.vehicle_mut().set_drive_heartbeats(false);
-    let stop = time_to_stop(&mut v, 3.0).expect("stopped");
-    println!("stopped in {stop:.3} s (bound {:.3} s)", stop_bound());
-    assert!(stop <= stop_bound(), "{stop} s > {} s", stop_bound());
-    assert_ne!(bits(&v) & status_bits::HEARTBEAT_LOST, 0, "{:b}", bits(&v));
-    v.sim.vehicle_mut().set_drive_heartbeats(true);
-    let back = time_to_recover(&mut v, 20.0, enabled_without(status_bits::HEARTBEAT_LOST));
-    assert!(back.is_some(), "not recovered: {:b}", bits(&v));
-    println!("recovered {back:?} s after the fault cleared");
-    drive(&mut v, SPEED, 2.0);
-    assert!(
-        v.speed() > 0.3,
-        "drives again after the re-arm: {}",
-        v.speed()
-    );
+    stops_and_recovers(2, status_bits::HEARTBEAT_LOST, |v, lost| {
+        v.sim.vehicle_mut().set_drive_heartbeats(!lost)
+    });
 }
 
 #[test]

@@ -148,14 +148,17 @@ impl MqttComparison {
     }
 }
 
-/// Runs the benchmark.
-pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
-    let vehicle_id = options
-        .mqtt
-        .root
+/// The vehicle id of `mqtt`'s root dialect, which a benchmark's DRIVE commands need.
+pub fn root_vehicle_id(mqtt: &MqttConfig) -> anyhow::Result<String> {
+    mqtt.root
         .as_ref()
         .map(|r| r.vehicle_id.clone())
-        .context("the root dialect must be on (DRIVE is one of its commands)")?;
+        .context("the root dialect must be on (DRIVE is one of its commands)")
+}
+
+/// Runs the benchmark.
+pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
+    let vehicle_id = root_vehicle_id(&options.mqtt)?;
     let dir = std::env::temp_dir().join(format!(
         "chassisd-bench-mqtt-{}-{}",
         std::process::id(),

@@ -280,12 +280,7 @@ pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
 }
 
 async fn run_one(options: &SoakOptions, broker: SoakBroker) -> anyhow::Result<RunFigures> {
-    let vehicle_id = options
-        .mqtt
-        .root
-        .as_ref()
-        .map(|r| r.vehicle_id.clone())
-        .context("the root dialect must be on (DRIVE is one of its commands)")?;
+    let vehicle_id = super::mqtt::root_vehicle_id(&options.mqtt)?;
     let mut mqtt = options.mqtt.clone();
     let mut mosquitto = None;
     match broker {
