@@ -8,7 +8,9 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
+use chassisd::bench::Broker;
 use chassisd::bench::fusion;
+use chassisd::bench::mosquitto::Mosquitto;
 use chassisd::config::VehicleConfig;
 use chassisd::config::mqtt::{
     DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
@@ -506,53 +508,47 @@ fn bench_fusion(
     Ok(report.pass)
 }
 
+/// The brokers `--broker` names, in the order they run.
+fn bench_brokers(choice: BenchBroker) -> Vec<Broker> {
+    match choice {
+        BenchBroker::Embedded => vec![Broker::Embedded],
+        BenchBroker::Mosquitto => vec![Broker::Mosquitto],
+        BenchBroker::Both => vec![Broker::Embedded, Broker::Mosquitto],
+    }
+}
+
 fn bench_mqtt(
     plant: Option<PathBuf>,
     seconds: Duration,
     external: Option<&str>,
-    broker: BenchBroker,
+    choice: BenchBroker,
 ) -> anyhow::Result<bool> {
-    use chassisd::bench::mosquitto::Mosquitto;
     use chassisd::bench::mqtt::{BrokerRun, MqttBenchOptions, MqttComparison};
 
     let plant = load_plant(plant)?;
-    let mut brokers: Vec<&str> = Vec::new();
+    // An outside broker (`--mqtt`) runs alone; else each broker asked for, mosquitto left
+    // out with the reason when it is missing and both were asked for.
+    let mut brokers: Vec<Option<Broker>> = Vec::new();
     let mut skipped = None;
     if external.is_some() {
-        brokers.push("external");
+        brokers.push(None);
     } else {
-        if broker != BenchBroker::Mosquitto {
-            brokers.push("embedded");
-        }
-        if broker != BenchBroker::Embedded {
-            match Mosquitto::missing() {
-                None => brokers.push("mosquitto"),
-                Some(why) if broker == BenchBroker::Both => skipped = Some(why),
+        for broker in bench_brokers(choice) {
+            let missing = (broker == Broker::Mosquitto)
+                .then(Mosquitto::missing)
+                .flatten();
+            match missing {
+                Some(why) if choice == BenchBroker::Both => skipped = Some(why),
                 Some(why) => anyhow::bail!(why),
+                None => brokers.push(Some(broker)),
             }
         }
     }
     let mut runs = Vec::new();
-    for name in brokers {
+    for broker in brokers {
         let mut mqtt = sim_mqtt(external)?;
-        let mut mosquitto = None;
-        match name {
-            "embedded" => {
-                // A port of its own, so a broker already on 1883 is no obstacle.
-                mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
-                    .and_then(|l| l.local_addr())
-                    .context("no free port for the embedded broker")?
-                    .port();
-            }
-            "mosquitto" => {
-                let m = Mosquitto::start(&std::env::temp_dir())?;
-                mqtt.embedded_broker = false;
-                mqtt.host = "127.0.0.1".into();
-                mqtt.port = m.port();
-                mosquitto = Some(m);
-            }
-            _ => {}
-        }
+        let mosquitto = broker.map(|b| b.start(&mut mqtt)).transpose()?.flatten();
+        let name = broker.map_or("external", Broker::name);
         let runtime = async_runtime(2)?;
         let report = runtime.block_on(chassisd::bench::mqtt::run(MqttBenchOptions {
             plant: plant.clone(),
@@ -577,17 +573,12 @@ fn bench_mqtt(
 fn bench_soak(
     plant: Option<PathBuf>,
     total: Duration,
-    broker: BenchBroker,
+    choice: BenchBroker,
 ) -> anyhow::Result<bool> {
-    use chassisd::bench::mosquitto::Mosquitto;
-    use chassisd::bench::soak::{SoakBroker, SoakOptions};
+    use chassisd::bench::soak::SoakOptions;
 
-    let brokers = match broker {
-        BenchBroker::Embedded => vec![SoakBroker::Embedded],
-        BenchBroker::Mosquitto => vec![SoakBroker::Mosquitto],
-        BenchBroker::Both => vec![SoakBroker::Embedded, SoakBroker::Mosquitto],
-    };
-    if brokers.contains(&SoakBroker::Mosquitto)
+    let brokers = bench_brokers(choice);
+    if brokers.contains(&Broker::Mosquitto)
         && let Some(why) = Mosquitto::missing()
     {
         anyhow::bail!(why);

@@ -1,17 +1,17 @@
 //! The simulator's fault hooks that `chassisd bench soak` uses, through the whole engine:
 //! the CAN interface down, lost drive heartbeats and a stalled IMU are each seen in the
 //! status, stop a moving vehicle within the watchdog's bound where they must, and clear by
-//! themselves once the fault ends; motion then needs the deliberate re-arm.
+//! themselves once the fault ends; motion then needs the deliberate re-arm. Each runs on
+//! both shipped plants.
 
 mod common;
 
 use chassisd::core::chassis::{CONTROL_PERIOD, status_bits};
-use chassisd::sim::lockstep::PLANT_STEP;
-use common::lockstep::{FIXED, SimRun as Vehicle};
+use chassisd::sim::lockstep::{Lockstep, PLANT_STEP};
+use chassisd::sim::plant::PlantConfig;
+use common::lockstep::{FIXED, START, SimRun as Vehicle};
 
-/// cmd_timeout_s and max_decel_mps2 of the simulated vehicle's configuration.
-const CMD_TIMEOUT_S: f64 = 0.5;
-const MAX_DECEL: f64 = 1.5;
+/// The speed the vehicle runs at when a fault strikes, m/s.
 const SPEED: f64 = 0.4;
 
 fn twist(v: f64) -> String {
@@ -46,8 +46,11 @@ fn time_to_stop(v: &mut Vehicle, within: f64) -> Option<f64> {
     None
 }
 
-fn stop_bound() -> f64 {
-    CMD_TIMEOUT_S + CONTROL_PERIOD.as_secs_f64() + SPEED / MAX_DECEL
+/// cmd_timeout + one control period + the deceleration time from [`SPEED`], from the
+/// chassisd configuration of the simulated vehicle.
+fn stop_bound(v: &Vehicle) -> f64 {
+    let chassis = v.sim.config().chassis.as_ref().expect("a chassis");
+    chassis.cmd_timeout_s + CONTROL_PERIOD.as_secs_f64() + SPEED / chassis.max_decel_mps2
 }
 
 /// Steps (commanding zero, the re-arm) until `healthy` holds; the time taken.
@@ -72,28 +75,42 @@ fn enabled_without(flag: u32) -> impl Fn(&Vehicle) -> bool {
     move |v| bits(v) & flag == 0 && bits(v) & status_bits::ENABLED != 0
 }
 
-/// Drives at [`SPEED`], sets the fault with `fault(true)`: the vehicle stops within the
-/// bound and `flag` shows; clears it with `fault(false)`: the flag clears and the drives
-/// are enabled again, and after the zero command motion works again.
+/// The shipped plant files: every test runs on each.
+const PLANTS: [&str; 2] = ["plant.mower.toml", "plant.delivery.toml"];
+
+/// The vehicle of `plant` with noise `seed`, booted (3 s standing).
+fn booted(plant: &str, seed: u64) -> Vehicle {
+    let plant = PlantConfig::load(&common::repo().join("devices").join(plant)).expect("plant");
+    let mut v = Vehicle::on(Lockstep::new(plant, seed, START).expect("sim"));
+    v.run(3.0);
+    v
+}
+
+/// On every plant: drives at [`SPEED`], sets the fault with `fault(true)`: the vehicle
+/// stops within the bound and `flag` shows; clears it with `fault(false)`: the flag
+/// clears and the drives are enabled again, and after the zero command motion works again.
 fn stops_and_recovers(seed: u64, flag: u32, fault: impl Fn(&mut Vehicle, bool)) {
-    let mut v = Vehicle::booted(seed);
-    drive(&mut v, SPEED, 2.0);
-    assert!(v.speed() > 0.3, "under way: {}", v.speed());
-    fault(&mut v, true);
-    let stop = time_to_stop(&mut v, 3.0).expect("stopped");
-    println!("stopped in {stop:.3} s (bound {:.3} s)", stop_bound());
-    assert!(stop <= stop_bound(), "{stop} s > {} s", stop_bound());
-    assert_ne!(bits(&v) & flag, 0, "{:b}", bits(&v));
-    fault(&mut v, false);
-    let back = time_to_recover(&mut v, 20.0, enabled_without(flag));
-    assert!(back.is_some(), "not recovered: {:b}", bits(&v));
-    println!("recovered {back:?} s after the fault cleared");
-    drive(&mut v, SPEED, 2.0);
-    assert!(
-        v.speed() > 0.3,
-        "drives again after the re-arm: {}",
-        v.speed()
-    );
+    for plant in PLANTS {
+        let mut v = booted(plant, seed);
+        drive(&mut v, SPEED, 2.0);
+        assert!(v.speed() > 0.3, "{plant}: under way: {}", v.speed());
+        fault(&mut v, true);
+        let stop = time_to_stop(&mut v, 3.0).expect("stopped");
+        let bound = stop_bound(&v);
+        println!("{plant}: stopped in {stop:.3} s (bound {bound:.3} s)");
+        assert!(stop <= bound, "{plant}: {stop} s > {bound} s");
+        assert_ne!(bits(&v) & flag, 0, "{plant}: {:b}", bits(&v));
+        fault(&mut v, false);
+        let back = time_to_recover(&mut v, 20.0, enabled_without(flag));
+        assert!(back.is_some(), "{plant}: not recovered: {:b}", bits(&v));
+        println!("{plant}: recovered {back:?} s after the fault cleared");
+        drive(&mut v, SPEED, 2.0);
+        assert!(
+            v.speed() > 0.3,
+            "{plant}: drives again after the re-arm: {}",
+            v.speed()
+        );
+    }
 }
 
 #[test]
@@ -112,13 +129,15 @@ fn lost_drive_heartbeats_stop_the_vehicle_and_recover_when_back() {
 
 #[test]
 fn a_stalled_imu_is_reported_and_clears_when_it_sends_again() {
-    let mut v = Vehicle::booted(3);
-    v.run(1.0);
-    assert!(v.status().imu_ok, "IMU healthy at the start");
-    v.sim.vehicle_mut().set_imu_stalled(true);
-    v.run(2.0);
-    assert!(!v.status().imu_ok, "a silent IMU is reported");
-    v.sim.vehicle_mut().set_imu_stalled(false);
-    v.run(0.5);
-    assert!(v.status().imu_ok, "and clears once it sends again");
+    for plant in PLANTS {
+        let mut v = booted(plant, 3);
+        v.run(1.0);
+        assert!(v.status().imu_ok, "{plant}: IMU healthy at the start");
+        v.sim.vehicle_mut().set_imu_stalled(true);
+        v.run(2.0);
+        assert!(!v.status().imu_ok, "{plant}: a silent IMU is reported");
+        v.sim.vehicle_mut().set_imu_stalled(false);
+        v.run(0.5);
+        assert!(v.status().imu_ok, "{plant}: and clears once it sends again");
+    }
 }

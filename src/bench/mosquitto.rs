@@ -1,7 +1,7 @@
 //! A mosquitto broker that a benchmark starts on a free local port, restarts on demand and
 //! stops when dropped. It sets TCP_NODELAY, as a deployment should (see the README).
 
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -21,24 +21,13 @@ pub struct Mosquitto {
 impl Mosquitto {
     /// Why mosquitto cannot run here, if it cannot.
     pub fn missing() -> Option<String> {
-        match Command::new("mosquitto")
-            .arg("-h")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-        {
-            Ok(_) => None,
-            Err(e) => Some(format!("mosquitto: {e} (Debian: mosquitto)")),
-        }
+        super::missing_program("mosquitto", "-h", "mosquitto")
     }
 
     /// Starts mosquitto on a free port with its configuration in `dir`, and waits until it
     /// accepts connections.
     pub fn start(dir: &Path) -> anyhow::Result<Self> {
-        let port = TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .context("no free port for mosquitto")?
-            .port();
+        let port = super::free_local_port()?;
         let conf = dir.join(format!("mosquitto-{port}.conf"));
         std::fs::write(
             &conf,

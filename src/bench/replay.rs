@@ -79,15 +79,7 @@ fn run_in(
     logs: &[PathBuf],
     dir: &Path,
 ) -> anyhow::Result<ReplayReport> {
-    let gpsdecode_missing = match Command::new("gpsdecode")
-        .arg("-V")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-    {
-        Ok(_) => None,
-        Err(e) => Some(format!("gpsdecode: {e} (Debian: gpsd-clients)")),
-    };
+    let gpsdecode_missing = super::missing_program("gpsdecode", "-V", "gpsd-clients");
     let mut inputs: Vec<(String, Vec<PathBuf>)> = vec![("all".into(), logs.to_vec())];
     for log in logs {
         let name = log.file_stem().map_or_else(
@@ -170,12 +162,25 @@ fn repeat_into(parts: &[PathBuf], size: u64, path: &Path) -> anyhow::Result<u64>
     Ok(written)
 }
 
-/// chassisd's replay of `log`: the fastest of `runs` wall times (s), and its peak memory.
-fn time_replay(chassisd: &Path, log: &Path, runs: u32) -> anyhow::Result<(f64, Option<u64>)> {
-    let mut best = Duration::MAX;
-    let mut peak = None;
+/// Runs `once` `runs` times: the fastest wall time (s) and what that run returned.
+fn fastest<T>(runs: u32, mut once: impl FnMut() -> anyhow::Result<T>) -> anyhow::Result<(f64, T)> {
+    let mut best: Option<(Duration, T)> = None;
     for _ in 0..runs.max(1) {
         let start = Instant::now();
+        let out = once()?;
+        let took = start.elapsed();
+        if best.as_ref().is_none_or(|(b, _)| took < *b) {
+            best = Some((took, out));
+        }
+    }
+    let (took, out) = best.context("no run")?;
+    Ok((took.as_secs_f64(), out))
+}
+
+/// chassisd's replay of `log`: the fastest of `runs` wall times (s), and that run's peak
+/// memory.
+fn time_replay(chassisd: &Path, log: &Path, runs: u32) -> anyhow::Result<(f64, Option<u64>)> {
+    fastest(runs, || {
         let out = Command::new(chassisd)
             .arg("replay")
             .arg(log)
@@ -183,14 +188,12 @@ fn time_replay(chassisd: &Path, log: &Path, runs: u32) -> anyhow::Result<(f64, O
             .stderr(Stdio::piped())
             .output()
             .context("running chassisd replay")?;
-        best = best.min(start.elapsed());
         let stderr = String::from_utf8_lossy(&out.stderr);
         if !out.status.success() {
             bail!("chassisd replay {} failed: {stderr}", log.display());
         }
-        peak = peak_from_summary(&stderr).or(peak);
-    }
-    Ok((best.as_secs_f64(), peak))
+        Ok(peak_from_summary(&stderr))
+    })
 }
 
 /// The peak memory a replay summary reports ("peak memory 7.8 MB"), bytes.
@@ -202,22 +205,20 @@ fn peak_from_summary(stderr: &str) -> Option<u64> {
 
 /// gpsdecode reading `log` on its standard input: the fastest of `runs`, s.
 fn time_gpsdecode(log: &Path, runs: u32) -> anyhow::Result<f64> {
-    let mut best = Duration::MAX;
-    for _ in 0..runs.max(1) {
+    let (took, ()) = fastest(runs, || {
         let input = File::open(log).with_context(|| format!("opening {}", log.display()))?;
-        let start = Instant::now();
         let status = Command::new("gpsdecode")
             .stdin(input)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .status()
             .context("running gpsdecode")?;
-        best = best.min(start.elapsed());
         if !status.success() {
             bail!("gpsdecode failed on {}: {status}", log.display());
         }
-    }
-    Ok(best.as_secs_f64())
+        Ok(())
+    })?;
+    Ok(took)
 }
 
 impl ReplayReport {

@@ -21,7 +21,7 @@ use serde::Serialize;
 use serde_json::Value;
 use tokio::sync::watch;
 
-use super::mosquitto::Mosquitto;
+use super::Broker;
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
 use crate::core::chassis::{CONTROL_PERIOD, status_bits};
@@ -125,15 +125,6 @@ impl FaultKind {
     }
 }
 
-/// Which broker a run uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SoakBroker {
-    /// The embedded rumqttd.
-    Embedded,
-    /// A mosquitto the soak starts (and restarts).
-    Mosquitto,
-}
-
 /// What to run.
 #[derive(Debug, Clone)]
 pub struct SoakOptions {
@@ -144,7 +135,7 @@ pub struct SoakOptions {
     /// Length of each run.
     pub run_for: Duration,
     /// The runs, one per broker.
-    pub brokers: Vec<SoakBroker>,
+    pub brokers: Vec<Broker>,
 }
 
 /// One base_status as the client saw it.
@@ -269,8 +260,8 @@ pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
     let mut runs = Vec::new();
     for &broker in &options.brokers {
         eprintln!(
-            "chassisd bench soak: {:?} broker for {:.0} s",
-            broker,
+            "chassisd bench soak: {} broker for {:.0} s",
+            broker.name(),
             options.run_for.as_secs_f64()
         );
         runs.push(run_one(&options, broker).await?);
@@ -279,27 +270,10 @@ pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
     Ok(SoakReport { runs, pass })
 }
 
-async fn run_one(options: &SoakOptions, broker: SoakBroker) -> anyhow::Result<RunFigures> {
+async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFigures> {
     let vehicle_id = super::mqtt::root_vehicle_id(&options.mqtt)?;
     let mut mqtt = options.mqtt.clone();
-    let mut mosquitto = None;
-    match broker {
-        SoakBroker::Embedded => {
-            mqtt.embedded_broker = true;
-            mqtt.host = "127.0.0.1".into();
-            mqtt.port = std::net::TcpListener::bind("127.0.0.1:0")
-                .and_then(|l| l.local_addr())
-                .context("no free port for the embedded broker")?
-                .port();
-        }
-        SoakBroker::Mosquitto => {
-            let m = Mosquitto::start(&std::env::temp_dir())?;
-            mqtt.embedded_broker = false;
-            mqtt.host = "127.0.0.1".into();
-            mqtt.port = m.port();
-            mosquitto = Some(m);
-        }
-    }
+    let mut mosquitto = broker.start(&mut mqtt)?;
     let chassis = lockstep::vehicle_config(&options.plant)?
         .chassis
         .context("the simulated vehicle has a chassis")?;
@@ -404,7 +378,7 @@ async fn run_one(options: &SoakOptions, broker: SoakBroker) -> anyhow::Result<Ru
         cycles += 1;
     }
     let rss_end = resident_memory_bytes().unwrap_or(0);
-    let _ = client.await;
+    client.await.context("client task")??;
     sim.await.context("simulation task")??;
     drop(mosquitto);
 
@@ -471,11 +445,7 @@ async fn run_one(options: &SoakOptions, broker: SoakBroker) -> anyhow::Result<Ru
         && largest_gap_ms <= GAP_LIMIT.as_secs_f64() * 1000.0
         && faults.iter().all(|f| f.pass);
     Ok(RunFigures {
-        broker: match broker {
-            SoakBroker::Embedded => "embedded",
-            SoakBroker::Mosquitto => "mosquitto",
-        }
-        .into(),
+        broker: broker.name().into(),
         seconds: start.elapsed().as_secs_f64(),
         cycles,
         rss_start_mb: rss_start as f64 / 1e6,

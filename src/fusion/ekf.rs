@@ -92,56 +92,58 @@ pub struct Ekf {
     pub p: Cov,
 }
 
+/// Entries of the transition's Jacobian that differ from the identity, at most.
+const TRANSITION_ENTRIES: usize = 8;
+
 /// A state transition's Jacobian that differs from the identity in a few entries.
 #[derive(Debug, Clone, Copy, Default)]
 struct Transition {
-    entries: [(usize, usize, f64); 8],
+    entries: [(usize, usize, f64); TRANSITION_ENTRIES],
     len: usize,
 }
 
 impl Transition {
-    /// Sets entry (`row`, `col`); each entry is set at most once.
+    /// Sets entry (`row`, `col`); each entry is set at most once, and at most
+    /// [`TRANSITION_ENTRIES`] of them (the model's own, not an input's).
     fn set(&mut self, row: usize, col: usize, value: f64) {
         self.entries[self.len] = (row, col, value);
         self.len += 1;
     }
 
-    fn entries(&self) -> &[(usize, usize, f64)] {
-        &self.entries[..self.len]
+    fn diagonal(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.entries[..self.len]
+            .iter()
+            .filter(|(i, j, _)| i == j)
+            .map(|&(i, _, v)| (i, v))
     }
 
-    /// F P Fᵀ, with row and column operations for the entries that differ from the
-    /// identity: each row of F P is d·(its row of P) plus the off-diagonal terms, each
-    /// read from P as it was.
+    fn off_diagonal(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+        self.entries[..self.len]
+            .iter()
+            .filter(|(i, j, _)| i != j)
+            .copied()
+    }
+
+    /// F P Fᵀ by row and column operations: each row of F P is its diagonal entry times
+    /// that row of P plus the off-diagonal terms, read from P as it was; then the same on
+    /// the columns of F P.
     fn congruence(&self, p: &Cov) -> Cov {
         let mut fp = *p;
-        for &(i, j, v) in self.entries() {
-            for k in 0..N {
-                if i == j {
-                    fp[(i, k)] *= v;
-                }
-            }
+        for (i, v) in self.diagonal() {
+            fp.row_mut(i).scale_mut(v);
         }
-        for &(i, j, v) in self.entries() {
-            if i != j {
-                for k in 0..N {
-                    fp[(i, k)] += v * p[(j, k)];
-                }
+        for (i, j, v) in self.off_diagonal() {
+            for k in 0..N {
+                fp[(i, k)] += v * p[(j, k)];
             }
         }
         let mut fpf = fp;
-        for &(i, j, v) in self.entries() {
-            if i == j {
-                for k in 0..N {
-                    fpf[(k, i)] *= v;
-                }
-            }
+        for (i, v) in self.diagonal() {
+            fpf.column_mut(i).scale_mut(v);
         }
-        for &(i, j, v) in self.entries() {
-            if i != j {
-                for k in 0..N {
-                    fpf[(k, i)] += v * fp[(k, j)];
-                }
+        for (i, j, v) in self.off_diagonal() {
+            for k in 0..N {
+                fpf[(k, i)] += v * fp[(k, j)];
             }
         }
         fpf

@@ -305,13 +305,10 @@ impl Localizer {
         self.ekf().map(|e| (e.x[X], e.x[Y], e.x[YAW]))
     }
 
-    /// Odometry distance per true distance (1 + the wheels' scale error), once filtering.
-    pub fn wheel_scale(&self) -> Option<f64> {
-        self.ekf().map(|e| 1.0 + e.x[SCALE])
-    }
-
     /// What the vehicle publishes about its place at `t`, from one prediction of the
-    /// filter to `t`; `None` before the filter starts.
+    /// filter to `t`: the pose and its covariance in the map frame (INIT_POSITION's frame;
+    /// the ENU frame of the datum until then), `nav.locate` and the wheels' scale; `None`
+    /// before the filter starts.
     pub fn published(&self, t: Timestamp) -> Option<Published> {
         let e = self.predicted(t)?;
         let locate = if e.position_sigma() <= self.config.locate_bound_m
@@ -333,18 +330,6 @@ impl Localizer {
             locate,
             wheel_scale: 1.0 + e.x[SCALE],
         })
-    }
-
-    /// The published pose at `t`: the filter predicted to `t`, in the map frame
-    /// (INIT_POSITION's frame; the ENU frame of the datum until then): x, y (m), yaw (rad).
-    pub fn map_pose(&self, t: Timestamp) -> Option<(f64, f64, f64)> {
-        self.published(t).map(|p| p.map_pose)
-    }
-
-    /// The covariance of [`Localizer::map_pose`] at `t`: var x, cov xy, var y (m²), var yaw
-    /// (rad²), turned into the map frame.
-    pub fn map_covariance(&self, t: Timestamp) -> Option<[f64; 4]> {
-        self.published(t).map(|p| p.map_covariance)
     }
 
     /// The filter predicted to `t` (no measurement since then), without changing it.

@@ -168,9 +168,7 @@ fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
             .map(|t| (t, None));
     }
     match decode(&sentence) {
-        Ok(Some(GnssSentence::Gga(r) | GnssSentence::Gns(r))) => r.time.map(|t| (t, None)),
         Ok(Some(GnssSentence::Rmc(r))) => r.time.map(|t| (t, r.date)),
-        Ok(Some(GnssSentence::Gst(g))) => g.time.map(|t| (t, None)),
         Ok(Some(GnssSentence::Zda(z))) => z.time.map(|t| (t, z.date)),
         _ => None,
     }

@@ -5,7 +5,6 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
@@ -85,7 +84,7 @@ pub struct SimHandle {
     /// The faults to apply, read every pacing tick.
     pub faults: watch::Receiver<SimFaults>,
     /// The vehicle's true state, written every pacing tick.
-    pub truth: Arc<watch::Sender<Truth>>,
+    pub truth: watch::Sender<Truth>,
 }
 
 impl SimHandle {
@@ -93,14 +92,7 @@ impl SimHandle {
     pub fn new() -> (Self, watch::Sender<SimFaults>, watch::Receiver<Truth>) {
         let (fault_tx, faults) = watch::channel(SimFaults::default());
         let (truth, truth_rx) = watch::channel(Truth::default());
-        (
-            Self {
-                faults,
-                truth: Arc::new(truth),
-            },
-            fault_tx,
-            truth_rx,
-        )
+        (Self { faults, truth }, fault_tx, truth_rx)
     }
 }
 
