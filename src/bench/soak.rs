@@ -8,7 +8,9 @@
 //! whenever the status says a latched stop awaits one. Each fault is injected, held, and
 //! cleared; what base_status shows says when chassisd saw it and when it recovered by
 //! itself. For faults that must stop the vehicle (lost heartbeats, the bus down, the
-//! broker gone so no command arrives) the simulator's truth times the stop. Resident
+//! broker gone so no command arrives) the simulated drives time the command to stop,
+//! which is what the bound is about, and the simulator's truth times the wheels coming to
+//! rest, which adds the drives' own lag. Resident
 //! memory is sampled at the start of every cycle, in the same calm state, so the slope
 //! after the first (warm-up) cycle is not the noise of the faults themselves.
 
@@ -26,9 +28,9 @@ use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
 use crate::core::chassis::{CONTROL_PERIOD, status_bits};
 use crate::runtime::host::resident_memory_bytes;
-use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions};
+use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
 use crate::sim::lockstep;
-use crate::sim::plant::{PlantConfig, Truth};
+use crate::sim::plant::PlantConfig;
 
 /// No base_status gap may be longer, outside a broker restart.
 pub const GAP_LIMIT: Duration = Duration::from_millis(300);
@@ -161,10 +163,13 @@ pub struct FaultFigures {
     pub recovered_s: Option<f64>,
     /// The vehicle's true speed as it began, m/s.
     pub speed_mps: f64,
-    /// From injection to the true speed below 0.01 m/s, s (timed for faults that demand
-    /// a stop while the vehicle ran).
-    pub stop_s: Option<f64>,
-    /// The bound for that stop: cmd_timeout + one control period + speed / deceleration.
+    /// From injection to both wheel drives commanded to stop (zero targets, quick stop or
+    /// disabled), s; timed for faults that demand a stop while the vehicle ran.
+    pub stop_command_s: Option<f64>,
+    /// From injection to the true speed below 0.01 m/s, s (the drives' lag included).
+    pub at_rest_s: Option<f64>,
+    /// The bound for the command to stop, with the ramp down to rest in it: cmd_timeout +
+    /// one control period + speed / deceleration.
     pub stop_bound_s: Option<f64>,
     /// Seen (where base_status can show it), recovered, and stopped within the bound.
     pub pass: bool,
@@ -283,7 +288,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
 
     let start = Instant::now();
     let log = Arc::new(Mutex::new(Log::new(options.run_for, start)));
-    let (handle, faults_tx, truth) = SimHandle::new();
+    let (handle, faults_tx, probe) = SimHandle::new();
     let sim = tokio::spawn(sim::run(
         SimOptions {
             plant: options.plant.clone(),
@@ -322,7 +327,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
     let rss_start = resident_memory_bytes().unwrap_or(0);
     let mut rss_per_cycle = Vec::new();
-    let mut injected: Vec<(FaultKind, Instant, Instant, f64, Option<f64>)> = Vec::new();
+    let mut injected: Vec<(FaultKind, Instant, Instant, f64, Stop)> = Vec::new();
     let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
     let mut cycles = 0;
     while start.elapsed() + cycle_length <= options.run_for {
@@ -331,7 +336,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
         }
         rss_per_cycle.push(resident_memory_bytes().unwrap_or(0) as f64 / 1e6);
         for &kind in &schedule {
-            let speed = truth.borrow().v;
+            let speed = probe.borrow().truth.v;
             let began = Instant::now();
             let flood = match kind {
                 FaultKind::CommandFlood => Some(tokio::spawn(flood(
@@ -352,10 +357,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                 }
             };
             let timed = kind.demands_stop() && speed.abs() >= MOVING_MPS;
-            let stop_s = if timed {
-                time_stop(&truth, began, kind.hold()).await
+            let stop = if timed {
+                time_stop(&probe, began, kind.hold()).await
             } else {
-                None
+                Stop::default()
             };
             tokio::time::sleep_until((began + kind.hold()).into()).await;
             faults_tx.send_replace(SimFaults::default());
@@ -372,7 +377,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
             if kind == FaultKind::BrokerRestart {
                 broker_down.push((began, cleared));
             }
-            injected.push((kind, began, cleared, speed, stop_s));
+            injected.push((kind, began, cleared, speed, stop));
             tokio::time::sleep(CALM).await;
         }
         cycles += 1;
@@ -404,7 +409,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
         .fold(0.0, f64::max);
     let faults: Vec<FaultFigures> = injected
         .iter()
-        .map(|&(kind, began, cleared, speed, stop_s)| {
+        .map(|&(kind, began, cleared, speed, stop)| {
             let detected_s = observations
                 .iter()
                 .find(|o| o.at >= began && kind.shown(o) == Some(true))
@@ -426,14 +431,19 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
             let seen = !kind.observable() || detected_s.is_some_and(|d| d <= limit);
             let pass = seen
                 && recovered_s.is_some_and(|r| r <= limit)
-                && (!timed || stop_s.zip(stop_bound_s).is_some_and(|(s, b)| s <= b));
+                && (!timed
+                    || stop
+                        .command_s
+                        .zip(stop_bound_s)
+                        .is_some_and(|(s, b)| s <= b));
             FaultFigures {
                 kind,
                 at_s: began.duration_since(start).as_secs_f64(),
                 detected_s,
                 recovered_s,
                 speed_mps: speed,
-                stop_s,
+                stop_command_s: stop.command_s,
+                at_rest_s: stop.at_rest_s,
                 stop_bound_s,
                 pass,
             }
@@ -477,21 +487,32 @@ fn slope_per_hour(samples: &[f64], every: Duration) -> Option<f64> {
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
-/// From `began`, how long until the true speed falls below [`STOPPED_MPS`], s; `None` if
-/// it does not within `within`.
-async fn time_stop(
-    truth: &watch::Receiver<Truth>,
-    began: Instant,
-    within: Duration,
-) -> Option<f64> {
+/// When a stop came, s from the fault's start.
+#[derive(Debug, Clone, Copy, Default)]
+struct Stop {
+    /// Both wheel drives commanded to stop.
+    command_s: Option<f64>,
+    /// The true speed below [`STOPPED_MPS`].
+    at_rest_s: Option<f64>,
+}
+
+/// From `began`, how long until the drives are commanded to stop and until the wheels
+/// rest, each `None` if it does not happen within `within`.
+async fn time_stop(probe: &watch::Receiver<SimProbe>, began: Instant, within: Duration) -> Stop {
+    let mut stop = Stop::default();
     let mut poll = tokio::time::interval(Duration::from_millis(5));
-    while began.elapsed() < within {
+    while began.elapsed() < within && (stop.command_s.is_none() || stop.at_rest_s.is_none()) {
         poll.tick().await;
-        if truth.borrow().v.abs() < STOPPED_MPS {
-            return Some(began.elapsed().as_secs_f64());
+        let now = *probe.borrow();
+        let since = Some(began.elapsed().as_secs_f64());
+        if now.wheels_commanded_to_stop {
+            stop.command_s = stop.command_s.or(since);
+        }
+        if now.truth.v.abs() < STOPPED_MPS {
+            stop.at_rest_s = stop.at_rest_s.or(since);
         }
     }
-    None
+    stop
 }
 
 /// The root dialect's topics the client uses.
@@ -640,13 +661,21 @@ impl RunFigures {
         );
         let _ = writeln!(
             out,
-            "{:<22} {:>8} {:>10} {:>11} {:>8} {:>8} {:>8} {:>5}",
-            "fault", "at s", "detected s", "recovered s", "speed", "stop s", "bound s", ""
+            "{:<22} {:>8} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8} {:>5}",
+            "fault",
+            "at s",
+            "detected s",
+            "recovered s",
+            "speed",
+            "stop s",
+            "bound s",
+            "rest s",
+            ""
         );
         for f in &self.faults {
             let _ = writeln!(
                 out,
-                "{:<22} {:>8.1} {:>10} {:>11} {:>8.2} {:>8} {:>8} {:>5}",
+                "{:<22} {:>8.1} {:>10} {:>11} {:>8.2} {:>8} {:>8} {:>8} {:>5}",
                 serde_json::to_value(f.kind)
                     .ok()
                     .and_then(|v| v.as_str().map(str::to_owned))
@@ -655,8 +684,9 @@ impl RunFigures {
                 opt(f.detected_s),
                 opt(f.recovered_s),
                 f.speed_mps,
-                opt(f.stop_s),
+                opt(f.stop_command_s),
                 opt(f.stop_bound_s),
+                opt(f.at_rest_s),
                 if f.pass { "ok" } else { "MISS" },
             );
         }

@@ -83,16 +83,25 @@ pub struct SimFaults {
 pub struct SimHandle {
     /// The faults to apply, read every pacing tick.
     pub faults: watch::Receiver<SimFaults>,
-    /// The vehicle's true state, written every pacing tick.
-    pub truth: watch::Sender<Truth>,
+    /// What the benchmark reads back, written every pacing tick.
+    pub probe: watch::Sender<SimProbe>,
+}
+
+/// The simulated vehicle as a benchmark reads it back.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SimProbe {
+    /// The true state.
+    pub truth: Truth,
+    /// Both wheel drives are commanded to stop (zero targets, quick stop or disabled).
+    pub wheels_commanded_to_stop: bool,
 }
 
 impl SimHandle {
-    /// A handle, with the sender of its faults and the receiver of the truth.
-    pub fn new() -> (Self, watch::Sender<SimFaults>, watch::Receiver<Truth>) {
+    /// A handle, with the sender of its faults and the receiver of its probe.
+    pub fn new() -> (Self, watch::Sender<SimFaults>, watch::Receiver<SimProbe>) {
         let (fault_tx, faults) = watch::channel(SimFaults::default());
-        let (truth, truth_rx) = watch::channel(Truth::default());
-        (Self { faults, truth }, fault_tx, truth_rx)
+        let (probe, probe_rx) = watch::channel(SimProbe::default());
+        (Self { faults, probe }, fault_tx, probe_rx)
     }
 }
 
@@ -250,7 +259,10 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
                     summary.track(sim.vehicle().truth());
                 }
                 if let Some(h) = &options.handle {
-                    h.truth.send_replace(sim.vehicle().truth());
+                    h.probe.send_replace(SimProbe {
+                        truth: sim.vehicle().truth(),
+                        wheels_commanded_to_stop: sim.vehicle().wheels_commanded_to_stop(),
+                    });
                 }
             }
             command = commands.recv(), if commands_open => match command {

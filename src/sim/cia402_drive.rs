@@ -262,6 +262,14 @@ impl SimDrive {
             .collect()
     }
 
+    /// Whether every axis is commanded to stop: a zero target, or out of "operation
+    /// enabled" (quick stop, fault, disabled).
+    pub fn commanded_to_stop(&self) -> bool {
+        self.axes
+            .iter()
+            .all(|a| a.target == 0 || a.state != Some(DriveState::OperationEnabled))
+    }
+
     /// Handles a frame from the bus.
     pub fn on_frame(&mut self, t: Timestamp, frame: &Frame, out: &mut Vec<Frame>) {
         match Cob::of(frame) {

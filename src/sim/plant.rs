@@ -448,6 +448,11 @@ impl SimVehicle {
         self.right.set_heartbeat(on);
     }
 
+    /// Whether both wheel drives are commanded to stop (see [`SimDrive::commanded_to_stop`]).
+    pub fn wheels_commanded_to_stop(&self) -> bool {
+        self.left.commanded_to_stop() && self.right.commanded_to_stop()
+    }
+
     /// The blade drive's motor speed, r/min (0 without one).
     pub fn blade_rpm(&self) -> f64 {
         self.blade
