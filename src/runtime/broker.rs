@@ -22,11 +22,16 @@ use rumqttd::{Broker, Config, ConnectionSettings, RouterConfig, ServerSettings};
 
 /// How long the broker may take to listen.
 const START_TIMEOUT: Duration = Duration::from_secs(5);
-/// Size of one memory segment of a filter's log (payload and topic bytes; a larger message
-/// still fits whole). 64 KiB holds about 6 s of base_status.
-pub const SEGMENT_BYTES: usize = 64 << 10;
+/// Size of one memory segment of a filter's log, as rumqttd counts it: payload and topic
+/// bytes (a larger message still fits whole). Each stored message also costs rumqttd about
+/// 300 bytes it does not count, so a filter of small messages (a 5 Hz heartbeat of 60
+/// bytes) holds several times its counted size, and at 4 × 64 KiB took 26 minutes to fill:
+/// the soak saw that as memory still climbing after half an hour. 8 KiB holds about 1.5 s
+/// of base_status; a subscriber that falls behind also has rumqttd's 200-message outgoing
+/// queue, about 20 s of base_status.
+pub const SEGMENT_BYTES: usize = 8 << 10;
 /// Segments kept per filter, the one being filled included.
-pub const SEGMENTS: usize = 4;
+pub const SEGMENTS: usize = 2;
 /// Clients at once: a vehicle has a handful; each costs buffers.
 const MAX_CONNECTIONS: usize = 64;
 

@@ -14,6 +14,7 @@ use tokio::sync::mpsc;
 use super::broker;
 use super::can::{self, CanSpec, CanTx};
 use super::clock::RecordClock;
+use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
@@ -68,6 +69,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();
+    heap::spawn();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
     let config = &options.config;
     let mut sources = Vec::new();

@@ -5,6 +5,7 @@ pub mod can;
 pub mod can_sim;
 pub mod clock;
 pub mod command_rate;
+pub mod heap;
 pub mod host;
 pub mod input_lines;
 pub mod live;

@@ -12,6 +12,7 @@ use tokio::sync::{mpsc, watch};
 
 use super::broker;
 use super::clock::RecordClock;
+use super::heap;
 use super::host;
 use super::live::read_commands;
 use super::mqtt::{self, MqttSender, MqttSpec};
@@ -187,6 +188,7 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         }
         None => None,
     };
+    heap::spawn();
     let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
     let mqtt = match &options.mqtt {
         Some(m) => {

@@ -1,0 +1,42 @@
+//! Gives freed heap memory back to the operating system on a schedule.
+//!
+//! glibc's allocator keeps the freed pages of its per-thread arenas for reuse, so a burst (a
+//! command flood through the embedded broker, a large trajectory) leaves resident memory at
+//! the burst's high-water mark, and each new peak raises it a little more. The soak saw the
+//! live heap flat at about 7 MB for eight minutes while resident memory crept up 1.4 MB.
+//! `malloc_trim` hands back every whole free page, in the middle of the arenas too.
+
+use std::time::{Duration, Instant};
+
+/// How often freed memory is handed back: rare enough to cost nothing measurable, often
+/// enough that a burst's pages go back within seconds.
+pub const PERIOD: Duration = Duration::from_secs(10);
+
+/// Hands freed heap pages back now; what it took. Without glibc, the allocator's own
+/// policy stands and this does nothing.
+pub fn release_free_memory() -> Duration {
+    let start = Instant::now();
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim takes the allocator's own locks and only releases pages that hold
+    // no live allocation; it has no preconditions.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+    start.elapsed()
+}
+
+/// Starts the periodic release on a blocking thread of the runtime (the trim walks every
+/// arena under its lock); it stops with the runtime.
+pub fn spawn() {
+    tokio::spawn(async {
+        let mut interval = tokio::time::interval(PERIOD);
+        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            interval.tick().await;
+            match tokio::task::spawn_blocking(release_free_memory).await {
+                Ok(took) => tracing::trace!(?took, "freed heap pages handed back"),
+                Err(_) => return,
+            }
+        }
+    });
+}
