@@ -40,7 +40,7 @@ pub struct MotionConfig {
     /// A distance move has arrived within this, m (default 0.001).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_tolerance_m: Option<f64>,
-    /// A turn has arrived within this, degrees (default 0.1).
+    /// A turn has arrived within this, degrees (default 0.15).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub angle_tolerance_deg: Option<f64>,
     /// A goal has arrived within this distance of it, m (default 0.02).
@@ -187,7 +187,7 @@ impl MotionConfig {
                 jerk: self.max_yaw_jerk_rps3.unwrap_or(f64::INFINITY),
             },
             position_tolerance_m: self.position_tolerance_m.unwrap_or(0.001),
-            angle_tolerance_rad: self.angle_tolerance_deg.unwrap_or(0.1).to_radians(),
+            angle_tolerance_rad: self.angle_tolerance_deg.unwrap_or(0.15).to_radians(),
             goal_position_tolerance_m: self.goal_position_tolerance_m.unwrap_or(0.02),
             goal_angle_tolerance_rad: self.goal_angle_tolerance_deg.unwrap_or(1.0).to_radians(),
             time_allowance_factor: self.time_allowance_factor.unwrap_or(1.5),

@@ -11,12 +11,12 @@
 //!   correction proportional to the distance the vehicle lags the profile by (compared at the
 //!   time the position was measured) and a bounded integral of it, learnt and applied in
 //!   proportion to the profile's speed (slip and scale errors grow with it). The gains come
-//!   from the learnt response time (damping about 0.7), not from a plant's figure.
-//! - It has arrived once the profile has ended and the point where the vehicle comes to
-//!   rest is within the tolerance: the position plus the speed times the response time (a
-//!   first-order drive coasts that far once its command is zero), with that coast itself
-//!   within a few tolerances (the prediction's error is a share of it). It has timed out
-//!   when the allowance is spent first.
+//!   from the learnt response time (damping 0.6), not from a plant's figure.
+//! - After the profile it steers the point where the vehicle comes to rest: the position
+//!   plus the speed times the response time (a first-order drive coasts that far once its
+//!   command is zero), with a higher, overdamped gain. It has arrived once that point is
+//!   within the tolerance, with the coast itself within a few tolerances (the prediction's
+//!   error is a share of it). It has timed out when the allowance is spent first.
 
 use super::profile::{Limits, Profile};
 use super::{MoveKind, Outcome, PoseView};
@@ -76,6 +76,25 @@ pub(super) fn led_speed(
         0.0
     };
     (planned, planned + response_s * rate)
+}
+
+/// Damping of the loop that holds the vehicle on the profile. Below 0.7 so it takes out a
+/// disturbance while braking (slip changing under the wheels, a drive that brakes late)
+/// before the profile ends, rather than overshooting and settling back.
+const TRACKING_DAMPING: f64 = 0.6;
+
+/// The position gain while tracking the profile (1/s), around a first-order drive of lag
+/// `response_s`: the loop τs² + s + K has damping [`TRACKING_DAMPING`].
+fn tracking_gain(response_s: f64) -> f64 {
+    1.0 / (4.0 * TRACKING_DAMPING * TRACKING_DAMPING * response_s)
+}
+
+/// The position gain while settling after the profile (1/s). The error it acts on is the
+/// point the vehicle comes to rest at (the coast, speed × lag, is its damping term), so the
+/// loop τs² + (1 + Kτ)s + K has its poles at −1/τ and −1.5/τ: overdamped, and its slower
+/// pole already at −1/τ, the limit no higher gain passes.
+fn settle_gain(response_s: f64) -> f64 {
+    1.5 / response_s
 }
 
 /// A move may end while still rolling, by at most this many tolerances of coast: the
@@ -247,7 +266,8 @@ impl RelativeMove {
         self.last_yaw = yaw;
         self.left = self.remaining(view);
         let elapsed = t.saturating_since(self.started).as_secs_f64();
-        // Damping ≈ 0.7 of the position loop around a first-order drive of this lag.
+        // Holding the heading (or the spot) and the integral: damping ≈ 0.7 around a
+        // first-order drive of this lag.
         let gain = 1.0 / (2.0 * response_s);
         let along = self.along(view);
         let (progress, speed_now) = match self.kind {
@@ -321,7 +341,12 @@ impl RelativeMove {
             -self.integral_limit / integral_gain,
             self.integral_limit / integral_gain,
         );
-        let mut speed = feedforward + gain * error + integral_gain * self.integral * share;
+        let position_gain = if ended {
+            settle_gain(response_s)
+        } else {
+            tracking_gain(response_s)
+        };
+        let mut speed = feedforward + position_gain * error + integral_gain * self.integral * share;
         // Settling off the goal, no slower than the odometry sees (below it the measured
         // progress freezes and the move stalls until the integral grows), and no faster than
         // coasts past the tolerance.

@@ -310,6 +310,9 @@ pub struct Truth {
     pub v: f64,
     /// Yaw rate, rad/s.
     pub w: f64,
+    /// Distance driven forward by the random part of the wheel slip alone, m: on top of the
+    /// wheels' turning and the systematic slip, and seen by no wheel odometry.
+    pub unseen_slip_m: f64,
 }
 
 /// The simulated vehicle.
@@ -534,17 +537,13 @@ impl SimVehicle {
         Normal::new(0.0, sigma).map_or(0.0, |n| n.sample(&mut self.rng))
     }
 
-    /// Wheel ground speeds from the motors, m/s.
-    fn wheel_speeds(&self) -> (f64, f64) {
+    /// Wheel surface speeds from the motors, before any slip, m/s.
+    fn wheel_surface_speeds(&self) -> (f64, f64) {
         let g = &self.plant.geometry;
-        let speed =
-            |rpm: f64, slip: f64| rpm * TAU / 60.0 / g.gear_ratio * g.wheel_radius_m * (1.0 + slip);
+        let speed = |rpm: f64| rpm * TAU / 60.0 / g.gear_ratio * g.wheel_radius_m;
         let l = self.left.motor_rpm().first().copied().unwrap_or(0.0);
         let r = self.right.motor_rpm().first().copied().unwrap_or(0.0);
-        (
-            speed(l, self.slip.0 + self.plant.slip.bias[0]),
-            speed(r, self.slip.1 + self.plant.slip.bias[1]),
-        )
+        (speed(l), speed(r))
     }
 
     /// Advances to `t` and emits what is due, as records at `t`.
@@ -571,7 +570,12 @@ impl SimVehicle {
             // The recorded wheels are the motion; there is no slip beyond what they show.
             self.slip = (-self.plant.slip.bias[0], -self.plant.slip.bias[1]);
         }
-        let (vl, vr) = self.wheel_speeds();
+        let (sl, sr) = self.wheel_surface_speeds();
+        let bias = self.plant.slip.bias;
+        let (vl, vr) = (
+            sl * (1.0 + self.slip.0 + bias[0]),
+            sr * (1.0 + self.slip.1 + bias[1]),
+        );
         let v = (vl + vr) / 2.0;
         let w = (vr - vl) / self.plant.geometry.track_m;
         let tr = &mut self.truth;
@@ -582,6 +586,9 @@ impl SimVehicle {
         let accel = (v - tr.v) / dt.max(1e-6);
         tr.v = v;
         tr.w = w;
+        if self.forced.is_none() {
+            tr.unseen_slip_m += (sl * self.slip.0 + sr * self.slip.1) / 2.0 * dt;
+        }
         let docked = self.docked();
         let cutting = self.cutter_on();
         if let (Some(b), Some(y)) = (&mut self.bms, self.plant.yard) {
