@@ -1,7 +1,7 @@
 //! The `chassisd` command line.
 
 use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -15,6 +15,7 @@ use chassisd::config::VehicleConfig;
 use chassisd::config::mqtt::{
     DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
 };
+use chassisd::config::ros1::Ros1Config;
 use chassisd::record::nmea_import::ImportOptions;
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
@@ -64,6 +65,10 @@ enum Command {
         /// (e.g. `cmd_vel {"linear":{"x":0.2},"angular":{"z":0}}`).
         #[arg(long)]
         commands_stdin: bool,
+        /// Join the ROS1 graph of this master as a node (ros1-navigation-interface.txt),
+        /// over the configuration's `[ros1]` master_uri.
+        #[arg(long, value_name = "URI")]
+        ros_master: Option<String>,
     },
     /// Run the simulated vehicle in real time through the live engine (no hardware): print
     /// base_status JSON lines at 10 Hz.
@@ -99,6 +104,10 @@ enum Command {
         /// Keep the rtk dialect's trajectories in this folder (default: in memory).
         #[arg(long, conflicts_with = "no_mqtt")]
         trajectory_dir: Option<PathBuf>,
+        /// Join the ROS1 graph of this master as a node (ros1-navigation-interface.txt),
+        /// e.g. http://127.0.0.1:11311.
+        #[arg(long, value_name = "URI")]
+        ros_master: Option<String>,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -214,6 +223,13 @@ enum BenchBroker {
 const LOG_QUEUE: usize = 4096;
 
 fn main() -> ExitCode {
+    // Errors travel to network clients (a ROS1 service's refusal carries its text), so they
+    // carry no backtrace unless asked for by RUST_LIB_BACKTRACE itself; RUST_BACKTRACE still
+    // gives panics theirs.
+    if std::env::var_os("RUST_LIB_BACKTRACE").is_none() {
+        // SAFETY: no other thread exists yet to read the environment concurrently.
+        unsafe { std::env::set_var("RUST_LIB_BACKTRACE", "0") };
+    }
     // The guard writes what is queued when main returns.
     let (log_writer, _log_guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
         .lossy(true)
@@ -224,8 +240,9 @@ fn main() -> ExitCode {
         .with_writer(log_writer)
         .with_ansi(std::io::stderr().is_terminal())
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rumqttd=off")),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
+            }),
         )
         .init();
     match run(Cli::parse()) {
@@ -359,8 +376,16 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             config,
             record,
             commands_stdin,
+            ros_master,
         } => {
-            let vehicle = VehicleConfig::load(&config)?;
+            let mut vehicle = VehicleConfig::load(&config)?;
+            if let Some(uri) = ros_master {
+                let mut ros1 = vehicle.ros1.take().unwrap_or_default();
+                ros1.master_uri = uri;
+                ros1.validate(Path::new("--ros-master"))?;
+                vehicle.ros1 = Some(ros1);
+            }
+            ensure_ros1_built(vehicle.ros1.is_some())?;
             let runtime = async_runtime(2)?;
             let result = runtime.block_on(live::run(
                 LiveOptions {
@@ -386,7 +411,13 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             broker_port,
             no_mqtt,
             trajectory_dir,
+            ros_master,
         } => {
+            let ros1 = ros_master.map(|uri| Ros1Config::with_master(&uri));
+            if let Some(r) = &ros1 {
+                r.validate(Path::new("--ros-master"))?;
+            }
+            ensure_ros1_built(ros1.is_some())?;
             let plant = load_plant(plant)?;
             let mut mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
             if let (Some(m), Some(port)) = (mqtt.as_mut(), broker_port) {
@@ -396,7 +427,8 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                 rtk.trajectory_dir = trajectory_dir.map(|d| d.to_string_lossy().into_owned());
             }
             let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
-            let runtime = async_runtime(1)?;
+            // The ROS1 node's publishing gets a worker of its own beside the simulation.
+            let runtime = async_runtime(if ros1.is_some() { 2 } else { 1 })?;
             let result = runtime.block_on(sim::run(
                 SimOptions {
                     plant,
@@ -406,6 +438,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     scenario,
                     duration,
                     mqtt,
+                    ros1,
                     handle: None,
                 },
                 std::io::stdout(),
@@ -421,6 +454,16 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             result.map(|()| true)
         }
     }
+}
+
+/// Refuses a ROS1 node in a build without the `ros1` feature, saying how to get one.
+fn ensure_ros1_built(wanted: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        !wanted || cfg!(feature = "ros1"),
+        "this chassisd was built without the ros1 feature; build it with the default \
+         features (cargo build --release) to join a ROS1 graph"
+    );
+    Ok(())
 }
 
 /// The `{vehicleId}` of the simulated vehicle's root dialect.

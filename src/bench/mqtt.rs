@@ -177,6 +177,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
             scenario: None,
             duration: Some(options.duration + Duration::from_secs(4)),
             mqtt: Some(options.mqtt.clone()),
+            ros1: None,
             handle: None,
         },
         std::io::sink(),

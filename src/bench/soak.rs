@@ -11,7 +11,8 @@
 //! broker gone so no command arrives) the simulated drives time the command to stop,
 //! which is what the bound is about, and the simulator's truth times the wheels coming to
 //! rest, which adds the drives' own lag. Resident
-//! memory is sampled at the start of every cycle, in the same calm state, so the slope
+//! memory is sampled at the start of every cycle, in the same calm state and right after
+//! freed pages are handed back (which the daemon does every 10 s anyway), so the slope
 //! after the first (warm-up) cycle is not the noise of the faults themselves.
 
 use std::sync::{Arc, Mutex};
@@ -27,6 +28,7 @@ use super::Broker;
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
 use crate::core::chassis::{CONTROL_PERIOD, status_bits};
+use crate::runtime::heap;
 use crate::runtime::host::resident_memory_bytes;
 use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
 use crate::sim::lockstep;
@@ -298,6 +300,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
             scenario: None,
             duration: Some(options.run_for + Duration::from_secs(3)),
             mqtt: Some(mqtt.clone()),
+            ros1: None,
             handle: Some(handle),
         },
         std::io::sink(),
@@ -334,6 +337,9 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
         if sim.is_finished() {
             anyhow::bail!("the simulation ended early (a signal?)");
         }
+        // What the periodic trim would hand back anyway goes back first, so the sample is
+        // what the process keeps, not where a burst's garbage stood at that instant.
+        heap::release_free_memory();
         rss_per_cycle.push(resident_memory_bytes().unwrap_or(0) as f64 / 1e6);
         for &kind in &schedule {
             let speed = probe.borrow().truth.v;

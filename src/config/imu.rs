@@ -55,6 +55,13 @@ pub struct ImuConfig {
     /// Longest wait between reconnect attempts, s.
     #[serde(default = "default_reconnect")]
     pub reconnect_max_s: f64,
+    /// Accelerometer noise, 1σ m/s² (`/imu/data`'s covariance; the gyro's is
+    /// `localization.gyro_noise_rps`).
+    #[serde(default = "default_accel_noise")]
+    pub accel_noise_mps2: f64,
+    /// The sensor's own orientation estimate, 1σ degrees (`/imu/data`'s covariance).
+    #[serde(default = "default_orientation_noise")]
+    pub orientation_noise_deg: f64,
 }
 
 fn default_baud() -> u32 {
@@ -65,6 +72,14 @@ fn default_timeout() -> f64 {
 }
 fn default_reconnect() -> f64 {
     5.0
+}
+/// A MEMS accelerometer's noise at a 100 Hz output rate (some 5 mg).
+fn default_accel_noise() -> f64 {
+    0.05
+}
+/// What WitMotion and HiPNUC modules state for their fused angles in motion.
+fn default_orientation_noise() -> f64 {
+    1.0
 }
 
 /// `calib/imu.toml`
@@ -132,6 +147,20 @@ impl ImuConfig {
                 "use one of 4800 ... 921600",
             ));
         }
+        check_range(
+            file,
+            "imu.accel_noise_mps2",
+            self.accel_noise_mps2,
+            1e-6..=10.0,
+            "m/s²",
+        )?;
+        check_range(
+            file,
+            "imu.orientation_noise_deg",
+            self.orientation_noise_deg,
+            1e-4..=180.0,
+            "degrees",
+        )?;
         for (i, a) in self.mounting_rpy_deg.iter().enumerate() {
             check_range(
                 file,

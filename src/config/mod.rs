@@ -11,6 +11,7 @@ pub mod localization;
 pub mod mission;
 pub mod motion;
 pub mod mqtt;
+pub mod ros1;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -151,6 +152,9 @@ pub struct VehicleConfig {
     /// The MQTT broker and the protocol dialects.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mqtt: Option<mqtt::MqttConfig>,
+    /// The native ROS1 node.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros1: Option<ros1::Ros1Config>,
 }
 
 /// `[vehicle]`
@@ -346,6 +350,9 @@ impl VehicleConfig {
         }
         if let Some(m) = &self.mqtt {
             m.validate(file)?;
+        }
+        if let Some(r) = &self.ros1 {
+            r.validate(file)?;
         }
         let Some(gnss) = &self.gnss else {
             return Ok(());

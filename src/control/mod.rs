@@ -53,6 +53,11 @@ impl fmt::Display for MoveKind {
     }
 }
 
+/// Why a motion ended on `set_navi_cmd` 5 (or `/navi_stop`): brought to rest, not latched.
+pub const STOP_REQUESTED: &str = "stop requested";
+/// Why a motion ended on an operator's stop (latched).
+pub const STOPPED_BY_OPERATOR: &str = "stopped by the operator";
+
 /// Who asked for a motion: a dialect's name and its own number for the request (it keeps
 /// what the number stands for, such as a `msg_id`), so that it can answer at the end.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -32,7 +32,7 @@ use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
 use safety::{Cause, ControlLinkConfig, SafetyConfig};
 pub use status::{
     BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, PoseCovariance,
-    VehicleStatus,
+    PoseReport, VehicleStatus,
 };
 
 /// A course over ground is never trusted beyond this, degrees ...
@@ -504,8 +504,8 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::CancelMotion) => {
-                self.cancel_mission("stop requested");
-                self.end_motion(t, Outcome::Cancelled("stop requested".into()));
+                self.cancel_mission(crate::control::STOP_REQUESTED);
+                self.end_motion(t, Outcome::Cancelled(crate::control::STOP_REQUESTED.into()));
                 let result = self.with_chassis(|c| {
                     c.hold_zero(t);
                     Ok(())
@@ -513,8 +513,11 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Stop) => {
-                self.cancel_mission("stopped by the operator");
-                self.end_motion(t, Outcome::Cancelled("stopped by the operator".into()));
+                self.cancel_mission(crate::control::STOPPED_BY_OPERATOR);
+                self.end_motion(
+                    t,
+                    Outcome::Cancelled(crate::control::STOPPED_BY_OPERATOR.into()),
+                );
                 let result = self.with_chassis(|c| {
                     c.operator_stop(t);
                     Ok(())
@@ -962,17 +965,15 @@ impl Vehicle {
                     .imu
                     .is_some_and(|s| t.saturating_since(s.rx) <= timeout)
         });
-        let published = self.localizer.published(t);
-        let localization = match published.map_or(LocateState::Uninitialized, |p| p.locate) {
-            LocateState::Uninitialized => Localization::Uninitialized,
-            LocateState::Good => Localization::Good,
-            LocateState::Lost => Localization::Lost,
-        };
+        let PoseReport {
+            odom,
+            map,
+            localization,
+        } = self.pose_report(t);
         // The map pose once GNSS (or INIT_POSITION) has placed the vehicle; before that the
         // odom frame's, which LOCATE_UNINIT marks.
-        let odom = self.odometry.as_ref().and_then(Odometry::pose);
-        let pose = match (published.map(|p| p.map_pose), odom) {
-            (Some((x, y, yaw)), _) => Pose2D { x, y, yaw },
+        let pose = match (map, odom) {
+            (Some((pose, _)), _) => pose,
             (None, Some(o)) => Pose2D {
                 x: o.x,
                 y: o.y,
@@ -987,10 +988,7 @@ impl Vehicle {
             battery,
             gnss: self.gnss_status(t),
             pose,
-            pose_covariance: published.map(|p| {
-                let [xx, xy, yy, yaw] = p.map_covariance;
-                PoseCovariance { xx, xy, yy, yaw }
-            }),
+            pose_covariance: map.map(|(_, covariance)| covariance),
             odom,
             localization,
             navigation: self
@@ -1000,6 +998,32 @@ impl Vehicle {
             obstacle_stop: false,
             host: self.host,
             mode: self.chassis.as_ref().map(Chassis::mode),
+        }
+    }
+
+    /// The `odom` pose and the map pose at `t`, without the rest of a status.
+    pub fn pose_report(&self, t: Timestamp) -> PoseReport {
+        let published = self.localizer.published(t);
+        PoseReport {
+            odom: self.odometry.as_ref().and_then(Odometry::pose),
+            map: published.map(|p| {
+                let (x, y, yaw) = p.map_pose;
+                let [xx, xy, yy, yaw_var] = p.map_covariance;
+                (
+                    Pose2D { x, y, yaw },
+                    PoseCovariance {
+                        xx,
+                        xy,
+                        yy,
+                        yaw: yaw_var,
+                    },
+                )
+            }),
+            localization: match published.map_or(LocateState::Uninitialized, |p| p.locate) {
+                LocateState::Uninitialized => Localization::Uninitialized,
+                LocateState::Good => Localization::Good,
+                LocateState::Lost => Localization::Lost,
+            },
         }
     }
 

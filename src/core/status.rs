@@ -38,6 +38,18 @@ pub struct VehicleStatus {
     pub mode: Option<DriveMode>,
 }
 
+/// The vehicle's poses at one control tick: what a 100 Hz odometry topic needs, without
+/// the rest of a status.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseReport {
+    /// The `odom` frame's pose and speeds, once the drives report.
+    pub odom: Option<crate::fusion::odometry::OdomPose>,
+    /// The map pose and its covariance, once GNSS or INIT_POSITION has placed the vehicle.
+    pub map: Option<(Pose2D, PoseCovariance)>,
+    /// Localisation state.
+    pub localization: Localization,
+}
+
 /// The host computer's load.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct HostUsage {

@@ -18,6 +18,7 @@ use std::time::Duration;
 
 use crate::api::local;
 use crate::api::mqtt::{CoreAccess, Dialects, MQTT_SOURCE, Publish};
+use crate::api::ros1;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
@@ -97,6 +98,19 @@ pub enum EngineOutput {
     Publish(Publish),
     /// A closed-loop motion ended (also announced as an event).
     MotionEnded(crate::control::MotionResult),
+    /// The poses at a control tick (only with [`Engine::emit_poses`]: the 100 Hz feed of a
+    /// ROS node's odometry).
+    Poses(Timestamp, crate::core::PoseReport),
+    /// An IMU sample as the core got it, in the vehicle frame (only with
+    /// [`Engine::emit_poses`]).
+    Imu(crate::devices::imu::ImuSample),
+    /// A mission's progress, with the tag of whoever asked for it.
+    Mission {
+        /// Who asked.
+        tag: Option<crate::control::MotionTag>,
+        /// What happened.
+        event: crate::control::mission::MissionEvent,
+    },
     /// The answer to a command record.
     CommandResult {
         /// The channel it came on.
@@ -153,6 +167,8 @@ pub struct Engine {
     stop_reason: Option<String>,
     /// The MQTT protocol dialects.
     dialects: Dialects,
+    /// Emit the poses every control tick and every IMU sample.
+    emit_poses: bool,
     stats: EngineStats,
 }
 
@@ -232,8 +248,15 @@ impl Engine {
             drive_states: Vec::new(),
             stop_reason: None,
             dialects: dialects(config, trajectories),
+            emit_poses: false,
             stats: EngineStats::default(),
         }
+    }
+
+    /// Emits [`EngineOutput::Poses`] every control tick and [`EngineOutput::Imu`] for every
+    /// sample, for a consumer that publishes them at their own rate (the ROS1 node).
+    pub fn emit_poses(&mut self) {
+        self.emit_poses = true;
     }
 
     /// Replay mode: transmissions are checked against the recording's `T` frames instead of
@@ -289,8 +312,13 @@ impl Engine {
                         }
                     });
                 } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
+                    let emit = self.emit_poses;
                     decoder.push(t, bytes, |sample| {
-                        vehicle.handle(t, Input::Imu(&mounting.apply(&sample)));
+                        let sample = mounting.apply(&sample);
+                        vehicle.handle(t, Input::Imu(&sample));
+                        if emit {
+                            out.push(EngineOutput::Imu(sample));
+                        }
                     });
                 } else {
                     self.stats.undecoded += 1;
@@ -345,12 +373,23 @@ impl Engine {
                     Err(_) => self.stats.undecoded += 1,
                 }
             }
-            Payload::Command { .. } if record.source != LOCAL_COMMANDS => {
+            Payload::Command { .. }
+                if record.source != LOCAL_COMMANDS && record.source != ros1::SOURCE =>
+            {
                 self.stats.commands_without_dialect += 1;
             }
+            // The local channel and the ROS1 node speak the same commands; what the node
+            // asks for carries its tag, so that it can tell its own mission's end.
             Payload::Command { topic, payload } => {
                 self.stats.commands += 1;
-                let result = match local::decode(topic, payload) {
+                let decoded = local::decode(topic, payload).map(|command| {
+                    if record.source == ros1::SOURCE {
+                        command.map(ros1::tagged)
+                    } else {
+                        command
+                    }
+                });
+                let result = match decoded {
                     Ok(Some(command)) => self
                         .vehicle
                         .handle(t, Input::Command(command))
@@ -452,6 +491,9 @@ impl Engine {
     fn emit_ticks(&mut self, due: impl Fn(Timestamp) -> bool, out: &mut Vec<EngineOutput>) {
         while let Some(tick) = self.next_tick.filter(|&tick| due(tick)) {
             self.control_tick(tick, out);
+            if self.emit_poses {
+                out.push(EngineOutput::Poses(tick, self.vehicle.pose_report(tick)));
+            }
             if tick.as_nanos() % STATUS_PERIOD.as_nanos() as u64 == 0 {
                 for output in self.vehicle.handle(tick, Input::Tick) {
                     if let Output::Status(s) = output {
@@ -506,6 +548,7 @@ impl Engine {
                         let mut replies = Vec::new();
                         self.dialects.on_mission_event(t, tag, &event, &mut replies);
                         out.extend(replies.into_iter().map(EngineOutput::Publish));
+                        out.push(EngineOutput::Mission { tag, event });
                     }
                     Output::Status(_) | Output::CommandResult(_) => {}
                 }

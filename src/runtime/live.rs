@@ -18,6 +18,7 @@ use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
+use super::ros1::Ros1Link;
 use super::serial::{self, SerialSpec};
 use super::status_out::StatusOut;
 use super::trajectory_writer;
@@ -188,6 +189,13 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         }
         None => None,
     };
+    let mut ros1 = match config.ros1.clone() {
+        Some(r) => {
+            source_meta.push(super::ros1::source_meta());
+            Some(start_ros1(&mut engine, config, r, clock, tx.clone())?)
+        }
+        None => None,
+    };
     let drivers_running = !source_meta.is_empty();
     drop(tx);
 
@@ -252,7 +260,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             &mut outputs,
             t,
             &can_tx,
-            mqtt.as_ref(),
+            (mqtt.as_ref(), ros1.as_mut()),
             recorder.as_mut(),
             &mut out,
         );
@@ -286,7 +294,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         &mut outputs,
         end,
         &can_tx,
-        mqtt.as_ref(),
+        (mqtt.as_ref(), ros1.as_mut()),
         recorder.as_mut(),
         &mut out,
     );
@@ -326,12 +334,12 @@ fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
     can_tx: &BTreeMap<String, CanTx>,
-    mqtt: Option<&MqttSender>,
+    (mqtt, mut ros1): (Option<&MqttSender>, Option<&mut Ros1Link>),
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
 ) {
     for output in outputs.drain(..) {
-        let Some(output) = super::forward_common(output, mqtt) else {
+        let Some(output) = super::forward_common(output, mqtt, ros1.as_deref_mut()) else {
             continue;
         };
         match output {
@@ -355,6 +363,32 @@ fn dispatch(
             _ => {}
         }
     }
+}
+
+/// Starts the ROS1 node of `config`; its requests go to `records`.
+#[cfg(feature = "ros1")]
+fn start_ros1(
+    engine: &mut Engine,
+    config: &VehicleConfig,
+    ros1: crate::config::ros1::Ros1Config,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+) -> anyhow::Result<Ros1Link> {
+    engine.emit_poses();
+    let (link, queues) = Ros1Link::new();
+    super::ros1::spawn(super::ros1::spec_for(config, ros1), clock, records, queues);
+    Ok(link)
+}
+
+#[cfg(not(feature = "ros1"))]
+fn start_ros1(
+    _: &mut Engine,
+    _: &VehicleConfig,
+    _: crate::config::ros1::Ros1Config,
+    _: RecordClock,
+    _: mpsc::Sender<Record>,
+) -> anyhow::Result<Ros1Link> {
+    anyhow::bail!("this chassisd was built without the ros1 feature")
 }
 
 /// Reads `TOPIC JSON` lines from standard input as commands. A line that is not UTF-8 or

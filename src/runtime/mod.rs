@@ -13,6 +13,7 @@ pub mod lossy;
 pub mod mqtt;
 pub mod outage_log;
 pub mod recorder;
+pub mod ros1;
 pub mod serial;
 pub mod sim;
 pub mod status_out;
@@ -21,9 +22,18 @@ pub mod trajectory_writer;
 use crate::engine::EngineOutput;
 
 /// Handles the engine outputs that go the same way in live mode and in the simulation:
-/// messages to the MQTT link, events and command answers to the log. Returns the others
+/// what the ROS1 node publishes to it, messages to the MQTT link, events and command
+/// answers to the log. Returns the others
 /// (status lines and frames), which each mode routes itself.
-fn forward_common(output: EngineOutput, mqtt: Option<&mqtt::MqttSender>) -> Option<EngineOutput> {
+fn forward_common(
+    output: EngineOutput,
+    mqtt: Option<&mqtt::MqttSender>,
+    ros1: Option<&mut ros1::Ros1Link>,
+) -> Option<EngineOutput> {
+    let output = match ros1 {
+        Some(link) => link.take(output)?,
+        None => output,
+    };
     match output {
         EngineOutput::Publish(message) => {
             if let Some(link) = mqtt {

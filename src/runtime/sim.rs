@@ -17,6 +17,7 @@ use super::host;
 use super::live::read_commands;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::recorder::Recorder;
+use super::ros1::Ros1Link;
 use super::status_out::StatusOut;
 use super::trajectory_writer;
 use crate::api::rtk::BaseStatus;
@@ -62,6 +63,8 @@ pub struct SimOptions {
     pub duration: Option<Duration>,
     /// Speak the MQTT dialects of this configuration (its broker embedded or not).
     pub mqtt: Option<MqttConfig>,
+    /// Join a ROS1 graph as a node.
+    pub ros1: Option<crate::config::ros1::Ros1Config>,
     /// A benchmark's hold on the run: faults to inject, truth to read back.
     pub handle: Option<SimHandle>,
 }
@@ -126,6 +129,7 @@ struct Output {
     out: StatusOut,
     recorder: Option<Recorder>,
     mqtt: Option<MqttSender>,
+    ros1: Option<Ros1Link>,
 }
 
 impl Sink for Output {
@@ -138,7 +142,7 @@ impl Sink for Output {
     fn output(&mut self, output: EngineOutput) {
         // Frames go to the simulated drives inside the lockstep, not here.
         if let Some(EngineOutput::Status(status)) =
-            super::forward_common(output, self.mqtt.as_ref())
+            super::forward_common(output, self.mqtt.as_ref(), self.ros1.as_mut())
         {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
@@ -168,6 +172,10 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         options.mqtt.clone(),
         store,
     )?;
+    let mut sources = lockstep::sources(&options.plant);
+    if options.ros1.is_some() {
+        sources.push(super::ros1::source_meta());
+    }
     let recorder = match &options.record {
         Some(dir) => {
             let mut writer = RecordingWriter::create(
@@ -175,7 +183,7 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
                 &sim.config().vehicle.name,
                 start,
                 Some(&sim.config().to_effective_toml()),
-                lockstep::sources(&options.plant),
+                sources,
             )
             .with_context(|| format!("cannot start recording in {}", dir.display()))?;
             if let Some(snapshot) = &snapshot {
@@ -207,17 +215,23 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         }
         None => None,
     };
+    let ros1 = match options.ros1.clone() {
+        Some(config) => Some(start_ros1(&mut sim, config, clock, tx.clone())?),
+        None => None,
+    };
     let mut sink = Output {
         out: StatusOut::start(out),
         recorder,
         mqtt,
+        ros1,
     };
     if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
     } else {
         drop(tx);
     }
-    let mut commands_open = options.commands_stdin || options.mqtt.is_some();
+    let mut commands_open =
+        options.commands_stdin || options.mqtt.is_some() || options.ros1.is_some();
     eprintln!(
         "{}",
         start_line(&options, sim.config().vehicle.name.as_str())
@@ -292,6 +306,35 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     Ok(())
 }
 
+/// Starts the ROS1 node on the simulated vehicle; its requests go to `commands`.
+#[cfg(feature = "ros1")]
+fn start_ros1(
+    sim: &mut Lockstep,
+    config: crate::config::ros1::Ros1Config,
+    clock: RecordClock,
+    commands: mpsc::Sender<Record>,
+) -> anyhow::Result<Ros1Link> {
+    sim.engine_mut().emit_poses();
+    let (link, queues) = Ros1Link::new();
+    super::ros1::spawn(
+        super::ros1::spec_for(sim.config(), config),
+        clock,
+        commands,
+        queues,
+    );
+    Ok(link)
+}
+
+#[cfg(not(feature = "ros1"))]
+fn start_ros1(
+    _: &mut Lockstep,
+    _: crate::config::ros1::Ros1Config,
+    _: RecordClock,
+    _: mpsc::Sender<Record>,
+) -> anyhow::Result<Ros1Link> {
+    anyhow::bail!("this chassisd was built without the ros1 feature")
+}
+
 /// The line a person reads first: what runs, where to watch it, how to stop it.
 fn start_line(options: &SimOptions, vehicle: &str) -> String {
     let mut line = format!(
@@ -314,6 +357,12 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
         line += &format!(
             " and over MQTT (watch: mosquitto_sub -h {} -p {} -t base_status)",
             m.host, m.port
+        );
+    }
+    if let Some(r) = &options.ros1 {
+        line += &format!(
+            "; ROS1 node {} on {} (watch: rostopic echo /tracked_pose)",
+            r.node_name, r.master_uri
         );
     }
     if let Some(dir) = &options.record {
@@ -360,7 +409,7 @@ impl Summary {
             (Ended::Stopped, _) => "stopped".to_owned(),
         };
         let mut line = format!(
-            "chassisd sim: {why} after {:.1} s simulated; drove {:.1} m, ending ({:.2}, {:.2}) m from the start, heading {:.0}°; {} commands ({} refused), {} status lines",
+            "chassisd sim: {why} after {:.1} s simulated; drove {:.1} m, ending ({:.3}, {:.3}) m from the start, heading {:.0}°; {} commands ({} refused), {} status lines",
             elapsed.as_secs_f64(),
             self.distance_m,
             self.last.x - self.start.x,

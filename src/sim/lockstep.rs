@@ -342,6 +342,11 @@ impl Lockstep {
         &self.engine
     }
 
+    /// The engine, to set what it emits.
+    pub fn engine_mut(&mut self) -> &mut Engine {
+        &mut self.engine
+    }
+
     /// Simulated time.
     pub fn time(&self) -> Timestamp {
         self.t

@@ -1,0 +1,137 @@
+//! The ROS1 types generated from `src/api/ros1/interfaces` (build.rs), and the messages
+//! built from the core's poses and samples, stamped and framed by REP-103/105.
+
+include!(concat!(env!("OUT_DIR"), "/ros1_interfaces.rs"));
+
+use crate::api::ros1::odometry::OdometryCovariance;
+use crate::api::ros1::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
+use crate::core::Pose2D;
+use crate::devices::imu::ImuSample;
+use crate::fusion::odometry::OdomPose;
+use crate::time::Timestamp;
+
+/// The IMU's noise, 1σ, for `/imu/data`'s covariances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuNoise {
+    /// Angular rate, rad/s.
+    pub gyro_rps: f64,
+    /// Specific force, m/s².
+    pub accel_mps2: f64,
+    /// The sensor's own orientation, rad.
+    pub orientation_rad: f64,
+}
+
+fn header(t: Timestamp, seq: u32, frame: &str) -> std_msgs::Header {
+    let (secs, nsecs) = ros_time(t);
+    std_msgs::Header {
+        seq,
+        // ROS1 time is two uint32 on the wire; roslibrust types them i32, which carries the
+        // same 32 bits.
+        stamp: roslibrust::codegen::integral_types::Time {
+            secs: secs as i32,
+            nsecs: nsecs as i32,
+        },
+        frame_id: frame.to_owned(),
+    }
+}
+
+fn quaternion([x, y, z, w]: [f64; 4]) -> geometry_msgs::Quaternion {
+    geometry_msgs::Quaternion { x, y, z, w }
+}
+
+fn vector(v: &nalgebra::Vector3<f64>) -> geometry_msgs::Vector3 {
+    geometry_msgs::Vector3 {
+        x: v.x,
+        y: v.y,
+        z: v.z,
+    }
+}
+
+/// A diagonal 3×3 covariance, row-major.
+fn diagonal(variance: f64) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    m[0] = variance;
+    m[4] = variance;
+    m[8] = variance;
+    m
+}
+
+/// `/raw_odom`: the `odom` frame's pose and the speeds in the vehicle frame.
+pub fn odometry(
+    t: Timestamp,
+    seq: u32,
+    odom: &OdomPose,
+    covariance: &OdometryCovariance,
+) -> nav_msgs::Odometry {
+    nav_msgs::Odometry {
+        header: header(t, seq, ODOM_FRAME),
+        child_frame_id: BASE_FRAME.to_owned(),
+        pose: geometry_msgs::PoseWithCovariance {
+            pose: geometry_msgs::Pose {
+                position: geometry_msgs::Point {
+                    x: odom.x,
+                    y: odom.y,
+                    z: 0.0,
+                },
+                orientation: quaternion(yaw_quaternion(odom.yaw)),
+            },
+            covariance: covariance.pose,
+        },
+        twist: geometry_msgs::TwistWithCovariance {
+            twist: geometry_msgs::Twist {
+                linear: geometry_msgs::Vector3 {
+                    x: odom.v,
+                    y: 0.0,
+                    z: 0.0,
+                },
+                angular: geometry_msgs::Vector3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: odom.w,
+                },
+            },
+            covariance: covariance.twist,
+        },
+    }
+}
+
+/// `/tracked_pose`: the fused pose in the map frame.
+pub fn pose_stamped(t: Timestamp, seq: u32, pose: &Pose2D) -> geometry_msgs::PoseStamped {
+    geometry_msgs::PoseStamped {
+        header: header(t, seq, MAP_FRAME),
+        pose: geometry_msgs::Pose {
+            position: geometry_msgs::Point {
+                x: pose.x,
+                y: pose.y,
+                z: 0.0,
+            },
+            orientation: quaternion(yaw_quaternion(pose.yaw)),
+        },
+    }
+}
+
+/// `/imu/data`: a sample in the vehicle frame (the mounting applied), stamped when it was
+/// received. Without the sensor's own orientation, orientation_covariance[0] is -1, as
+/// sensor_msgs/Imu says.
+pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> sensor_msgs::Imu {
+    let (orientation, orientation_covariance) = match sample.orientation {
+        Some(q) => (
+            quaternion([q.i, q.j, q.k, q.w]),
+            diagonal(noise.orientation_rad.powi(2)),
+        ),
+        None => {
+            let mut unknown = [0.0; 9];
+            unknown[0] = -1.0;
+            (quaternion([0.0, 0.0, 0.0, 1.0]), unknown)
+        }
+    };
+    sensor_msgs::Imu {
+        header: header(sample.rx, seq, BASE_FRAME),
+        orientation,
+        orientation_covariance,
+        angular_velocity: vector(&sample.gyro),
+        angular_velocity_covariance: diagonal(noise.gyro_rps.powi(2)),
+        linear_acceleration: vector(&sample.accel),
+        linear_acceleration_covariance: diagonal(noise.accel_mps2.powi(2)),
+    }
+}

@@ -1,0 +1,172 @@
+//! The native ROS1 node: chassisd joins a ROS1 graph itself (roslibrust speaks XML-RPC and
+//! TCPROS), with no ROS installation on the vehicle. What its topics and services mean is
+//! `api::ros1`; this module moves the messages.
+//!
+//! The engine's task hands the node what it publishes through a [`Ros1Link`], which never
+//! blocks: poses every control tick, IMU samples, the status, motion and mission ends, and
+//! the answers to the node's own requests. The node's requests go to the engine as command
+//! records of the source `ros1`, so a recording keeps them and replays without ROS.
+
+#[cfg(feature = "ros1")]
+mod messages;
+#[cfg(feature = "ros1")]
+mod node;
+
+use tokio::sync::mpsc;
+
+use crate::api::local;
+use crate::api::ros1::SOURCE;
+use crate::engine::EngineOutput;
+
+#[cfg(feature = "ros1")]
+pub use messages::ImuNoise;
+#[cfg(feature = "ros1")]
+pub use node::{Ros1Spec, spawn};
+
+/// Feed items waiting for the node before the newest are dropped (some 2 s of poses).
+const FEED_QUEUE: usize = 256;
+/// Answers waiting for the node: more than the requests it may have in flight.
+const ANSWER_QUEUE: usize = 256;
+
+/// What the engine's outputs give the node.
+#[derive(Debug, Clone)]
+pub enum Feed {
+    /// The poses at a control tick.
+    Poses(crate::time::Timestamp, crate::core::PoseReport),
+    /// An IMU sample, in the vehicle frame.
+    Imu(crate::devices::imu::ImuSample),
+    /// A status tick.
+    Status(Box<crate::core::VehicleStatus>),
+    /// A motion ended.
+    MotionEnded(crate::control::MotionResult),
+    /// A mission made progress.
+    Mission {
+        /// Who asked.
+        tag: Option<crate::control::MotionTag>,
+        /// What happened.
+        event: crate::control::mission::MissionEvent,
+    },
+}
+
+/// The engine task's end of the node's queues: sending never blocks, and what does not fit
+/// is dropped and counted (the node publishes the next pose instead).
+pub struct Ros1Link {
+    feed: mpsc::Sender<Feed>,
+    answers: mpsc::Sender<Result<(), String>>,
+    dropped: u64,
+}
+
+/// The node's end.
+pub struct Ros1Queues {
+    /// What to publish.
+    pub feed: mpsc::Receiver<Feed>,
+    /// The engine's answers to the node's tracked requests, in order.
+    pub answers: mpsc::Receiver<Result<(), String>>,
+}
+
+/// Whether the engine's answer to a request of `topic` goes back to the node: the moves,
+/// stops and missions it waits on or announces (a velocity command's answer is only logged).
+pub fn is_tracked(topic: &str) -> bool {
+    topic == local::SET_NAVI_CMD || topic == local::MISSION
+}
+
+impl Ros1Link {
+    /// A link and the node's end of it.
+    pub fn new() -> (Self, Ros1Queues) {
+        let (feed, feed_rx) = mpsc::channel(FEED_QUEUE);
+        let (answers, answers_rx) = mpsc::channel(ANSWER_QUEUE);
+        (
+            Self {
+                feed,
+                answers,
+                dropped: 0,
+            },
+            Ros1Queues {
+                feed: feed_rx,
+                answers: answers_rx,
+            },
+        )
+    }
+
+    fn send(&mut self, item: Feed) {
+        if self.feed.try_send(item).is_err() {
+            self.dropped += 1;
+            if self.dropped.is_power_of_two() {
+                tracing::warn!(dropped = self.dropped, "ROS1 node behind: poses dropped");
+            }
+        }
+    }
+
+    /// Takes what the node needs from `output`; returns the output when others want it too
+    /// (statuses, motion ends, command answers), `None` when it was the node's alone.
+    pub fn take(&mut self, output: EngineOutput) -> Option<EngineOutput> {
+        match output {
+            EngineOutput::Poses(t, report) => self.send(Feed::Poses(t, report)),
+            EngineOutput::Imu(sample) => self.send(Feed::Imu(sample)),
+            EngineOutput::Mission { tag, event } => self.send(Feed::Mission { tag, event }),
+            EngineOutput::Status(status) => {
+                self.send(Feed::Status(status.clone()));
+                return Some(EngineOutput::Status(status));
+            }
+            EngineOutput::MotionEnded(result) => {
+                self.send(Feed::MotionEnded(result.clone()));
+                return Some(EngineOutput::MotionEnded(result));
+            }
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                result,
+            } if source == SOURCE && is_tracked(&topic) => {
+                // Every tracked request gets exactly one answer, in order; the queue is
+                // longer than the requests the node lets wait, so it never overflows.
+                if self.answers.try_send(result.clone()).is_err() {
+                    tracing::error!("ROS1 node: an answer was lost; its caller times out");
+                }
+                return Some(EngineOutput::CommandResult {
+                    source,
+                    topic,
+                    result,
+                });
+            }
+            other => return Some(other),
+        }
+        None
+    }
+}
+
+/// The node's spec for a vehicle: its noise figures come from the configuration (the
+/// localiser's odometry and gyro noise, the IMU's accelerometer and orientation noise).
+#[cfg(feature = "ros1")]
+pub fn spec_for(
+    config: &crate::config::VehicleConfig,
+    ros1: crate::config::ros1::Ros1Config,
+) -> Ros1Spec {
+    let localizer = crate::config::localization::localizer_config(config);
+    let (accel_mps2, orientation_deg) = config.imu.as_ref().map_or((0.05, 1.0), |imu| {
+        (imu.accel_noise_mps2, imu.orientation_noise_deg)
+    });
+    Ros1Spec {
+        config: ros1,
+        vehicle: config.vehicle.name.clone(),
+        odometry_noise: crate::api::ros1::odometry::OdometryNoise::from_localizer(
+            &localizer,
+            config.imu.is_some(),
+        ),
+        imu_noise: messages::ImuNoise {
+            gyro_rps: localizer.gyro_sigma,
+            accel_mps2,
+            orientation_rad: orientation_deg.to_radians(),
+        },
+    }
+}
+
+/// The recording's entry for the node's commands.
+pub fn source_meta() -> crate::record::SourceMeta {
+    crate::record::SourceMeta {
+        name: SOURCE.into(),
+        kind: crate::record::SourceKind::Commands,
+        file: format!("{SOURCE}.log"),
+        protocol: None,
+        events: None,
+    }
+}

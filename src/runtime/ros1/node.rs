@@ -1,0 +1,600 @@
+//! The node's life: connect to the master (retrying while it is away), advertise, subscribe
+//! and serve; publish what the engine feeds; and watch the master, rebuilding every
+//! registration when it has forgotten the node (a restarted rosmaster keeps none, and a
+//! roslibrust node does not register again by itself).
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use bytes::Bytes;
+use roslibrust::ros1::{MasterClient, NodeHandle, Publisher, ServiceServer};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
+
+use super::messages::{self, geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs};
+use super::{Feed, Ros1Queues};
+use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
+use crate::api::ros1::status::{StatusTopics, Topic};
+use crate::api::ros1::{self, Request};
+use crate::config::ros1::Ros1Config;
+use crate::core::{Localization, Pose2D};
+use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::command_rate::{CommandRate, RateReport};
+use crate::runtime::outage_log::{OutageLog, Say};
+
+/// How often the master is asked whether it still knows the node.
+const WATCH_EVERY: Duration = Duration::from_secs(1);
+/// The longest wait between connection attempts.
+const RETRY_MAX: Duration = Duration::from_secs(5);
+/// `/tracked_pose`'s period (15 Hz).
+const TRACKED_POSE_PERIOD: Duration = Duration::from_nanos(1_000_000_000 / 15);
+/// Requests that may wait for the engine's answer at once; more are refused as busy.
+const MAX_PENDING: usize = 64;
+/// How long a service call waits for the engine's answer.
+const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
+/// Messages queued per subscribed topic in roslibrust before the oldest go.
+const SUBSCRIBER_QUEUE: usize = 16;
+/// Why `/robot_ssh` and `/set_wifi` answer no.
+const DISABLED: &str = "disabled for security";
+
+/// What the node is built from.
+#[derive(Debug, Clone)]
+pub struct Ros1Spec {
+    /// `[ros1]`.
+    pub config: Ros1Config,
+    /// The vehicle's name (`/navi_info`).
+    pub vehicle: String,
+    /// The odometry's noise (`/raw_odom`'s covariance).
+    pub odometry_noise: OdometryNoise,
+    /// The IMU's noise (`/imu/data`'s covariances).
+    pub imu_noise: messages::ImuNoise,
+}
+
+/// One request waiting for the engine's answer.
+struct Pending {
+    /// Who waits (a service call); `None` for a topic's message.
+    waiter: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
+    /// Whether it starts a motion (announced on the navigation topic once accepted).
+    starts_motion: bool,
+    /// Whether it is the charging action.
+    charging: bool,
+}
+
+/// Hands requests to the engine, in the order their answers will come back.
+#[derive(Clone)]
+struct Requests {
+    records: mpsc::Sender<Record>,
+    clock: RecordClock,
+    pending: Arc<Mutex<VecDeque<Pending>>>,
+}
+
+impl Requests {
+    /// Sends `request`; a `waiter` gets the engine's answer.
+    fn submit(
+        &self,
+        request: Request,
+        waiter: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
+    ) -> Result<(), String> {
+        let tracked = super::is_tracked(request.topic);
+        // The lock spans the send, so the pending order is the order the engine sees.
+        let mut pending = self
+            .pending
+            .lock()
+            .map_err(|_| "the ROS1 node's request queue is broken".to_owned())?;
+        if tracked && pending.len() >= MAX_PENDING {
+            return Err(format!(
+                "busy: {MAX_PENDING} requests already wait for the vehicle"
+            ));
+        }
+        let entry = Pending {
+            waiter,
+            starts_motion: ros1::starts_motion(&request),
+            charging: request.topic == crate::api::local::MISSION,
+        };
+        let record = Record {
+            t: self.clock.now(),
+            source: ros1::SOURCE.into(),
+            payload: Payload::Command {
+                topic: request.topic.to_owned(),
+                payload: Bytes::from(request.payload),
+            },
+        };
+        self.records
+            .try_send(record)
+            .map_err(|_| "the vehicle's command queue is full".to_owned())?;
+        if tracked {
+            pending.push_back(entry);
+        }
+        Ok(())
+    }
+
+    /// Sends `request` and waits for the engine's answer (on a blocking thread: roslibrust
+    /// runs service callbacks there).
+    fn call(&self, request: Request) -> Result<(), String> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        self.submit(request, Some(tx))?;
+        rx.recv_timeout(ANSWER_TIMEOUT)
+            .unwrap_or_else(|_| Err("the vehicle did not answer in time".to_owned()))
+    }
+}
+
+/// Starts the node; it runs until the runtime ends. Requests go to `records`.
+pub fn spawn(
+    spec: Ros1Spec,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+    queues: Ros1Queues,
+) {
+    tokio::spawn(run(spec, clock, records, queues));
+}
+
+/// The registered graph: dropping it unregisters everything (the node handle goes last).
+struct Graph {
+    raw_odom: Publisher<nav_msgs::Odometry>,
+    imu: Publisher<sensor_msgs::Imu>,
+    tracked_pose: Publisher<geometry_msgs::PoseStamped>,
+    codes: Vec<(Topic, Publisher<std_msgs::Int16>)>,
+    _services: Vec<ServiceServer>,
+    _subscribers: JoinSet<()>,
+    node: NodeHandle,
+}
+
+/// What the publishers keep between messages.
+struct Publishing {
+    odometry: OdometryUncertainty,
+    imu_noise: messages::ImuNoise,
+    status: StatusTopics,
+    next_tracked_pose: Option<crate::time::Timestamp>,
+    seq: u32,
+    imu_seq: u32,
+    position: watch::Sender<Option<Pose2D>>,
+}
+
+async fn run(
+    spec: Ros1Spec,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+    queues: Ros1Queues,
+) {
+    let Ros1Queues {
+        mut feed,
+        mut answers,
+    } = queues;
+    let requests = Requests {
+        records,
+        clock,
+        pending: Arc::new(Mutex::new(VecDeque::new())),
+    };
+    let (position, position_rx) = watch::channel(None);
+    let mut publishing = Publishing {
+        odometry: OdometryUncertainty::new(spec.odometry_noise),
+        imu_noise: spec.imu_noise,
+        status: StatusTopics::default(),
+        next_tracked_pose: None,
+        seq: 0,
+        imu_seq: 0,
+        position,
+    };
+    let mut outage = OutageLog::default();
+    let mut outage_start: Option<Instant> = None;
+    let mut retry = Duration::from_millis(250);
+    let mut watch = tokio::time::interval(WATCH_EVERY);
+    watch.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        // Connect and register everything, keeping up with the engine meanwhile.
+        let building = build(&spec, &requests, &position_rx);
+        tokio::pin!(building);
+        let graph = loop {
+            tokio::select! {
+                graph = &mut building => break graph,
+                Some(item) = feed.recv() => publishing.absorb(&item),
+                Some(answer) = answers.recv() => {
+                    answer_pending(&requests, &mut publishing, answer, None).await;
+                }
+            }
+        };
+        let graph = match graph {
+            Ok(graph) => graph,
+            Err(e) => {
+                let start = *outage_start.get_or_insert_with(Instant::now);
+                match outage.failed(start.elapsed()) {
+                    Say::First => tracing::warn!(
+                        master = %spec.config.master_uri,
+                        error = %e,
+                        "ROS master unreachable; retrying"
+                    ),
+                    Say::Still(attempts) => tracing::warn!(
+                        master = %spec.config.master_uri,
+                        attempts,
+                        error = %e,
+                        "ROS master still unreachable"
+                    ),
+                    Say::Quiet => tracing::debug!(error = %e, "ROS master unreachable"),
+                }
+                tokio::time::sleep(retry).await;
+                retry = (retry * 2).min(RETRY_MAX);
+                continue;
+            }
+        };
+        let uri = graph.node.get_client_uri().await.unwrap_or_default();
+        tracing::info!(
+            master = %spec.config.master_uri,
+            node = %spec.config.node_name,
+            %uri,
+            "ROS1 node registered"
+        );
+        outage = OutageLog::default();
+        outage_start = None;
+        retry = Duration::from_millis(250);
+        // The latched status codes again, for the new registrations.
+        for (topic, code) in publishing.status.current() {
+            publish_code(&graph, topic, code).await;
+        }
+        let master = MasterClient::new(
+            spec.config.master_uri.as_str(),
+            uri.as_str(),
+            format!("{}_watch", spec.config.node_name),
+        )
+        .await
+        .ok();
+        let mut master_away = false;
+        loop {
+            tokio::select! {
+                Some(item) = feed.recv() => publishing.publish(&graph, item).await,
+                Some(answer) = answers.recv() => {
+                    answer_pending(&requests, &mut publishing, answer, Some(&graph)).await;
+                }
+                _ = watch.tick() => {
+                    match still_registered(master.as_ref(), &spec.config.master_uri, &spec.config.node_name, &uri).await {
+                        Registration::Known => {
+                            if master_away {
+                                tracing::info!("ROS master back; the node is still registered");
+                                master_away = false;
+                            }
+                        }
+                        Registration::MasterAway => {
+                            if !master_away {
+                                tracing::warn!(master = %spec.config.master_uri, "ROS master unreachable; publishing goes on to connected subscribers");
+                                master_away = true;
+                            }
+                        }
+                        Registration::Forgotten => {
+                            tracing::warn!(master = %spec.config.master_uri, "the ROS master does not know the node (restarted?): registering again");
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+        drop(graph);
+    }
+}
+
+/// Answers the oldest pending request with the engine's `answer`.
+async fn answer_pending(
+    requests: &Requests,
+    publishing: &mut Publishing,
+    answer: Result<(), String>,
+    graph: Option<&Graph>,
+) {
+    let entry = match requests.pending.lock() {
+        Ok(mut p) => p.pop_front(),
+        Err(_) => None,
+    };
+    let Some(entry) = entry else {
+        return;
+    };
+    if answer.is_ok() && entry.starts_motion {
+        let mut codes = Vec::new();
+        publishing
+            .status
+            .on_request_accepted(entry.charging, &mut codes);
+        if let Some(graph) = graph {
+            for (topic, code) in codes {
+                publish_code(graph, topic, code).await;
+            }
+        }
+    }
+    if let Some(waiter) = entry.waiter {
+        // A caller that timed out is gone; its answer goes nowhere.
+        let _ = waiter.try_send(answer);
+    }
+}
+
+/// Whether the master still knows the node.
+enum Registration {
+    Known,
+    MasterAway,
+    Forgotten,
+}
+
+async fn still_registered(
+    master: Option<&MasterClient>,
+    master_uri: &str,
+    name: &str,
+    uri: &str,
+) -> Registration {
+    let fresh;
+    let master = match master {
+        Some(m) => m,
+        None => match MasterClient::new(master_uri, uri, format!("{name}_watch")).await {
+            Ok(m) => {
+                fresh = m;
+                &fresh
+            }
+            Err(_) => return Registration::MasterAway,
+        },
+    };
+    match master.lookup_node(name).await {
+        Ok(known) if known == uri => Registration::Known,
+        Ok(other) => {
+            // Another node took the name; the master told this one to shut down. Registering
+            // again would fight it, so the node stays as it is and says so.
+            tracing::error!(name, other = %other, "another ROS node took this node's name");
+            Registration::Known
+        }
+        Err(roslibrust::ros1::RosMasterError::MasterError(_)) => Registration::Forgotten,
+        Err(_) => Registration::MasterAway,
+    }
+}
+
+async fn publish_code(graph: &Graph, topic: Topic, code: i16) {
+    if let Some((_, publisher)) = graph.codes.iter().find(|(t, _)| *t == topic)
+        && let Err(e) = publisher.publish(&std_msgs::Int16 { data: code }).await
+    {
+        tracing::debug!(topic = topic.name(), error = %e, "ROS1 publish failed");
+    }
+}
+
+impl Publishing {
+    /// Keeps what the next registration needs while the node is not registered.
+    fn absorb(&mut self, item: &Feed) {
+        let mut codes = Vec::new();
+        match item {
+            Feed::Status(status) => self.status.on_status(status, &mut codes),
+            Feed::MotionEnded(result) => self.status.on_motion_ended(result, &mut codes),
+            Feed::Mission { tag, event } => self.status.on_mission(*tag, event, &mut codes),
+            Feed::Poses(_, report) => {
+                self.position.send_replace(position(report));
+            }
+            Feed::Imu(_) => {}
+        }
+    }
+
+    async fn publish(&mut self, graph: &Graph, item: Feed) {
+        let mut codes = Vec::new();
+        match item {
+            Feed::Poses(t, report) => {
+                self.position.send_replace(position(&report));
+                if let Some(odom) = report.odom {
+                    let covariance = self.odometry.update(t, &odom);
+                    self.seq = self.seq.wrapping_add(1);
+                    let message = messages::odometry(t, self.seq, &odom, &covariance);
+                    if let Err(e) = graph.raw_odom.publish(&message).await {
+                        tracing::debug!(error = %e, "/raw_odom publish failed");
+                    }
+                }
+                let due = self.next_tracked_pose.is_none_or(|next| t >= next);
+                if let (true, Some((pose, _))) = (due, report.map) {
+                    let next = self
+                        .next_tracked_pose
+                        .map_or(t, |n| n.saturating_add(TRACKED_POSE_PERIOD));
+                    // Late by more than a period (a pause in the feed): start again from now.
+                    self.next_tracked_pose = Some(if next < t {
+                        t.saturating_add(TRACKED_POSE_PERIOD)
+                    } else {
+                        next
+                    });
+                    let message = messages::pose_stamped(t, self.seq, &pose);
+                    if let Err(e) = graph.tracked_pose.publish(&message).await {
+                        tracing::debug!(error = %e, "/tracked_pose publish failed");
+                    }
+                }
+            }
+            Feed::Imu(sample) => {
+                self.imu_seq = self.imu_seq.wrapping_add(1);
+                let message = messages::imu(&sample, self.imu_seq, &self.imu_noise);
+                if let Err(e) = graph.imu.publish(&message).await {
+                    tracing::debug!(error = %e, "/imu/data publish failed");
+                }
+            }
+            Feed::Status(status) => self.status.on_status(&status, &mut codes),
+            Feed::MotionEnded(result) => self.status.on_motion_ended(&result, &mut codes),
+            Feed::Mission { tag, event } => self.status.on_mission(tag, &event, &mut codes),
+        }
+        for (topic, code) in codes {
+            publish_code(graph, topic, code).await;
+        }
+    }
+}
+
+/// `/get_position`'s answer: the map pose when located, else none.
+fn position(report: &crate::core::PoseReport) -> Option<Pose2D> {
+    match (report.localization, report.map) {
+        (Localization::Good | Localization::Lost, Some((pose, _))) => Some(pose),
+        _ => None,
+    }
+}
+
+/// Connects and registers every publisher, subscriber and service.
+async fn build(
+    spec: &Ros1Spec,
+    requests: &Requests,
+    position: &watch::Receiver<Option<Pose2D>>,
+) -> Result<Graph, roslibrust::ros1::NodeError> {
+    let node = NodeHandle::new(&spec.config.master_uri, &spec.config.node_name).await?;
+    let raw_odom = node.advertise("/raw_odom", 10, false).await?;
+    let imu = node.advertise("/imu/data", 10, false).await?;
+    let tracked_pose = node.advertise("/tracked_pose", 10, false).await?;
+    let mut codes = Vec::new();
+    for topic in Topic::ALL {
+        codes.push((topic, node.advertise(topic.name(), 1, true).await?));
+    }
+    let mut subscribers = JoinSet::new();
+    let rate = (spec.config.command_rate_hz, spec.config.command_burst);
+    let cmd_vel = node
+        .subscribe::<geometry_msgs::Twist>("/cmd_vel", SUBSCRIBER_QUEUE)
+        .await?;
+    subscribers.spawn(forward(cmd_vel, "/cmd_vel", requests.clone(), rate, |t| {
+        Ok(ros1::cmd_vel(
+            [t.linear.x, t.linear.y, t.linear.z],
+            [t.angular.x, t.angular.y, t.angular.z],
+        ))
+    }));
+    let navi_stop = node
+        .subscribe::<std_msgs::Int16>("/navi_stop", SUBSCRIBER_QUEUE)
+        .await?;
+    subscribers.spawn(forward(
+        navi_stop,
+        "/navi_stop",
+        requests.clone(),
+        rate,
+        |m| ros1::navi_stop(m.data),
+    ));
+    let autocharge = node
+        .subscribe::<std_msgs::Int16>("/autocharge", SUBSCRIBER_QUEUE)
+        .await?;
+    subscribers.spawn(forward(
+        autocharge,
+        "/autocharge",
+        requests.clone(),
+        rate,
+        |m| ros1::autocharge(m.data),
+    ));
+
+    let mut services = Vec::new();
+    let r = requests.clone();
+    services.push(
+        node.advertise_service::<map_msgs::SetNaviCmd, _>(
+            "/set_navi_cmd",
+            move |request: map_msgs::SetNaviCmdRequest| {
+                r.call(ros1::set_navi_cmd(&request.cmd, request.distance))
+                    .map(|()| map_msgs::SetNaviCmdResponse {})
+                    .map_err(|reason| {
+                        tracing::warn!(%reason, "/set_navi_cmd refused");
+                        anyhow::anyhow!(reason)
+                    })
+            },
+        )
+        .await?,
+    );
+    let p = position.clone();
+    services.push(
+        node.advertise_service::<map_msgs::GetPosition, _>(
+            "/get_position",
+            move |_: map_msgs::GetPositionRequest| match *p.borrow() {
+                Some(pose) => Ok(map_msgs::GetPositionResponse {
+                    pose: geometry_msgs::Point32 {
+                        x: pose.x as f32,
+                        y: pose.y as f32,
+                        z: 0.0,
+                    },
+                }),
+                None => Err(anyhow::anyhow!(
+                    "the vehicle is not located yet (no GNSS fix or INIT_POSITION)"
+                )),
+            },
+        )
+        .await?,
+    );
+    let info = ros1::navi_info(&spec.vehicle);
+    services.push(
+        node.advertise_service::<map_msgs::AboutRobot, _>(
+            "/navi_info",
+            move |_: map_msgs::AboutRobotRequest| {
+                Ok(map_msgs::AboutRobotResponse {
+                    status: 0,
+                    nav_info: info.clone(),
+                })
+            },
+        )
+        .await?,
+    );
+    services.push(
+        node.advertise_service::<map_msgs::RobotSsh, _>(
+            "/robot_ssh",
+            |request: map_msgs::RobotSshRequest| {
+                let shown: String = request.instruction.chars().take(200).collect();
+                tracing::warn!(instruction = ?shown, "/robot_ssh refused: {DISABLED}");
+                Ok(map_msgs::RobotSshResponse {
+                    status: 1,
+                    data: DISABLED.to_owned(),
+                })
+            },
+        )
+        .await?,
+    );
+    services.push(
+        node.advertise_service::<map_msgs::SetWifi, _>(
+            "/set_wifi",
+            |request: map_msgs::SetWifiRequest| {
+                let shown: String = request.wifi_name.chars().take(64).collect();
+                tracing::warn!(wifi = ?shown, "/set_wifi refused: {DISABLED} (no network manager integration)");
+                Err(anyhow::anyhow!(
+                    "{DISABLED}: chassisd has no network manager integration"
+                ))
+            },
+        )
+        .await?,
+    );
+    Ok(Graph {
+        raw_odom,
+        imu,
+        tracked_pose,
+        codes,
+        _services: services,
+        _subscribers: subscribers,
+        node,
+    })
+}
+
+/// Turns a subscribed topic's messages into requests, within its rate.
+async fn forward<T, F>(
+    mut subscriber: roslibrust::ros1::Subscriber<T>,
+    topic: &'static str,
+    requests: Requests,
+    (rate_hz, burst): (f64, u32),
+    to_request: F,
+) where
+    T: roslibrust::RosMessageType,
+    F: Fn(T) -> Result<Request, String> + Send + 'static,
+{
+    let mut rate = CommandRate::new(rate_hz, burst);
+    while let Some(message) = subscriber.next().await {
+        let message = match message {
+            Ok(m) => m,
+            Err(e) => {
+                tracing::warn!(topic, error = %e, "ROS1 message refused");
+                continue;
+            }
+        };
+        let now = Instant::now();
+        let (admitted, report) = rate.admit(topic, now);
+        match report.or_else(|| rate.due_summary(now)) {
+            Some(RateReport::Started(_)) => tracing::warn!(
+                topic,
+                limit_hz = rate_hz,
+                burst,
+                "ROS1 messages over the rate limit are dropped; a summary follows every 5 s while it lasts"
+            ),
+            Some(RateReport::Summary(counts)) => {
+                let dropped: u64 = counts.iter().map(|(_, n)| n).sum();
+                tracing::warn!(
+                    topic,
+                    dropped,
+                    "ROS1 messages dropped over the rate limit in the last 5 s"
+                );
+            }
+            None => {}
+        }
+        if !admitted {
+            continue;
+        }
+        let request = to_request(message).and_then(|r| requests.submit(r, None));
+        if let Err(reason) = request {
+            tracing::warn!(topic, %reason, "ROS1 message refused");
+        }
+    }
+}
