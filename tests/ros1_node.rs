@@ -1,0 +1,494 @@
+//! The ROS1 node (issue 12) against a real rosmaster and the real ROS tools (`rostopic`,
+//! `rosservice`) as the client, on `chassisd sim --no-mqtt --ros-master URI`, exactly as a
+//! person would run it. The Python tools call the spec's services through classes genpy
+//! generates from the repository's own `map_msgs` files.
+
+#![cfg(feature = "ros1")]
+
+mod common;
+
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use common::process::{Proc, lines_of};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+/// A rosmaster on its own port (the tests run side by side).
+struct Master {
+    port: u16,
+    child: Child,
+}
+
+impl Master {
+    fn start() -> Master {
+        Self::start_on(common::mqtt::free_port())
+    }
+
+    fn start_on(port: u16) -> Master {
+        let child = Command::new("rosmaster")
+            .args(["--core", "-p", &port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("rosmaster runs (Debian's ros-core; tests/install-deps installs it)");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(
+                Instant::now() < deadline,
+                "rosmaster did not listen on {port}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Master { port, child }
+    }
+
+    fn uri(&self) -> String {
+        format!("http://127.0.0.1:{}", self.port)
+    }
+
+    /// Kills it (no goodbye to anyone) and waits for it to be gone.
+    fn kill(mut self) -> u16 {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.port
+    }
+}
+
+impl Drop for Master {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The Python classes of the spec's services, generated once from the repository's files.
+fn python_classes() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = common::tempdir("ros1-python");
+        let interfaces = common::repo().join("src/api/ros1/interfaces");
+        let include = |package: &str| {
+            format!(
+                "-I{package}:{}",
+                interfaces.join(package).join("msg").display()
+            )
+        };
+        for kind in ["srv", "msg"] {
+            let out = dir.join("map_msgs").join(kind);
+            std::fs::create_dir_all(&out).expect("folder");
+            let generator = if kind == "srv" {
+                "/usr/lib/genpy/gensrv_py.py"
+            } else {
+                "/usr/lib/genpy/genmsg_py.py"
+            };
+            let files: Vec<PathBuf> = std::fs::read_dir(interfaces.join("map_msgs").join(kind))
+                .expect("map_msgs definitions")
+                .map(|e| e.expect("entry").path())
+                .collect();
+            let status = Command::new("/usr/bin/python3")
+                .arg(generator)
+                .args(["-p", "map_msgs"])
+                .args([
+                    include("map_msgs"),
+                    include("geometry_msgs"),
+                    include("std_msgs"),
+                ])
+                .arg("-o")
+                .arg(&out)
+                .args(&files)
+                .status()
+                .expect("genpy runs (Debian's python3-genpy)");
+            assert!(status.success(), "genpy failed on {files:?}");
+            let status = Command::new("/usr/bin/python3")
+                .arg(generator)
+                .args(["--initpy", "-p", "map_msgs", "-o"])
+                .arg(&out)
+                .status()
+                .expect("genpy runs");
+            assert!(status.success());
+        }
+        std::fs::write(dir.join("map_msgs/__init__.py"), "").expect("package");
+        dir
+    })
+}
+
+/// Runs a ROS tool (`rostopic ...`, `rosservice ...`) against `master`, stopped with SIGINT
+/// after `limit` (as a person stops `rostopic hz`).
+fn ros(master: &Master, args: &[&str], limit: Duration) -> Output {
+    Command::new("timeout")
+        .args(["-s", "INT", &format!("{}", limit.as_secs_f64())])
+        .args(args)
+        .env("ROS_MASTER_URI", master.uri())
+        .env("PYTHONPATH", python_classes())
+        .env("ROS_HOME", common::tempdir("ros-home"))
+        .output()
+        .expect("the ROS tools run (Debian's ros-core)")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// `rostopic echo -n 1 TOPIC`, retried until `want` holds or `wait` passes.
+fn echo_until(master: &Master, topic: &str, wait: Duration, want: impl Fn(&str) -> bool) -> String {
+    let deadline = Instant::now() + wait;
+    loop {
+        let out = text(&ros(
+            master,
+            &["rostopic", "echo", "-n", "1", topic],
+            Duration::from_secs(5),
+        ));
+        if want(&out) {
+            return out;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{topic} never showed what was wanted; last:\n{out}"
+        );
+        std::thread::sleep(Duration::from_millis(300));
+    }
+}
+
+/// `chassisd sim --no-mqtt --ros-master URI`, once the node is registered.
+fn sim(master: &Master) -> Proc {
+    let mut p = Proc::start(&["sim", "--no-mqtt", "--ros-master", &master.uri()]);
+    p.wait_log(Duration::from_secs(30), "ROS1 node registered");
+    p
+}
+
+/// Stops `p` with SIGINT; its stderr after the stop (the summary line).
+fn interrupt(mut p: Proc) -> Vec<String> {
+    kill(Pid::from_raw(p.child.id() as i32), Signal::SIGINT).expect("signal");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while p.child.try_wait().expect("status").is_none() {
+        assert!(Instant::now() < deadline, "no exit within 10 s of SIGINT");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut log = std::mem::take(&mut p.log);
+    log.extend(p.stderr.try_iter());
+    log
+}
+
+/// The last "average rate" `rostopic hz` printed.
+fn average_rate(out: &str) -> f64 {
+    out.lines()
+        .filter_map(|l| l.trim().strip_prefix("average rate:"))
+        .filter_map(|v| v.trim().parse().ok())
+        .next_back()
+        .unwrap_or_else(|| panic!("no rate in:\n{out}"))
+}
+
+/// The vehicle's forward speed in a base_status line.
+fn vx(line: &str) -> f64 {
+    let v: serde_json::Value = serde_json::from_str(line).expect("base_status JSON");
+    v["robot"]["vx"].as_f64().expect("robot.vx")
+}
+
+#[test]
+fn the_node_publishes_its_topics_and_answers_its_services() {
+    // On ROS's own port, exactly as the README runs it by hand.
+    assert!(
+        TcpStream::connect(("127.0.0.1", 11311)).is_err(),
+        "port 11311 is taken: stop the ROS master running on this machine"
+    );
+    let master = Master::start_on(11311);
+    assert_eq!(master.uri(), "http://127.0.0.1:11311");
+    let mut p = sim(&master);
+
+    let hz = text(&ros(
+        &master,
+        &["rostopic", "hz", "-w", "300", "/raw_odom"],
+        Duration::from_secs(7),
+    ));
+    let rate = average_rate(&hz);
+    assert!((95.0..=105.0).contains(&rate), "/raw_odom at {rate} Hz");
+    let odom = echo_until(&master, "/raw_odom", Duration::from_secs(5), |o| {
+        o.contains("frame_id: \"odom\"")
+    });
+    assert!(odom.contains("child_frame_id: \"base_link\""), "{odom}");
+    assert!(
+        odom.contains("1000000.0"),
+        "z, roll, pitch unmeasured:\n{odom}"
+    );
+
+    let located = echo_until(
+        &master,
+        "/androidmsg_locationstatus",
+        Duration::from_secs(20),
+        |o| o.contains("data: 10"),
+    );
+    assert!(located.contains("data: 10"));
+    let pose = echo_until(&master, "/tracked_pose", Duration::from_secs(5), |o| {
+        o.contains("frame_id: \"map\"")
+    });
+    assert!(
+        pose.contains("position:") && pose.contains("orientation:"),
+        "{pose}"
+    );
+    let tracked = text(&ros(
+        &master,
+        &["rostopic", "hz", "-w", "50", "/tracked_pose"],
+        Duration::from_secs(5),
+    ));
+    let rate = average_rate(&tracked);
+    assert!((14.0..=16.0).contains(&rate), "/tracked_pose at {rate} Hz");
+    let imu = echo_until(&master, "/imu/data", Duration::from_secs(5), |o| {
+        o.contains("angular_velocity_covariance")
+    });
+    assert!(imu.contains("frame_id: \"base_link\""), "{imu}");
+
+    for (topic, code) in [
+        ("/androidmsg_initstatus", "data: 12"),
+        ("/androidmsg_emergencystatus", "data: 32"),
+        ("/androidmsg_chargestatus", "data: 41"),
+        ("/power_report", "data: 80"),
+    ] {
+        echo_until(&master, topic, Duration::from_secs(10), |o| {
+            o.contains(code)
+        });
+    }
+
+    let info = text(&ros(
+        &master,
+        &["rosservice", "call", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    assert!(info.contains("status: 0"), "{info}");
+    assert!(info.contains(env!("CARGO_PKG_VERSION")), "{info}");
+    let position = text(&ros(
+        &master,
+        &["rosservice", "call", "/get_position"],
+        Duration::from_secs(10),
+    ));
+    assert!(
+        position.contains("pose:") && position.contains("x:"),
+        "{position}"
+    );
+
+    let ssh = ros(
+        &master,
+        &["rosservice", "call", "/robot_ssh", "instruction: 'reboot'"],
+        Duration::from_secs(10),
+    );
+    let answer = text(&ssh);
+    assert!(answer.contains("status: 1"), "{answer}");
+    assert!(answer.contains("disabled for security"), "{answer}");
+    p.wait_log(Duration::from_secs(5), "/robot_ssh refused");
+    let wifi = ros(
+        &master,
+        &[
+            "rosservice",
+            "call",
+            "/set_wifi",
+            "{wifi_name: 'x', wifi_pass: 'y'}",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(!wifi.status.success());
+    assert!(
+        text(&wifi).contains("disabled for security"),
+        "{}",
+        text(&wifi)
+    );
+}
+
+#[test]
+fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
+    let master = Master::start();
+    let p = sim(&master);
+    echo_until(
+        &master,
+        "/androidmsg_locationstatus",
+        Duration::from_secs(20),
+        |o| o.contains("data: 10"),
+    );
+    // The navigation codes, as a client listening all along sees them.
+    let mut listener = Command::new("rostopic")
+        .args(["echo", "/androidmsg_navigationstatus"])
+        .env("ROS_MASTER_URI", master.uri())
+        .env("ROS_HOME", common::tempdir("ros-home"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("rostopic runs");
+    let codes: Receiver<String> = lines_of(listener.stdout.take().expect("piped"));
+    std::thread::sleep(Duration::from_secs(2));
+
+    let call = ros(
+        &master,
+        &[
+            "rosservice",
+            "call",
+            "/set_navi_cmd",
+            "{cmd: '1', distance: 50}",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(call.status.success(), "{}", text(&call));
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while !seen.iter().any(|l: &String| l == "data: 2") {
+        let left = deadline
+            .checked_duration_since(Instant::now())
+            .unwrap_or_else(|| panic!("no success on the navigation topic: {seen:?}"));
+        if let Ok(line) = codes.recv_timeout(left) {
+            seen.push(line);
+        }
+    }
+    let started = seen.iter().position(|l| l == "data: 1");
+    let ended = seen.iter().position(|l| l == "data: 2");
+    assert!(started < ended && started.is_some(), "{seen:?}");
+
+    let refused = ros(
+        &master,
+        &[
+            "rosservice",
+            "call",
+            "/set_navi_cmd",
+            "{cmd: '9', distance: 50}",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(!refused.status.success());
+    assert!(text(&refused).contains("cmd must be"), "{}", text(&refused));
+    let _ = listener.kill();
+    let _ = listener.wait();
+
+    // The simulator's truth, in the closing line: the move against the target of
+    // `bench control` (5 mm + 0.5 % of the distance).
+    let log = interrupt(p);
+    let summary = log
+        .iter()
+        .find(|l| l.contains("from the start"))
+        .unwrap_or_else(|| panic!("no summary in {log:?}"));
+    let inside = summary
+        .split("ending (")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .expect("ending (x, y)");
+    let xy: Vec<f64> = inside
+        .split(',')
+        .map(|v| v.trim().parse().expect("a number"))
+        .collect();
+    let moved = xy[0].hypot(xy[1]);
+    assert!(
+        (moved - 0.5).abs() <= 0.005 + 0.005 * 0.5,
+        "drove {moved} m for 50 cm: {summary}"
+    );
+}
+
+#[test]
+fn cmd_vel_drives_through_the_watchdog_and_navi_stop_ends_a_move() {
+    let master = Master::start();
+    let mut p = sim(&master);
+    let publishing = ros(
+        &master,
+        &[
+            "rostopic",
+            "pub",
+            "-r",
+            "10",
+            "/cmd_vel",
+            "geometry_msgs/Twist",
+            "{linear: {x: 0.4}, angular: {z: 0.0}}",
+        ],
+        Duration::from_secs(4),
+    );
+    // rostopic pub ends on SIGINT with a non-zero status; what it did is in the log.
+    drop(publishing);
+    let lines: Vec<String> = p.drain_out().to_vec();
+    let fastest = lines.iter().map(|l| vx(l)).fold(0.0, f64::max);
+    assert!(fastest > 0.3, "never drove: fastest {fastest} m/s");
+    // The command watchdog (0.5 s) and the deceleration bring it to rest by itself.
+    p.wait_out(Duration::from_secs(3), "the vehicle at rest", |l| {
+        vx(l).abs() < 0.01
+    });
+
+    // A long move, ended by /navi_stop 5: the navigation topic says "stopped" (7).
+    let call = ros(
+        &master,
+        &[
+            "rosservice",
+            "call",
+            "/set_navi_cmd",
+            "{cmd: '1', distance: 500}",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(call.status.success(), "{}", text(&call));
+    std::thread::sleep(Duration::from_secs(1));
+    let stop = ros(
+        &master,
+        &[
+            "rostopic",
+            "pub",
+            "-1",
+            "/navi_stop",
+            "std_msgs/Int16",
+            "data: 5",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(stop.status.success(), "{}", text(&stop));
+    p.wait_log(Duration::from_secs(5), "cancelled: stop requested");
+    echo_until(
+        &master,
+        "/androidmsg_navigationstatus",
+        Duration::from_secs(5),
+        |o| o.contains("data: 7"),
+    );
+    p.wait_out(Duration::from_secs(3), "the vehicle at rest", |l| {
+        vx(l).abs() < 0.01
+    });
+}
+
+#[test]
+fn a_master_restart_and_a_node_restart_are_both_survived() {
+    let master = Master::start();
+    let mut p = sim(&master);
+    let port = master.kill();
+    p.wait_log(Duration::from_secs(10), "ROS master unreachable");
+    let master = Master::start_on(port);
+    p.wait_log(Duration::from_secs(20), "registering again");
+    p.wait_log(Duration::from_secs(20), "ROS1 node registered");
+    let hz = text(&ros(
+        &master,
+        &["rostopic", "hz", "-w", "200", "/raw_odom"],
+        Duration::from_secs(5),
+    ));
+    assert!(average_rate(&hz) > 90.0, "{hz}");
+    let moved = ros(
+        &master,
+        &[
+            "rosservice",
+            "call",
+            "/set_navi_cmd",
+            "{cmd: '3', distance: 90}",
+        ],
+        Duration::from_secs(10),
+    );
+    assert!(moved.status.success(), "{}", text(&moved));
+    p.wait_log(Duration::from_secs(10), "succeeded");
+
+    // chassisd itself restarts: the new node takes the name, and clients find it.
+    drop(p);
+    let _p = sim(&master);
+    echo_until(&master, "/raw_odom", Duration::from_secs(10), |o| {
+        o.contains("frame_id: \"odom\"")
+    });
+    let info = text(&ros(
+        &master,
+        &["rosservice", "call", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    assert!(info.contains("status: 0"), "{info}");
+}
