@@ -158,15 +158,22 @@ fn echo_until(master: &Master, topic: &str, wait: Duration, want: impl Fn(&str) 
     }
 }
 
-/// `chassisd sim --no-mqtt --ros-master URI`, once the node is registered.
-fn sim(master: &Master) -> Proc {
-    let mut p = Proc::start(&["sim", "--no-mqtt", "--ros-master", &master.uri()]);
+/// `chassisd sim --no-mqtt --ros-master URI [MORE]`, once the node is registered.
+fn sim_with(master: &Master, more: &[&str]) -> Proc {
+    let uri = master.uri();
+    let mut args = vec!["sim", "--no-mqtt", "--ros-master", uri.as_str()];
+    args.extend_from_slice(more);
+    let mut p = Proc::start(&args);
     p.wait_log(Duration::from_secs(30), "ROS1 node registered");
     p
 }
 
-/// Stops `p` with SIGINT; its stderr after the stop (the summary line).
-fn interrupt(mut p: Proc) -> Vec<String> {
+fn sim(master: &Master) -> Proc {
+    sim_with(master, &[])
+}
+
+/// Stops `p` with SIGINT; every stdout line and its stderr (the summary line last).
+fn interrupt(mut p: Proc) -> (Vec<String>, Vec<String>) {
     kill(Pid::from_raw(p.child.id() as i32), Signal::SIGINT).expect("signal");
     let deadline = Instant::now() + Duration::from_secs(10);
     while p.child.try_wait().expect("status").is_none() {
@@ -174,8 +181,10 @@ fn interrupt(mut p: Proc) -> Vec<String> {
         std::thread::sleep(Duration::from_millis(20));
     }
     let mut log = std::mem::take(&mut p.log);
-    log.extend(p.stderr.try_iter());
-    log
+    log.extend(p.stderr.iter());
+    let mut out = std::mem::take(&mut p.out);
+    out.extend(p.stdout.iter());
+    (out, log)
 }
 
 /// The last "average rate" `rostopic hz` printed.
@@ -304,7 +313,11 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
 #[test]
 fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
     let master = Master::start();
-    let p = sim(&master);
+    let recording = common::tempdir("ros1-move").join("rec");
+    let p = sim_with(
+        &master,
+        &["--record", recording.to_str().expect("UTF-8 path")],
+    );
     echo_until(
         &master,
         "/androidmsg_locationstatus",
@@ -365,7 +378,7 @@ fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
 
     // The simulator's truth, in the closing line: the move against the target of
     // `bench control` (5 mm + 0.5 % of the distance).
-    let log = interrupt(p);
+    let (live, log) = interrupt(p);
     let summary = log
         .iter()
         .find(|l| l.contains("from the start"))
@@ -384,6 +397,18 @@ fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
         (moved - 0.5).abs() <= 0.005 + 0.005 * 0.5,
         "drove {moved} m for 50 cm: {summary}"
     );
+
+    // The node's requests are in the recording, which replays to the live output, move and
+    // refusal included, without ROS.
+    let requests = std::fs::read_to_string(recording.join("ros1.log")).expect("ros1.log");
+    assert_eq!(requests.matches("set_navi_cmd").count(), 2, "{requests}");
+    let replayed = common::replay(&recording);
+    let replayed: Vec<&str> = std::str::from_utf8(&replayed.stdout)
+        .expect("UTF-8")
+        .lines()
+        .collect();
+    assert_eq!(replayed.len(), live.len());
+    assert!(replayed == live, "the replay differs from the live output");
 }
 
 #[test]
