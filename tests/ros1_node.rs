@@ -517,3 +517,43 @@ fn a_master_restart_and_a_node_restart_are_both_survived() {
     ));
     assert!(info.contains("status: 0"), "{info}");
 }
+
+#[test]
+fn run_joins_the_graph_from_its_configuration() {
+    let master = Master::start();
+    let dir = common::tempdir("ros1-run");
+    let config = dir.join("vehicle.toml");
+    // A receiver that is not plugged in (retried, not fatal), and the node.
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"yard-7\"\n\n[gnss]\nport = \"{}\"\n\n[ros1]\nmaster_uri = \"{}\"\nnode_name = \"/yard7/chassisd\"\n",
+            dir.join("absent-tty").display(),
+            master.uri()
+        ),
+    )
+    .expect("config");
+    let mut p = Proc::start(&["run", "--config", config.to_str().expect("UTF-8")]);
+    p.wait_log(Duration::from_secs(30), "ROS1 node registered");
+    let nodes = text(&ros(&master, &["rosnode", "list"], Duration::from_secs(10)));
+    assert!(nodes.contains("/yard7/chassisd"), "{nodes}");
+    let info = text(&ros(
+        &master,
+        &["rosservice", "call", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    assert!(info.contains("yard-7"), "{info}");
+    let position = ros(
+        &master,
+        &["rosservice", "call", "/get_position"],
+        Duration::from_secs(10),
+    );
+    assert!(!position.status.success());
+    assert!(
+        text(&position).contains("not located"),
+        "{}",
+        text(&position)
+    );
+    // SIGTERM still ends it cleanly.
+    p.stop();
+}
