@@ -557,3 +557,55 @@ fn run_joins_the_graph_from_its_configuration() {
     // SIGTERM still ends it cleanly.
     p.stop();
 }
+
+#[test]
+fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
+    use chassisd::runtime::ros1::messages::{
+        geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs,
+    };
+    use roslibrust::{RosMessageType, RosServiceType};
+    fn message<T: RosMessageType>() -> (String, &'static str) {
+        let name = T::DESCRIPTION.ros_type_name.replacen('/', ".msg.", 1);
+        (name, T::DESCRIPTION.md5sum)
+    }
+    fn service<T: RosServiceType>() -> (String, &'static str) {
+        (T::ROS_SERVICE_NAME.replacen('/', ".srv.", 1), T::MD5SUM)
+    }
+    let ours = [
+        message::<std_msgs::Header>(),
+        message::<std_msgs::Int16>(),
+        message::<geometry_msgs::Twist>(),
+        message::<geometry_msgs::PoseStamped>(),
+        message::<nav_msgs::Odometry>(),
+        message::<sensor_msgs::Imu>(),
+        message::<map_msgs::TargetGoal>(),
+        service::<map_msgs::SetNaviCmd>(),
+        service::<map_msgs::GetPosition>(),
+        service::<map_msgs::AboutRobot>(),
+        service::<map_msgs::RobotSsh>(),
+        service::<map_msgs::SetWifi>(),
+    ];
+    // Debian's classes for the standard types; genpy's from the repository's map_msgs.
+    let script = "import importlib, sys\n\
+        for name in sys.argv[1:]:\n\
+        \x20   module, kind = name.rsplit('.', 1)\n\
+        \x20   print(name, getattr(importlib.import_module(module), kind)._md5sum)\n";
+    let out = Command::new("/usr/bin/python3")
+        .args(["-c", script])
+        .args(ours.iter().map(|(name, _)| name.as_str()))
+        .env("PYTHONPATH", python_classes())
+        .output()
+        .expect("python3 runs");
+    let printed = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for (name, md5) in ours {
+        assert!(
+            printed.lines().any(|l| l == format!("{name} {md5}")),
+            "{name}: ours {md5}, ROS's:\n{printed}"
+        );
+    }
+}

@@ -8,7 +8,7 @@
 //! records of the source `ros1`, so a recording keeps them and replays without ROS.
 
 #[cfg(feature = "ros1")]
-mod messages;
+pub mod messages;
 #[cfg(feature = "ros1")]
 mod node;
 
