@@ -192,7 +192,13 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut ros1 = match config.ros1.clone() {
         Some(r) => {
             source_meta.push(super::ros1::source_meta());
-            Some(start_ros1(&mut engine, config, r, clock, tx.clone())?)
+            Some(super::ros1::start(
+                &mut engine,
+                config,
+                r,
+                clock,
+                tx.clone(),
+            )?)
         }
         None => None,
     };
@@ -363,32 +369,6 @@ fn dispatch(
             _ => {}
         }
     }
-}
-
-/// Starts the ROS1 node of `config`; its requests go to `records`.
-#[cfg(feature = "ros1")]
-fn start_ros1(
-    engine: &mut Engine,
-    config: &VehicleConfig,
-    ros1: crate::config::ros1::Ros1Config,
-    clock: RecordClock,
-    records: mpsc::Sender<Record>,
-) -> anyhow::Result<Ros1Link> {
-    engine.emit_poses();
-    let (link, queues) = Ros1Link::new();
-    super::ros1::spawn(super::ros1::spec_for(config, ros1), clock, records, queues);
-    Ok(link)
-}
-
-#[cfg(not(feature = "ros1"))]
-fn start_ros1(
-    _: &mut Engine,
-    _: &VehicleConfig,
-    _: crate::config::ros1::Ros1Config,
-    _: RecordClock,
-    _: mpsc::Sender<Record>,
-) -> anyhow::Result<Ros1Link> {
-    anyhow::bail!("this chassisd was built without the ros1 feature")
 }
 
 /// Reads `TOPIC JSON` lines from standard input as commands. A line that is not UTF-8 or

@@ -216,7 +216,16 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         None => None,
     };
     let ros1 = match options.ros1.clone() {
-        Some(config) => Some(start_ros1(&mut sim, config, clock, tx.clone())?),
+        Some(ros1) => {
+            let config = sim.config().clone();
+            Some(super::ros1::start(
+                sim.engine_mut(),
+                &config,
+                ros1,
+                clock,
+                tx.clone(),
+            )?)
+        }
         None => None,
     };
     let mut sink = Output {
@@ -304,35 +313,6 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         writer.finish(Duration::from_millis(500));
     }
     Ok(())
-}
-
-/// Starts the ROS1 node on the simulated vehicle; its requests go to `commands`.
-#[cfg(feature = "ros1")]
-fn start_ros1(
-    sim: &mut Lockstep,
-    config: crate::config::ros1::Ros1Config,
-    clock: RecordClock,
-    commands: mpsc::Sender<Record>,
-) -> anyhow::Result<Ros1Link> {
-    sim.engine_mut().emit_poses();
-    let (link, queues) = Ros1Link::new();
-    super::ros1::spawn(
-        super::ros1::spec_for(sim.config(), config),
-        clock,
-        commands,
-        queues,
-    );
-    Ok(link)
-}
-
-#[cfg(not(feature = "ros1"))]
-fn start_ros1(
-    _: &mut Lockstep,
-    _: crate::config::ros1::Ros1Config,
-    _: RecordClock,
-    _: mpsc::Sender<Record>,
-) -> anyhow::Result<Ros1Link> {
-    anyhow::bail!("this chassisd was built without the ros1 feature")
 }
 
 /// The line a person reads first: what runs, where to watch it, how to stop it.

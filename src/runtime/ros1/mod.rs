@@ -170,3 +170,31 @@ pub fn source_meta() -> crate::record::SourceMeta {
         events: None,
     }
 }
+
+/// Starts the node of `ros1` for a vehicle of `config` whose engine is `engine` (it then
+/// emits the poses the node publishes); the node's requests go to `records`.
+#[cfg(feature = "ros1")]
+pub fn start(
+    engine: &mut crate::engine::Engine,
+    config: &crate::config::VehicleConfig,
+    ros1: crate::config::ros1::Ros1Config,
+    clock: crate::runtime::clock::RecordClock,
+    records: mpsc::Sender<crate::record::Record>,
+) -> anyhow::Result<Ros1Link> {
+    engine.emit_poses();
+    let (link, queues) = Ros1Link::new();
+    spawn(spec_for(config, ros1), clock, records, queues);
+    Ok(link)
+}
+
+/// Without the `ros1` feature there is no node to start.
+#[cfg(not(feature = "ros1"))]
+pub fn start(
+    _: &mut crate::engine::Engine,
+    _: &crate::config::VehicleConfig,
+    _: crate::config::ros1::Ros1Config,
+    _: crate::runtime::clock::RecordClock,
+    _: mpsc::Sender<crate::record::Record>,
+) -> anyhow::Result<Ros1Link> {
+    anyhow::bail!("this chassisd was built without the ros1 feature")
+}
