@@ -478,8 +478,21 @@ fn cmd_vel_drives_through_the_watchdog_and_navi_stop_ends_a_move() {
 
 #[test]
 fn a_master_restart_and_a_node_restart_are_both_survived() {
-    let master = Master::start();
-    let mut p = sim(&master);
+    // chassisd first: it keeps trying until the master comes.
+    let port = common::mqtt::free_port();
+    let mut p = Proc::start(&[
+        "sim",
+        "--no-mqtt",
+        "--ros-master",
+        &format!("http://127.0.0.1:{port}"),
+    ]);
+    p.wait_log(Duration::from_secs(10), "ROS master unreachable; retrying");
+    let master = Master::start_on(port);
+    p.wait_log(Duration::from_secs(20), "ROS1 node registered");
+    assert!(
+        !p.log.iter().any(|l| l.contains("poses dropped")),
+        "the feed piled up while the master was away"
+    );
     let port = master.kill();
     p.wait_log(Duration::from_secs(10), "ROS master unreachable");
     let master = Master::start_on(port);

@@ -213,7 +213,18 @@ async fn run(
                     ),
                     Say::Quiet => tracing::debug!(error = %e, "ROS master unreachable"),
                 }
-                tokio::time::sleep(retry).await;
+                // The engine's feed is kept up with while waiting, so nothing piles up.
+                let pause = tokio::time::sleep(retry);
+                tokio::pin!(pause);
+                loop {
+                    tokio::select! {
+                        () = &mut pause => break,
+                        Some(item) = feed.recv() => publishing.absorb(&item),
+                        Some(answer) = answers.recv() => {
+                            answer_pending(&requests, &mut publishing, answer, None).await;
+                        }
+                    }
+                }
                 retry = (retry * 2).min(RETRY_MAX);
                 continue;
             }
