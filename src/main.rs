@@ -223,6 +223,8 @@ enum BenchBroker {
 const LOG_QUEUE: usize = 4096;
 
 fn main() -> ExitCode {
+    // Before any thread exists: see runtime::heap.
+    chassisd::runtime::heap::tune_allocator();
     // Errors travel to network clients (a ROS1 service's refusal carries its text), so they
     // carry no backtrace unless asked for by RUST_LIB_BACKTRACE itself; RUST_BACKTRACE still
     // gives panics theirs.

@@ -10,7 +10,9 @@
 //! later blocks of that size come from the arenas, where they stay resident after use: the
 //! soak saw 800 KB mapped blocks move into the arenas one by one over ten minutes, which a
 //! resident-memory slope reads as growth. A fixed threshold keeps large blocks mapped and
-//! returned to the system the moment they are freed.
+//! returned to the system the moment they are freed. And each of glibc's arenas (up to
+//! eight per core, one per thread that allocates at once) keeps partly used pages of its
+//! own; two arenas stop the creep that remained after trims.
 
 use std::time::{Duration, Instant};
 
@@ -21,15 +23,26 @@ const PERIOD: Duration = Duration::from_secs(10);
 
 /// Blocks of this size and larger are mapped on their own and unmapped when freed: glibc's
 /// default starting threshold, held fixed.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
 const MMAP_THRESHOLD: libc::c_int = 128 * 1024;
 
-/// Holds glibc's mmap threshold fixed (setting it turns the dynamic raise off); returns
-/// whether the allocator took it. Without glibc, the allocator's own policy stands.
-pub fn fix_mmap_threshold() -> bool {
+/// Heap arenas at most. glibc gives threads up to eight arenas per core; each keeps its own
+/// partly used pages, which no trim can hand back. chassisd allocates little outside bursts,
+/// so two arenas cost no measurable contention, and the soak's resident memory stops
+/// creeping after a few fault cycles (with the default it crept 4.8 MB/h after trims).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const ARENA_MAX: libc::c_int = 2;
+
+/// Sets the allocator up for a process that runs for months: a fixed mmap threshold
+/// (setting it turns glibc's dynamic raise off) and at most [`ARENA_MAX`] arenas. Call it
+/// first in `main`, before any thread starts, so every thread shares those arenas. Returns
+/// whether the allocator took both; without glibc its own policy stands.
+pub fn tune_allocator() -> bool {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: mallopt only changes an allocator parameter; it has no preconditions.
+    // SAFETY: mallopt only changes allocator parameters; it has no preconditions.
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
+            && libc::mallopt(libc::M_ARENA_MAX, ARENA_MAX) == 1
     }
     #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
     false
@@ -48,12 +61,9 @@ pub fn release_free_memory() -> Duration {
     start.elapsed()
 }
 
-/// Fixes the mmap threshold, then starts the periodic release on a blocking thread of the
-/// runtime (the trim walks every arena under its lock); it stops with the runtime.
+/// Starts the periodic release on a blocking thread of the runtime (the trim walks every
+/// arena under its lock); it stops with the runtime.
 pub fn spawn() {
-    if !fix_mmap_threshold() {
-        tracing::debug!("the allocator keeps its own mmap threshold");
-    }
     tokio::spawn(async {
         let mut interval = tokio::time::interval(PERIOD);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
