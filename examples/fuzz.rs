@@ -175,7 +175,134 @@ fn targets() -> Vec<Target> {
             structured: None,
             runner: canopen_runner,
         },
+        #[cfg(feature = "ros1")]
+        Target {
+            name: "ros1",
+            about: "ROS1 wire messages the node takes (Twist, Int16, SetNaviCmd), into the engine",
+            seeds: ros1::seeds,
+            tokens: &[
+                b"\x00\x00\x00\x00",
+                b"\x01\x00\x00\x00",
+                b"\x05\x00",
+                b"\xff\xff\xff\x7f",
+            ],
+            structured: None,
+            runner: ros1::runner,
+        },
     ]
+}
+
+/// The ROS1 node's inputs: a kind byte, then the message as TCPROS carries it.
+#[cfg(feature = "ros1")]
+mod ros1 {
+    use super::*;
+    use chassisd::api::ros1 as codec;
+    use chassisd::runtime::ros1::messages::{geometry_msgs, map_msgs, std_msgs};
+    use roslibrust_serde_rosmsg::{from_slice, to_vec};
+
+    /// What the node subscribes to and serves, in kind-byte order.
+    const KINDS: u8 = 4;
+
+    pub fn seeds() -> Vec<Vec<u8>> {
+        let with = |kind: u8, body: Vec<u8>| [vec![kind], body].concat();
+        let twist = |x: f64, z: f64| geometry_msgs::Twist {
+            linear: geometry_msgs::Vector3 { x, y: 0.0, z: 0.0 },
+            angular: geometry_msgs::Vector3 { x: 0.0, y: 0.0, z },
+        };
+        let mut seeds = Vec::new();
+        for (x, z) in [(0.3, 0.0), (0.0, 0.5), (0.0, 0.0), (-0.2, -0.1)] {
+            seeds.push(with(0, to_vec(&twist(x, z)).unwrap_or_default()));
+        }
+        for data in [5i16, 1, 0, -1] {
+            let int16 = to_vec(&std_msgs::Int16 { data }).unwrap_or_default();
+            seeds.push(with(1, int16.clone()));
+            seeds.push(with(2, int16));
+        }
+        for (cmd, distance) in [
+            ("1", 50i64),
+            ("2", 10),
+            ("3", 90),
+            ("4", 180),
+            ("5", 0),
+            ("9", -1),
+        ] {
+            let request = map_msgs::SetNaviCmdRequest {
+                cmd: cmd.into(),
+                distance,
+            };
+            seeds.push(with(3, to_vec(&request).unwrap_or_default()));
+        }
+        seeds
+    }
+
+    fn request(kind: u8, body: &[u8]) -> Option<Result<codec::Request, String>> {
+        Some(match kind % KINDS {
+            0 => {
+                let t: geometry_msgs::Twist = from_slice(body).ok()?;
+                Ok(codec::cmd_vel(
+                    [t.linear.x, t.linear.y, t.linear.z],
+                    [t.angular.x, t.angular.y, t.angular.z],
+                ))
+            }
+            1 => codec::navi_stop(from_slice::<std_msgs::Int16>(body).ok()?.data),
+            2 => codec::autocharge(from_slice::<std_msgs::Int16>(body).ok()?.data),
+            _ => {
+                let r: map_msgs::SetNaviCmdRequest = from_slice(body).ok()?;
+                Ok(codec::set_navi_cmd(&r.cmd, r.distance))
+            }
+        })
+    }
+
+    pub fn runner() -> Runner {
+        let fresh = || {
+            let plant = PlantConfig::builtin().expect("built-in plant");
+            Lockstep::with_mqtt(
+                plant,
+                5,
+                Timestamp::from_micros(1_000_000),
+                None,
+                Box::new(MemoryStore::default()),
+            )
+            .expect("simulated vehicle")
+        };
+        let mut sim = fresh();
+        let mut n = 0u64;
+        Box::new(move |input| {
+            n += 1;
+            if n.is_multiple_of(2000) {
+                sim = fresh();
+            }
+            let Some((&kind, body)) = input.split_first() else {
+                return 0;
+            };
+            let outcome = match request(kind, body) {
+                None => 0,
+                Some(Err(_)) => 1,
+                Some(Ok(r)) => {
+                    let mut sink = Collect::default();
+                    sim.input(
+                        codec::SOURCE,
+                        Payload::Command {
+                            topic: r.topic.into(),
+                            payload: Bytes::from(r.payload),
+                        },
+                        &mut sink,
+                    );
+                    if n.is_multiple_of(50) {
+                        let gnss = GnssCondition {
+                            quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
+                            offset: (0.0, 0.0),
+                        };
+                        for _ in 0..10 {
+                            sim.step(gnss, &mut sink);
+                        }
+                    }
+                    2 + sink.outputs.min(8)
+                }
+            };
+            signature(&[u64::from(kind % KINDS), outcome])
+        })
+    }
 }
 
 const NMEA_TOKENS: &[&[u8]] = &[
