@@ -6,6 +6,7 @@
 
 pub mod api;
 pub mod bench;
+pub mod calib;
 pub mod config;
 pub mod control;
 pub mod core;

@@ -108,6 +108,34 @@ enum Command {
         /// e.g. http://127.0.0.1:11311.
         #[arg(long, value_name = "URI")]
         ros_master: Option<String>,
+        /// Run in lockstep as fast as the machine allows: no wall clock, no MQTT, no
+        /// standard input. Needs --scenario or --duration; --record works as without it.
+        #[arg(long, conflicts_with_all = ["mqtt", "broker_port", "commands_stdin", "trajectory_dir", "ros_master"])]
+        fast: bool,
+        /// A calibration file for the simulated vehicle's configuration (as `[vehicle]
+        /// calibration` names one on a real vehicle).
+        #[arg(long, value_name = "FILE")]
+        calibration: Option<PathBuf>,
+    },
+    /// Calibrate from a recording: `imu` (standing still: gyro bias, mounting roll and
+    /// pitch), `odometry` (wheel radii, track) or `gnss` (antenna position, dual-antenna
+    /// heading offset). Writes or updates the calibration file and prints a report.
+    Calibrate {
+        /// What to calibrate.
+        #[arg(value_enum)]
+        procedure: CalibrateProcedure,
+        /// The recording folder (`chassisd run --record` or `chassisd sim --record`).
+        #[arg(long)]
+        from: PathBuf,
+        /// Vehicle configuration to use instead of the one stored with the recording.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Calibration file to write or update (default calib/<vehicle>.toml).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Standing still must last this long, s.
+        #[arg(long, default_value = "20", value_parser = seconds_arg)]
+        still: Duration,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -160,6 +188,9 @@ enum BenchCommand {
         /// Noise seed.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// A calibration file for the simulated vehicle's configuration.
+        #[arg(long, value_name = "FILE")]
+        calibration: Option<PathBuf>,
     },
     /// Time plain-log replay against gpsd's gpsdecode on real receiver logs repeated to a
     /// size (all concatenated, then each receiver alone), with peak memory; the last line
@@ -206,6 +237,17 @@ enum BenchCommand {
         #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
         broker: BenchBroker,
     },
+}
+
+/// The procedures of `chassisd calibrate`.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum CalibrateProcedure {
+    /// Gyro bias and mounting roll and pitch, from standing still.
+    Imu,
+    /// Wheel radii and track, from straight runs and turns on the spot.
+    Odometry,
+    /// Antenna position and dual-antenna heading offset, from turns and runs.
+    Gnss,
 }
 
 /// Brokers `chassisd bench mqtt` can start.
@@ -282,9 +324,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             bench_fusion(plant, seed, runs, &scenario)
         }
         Command::Bench {
-            which: BenchCommand::Control { plant, seed },
+            which:
+                BenchCommand::Control {
+                    plant,
+                    seed,
+                    calibration,
+                },
         } => {
-            let plant = load_plant(plant)?;
+            let mut plant = load_plant(plant)?;
+            plant.calibration = load_calibration(calibration.as_deref())?;
             let report = chassisd::bench::control::run(&plant, seed)?;
             print!("{}", report.table());
             println!("{}", report.json());
@@ -414,13 +462,31 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             no_mqtt,
             trajectory_dir,
             ros_master,
+            fast,
+            calibration,
         } => {
+            let mut plant = load_plant(plant)?;
+            plant.calibration = load_calibration(calibration.as_deref())?;
+            let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
+            if fast {
+                let summary = chassisd::runtime::sim_fast::run(
+                    chassisd::runtime::sim_fast::FastOptions {
+                        plant,
+                        seed,
+                        scenario,
+                        duration,
+                        record,
+                    },
+                    std::io::stdout().lock(),
+                )?;
+                eprintln!("{}", summary.line());
+                return Ok(true);
+            }
             let ros1 = ros_master.map(|uri| Ros1Config::with_master(&uri));
             if let Some(r) = &ros1 {
                 r.validate(Path::new("--ros-master"))?;
             }
             ensure_ros1_built(ros1.is_some())?;
-            let plant = load_plant(plant)?;
             let mut mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
             if let (Some(m), Some(port)) = (mqtt.as_mut(), broker_port) {
                 m.port = port;
@@ -428,7 +494,6 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             if let Some(rtk) = mqtt.as_mut().and_then(|m| m.rtk.as_mut()) {
                 rtk.trajectory_dir = trajectory_dir.map(|d| d.to_string_lossy().into_owned());
             }
-            let scenario = scenario.map(|name| find_scenario(&name)).transpose()?;
             // The ROS1 node's publishing gets a worker of its own beside the simulation.
             let runtime = async_runtime(if ros1.is_some() { 2 } else { 1 })?;
             let result = runtime.block_on(sim::run(
@@ -448,6 +513,13 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             runtime.shutdown_background();
             result.map(|()| true)
         }
+        Command::Calibrate {
+            procedure,
+            from,
+            config,
+            out,
+            still,
+        } => calibrate(procedure, &from, config.as_deref(), out, still),
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
             let runtime = async_runtime(1)?;
@@ -502,6 +574,68 @@ fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
     Ok(config)
 }
 
+/// `chassisd calibrate`: the procedure on a recording, its report on stdout, the file
+/// written; a refusal is an error with the reason and the fix.
+fn calibrate(
+    procedure: CalibrateProcedure,
+    from: &Path,
+    config: Option<&Path>,
+    out: Option<PathBuf>,
+    still: Duration,
+) -> anyhow::Result<bool> {
+    use chassisd::calib::{self, Procedure, Settings, data::Dataset};
+    use chassisd::config::calibration::{CalibrationFile, default_path};
+
+    let procedure = match procedure {
+        CalibrateProcedure::Imu => Procedure::Imu,
+        CalibrateProcedure::Odometry => Procedure::Odometry,
+        CalibrateProcedure::Gnss => Procedure::Gnss,
+    };
+    let config = config.map(VehicleConfig::load).transpose()?;
+    let data = Dataset::from_recording(from, config)
+        .with_context(|| format!("reading {}", from.display()))?;
+    if data.truncated {
+        eprintln!(
+            "the recording is longer than {:.0} s; its first {:.0} s are used",
+            calib::data::MAX_SPAN_S,
+            calib::data::MAX_SPAN_S
+        );
+    }
+    let out = out.unwrap_or_else(|| default_path(&data.vehicle.vehicle.name));
+    let mut file = if out.exists() {
+        CalibrationFile::load(&out)?
+    } else {
+        CalibrationFile::default()
+    };
+    let settings = Settings {
+        min_still_s: still.as_secs_f64(),
+    };
+    let found = calib::run(procedure, &data, &settings, &mut file)
+        .map_err(|r| anyhow::anyhow!("calibrate {}: {r}", procedure.name()))?;
+    print!("{}", found.table());
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let text = format!(
+        "# Calibration of {:?}, written by chassisd calibrate; each value replaces the\n\
+         # configuration's (see calib/README.md).\n{}",
+        data.vehicle.vehicle.name,
+        file.to_toml()
+    );
+    std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+    println!("written: {}", out.display());
+    Ok(true)
+}
+
+/// The calibration file at `path`, if one is given.
+fn load_calibration(
+    path: Option<&Path>,
+) -> anyhow::Result<Option<chassisd::config::calibration::CalibrationFile>> {
+    Ok(path
+        .map(chassisd::config::calibration::CalibrationFile::load)
+        .transpose()?)
+}
+
 fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {
     Ok(match path {
         Some(path) => PlantConfig::load(&path)?,
@@ -512,7 +646,7 @@ fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {
 /// The scenarios' names, each with what it drives, for `--help` and argument checking.
 fn scenario_names() -> clap::builder::PossibleValuesParser {
     clap::builder::PossibleValuesParser::new(
-        Scenario::all()
+        Scenario::every()
             .into_iter()
             .map(|s| clap::builder::PossibleValue::new(s.name).help(s.about)),
     )
@@ -520,7 +654,7 @@ fn scenario_names() -> clap::builder::PossibleValuesParser {
 
 fn find_scenario(name: &str) -> anyhow::Result<Scenario> {
     Scenario::named(name).ok_or_else(|| {
-        let names: Vec<&str> = Scenario::all().iter().map(|s| s.name).collect();
+        let names: Vec<&str> = Scenario::every().iter().map(|s| s.name).collect();
         anyhow::anyhow!("no scenario {name:?}; there are {}", names.join(", "))
     })
 }

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::api::rtk::BaseStatus;
-use crate::api::rtk::trajectory::{MemoryStore, Trajectory, TrajectoryStore};
+use crate::api::rtk::trajectory::{MemoryStore, Trajectory};
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::GnssStats;
 use crate::engine::EngineOutput;
@@ -71,12 +71,37 @@ pub struct ReplayOptions {
     pub import: ImportOptions,
 }
 
+/// What takes a replay's engine outputs as they come.
+pub trait Consumer {
+    /// Takes (drains) `outputs`; their times are the recorded times less `offset_ns`.
+    fn take(&mut self, outputs: &mut Vec<EngineOutput>, offset_ns: i128) -> std::io::Result<()>;
+}
+
 /// Replays `path` (a recording folder or a plain NMEA log) and writes one base_status line
 /// per tick to `out`.
 pub fn replay(
     path: &Path,
     options: &ReplayOptions,
     out: &mut impl Write,
+) -> Result<ReplaySummary, ReplayError> {
+    let mut output = Output {
+        out,
+        stamped: options.stamped,
+        line: Vec::with_capacity(1024),
+        json: Vec::with_capacity(1024),
+    };
+    let summary = replay_into(path, options, |_| {}, &mut output)?;
+    output.out.flush()?;
+    Ok(summary)
+}
+
+/// Replays `path` through an engine that `setup` may adjust, handing every output to
+/// `consumer`.
+pub fn replay_into(
+    path: &Path,
+    options: &ReplayOptions,
+    setup: impl FnOnce(&mut Engine),
+    consumer: &mut impl Consumer,
 ) -> Result<ReplaySummary, ReplayError> {
     let config = options.config.as_ref();
     let mut summary = ReplaySummary::default();
@@ -127,35 +152,23 @@ pub fn replay(
         )
     };
     let store = Box::new(MemoryStore::with(trajectories));
-    let output = Output {
-        out,
-        stamped: options.stamped,
-        line: Vec::with_capacity(1024),
-        json: Vec::with_capacity(1024),
-    };
-    run(
-        reader,
-        &vehicle,
-        &sources,
-        store,
-        span,
-        output,
-        &mut summary,
-    )?;
+    let mut engine = Engine::with_trajectories(&vehicle, &sources, store);
+    setup(&mut engine);
+    run(reader, engine, span, consumer, &mut summary)?;
     Ok(summary)
 }
 
 /// Ticks up to `until` in batches of [`TICK_BATCH`], writing each batch's lines.
-fn advance<W: Write>(
+fn advance(
     engine: &mut Engine,
     until: Timestamp,
     outputs: &mut Vec<EngineOutput>,
-    out: &mut Output<'_, W>,
+    out: &mut impl Consumer,
     offset: i128,
 ) -> std::io::Result<()> {
     while let Some(next) = engine.next_tick().filter(|&next| next <= until) {
         engine.advance_to(until.min(next.saturating_add(TICK_BATCH)), outputs);
-        out.statuses(outputs, offset)?;
+        out.take(outputs, offset)?;
     }
     Ok(())
 }
@@ -196,13 +209,9 @@ struct Output<'a, W: Write> {
     json: Vec<u8>,
 }
 
-impl<W: Write> Output<'_, W> {
+impl<W: Write> Consumer for Output<'_, W> {
     /// Writes the statuses among `outputs`, stamped with their time plus `offset_ns`.
-    fn statuses(
-        &mut self,
-        outputs: &mut Vec<EngineOutput>,
-        offset_ns: i128,
-    ) -> std::io::Result<()> {
+    fn take(&mut self, outputs: &mut Vec<EngineOutput>, offset_ns: i128) -> std::io::Result<()> {
         for output in outputs.drain(..) {
             let EngineOutput::Status(status) = output else {
                 continue;
@@ -253,16 +262,13 @@ struct SessionSpan {
     end: Option<Timestamp>,
 }
 
-fn run<W: Write>(
+fn run(
     mut input: Input,
-    vehicle: &VehicleConfig,
-    sources: &[(String, Decoder)],
-    trajectories: Box<dyn TrajectoryStore>,
+    mut engine: Engine,
     session: SessionSpan,
-    mut out: Output<'_, W>,
+    out: &mut impl Consumer,
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
-    let mut engine = Engine::with_trajectories(vehicle, sources, trajectories);
     engine.check_recorded_transmissions();
     if let Some(start) = session.start {
         engine.start_at(start);
@@ -274,10 +280,10 @@ fn run<W: Write>(
     while let Some(record) = input.next() {
         // The ticks of a long gap leave in batches, so memory does not grow with it.
         let before = Timestamp::from_nanos(record.t.as_nanos().saturating_sub(1));
-        advance(&mut engine, before, &mut outputs, &mut out, offset)?;
+        advance(&mut engine, before, &mut outputs, out, offset)?;
         let t = engine.handle(&record, &mut outputs);
         span = Some(span.map_or((t, t), |(first, _)| (first, t)));
-        out.statuses(&mut outputs, offset)?;
+        out.take(&mut outputs, offset)?;
         offset = input.logged_offset_ns();
     }
     // Tick to the session's recorded end, else to where an unclean end's files all end,
@@ -291,10 +297,9 @@ fn run<W: Write>(
         .or(cut)
         .or(span.map(|(_, last)| last.ceil_to(STATUS_PERIOD)));
     if let Some(end) = end {
-        advance(&mut engine, end, &mut outputs, &mut out, offset)?;
+        advance(&mut engine, end, &mut outputs, out, offset)?;
     }
     engine.finish();
-    out.out.flush()?;
     summary.engine = engine.stats().clone();
     summary.gnss = engine
         .gnss_stats()

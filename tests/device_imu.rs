@@ -147,27 +147,38 @@ fn the_calibration_file_replaces_the_configured_bias() {
     let dir = std::env::temp_dir().join(format!("chassisd-imu-calib-{}", std::process::id()));
     std::fs::create_dir_all(dir.join("calib")).unwrap();
     let config = r#"
+[vehicle]
+name = "mower"
+calibration = "calib/imu.toml"
+
 [imu]
 port = "/dev/ttyUSB1"
 protocol = "hipnuc"
 gyro_bias_rps = [0.1, 0.1, 0.1]
-calibration = "calib/imu.toml"
 "#;
     std::fs::write(dir.join("vehicle.toml"), config).unwrap();
     std::fs::write(
         dir.join("calib/imu.toml"),
-        "date = \"2026-11-22\"\nmethod = \"60 s at rest\"\ngyro_bias_rps = [0.001, -0.002, 0.003]\n",
+        "[imu]\ngyro_bias_rps = { value = [0.001, -0.002, 0.003], date = \"2026-11-22\", \
+         method = \"60 s at rest\", verdict = \"ok\" }\nmounting_rpy_deg = [1.0, -2.0, 0.0]\n",
     )
     .unwrap();
     let loaded = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml")).unwrap();
+    let (file, lines) = loaded.calibration_in_force.clone().expect("read");
+    assert!(file.ends_with("calib/imu.toml"));
+    assert!(
+        lines.iter().any(|l| l.contains("60 s at rest")),
+        "{lines:?}"
+    );
     let imu = loaded.imu.expect("imu section");
     assert_eq!(imu.gyro_bias_rps, [0.001, -0.002, 0.003]);
+    assert_eq!(imu.mounting_rpy_deg, [1.0, -2.0, 0.0]);
     // The effective configuration carries the bias, not the file name.
     assert!(!loaded_text(&dir).contains("calibration"));
 
     std::fs::write(
         dir.join("calib/imu.toml"),
-        "date = \"2026-11-22\"\nmethod = \"x\"\ngyro_bias_rps = [0.0, 0.0, 9.0]\n",
+        "[imu]\ngyro_bias_rps = [0.0, 0.0, 9.0]\n",
     )
     .unwrap();
     let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
@@ -181,7 +192,31 @@ calibration = "calib/imu.toml"
     let err = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
         .unwrap_err()
         .to_string();
-    assert!(err.contains("imu.toml"), "{err}");
+    assert!(
+        err.contains("imu.toml") && err.contains("vehicle.calibration"),
+        "{err}"
+    );
+
+    // Without the key, calib/<name>.toml beside the configuration is read when it exists.
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        config.replace("calibration = \"calib/imu.toml\"\n", ""),
+    )
+    .unwrap();
+    assert!(
+        chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml"))
+            .unwrap()
+            .calibration_in_force
+            .is_none()
+    );
+    std::fs::write(
+        dir.join("calib/mower.toml"),
+        "[imu]\ngyro_bias_rps = [0.0, 0.0, 0.004]\n",
+    )
+    .unwrap();
+    let loaded = chassisd::config::VehicleConfig::load(&dir.join("vehicle.toml")).unwrap();
+    assert_eq!(loaded.imu.expect("imu").gyro_bias_rps, [0.0, 0.0, 0.004]);
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 fn loaded_text(dir: &std::path::Path) -> String {

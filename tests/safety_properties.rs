@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use chassisd::config::chassis::ChassisConfig;
+use chassisd::config::chassis::{ChassisConfig, WheelRadius};
 use chassisd::core::chassis::{
     Chassis, ChassisFeedback, DriveSummary, MAX_LEAD_S, WheelCommand, status_bits,
 };
@@ -19,7 +19,7 @@ const PERIOD_MS: u64 = 10;
 /// A typical configuration, for the worked example.
 fn chassis_config() -> ChassisConfig {
     ChassisConfig {
-        wheel_radius_m: 0.1,
+        wheel_radius_m: WheelRadius::both(0.1),
         track_m: 0.5,
         max_speed_mps: 1.0,
         max_yaw_rate_rps: 1.5,
@@ -37,13 +37,21 @@ fn chassis_config() -> ChassisConfig {
 /// ranges the configuration accepts (the command timeout from 50 ms, a few periods, to 2 s).
 fn config_sweep() -> impl Strategy<Value = ChassisConfig> {
     (
-        (0.05f64..0.5, 0.2f64..1.5),
+        (0.05f64..0.5, 0.97f64..1.03, 0.2f64..1.5),
         (0.1f64..3.0, 1.0f64..2.0, 0.5f64..5.0),
         (5u64..=200, 0u64..=100),
     )
         .prop_map(
-            |((radius, track), (accel, decel_factor, yaw_accel), (timeout, quick))| ChassisConfig {
-                wheel_radius_m: radius,
+            |(
+                (radius, right_factor, track),
+                (accel, decel_factor, yaw_accel),
+                (timeout, quick),
+            )| ChassisConfig {
+                // Calibrated wheels differ by a few per cent.
+                wheel_radius_m: WheelRadius {
+                    left: radius,
+                    right: radius * right_factor,
+                },
                 track_m: track,
                 max_accel_mps2: accel,
                 max_decel_mps2: accel * decel_factor,
@@ -182,8 +190,8 @@ fn ms(v: u64) -> Timestamp {
 /// Speed (m/s) and yaw rate (rad/s) of a wheel command on `c`.
 fn body(w: &WheelCommand, c: &ChassisConfig) -> (f64, f64) {
     let (l, r) = (
-        w.left_rad_s * c.wheel_radius_m,
-        w.right_rad_s * c.wheel_radius_m,
+        w.left_rad_s * c.wheel_radius_m.left,
+        w.right_rad_s * c.wheel_radius_m.right,
     );
     ((l + r) / 2.0, (r - l) / c.track_m)
 }
@@ -469,7 +477,7 @@ fn a_continuous_stream_after_a_fault_does_not_move_until_zero() {
 #[test]
 fn a_move_reversing_its_turn_passes_through_zero() {
     let config = ChassisConfig {
-        wheel_radius_m: 0.05,
+        wheel_radius_m: WheelRadius::both(0.05),
         track_m: 0.2,
         max_accel_mps2: 2.108,
         max_decel_mps2: 2.108,

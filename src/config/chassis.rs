@@ -15,8 +15,9 @@ use crate::devices::estop::EStopProfile;
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChassisConfig {
-    /// Wheel radius, m.
-    pub wheel_radius_m: f64,
+    /// Wheel radius, m: one number for both wheels, or `[left, right]` (a calibration
+    /// finds them apart).
+    pub wheel_radius_m: WheelRadius,
     /// Distance between the wheel contact points, m.
     pub track_m: f64,
     /// Forward and reverse speed limit, m/s.
@@ -47,6 +48,55 @@ pub struct ChassisConfig {
     /// A fault reset that has not cleared every drive fault by then has failed, s.
     #[serde(default = "default_reset_timeout")]
     pub reset_timeout_s: f64,
+}
+
+/// The rolling radius of each wheel, m. TOML gives one number for both, or `[left, right]`.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(from = "RadiusText", into = "RadiusText")]
+pub struct WheelRadius {
+    /// Left wheel, m.
+    pub left: f64,
+    /// Right wheel, m.
+    pub right: f64,
+}
+
+impl WheelRadius {
+    /// The same radius on both wheels.
+    pub fn both(r: f64) -> Self {
+        Self { left: r, right: r }
+    }
+
+    /// The mean of the two, m.
+    pub fn mean(&self) -> f64 {
+        (self.left + self.right) / 2.0
+    }
+}
+
+/// How `wheel_radius_m` is written: one number, or one per wheel.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(untagged)]
+enum RadiusText {
+    Both(f64),
+    Each([f64; 2]),
+}
+
+impl From<RadiusText> for WheelRadius {
+    fn from(text: RadiusText) -> Self {
+        match text {
+            RadiusText::Both(r) => Self::both(r),
+            RadiusText::Each([left, right]) => Self { left, right },
+        }
+    }
+}
+
+impl From<WheelRadius> for RadiusText {
+    fn from(r: WheelRadius) -> Self {
+        if r.left == r.right {
+            Self::Both(r.left)
+        } else {
+            Self::Each([r.left, r.right])
+        }
+    }
 }
 
 fn default_max_speed() -> f64 {
@@ -493,7 +543,13 @@ pub fn validate(config: &VehicleConfig, file: &Path) -> Result<(), ConfigError> 
         for (key, value, range, unit) in [
             (
                 "chassis.wheel_radius_m",
-                chassis.wheel_radius_m,
+                chassis.wheel_radius_m.left,
+                0.01..=2.0,
+                "m",
+            ),
+            (
+                "chassis.wheel_radius_m",
+                chassis.wheel_radius_m.right,
                 0.01..=2.0,
                 "m",
             ),

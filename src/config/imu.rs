@@ -42,13 +42,9 @@ pub struct ImuConfig {
     /// Rotation from the sensor frame to the vehicle frame: roll, pitch, yaw, degrees.
     #[serde(default)]
     pub mounting_rpy_deg: [f64; 3],
-    /// Gyro bias in the sensor frame, rad/s; a calibration file overrides it.
+    /// Gyro bias in the sensor frame, rad/s; the calibration file's replaces it.
     #[serde(default)]
     pub gyro_bias_rps: [f64; 3],
-    /// Calibration result written by `chassisd calibrate` (relative to this file). Read on
-    /// load; its bias replaces `gyro_bias_rps`.
-    #[serde(default, skip_serializing)]
-    pub calibration: Option<String>,
     /// No plausible sample for this long: the IMU is not ok, s.
     #[serde(default = "default_timeout")]
     pub timeout_s: f64,
@@ -82,18 +78,6 @@ fn default_orientation_noise() -> f64 {
     1.0
 }
 
-/// `calib/imu.toml`
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct ImuCalibration {
-    /// When it was made.
-    pub date: String,
-    /// How it was made.
-    pub method: String,
-    /// Gyro bias in the sensor frame, rad/s.
-    pub gyro_bias_rps: [f64; 3],
-}
-
 impl ImuConfig {
     /// The mounting rotation and bias.
     pub fn mounting(&self) -> Mounting {
@@ -103,30 +87,6 @@ impl ImuConfig {
     /// The stale timeout.
     pub fn timeout(&self) -> Duration {
         Duration::from_secs_f64(self.timeout_s)
-    }
-
-    /// Reads the calibration file, if one is named, into `gyro_bias_rps`.
-    pub fn resolve(&mut self, base: &Path) -> Result<(), ConfigError> {
-        let Some(name) = self.calibration.take() else {
-            return Ok(());
-        };
-        let path = base.join(&name);
-        let text = super::read_text(&path)?;
-        let calib: ImuCalibration = toml::from_str(&text).map_err(|e| ConfigError::Parse {
-            file: path.clone(),
-            message: e.to_string(),
-        })?;
-        for (i, b) in calib.gyro_bias_rps.iter().enumerate() {
-            check_range(
-                &path,
-                &format!("gyro_bias_rps[{i}]"),
-                *b,
-                -0.5..=0.5,
-                "rad/s",
-            )?;
-        }
-        self.gyro_bias_rps = calib.gyro_bias_rps;
-        Ok(())
     }
 
     /// Checks ranges.

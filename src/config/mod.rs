@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+pub mod calibration;
 pub mod chassis;
 pub mod imu;
 pub mod localization;
@@ -155,6 +156,9 @@ pub struct VehicleConfig {
     /// The native ROS1 node.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros1: Option<ros1::Ros1Config>,
+    /// The calibration file read on load and the values it put in force, for the log.
+    #[serde(skip)]
+    pub calibration_in_force: Option<(PathBuf, Vec<String>)>,
 }
 
 /// `[vehicle]`
@@ -164,12 +168,18 @@ pub struct VehicleSection {
     /// A name for logs and recordings.
     #[serde(default = "default_vehicle_name")]
     pub name: String,
+    /// The calibration file, relative to this configuration (default
+    /// `calib/<name>.toml` beside it, when that exists). Read on load; its values replace
+    /// the configuration's.
+    #[serde(default, skip_serializing)]
+    pub calibration: Option<String>,
 }
 
 impl Default for VehicleSection {
     fn default() -> Self {
         Self {
             name: default_vehicle_name(),
+            calibration: None,
         }
     }
 }
@@ -211,6 +221,10 @@ pub struct GnssConfig {
     /// Antenna phase centre in the vehicle frame (x forward, y left, z up), metres.
     #[serde(default)]
     pub antenna: Vector3,
+    /// The dual-antenna receiver's heading minus the vehicle's heading, degrees (the
+    /// baseline's misalignment with the vehicle's axis); subtracted from every heading.
+    #[serde(default)]
+    pub heading_offset_deg: f64,
 }
 
 /// A position in the vehicle frame, metres.
@@ -291,10 +305,7 @@ impl VehicleConfig {
         if let Some(bms) = &mut config.bms {
             bms.profile.resolve(base, file, "bms.profile")?;
         }
-        if let Some(imu) = &mut config.imu {
-            imu.resolve(base)
-                .map_err(|e| e.named_by(file, "imu.calibration"))?;
-        }
+        config.load_calibration(base, file)?;
         if let Some(mqtt) = &mut config.mqtt {
             mqtt.resolve(base);
             // Found now, not after the devices are opened and the broker is dialled.
@@ -312,6 +323,26 @@ impl VehicleConfig {
         }
         config.validate(file)?;
         Ok(config)
+    }
+
+    /// Reads the calibration file `[vehicle] calibration` names, or `calib/<name>.toml`
+    /// beside the configuration when that exists, into the values it calibrates.
+    fn load_calibration(&mut self, base: &Path, file: &Path) -> Result<(), ConfigError> {
+        let (path, named) = match &self.vehicle.calibration {
+            Some(name) => (base.join(name), true),
+            None => (
+                base.join(calibration::default_path(&self.vehicle.name)),
+                false,
+            ),
+        };
+        if !named && !path.exists() {
+            return Ok(());
+        }
+        let calib = calibration::CalibrationFile::load(&path)
+            .map_err(|e| e.named_by(file, "vehicle.calibration"))?;
+        let lines = calib.apply(self);
+        self.calibration_in_force = Some((path, lines));
+        Ok(())
     }
 
     /// This configuration as self-contained TOML, with every device profile written inline,
@@ -399,6 +430,13 @@ impl VehicleConfig {
         ] {
             check_range(file, key, v, -10.0..=10.0, "metres")?;
         }
+        check_range(
+            file,
+            "gnss.heading_offset_deg",
+            gnss.heading_offset_deg,
+            -180.0..=180.0,
+            "degrees",
+        )?;
         Ok(())
     }
 }

@@ -264,14 +264,14 @@ impl Chassis {
         if let Some(angles) = feedback.left.angle_rad.zip(feedback.right.angle_rad) {
             if let Some((l0, r0)) = self.last_angles {
                 let r = self.config.wheel_radius_m;
-                self.odometry.left_m += (angles.0 - l0) * r;
-                self.odometry.right_m += (angles.1 - r0) * r;
+                self.odometry.left_m += (angles.0 - l0) * r.left;
+                self.odometry.right_m += (angles.1 - r0) * r.right;
             }
             self.last_angles = Some(angles);
         }
         let r = self.config.wheel_radius_m;
-        self.odometry.left_mps = feedback.left.velocity_rad_s.unwrap_or(0.0) * r;
-        self.odometry.right_mps = feedback.right.velocity_rad_s.unwrap_or(0.0) * r;
+        self.odometry.left_mps = feedback.left.velocity_rad_s.unwrap_or(0.0) * r.left;
+        self.odometry.right_mps = feedback.right.velocity_rad_s.unwrap_or(0.0) * r.right;
         self.feedback = feedback;
     }
 
@@ -456,8 +456,8 @@ impl Chassis {
         let command = WheelCommand {
             power: verdict.power,
             reset_faults: verdict.reset_faults,
-            left_rad_s: (v - w * half_track) / r,
-            right_rad_s: (v + w * half_track) / r,
+            left_rad_s: (v - w * half_track) / r.left,
+            right_rad_s: (v + w * half_track) / r.right,
         };
         self.learn_response(t, &command);
         command
@@ -468,17 +468,20 @@ impl Chassis {
     fn learn_response(&mut self, t: Timestamp, command: &WheelCommand) {
         let r = self.config.wheel_radius_m;
         // A speed is paired with the commands up to when it arrived.
-        let reading = |wheel: &WheelFeedback| {
+        let reading = |wheel: &WheelFeedback, r: f64| {
             wheel
                 .velocity_rad_s
                 .map(|v| (wheel.velocity_received.map_or(t, |at| at.min(t)), v * r))
         };
-        let measured = reading(&self.feedback.left).zip(reading(&self.feedback.right));
+        let measured =
+            reading(&self.feedback.left, r.left).zip(reading(&self.feedback.right, r.right));
         match measured {
             Some((left, right)) if command.power == Power::Enabled => {
                 self.response.feedback(left, right);
-                self.response
-                    .command(t, (command.left_rad_s * r, command.right_rad_s * r));
+                self.response.command(
+                    t,
+                    (command.left_rad_s * r.left, command.right_rad_s * r.right),
+                );
             }
             _ => self.response.interrupt(),
         }
@@ -542,8 +545,8 @@ impl Chassis {
         let fb = &self.feedback;
         let r = self.config.wheel_radius_m;
         let (vl, vr) = (
-            fb.left.velocity_rad_s.unwrap_or(0.0) * r,
-            fb.right.velocity_rad_s.unwrap_or(0.0) * r,
+            fb.left.velocity_rad_s.unwrap_or(0.0) * r.left,
+            fb.right.velocity_rad_s.unwrap_or(0.0) * r.right,
         );
         let mut bits = 0;
         if !fb.drives.is_empty() && fb.drives.iter().all(|d| d.enabled) {
@@ -605,7 +608,7 @@ mod tests {
 
     fn config() -> ChassisConfig {
         ChassisConfig {
-            wheel_radius_m: 0.1,
+            wheel_radius_m: crate::config::chassis::WheelRadius::both(0.1),
             track_m: 0.5,
             max_speed_mps: 1.0,
             max_yaw_rate_rps: 1.0,

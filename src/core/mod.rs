@@ -58,6 +58,8 @@ pub struct CoreConfig {
     pub gnss_fix_timeout: Duration,
     /// Course over ground stands in for heading only above this speed, m/s.
     pub cog_min_speed_mps: f64,
+    /// The dual-antenna heading minus the vehicle's, degrees: taken off every heading.
+    pub heading_offset_deg: f64,
     /// The drive train, when the vehicle has drives.
     pub chassis: Option<ChassisConfig>,
     /// The controlling client's heartbeat watchdog, when a dialect has one.
@@ -81,6 +83,7 @@ impl Default for CoreConfig {
         Self {
             gnss_fix_timeout: Duration::from_secs(2),
             cog_min_speed_mps: 0.3,
+            heading_offset_deg: 0.0,
             chassis: None,
             control_link: None,
             bms_stale_after: None,
@@ -100,6 +103,7 @@ impl CoreConfig {
             Some(g) => Self {
                 gnss_fix_timeout: g.fix_timeout(),
                 cog_min_speed_mps: g.cog_min_speed_mps,
+                heading_offset_deg: g.heading_offset_deg,
                 ..Self::default()
             },
             None => Self::default(),
@@ -402,7 +406,8 @@ impl Vehicle {
                     if let (Some(l), Some(r)) =
                         (feedback.left.velocity_rad_s, feedback.right.velocity_rad_s)
                     {
-                        let (vl, vr) = (l * cfg.wheel_radius_m, r * cfg.wheel_radius_m);
+                        let radius = cfg.wheel_radius_m;
+                        let (vl, vr) = (l * radius.left, r * radius.right);
                         // A reading counts once, at the time it arrived: the drives report
                         // less often than the control loop polls them.
                         let measured = feedback
@@ -419,7 +424,7 @@ impl Vehicle {
                                 .left
                                 .angle_rad
                                 .zip(feedback.right.angle_rad)
-                                .map(|(a, b)| (a * cfg.wheel_radius_m, b * cfg.wheel_radius_m));
+                                .map(|(a, b)| (a * radius.left, b * radius.right));
                             o.wheels(
                                 measured,
                                 WheelReading {
@@ -1041,7 +1046,7 @@ impl Vehicle {
             self.localizer.add(
                 at(h.rx),
                 Measurement::Heading {
-                    yaw: yaw_of_heading_deg(h.value),
+                    yaw: yaw_of_heading_deg(h.value - self.config.heading_offset_deg),
                     sigma,
                 },
             );
@@ -1137,7 +1142,7 @@ impl Vehicle {
         let dual_antenna = fix
             .heading_deg
             .filter(|h| !self.gnss_link_down && fresh(h.rx))
-            .map(|h| h.value);
+            .map(|h| (h.value - self.config.heading_offset_deg).rem_euclid(360.0));
         let course = fix
             .velocity
             .filter(|v| !self.gnss_link_down && fresh(v.rx))

@@ -104,6 +104,9 @@ pub enum EngineOutput {
     /// An IMU sample as the core got it, in the vehicle frame (only with
     /// [`Engine::emit_poses`]).
     Imu(crate::devices::imu::ImuSample),
+    /// A raw measurement, as decoded (only with [`Engine::emit_measurements`]: what a
+    /// calibration fits).
+    Measured(Measured),
     /// A mission's progress, with the tag of whoever asked for it.
     Mission {
         /// Who asked.
@@ -119,6 +122,22 @@ pub enum EngineOutput {
         topic: String,
         /// Accepted, or why not.
         result: Result<(), String>,
+    },
+}
+
+/// A raw measurement for a calibration.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Measured {
+    /// An IMU sample in the sensor's own frame, the configured bias not taken off.
+    Imu(crate::devices::imu::ImuSample),
+    /// The receiver's fix after a sentence, at the time the sentence arrived.
+    Gnss(Timestamp, Box<crate::devices::gnss::GnssFix>),
+    /// The wheels' feedback at a control tick.
+    Wheels {
+        /// Left wheel.
+        left: crate::core::chassis::WheelFeedback,
+        /// Right wheel.
+        right: crate::core::chassis::WheelFeedback,
     },
 }
 
@@ -169,6 +188,8 @@ pub struct Engine {
     dialects: Dialects,
     /// Emit the poses every control tick and every IMU sample.
     emit_poses: bool,
+    /// Emit every raw measurement.
+    emit_measurements: bool,
     stats: EngineStats,
 }
 
@@ -249,6 +270,7 @@ impl Engine {
             stop_reason: None,
             dialects: dialects(config, trajectories),
             emit_poses: false,
+            emit_measurements: false,
             stats: EngineStats::default(),
         }
     }
@@ -257,6 +279,12 @@ impl Engine {
     /// sample, for a consumer that publishes them at their own rate (the ROS1 node).
     pub fn emit_poses(&mut self) {
         self.emit_poses = true;
+    }
+
+    /// Emits [`EngineOutput::Measured`] for every IMU sample, GNSS sentence and control
+    /// tick's wheel feedback, for a calibration.
+    pub fn emit_measurements(&mut self) {
+        self.emit_measurements = true;
     }
 
     /// Replay mode: transmissions are checked against the recording's `T` frames instead of
@@ -303,8 +331,15 @@ impl Engine {
         match &record.payload {
             Payload::Serial(bytes) => {
                 let vehicle = &mut self.vehicle;
+                let measure = self.emit_measurements;
                 if let Some(receiver) = self.nmea.get_mut(&record.source) {
                     receiver.push(t, bytes, |fix| {
+                        if measure {
+                            out.push(EngineOutput::Measured(Measured::Gnss(
+                                t,
+                                Box::new(*fix),
+                            )));
+                        }
                         for output in vehicle.handle(t, Input::Gnss(fix)) {
                             if let Output::Event(event) = output {
                                 out.push(EngineOutput::Event(event));
@@ -314,6 +349,9 @@ impl Engine {
                 } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
                     let emit = self.emit_poses;
                     decoder.push(t, bytes, |sample| {
+                        if measure {
+                            out.push(EngineOutput::Measured(Measured::Imu(sample)));
+                        }
                         let sample = mounting.apply(&sample);
                         vehicle.handle(t, Input::Imu(&sample));
                         if emit {
@@ -524,6 +562,12 @@ impl Engine {
         self.drivetrain.poll(t, &mut tx);
         if self.drivetrain.has_drives() {
             let feedback = self.drivetrain.feedback();
+            if self.emit_measurements {
+                out.push(EngineOutput::Measured(Measured::Wheels {
+                    left: feedback.left,
+                    right: feedback.right,
+                }));
+            }
             self.announce_drive_changes(&feedback.drives, out);
             self.vehicle.handle(t, Input::Chassis(&feedback));
             for output in self.vehicle.handle(t, Input::ControlTick) {

@@ -56,6 +56,21 @@ pub struct LiveOptions {
     pub commands_stdin: bool,
 }
 
+/// Says which calibrated values are in force, and from which file.
+fn log_calibration(config: &crate::config::VehicleConfig) {
+    match &config.calibration_in_force {
+        Some((file, lines)) => {
+            tracing::info!(file = %file.display(), "calibration file read");
+            for line in lines {
+                tracing::info!("calibration: {line}");
+            }
+        }
+        None => tracing::info!(
+            "no calibration file: the configuration's own geometry and biases are in force"
+        ),
+    }
+}
+
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out` (from a thread of its
 /// own: a stalled `out` never holds up the control loop).
 pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
@@ -67,6 +82,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
          devices/vehicle.example.toml is a complete one, and `chassisd sim` runs a simulated \
          vehicle without hardware"
     );
+    log_calibration(&options.config);
     let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();

@@ -16,6 +16,7 @@ pub mod recorder;
 pub mod ros1;
 pub mod serial;
 pub mod sim;
+pub mod sim_fast;
 pub mod status_out;
 pub mod trajectory_writer;
 

@@ -76,6 +76,10 @@ impl<S: Sink> Sink for ScriptSink<'_, S> {
 pub fn vehicle_config(plant: &PlantConfig) -> Result<VehicleConfig, ConfigError> {
     let file = Path::new(SIM_CONFIG_NAME);
     let g = &plant.geometry;
+    // A miscalibrated vehicle's configuration holds what it believes, not the truth.
+    let believed = &plant.configured;
+    let radius = believed.wheel_radius_m.unwrap_or(g.wheel_radius_m);
+    let antenna = believed.antenna.unwrap_or(g.antenna);
     let [lat, lon, h] = plant.datum;
     let text = format!(
         r#"
@@ -141,8 +145,8 @@ node = {right}
 wheels = ["right"]
 "#,
         name = plant.name.replace(['"', '\\'], "_"),
-        ax = g.antenna[0],
-        ay = g.antenna[1],
+        ax = antenna[0],
+        ay = antenna[1],
         latency = plant.gnss.latency_s,
         heading_sigma = plant.gnss.heading_sigma_deg.max(0.01),
         correlated = plant.gnss.correlated_fraction.min(0.95),
@@ -151,8 +155,8 @@ wheels = ["right"]
         gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),
         gyro_walk = plant.imu.gyro_bias_walk.clamp(1e-7, 1e-2),
         imu = plant.imu.protocol.name(),
-        radius = g.wheel_radius_m,
-        track = g.track_m,
+        radius = format_args!("[{}, {}]", radius.left, radius.right),
+        track = believed.track_m.unwrap_or(g.track_m),
         gear = g.gear_ratio,
         bus = SIM_BUS,
         left = LEFT_NODE.get(),
@@ -162,6 +166,9 @@ wheels = ["right"]
         file: file.to_owned(),
         message: e.to_string(),
     })?;
+    if let (Some(imu), Some(bias)) = (config.imu.as_mut(), believed.gyro_bias_rps) {
+        imu.gyro_bias_rps = bias;
+    }
     let profile = drive_profile()?;
     for drive in &mut config.drive {
         drive.profile = ProfileRef::Inline(Box::new(profile.clone()));
@@ -204,6 +211,10 @@ wheels = ["right"]
                 ..CutterConfig::default()
             },
         });
+    }
+    if let Some(calib) = &plant.calibration {
+        let lines = calib.apply(&mut config);
+        config.calibration_in_force = Some(("<given calibration>".into(), lines));
     }
     config.validate(file)?;
     Ok(config)

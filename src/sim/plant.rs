@@ -20,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::cia402_drive::{MotorModel, SimDrive};
 use super::nmea_out::{self, Epoch};
 use crate::config::ConfigError;
+use crate::config::chassis::WheelRadius;
 use crate::config::imu::ImuProtocol;
 use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
@@ -66,6 +67,39 @@ pub struct PlantConfig {
     /// The charging dock, the battery and the cutter, when the vehicle has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub yard: Option<Yard>,
+    /// What the vehicle's configuration believes where it differs from the truth above: a
+    /// miscalibrated vehicle, for the calibration procedures.
+    #[serde(default, skip_serializing_if = "Configured::is_empty")]
+    pub configured: Configured,
+    /// A calibration file the vehicle's configuration reads (as `[vehicle] calibration`
+    /// does on a real one); given on the command line, not in the plant file.
+    #[serde(skip)]
+    pub calibration: Option<crate::config::calibration::CalibrationFile>,
+}
+
+/// `[configured]`: values the configuration built from the plant holds instead of the
+/// plant's true ones. Each one left out is configured true (the gyro bias as zero).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Configured {
+    /// Wheel radius, m: one number, or `[left, right]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_radius_m: Option<WheelRadius>,
+    /// Track, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track_m: Option<f64>,
+    /// GNSS antenna (x forward, y left), m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub antenna: Option<[f64; 2]>,
+    /// Gyro bias the configuration subtracts (sensor frame), rad/s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gyro_bias_rps: Option<[f64; 3]>,
+}
+
+impl Configured {
+    fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 /// `[yard]`: a Daly BMS on the drives' bus that charges while the vehicle rests on the dock,
@@ -113,8 +147,8 @@ fn default_blade_rpm() -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Geometry {
-    /// Wheel radius, m.
-    pub wheel_radius_m: f64,
+    /// Wheel radius, m: one number, or `[left, right]`.
+    pub wheel_radius_m: WheelRadius,
     /// Track, m.
     pub track_m: f64,
     /// Motor revolutions per wheel revolution.
@@ -173,6 +207,10 @@ pub struct GnssModel {
     pub dual_antenna: bool,
     /// Heading noise, 1σ degrees.
     pub heading_sigma_deg: f64,
+    /// The dual-antenna baseline's true misalignment: the receiver's heading minus the
+    /// vehicle's, degrees.
+    #[serde(default)]
+    pub heading_offset_deg: f64,
     /// Velocity noise per axis, 1σ m/s (speed and course over ground come from it).
     pub velocity_sigma_mps: f64,
     /// Horizontal position noise per axis, 1σ m: RTK fixed, float, DGPS, single.
@@ -206,14 +244,32 @@ impl PlantConfig {
         })?;
         use crate::config::check_range;
         let g = &p.geometry;
+        for r in [g.wheel_radius_m.left, g.wheel_radius_m.right] {
+            check_range(file, "geometry.wheel_radius_m", r, 0.01..=2.0, "m")?;
+        }
+        check_range(file, "geometry.track_m", g.track_m, 0.05..=5.0, "m")?;
         check_range(
             file,
-            "geometry.wheel_radius_m",
-            g.wheel_radius_m,
-            0.01..=2.0,
-            "m",
+            "gnss.heading_offset_deg",
+            p.gnss.heading_offset_deg,
+            -180.0..=180.0,
+            "degrees",
         )?;
-        check_range(file, "geometry.track_m", g.track_m, 0.05..=5.0, "m")?;
+        let c = &p.configured;
+        if let Some(r) = c.wheel_radius_m {
+            for r in [r.left, r.right] {
+                check_range(file, "configured.wheel_radius_m", r, 0.01..=2.0, "m")?;
+            }
+        }
+        if let Some(t) = c.track_m {
+            check_range(file, "configured.track_m", t, 0.05..=5.0, "m")?;
+        }
+        for a in c.antenna.into_iter().flatten() {
+            check_range(file, "configured.antenna", a, -10.0..=10.0, "m")?;
+        }
+        for b in c.gyro_bias_rps.into_iter().flatten() {
+            check_range(file, "configured.gyro_bias_rps", b, -0.5..=0.5, "rad/s")?;
+        }
         check_range(file, "geometry.gear_ratio", g.gear_ratio, 0.1..=500.0, "")?;
         check_range(
             file,
@@ -497,16 +553,24 @@ impl SimVehicle {
     pub fn force_motion(&mut self, motion: Option<ForcedMotion>) {
         self.forced = motion;
         let g = self.plant.geometry;
-        let rpm = |v: f64| v / g.wheel_radius_m * 60.0 / TAU * g.gear_ratio;
+        let rpm = |v: f64, radius: f64| v / radius * 60.0 / TAU * g.gear_ratio;
         let (l, r) = match motion {
             Some(m) => {
                 let half = m.wheel_yaw_rate * g.track_m / 2.0;
-                (Some(rpm(m.v - half)), Some(rpm(m.v + half)))
+                (
+                    Some(rpm(m.v - half, g.wheel_radius_m.left)),
+                    Some(rpm(m.v + half, g.wheel_radius_m.right)),
+                )
             }
             None => (None, None),
         };
         self.left.back_drive(l);
         self.right.back_drive(r);
+    }
+
+    /// The gyro's z bias now, rad/s (it walks).
+    pub fn gyro_bias(&self) -> f64 {
+        self.gyro_bias
     }
 
     /// Adds to the gyro's z bias (a scenario's temperature drift), rad/s.
@@ -540,10 +604,13 @@ impl SimVehicle {
     /// Wheel surface speeds from the motors, before any slip, m/s.
     fn wheel_surface_speeds(&self) -> (f64, f64) {
         let g = &self.plant.geometry;
-        let speed = |rpm: f64| rpm * TAU / 60.0 / g.gear_ratio * g.wheel_radius_m;
+        let speed = |rpm: f64, radius: f64| rpm * TAU / 60.0 / g.gear_ratio * radius;
         let l = self.left.motor_rpm().first().copied().unwrap_or(0.0);
         let r = self.right.motor_rpm().first().copied().unwrap_or(0.0);
-        (speed(l), speed(r))
+        (
+            speed(l, g.wheel_radius_m.left),
+            speed(r, g.wheel_radius_m.right),
+        )
     }
 
     /// Advances to `t` and emits what is due, as records at `t`.
@@ -727,7 +794,7 @@ impl SimVehicle {
         let e = antenna_e + sc * self.gnss_error.0 + self.normal(white) + c.offset.0;
         let n = antenna_n + sc * self.gnss_error.1 + self.normal(white) + c.offset.1;
         let p = self.frame.to_geodetic(&Vector3::new(e, n, 0.0));
-        let heading = (90.0 - tr.yaw.to_degrees()).rem_euclid(360.0);
+        let heading = 90.0 - tr.yaw.to_degrees() + g.heading_offset_deg;
         let heading_noise = self.normal(g.heading_sigma_deg);
         // The antenna's velocity: the vehicle's, plus the turn about the antenna's offset.
         let [ax, ay] = self.plant.geometry.antenna;

@@ -16,6 +16,8 @@ const WARMUP_SPEED: f64 = 0.8;
 const WARMUP_RUN_S: f64 = 10.0;
 /// Scoring starts here, s.
 pub const WARMUP_S: f64 = STILL_S + WARMUP_RUN_S;
+/// The calibration pattern stands still this long first, s.
+pub const CALIBRATION_STILL_S: f64 = 30.0;
 
 /// Drive for `duration_s` at forward speed `v` (m/s) and yaw rate `w` (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -169,9 +171,57 @@ impl Scenario {
         ]
     }
 
-    /// The scenario called `name`.
+    /// The scenario called `name`, of [`Scenario::every`].
     pub fn named(name: &str) -> Option<Self> {
-        Self::all().into_iter().find(|s| s.name == name)
+        Self::every().into_iter().find(|s| s.name == name)
+    }
+
+    /// The fusion benchmark's scenarios and the calibration pattern: every scenario `chassisd
+    /// sim` drives.
+    pub fn every() -> Vec<Self> {
+        let mut all = Self::all();
+        all.push(Self::calibration());
+        all
+    }
+
+    /// The pattern the calibration procedures need, driven slowly with RTK fixed: 30 s
+    /// standing still (gyro bias, mounting), straight runs both ways joined by half turns
+    /// (wheel radii against RTK distance), turns on the spot both ways (track, antenna), and
+    /// a figure eight. The runs are commanded straight: a miscalibrated vehicle drives them
+    /// as arcs, which the fits allow for.
+    pub fn calibration() -> Self {
+        let (speed, turn_rate) = (0.5, 0.5);
+        let pause = leg(2.0, 0.0, 0.0);
+        let mut legs = vec![leg(CALIBRATION_STILL_S, 0.0, 0.0)];
+        // Ten runs of 20 m: the wheels' random slip averages out to a few hundredths of a
+        // per cent of each radius over some 400 s of driving.
+        for _ in 0..5 {
+            for direction in [1.0, -1.0] {
+                legs.push(leg(40.0, speed, 0.0));
+                legs.push(pause);
+                legs.push(leg(PI / turn_rate, 0.0, direction * turn_rate));
+                legs.push(pause);
+            }
+        }
+        for direction in [1.0, 1.0, -1.0, -1.0] {
+            legs.push(leg(2.0 * PI / turn_rate, 0.0, direction * turn_rate));
+            legs.push(pause);
+        }
+        let (v, radius) = (0.4, 2.0);
+        for _ in 0..2 {
+            legs.push(leg(2.0 * PI * radius / v, v, v / radius));
+            legs.push(leg(2.0 * PI * radius / v, v, -v / radius));
+        }
+        legs.push(leg(10.0, 0.0, 0.0));
+        Self {
+            name: "calibration",
+            about: "the calibration pattern: 30 s still, straight runs both ways, turns on the \
+                    spot both ways, a figure eight",
+            legs,
+            gnss: Vec::new(),
+            jump: None,
+            gyro_bias_ramp: 0.0,
+        }
     }
 
     /// Total length, s.
