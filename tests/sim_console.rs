@@ -81,3 +81,59 @@ fn ctrl_c_ends_with_a_summary_too() {
     }
     sim.wait_log(Duration::from_secs(5), "chassisd sim: stopped after");
 }
+
+/// The start line's `mosquitto_sub` and `mosquitto_pub` lines work when pasted into a shell:
+/// base_status arrives at 10 Hz, and the goal drives the vehicle there.
+#[test]
+fn the_printed_mosquitto_lines_watch_and_drive_the_vehicle() {
+    let port = common::mqtt::free_port().to_string();
+    let mut sim = Proc::start(&["sim", "--broker-port", &port]);
+    sim.wait_log(Duration::from_secs(10), "Ctrl-C stops");
+    let start = sim
+        .log
+        .iter()
+        .find(|l| l.contains("Ctrl-C stops"))
+        .expect("the start line")
+        .clone();
+    let pasted = |tool: &str| -> String {
+        let from = start
+            .find(tool)
+            .unwrap_or_else(|| panic!("{tool} in {start}"));
+        start[from..]
+            .split(';')
+            .next()
+            .expect("up to the next clause")
+            .trim_end_matches(')')
+            .to_owned()
+    };
+    let watch = pasted("mosquitto_sub");
+    let drive = pasted("mosquitto_pub");
+    // 30 messages: three seconds at 10 Hz, well within the wait.
+    let began = Instant::now();
+    let seen = Command::new("sh")
+        .arg("-c")
+        .arg(format!("{watch} -C 30 -W 10"))
+        .output()
+        .expect("sh runs");
+    let took = began.elapsed().as_secs_f64();
+    let lines = String::from_utf8_lossy(&seen.stdout);
+    assert_eq!(lines.lines().count(), 30, "{watch}: {lines}");
+    assert!((2.5..=4.5).contains(&took), "30 lines took {took:.2} s");
+    assert!(lines.lines().all(|l| l.contains("\"pose\"")));
+    sim.wait_out(Duration::from_secs(30), "located", |l| {
+        l.contains("LOCATE_TRUE")
+    });
+    let sent = Command::new("sh")
+        .arg("-c")
+        .arg(&drive)
+        .status()
+        .expect("sh runs");
+    assert!(sent.success(), "{drive}");
+    sim.wait_out(Duration::from_secs(30), "the pose at the goal", |l| {
+        serde_json::from_str::<serde_json::Value>(l).is_ok_and(|s| {
+            let (x, y) = (s["pose"]["x"].as_f64(), s["pose"]["y"].as_f64());
+            matches!((x, y), (Some(x), Some(y)) if (x - 2.0).hypot(y - 1.0) < 0.05)
+        })
+    });
+    sim.stop();
+}

@@ -335,10 +335,7 @@ impl Engine {
                 if let Some(receiver) = self.nmea.get_mut(&record.source) {
                     receiver.push(t, bytes, |fix| {
                         if measure {
-                            out.push(EngineOutput::Measured(Measured::Gnss(
-                                t,
-                                Box::new(*fix),
-                            )));
+                            out.push(EngineOutput::Measured(Measured::Gnss(t, Box::new(*fix))));
                         }
                         for output in vehicle.handle(t, Input::Gnss(fix)) {
                             if let Output::Event(event) = output {

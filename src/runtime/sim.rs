@@ -338,6 +338,13 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
             " and over MQTT (watch: mosquitto_sub -h {} -p {} -t base_status)",
             m.host, m.port
         );
+        if let Some(device) = &m.device {
+            // A goal is one message: pasted once, it drives the vehicle 2.2 m and turns it.
+            line += &format!(
+                "; drive it: mosquitto_pub -h {} -p {} -t device/{}/goal -m '{{\"msg_id\": \"1\", \"timestamp\": 1757403776, \"data\": {{\"x\": 2.0, \"y\": 1.0, \"z\": 0.7071}}}}'",
+                m.host, m.port, device.serial_number
+            );
+        }
     }
     if let Some(r) = &options.ros1 {
         line += &format!(
