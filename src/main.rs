@@ -136,6 +136,10 @@ enum Command {
         /// Standing still must last this long, s.
         #[arg(long, default_value = "20", value_parser = seconds_arg)]
         still: Duration,
+        /// The report plot (SVG; default: beside the calibration file, named
+        /// <vehicle>.<procedure>.svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -519,7 +523,8 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             config,
             out,
             still,
-        } => calibrate(procedure, &from, config.as_deref(), out, still),
+            plot,
+        } => calibrate(procedure, &from, config.as_deref(), out, still, plot),
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
             let runtime = async_runtime(1)?;
@@ -582,6 +587,7 @@ fn calibrate(
     config: Option<&Path>,
     out: Option<PathBuf>,
     still: Duration,
+    plot: Option<PathBuf>,
 ) -> anyhow::Result<bool> {
     use chassisd::calib::{self, Procedure, Settings, data::Dataset};
     use chassisd::config::calibration::{CalibrationFile, default_path};
@@ -592,7 +598,7 @@ fn calibrate(
         CalibrateProcedure::Gnss => Procedure::Gnss,
     };
     let config = config.map(VehicleConfig::load).transpose()?;
-    let data = Dataset::from_recording(from, config)
+    let data = Dataset::from_recording(from, config, std::io::stderr().is_terminal())
         .with_context(|| format!("reading {}", from.display()))?;
     if data.truncated {
         eprintln!(
@@ -624,6 +630,16 @@ fn calibrate(
     );
     std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
     println!("written: {}", out.display());
+    let plot = plot.unwrap_or_else(|| {
+        out.with_file_name(format!(
+            "{}.{}.svg",
+            out.file_stem()
+                .map_or("calibration".into(), |s| s.to_string_lossy()),
+            procedure.name()
+        ))
+    });
+    calib::plot::draw(procedure, &data, &found, &plot)?;
+    println!("plot: {}", plot.display());
     Ok(true)
 }
 

@@ -149,6 +149,12 @@ fn calibrates(name: &str, seed: u64) -> PathBuf {
         let o = calibrate(procedure, &rec, &out);
         assert!(o.status.success(), "calibrate {procedure}: {}", text(&o));
     }
+    // Each procedure drew its report beside the file.
+    for (procedure, title) in [("imu", "bias"), ("odometry", "radii"), ("gnss", "antenna")] {
+        let plot =
+            std::fs::read_to_string(dir.join(format!("calib.{procedure}.svg"))).expect("the plot");
+        assert!(plot.contains("<svg") && plot.contains(title), "{procedure}");
+    }
     let file: toml::Table =
         toml::from_str(&std::fs::read_to_string(&out).expect("written")).expect("TOML");
     let g = &plant.geometry;

@@ -90,6 +90,8 @@ struct Gather {
     last_heading: Option<Timestamp>,
     last_wheels: Option<Timestamp>,
     truncated: bool,
+    /// Shows how far the reading has come, in ms of the recording.
+    progress: Option<indicatif::ProgressBar>,
 }
 
 impl Gather {
@@ -141,6 +143,9 @@ impl Consumer for Gather {
                         accel: s.accel,
                     });
                     self.truncated = t > MAX_SPAN_S;
+                    if let Some(bar) = &self.progress {
+                        bar.set_position((t * 1000.0) as u64);
+                    }
                 }
                 Measured::Gnss(_, fix) => self.gnss(&fix),
                 Measured::Wheels { left, right } => {
@@ -170,12 +175,33 @@ impl Consumer for Gather {
 
 impl Dataset {
     /// Gathers the measurements of the recording at `path` (the configuration stored with
-    /// it, or `config`).
-    pub fn from_recording(path: &Path, config: Option<VehicleConfig>) -> anyhow::Result<Self> {
-        let vehicle = match config {
-            Some(c) => c,
-            None => stored_config(path)?,
+    /// it, or `config`), with a progress bar on stderr when `progress`.
+    pub fn from_recording(
+        path: &Path,
+        config: Option<VehicleConfig>,
+        progress: bool,
+    ) -> anyhow::Result<Self> {
+        let (stored, span_ms) = stored_config(path)?;
+        let vehicle = match (config, stored) {
+            (Some(c), _) => c,
+            (None, Some(c)) => c,
+            (None, None) => anyhow::bail!(
+                "the recording {} stores no vehicle configuration; give one with --config",
+                path.display()
+            ),
         };
+        let progress = progress.then(|| {
+            let bar = indicatif::ProgressBar::new(span_ms.unwrap_or(0));
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "reading {msg} [{bar:40}] {percent:>3}% ({elapsed} / about {duration})",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
+            );
+            bar.set_message(path.display().to_string());
+            bar
+        });
         let latency_s = vehicle.localization.map_or(0.0, |l| l.gnss_latency_s);
         let mut gather = Gather {
             latency_s,
@@ -188,12 +214,16 @@ impl Dataset {
             last_heading: None,
             last_wheels: None,
             truncated: false,
+            progress,
         };
         let options = ReplayOptions {
             config: Some(vehicle.clone()),
             ..ReplayOptions::default()
         };
         replay::replay_into(path, &options, |e| e.emit_measurements(), &mut gather)?;
+        if let Some(bar) = gather.progress.take() {
+            bar.finish_and_clear();
+        }
         let datum = vehicle
             .localization
             .and_then(|l| l.datum)
@@ -240,16 +270,19 @@ impl Dataset {
     }
 }
 
-/// The configuration stored with the recording at `path`.
-fn stored_config(path: &Path) -> anyhow::Result<VehicleConfig> {
+/// The configuration stored with the recording at `path`, and its length in ms when it
+/// ended cleanly.
+fn stored_config(path: &Path) -> anyhow::Result<(Option<VehicleConfig>, Option<u64>)> {
     use anyhow::Context;
     let (meta, _) = crate::record::RecordingReader::open(path)
         .with_context(|| format!("cannot open the recording {}", path.display()))?;
-    let file = meta.vehicle_config.with_context(|| {
-        format!(
-            "the recording {} stores no vehicle configuration; give one with --config",
-            path.display()
-        )
-    })?;
-    Ok(VehicleConfig::load(&path.join(file))?)
+    let span_ms = meta
+        .start_us
+        .zip(meta.end_us)
+        .map(|(a, b)| b.saturating_sub(a) / 1000);
+    let config = meta
+        .vehicle_config
+        .map(|file| VehicleConfig::load(&path.join(file)))
+        .transpose()?;
+    Ok((config, span_ms))
 }

@@ -6,6 +6,7 @@
 pub mod data;
 pub mod imu;
 pub mod motion;
+pub mod plot;
 
 use std::collections::BTreeMap;
 
