@@ -265,6 +265,9 @@ enum BenchBroker {
     Both,
 }
 
+/// Exit status of a configuration error (sysexits' EX_CONFIG).
+const EX_CONFIG: u8 = 78;
+
 /// Log lines waiting for stderr before new ones are dropped.
 const LOG_QUEUE: usize = 4096;
 
@@ -284,21 +287,32 @@ fn main() -> ExitCode {
         .buffered_lines_limit(LOG_QUEUE)
         .thread_name("log-out")
         .finish(std::io::stderr());
-    tracing_subscriber::fmt()
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
+    });
+    let logs = tracing_subscriber::fmt()
         .with_writer(log_writer)
-        .with_ansi(std::io::stderr().is_terminal())
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-                tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
-            }),
-        )
-        .init();
+        .with_env_filter(filter);
+    if chassisd::runtime::journal::to_journal() {
+        logs.event_format(chassisd::runtime::journal::JournalFormat::default())
+            .init();
+    } else {
+        logs.with_ansi(std::io::stderr().is_terminal()).init();
+    }
     match run(Cli::parse()) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),
         Err(e) => {
             eprintln!("chassisd: {e:#}");
-            ExitCode::FAILURE
+            // A configuration error does not mend itself: 78 (EX_CONFIG) tells systemd not to
+            // restart (the unit's RestartPreventExitStatus).
+            if e.chain()
+                .any(|c| c.downcast_ref::<chassisd::config::ConfigError>().is_some())
+            {
+                ExitCode::from(EX_CONFIG)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

@@ -17,6 +17,7 @@ use super::clock::RecordClock;
 use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
+use super::notify::ServiceManager;
 use super::recorder::Recorder;
 use super::ros1::Ros1Link;
 use super::serial::{self, SerialSpec};
@@ -27,6 +28,7 @@ use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
+use crate::core::LinkState;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
 use crate::record::{Payload, Record, RecordingWriter, SourceKind, SourceMeta};
@@ -38,6 +40,8 @@ const CHANNEL: usize = 4096;
 const SUMMARY_EVERY: Duration = Duration::from_secs(30);
 /// How long the stop frames on exit may take to leave.
 const STOP_FLUSH: Duration = Duration::from_millis(500);
+/// Devices still down this long after start: systemd hears READY anyway, with their names.
+const READY_GRACE: Duration = Duration::from_secs(10);
 /// Source name of the GNSS receiver.
 pub const GNSS_SOURCE: &str = "gnss";
 /// Source name of the IMU.
@@ -242,6 +246,26 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         None => None,
     };
 
+    // What must come up before systemd hears READY: each device, and the broker.
+    let mut expected: Vec<String> = Vec::new();
+    if config.gnss.is_some() {
+        expected.push(GNSS_SOURCE.into());
+    }
+    if config.imu.is_some() {
+        expected.push(IMU_SOURCE.into());
+    }
+    expected.extend(config.can.iter().map(|c| c.interface.clone()));
+    if config.mqtt.is_some() {
+        expected.push(MQTT_SOURCE.into());
+    }
+    let mut service = ServiceManager::new(expected, READY_GRACE, std::time::Instant::now());
+    if let Some(w) = service.watchdog() {
+        tracing::info!(
+            period_s = w.as_secs_f64(),
+            "systemd watchdog on: fed from the control loop"
+        );
+    }
+
     let mut outputs = Vec::new();
     let mut summary = tokio::time::interval(SUMMARY_EVERY);
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
@@ -261,6 +285,9 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
                     drivers_running = false;
                     continue;
                 };
+                if let Payload::Link(LinkState::Up) = record.payload {
+                    service.link_up(&record.source, std::time::Instant::now());
+                }
                 record.t = engine.handle(&record, &mut outputs);
                 now = Some(record.t);
                 if let Some(r) = recorder.as_mut() {
@@ -270,6 +297,8 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             () = tokio::time::sleep_until(clock.instant_at(next_tick)) => {
                 engine.advance_to(next_tick, &mut outputs);
                 now = Some(next_tick);
+                // Fed here only: a core that stops ticking stops the pings.
+                service.tick(std::time::Instant::now());
             }
             _ = summary.tick() => {
                 summarise_faults(&engine, &can_tx, &mut reported);
@@ -290,6 +319,10 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             break Err(e).context("cannot write status output");
         }
     };
+    service.stopping(match &result {
+        Ok(signal) => signal,
+        Err(_) => "error",
+    });
     // The ticks up to the stop, so a replay of the recording ends where this run ended; then
     // every drive quick-stops with zero targets, recorded so the replay does the same, and
     // those frames leave before the process does.

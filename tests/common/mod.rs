@@ -6,6 +6,7 @@ pub mod lockstep;
 pub mod mqtt;
 pub mod netcut;
 pub mod process;
+pub mod pty;
 pub mod spec;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,167 @@
+//! systemd's notify protocol for `chassisd run` under a `Type=notify` unit: READY once every
+//! configured device and the broker have come up (or, with some still missing, after a grace
+//! period, saying which in STATUS), WATCHDOG pings from the control loop itself (a hung core
+//! stops them, and systemd restarts it), and STOPPING on the way out. Without
+//! `NOTIFY_SOCKET` every call does nothing.
+
+use std::collections::BTreeSet;
+use std::time::{Duration, Instant};
+
+use sd_notify::NotifyState;
+
+/// The service manager as the run loop tells it how things stand.
+#[derive(Debug)]
+pub struct ServiceManager {
+    /// Whether anyone listens (`NOTIFY_SOCKET` is set).
+    listening: bool,
+    /// Ping at least this often (a quarter of `WatchdogSec`), when the watchdog is on.
+    feed_every: Option<Duration>,
+    last_feed: Option<Instant>,
+    /// Sources that have not come up yet.
+    waiting: BTreeSet<String>,
+    ready: bool,
+    /// READY goes out by then even with sources missing.
+    ready_by: Instant,
+}
+
+impl ServiceManager {
+    /// A manager that waits for `sources` (their link records) for up to `grace` from `now`.
+    pub fn new(sources: impl IntoIterator<Item = String>, grace: Duration, now: Instant) -> Self {
+        Self::with(
+            std::env::var_os("NOTIFY_SOCKET").is_some(),
+            sd_notify::watchdog_enabled(),
+            sources,
+            grace,
+            now,
+        )
+    }
+
+    fn with(
+        listening: bool,
+        watchdog: Option<Duration>,
+        sources: impl IntoIterator<Item = String>,
+        grace: Duration,
+        now: Instant,
+    ) -> Self {
+        Self {
+            listening,
+            feed_every: watchdog.map(|w| w / 4),
+            last_feed: None,
+            waiting: sources.into_iter().collect(),
+            ready: false,
+            ready_by: now + grace,
+        }
+    }
+
+    /// The watchdog's period as systemd set it, for the log.
+    pub fn watchdog(&self) -> Option<Duration> {
+        self.feed_every.map(|f| f * 4)
+    }
+
+    /// Whether READY has gone out.
+    pub fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// `source`'s link came up.
+    pub fn link_up(&mut self, source: &str, now: Instant) {
+        if self.waiting.remove(source) {
+            self.check_ready(now);
+        }
+    }
+
+    /// A control tick ran at `now`: feeds the watchdog when due, and sends READY once the
+    /// grace period is over.
+    pub fn tick(&mut self, now: Instant) {
+        self.check_ready(now);
+        if let Some(every) = self.feed_every
+            && self
+                .last_feed
+                .is_none_or(|l| now.duration_since(l) >= every)
+        {
+            self.last_feed = Some(now);
+            self.send(&[NotifyState::Watchdog]);
+        }
+    }
+
+    /// The daemon is shutting down for `why`.
+    pub fn stopping(&self, why: &str) {
+        let status = format!("stopping ({why}): drives quick-stopped, targets zero");
+        self.send(&[NotifyState::Stopping, NotifyState::Status(&status)]);
+    }
+
+    fn check_ready(&mut self, now: Instant) {
+        if self.ready || (!self.waiting.is_empty() && now < self.ready_by) {
+            return;
+        }
+        self.ready = true;
+        let status = if self.waiting.is_empty() {
+            "running: every device and the broker are up".to_owned()
+        } else {
+            let missing: Vec<&str> = self.waiting.iter().map(String::as_str).collect();
+            format!("running; not up yet: {}", missing.join(", "))
+        };
+        tracing::info!(%status, "ready");
+        self.send(&[NotifyState::Ready, NotifyState::Status(&status)]);
+    }
+
+    fn send(&self, states: &[NotifyState]) {
+        if !self.listening {
+            return;
+        }
+        if let Err(e) = sd_notify::notify(states) {
+            tracing::warn!(error = %e, "cannot notify the service manager");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manager(sources: &[&str], now: Instant) -> ServiceManager {
+        ServiceManager::with(
+            false,
+            Some(Duration::from_secs(2)),
+            sources.iter().map(|s| (*s).to_owned()),
+            Duration::from_secs(10),
+            now,
+        )
+    }
+
+    #[test]
+    fn ready_once_every_source_is_up_or_the_grace_is_over() {
+        let t0 = Instant::now();
+        let mut m = manager(&["gnss", "can0"], t0);
+        m.tick(t0 + Duration::from_secs(1));
+        assert!(!m.is_ready());
+        m.link_up("gnss", t0 + Duration::from_secs(2));
+        assert!(!m.is_ready());
+        m.link_up("can0", t0 + Duration::from_secs(3));
+        assert!(m.is_ready());
+        let mut late = manager(&["gnss"], t0);
+        late.tick(t0 + Duration::from_secs(9));
+        assert!(!late.is_ready());
+        late.tick(t0 + Duration::from_secs(10));
+        assert!(
+            late.is_ready(),
+            "READY after the grace, saying what is missing"
+        );
+    }
+
+    #[test]
+    fn the_watchdog_is_fed_a_quarter_period_apart_only_by_ticks() {
+        let t0 = Instant::now();
+        let mut m = manager(&[], t0);
+        assert_eq!(m.watchdog(), Some(Duration::from_secs(2)));
+        m.tick(t0);
+        assert_eq!(m.last_feed, Some(t0));
+        m.tick(t0 + Duration::from_millis(400));
+        assert_eq!(m.last_feed, Some(t0), "not yet due");
+        m.tick(t0 + Duration::from_millis(500));
+        assert_eq!(m.last_feed, Some(t0 + Duration::from_millis(500)));
+        // A link event is not a tick: it feeds nothing.
+        m.link_up("gnss", t0 + Duration::from_secs(5));
+        assert_eq!(m.last_feed, Some(t0 + Duration::from_millis(500)));
+    }
+}

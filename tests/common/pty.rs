@@ -1,0 +1,48 @@
+//! A pseudo-terminal standing in for a serial device.
+
+use std::fs::File;
+use std::io::Write;
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::Path;
+
+use nix::fcntl::{FcntlArg, FdFlag, fcntl};
+use nix::pty::openpty;
+use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+use nix::unistd::ttyname;
+
+/// A pty whose slave is reachable at `link`, like `/dev/serial/by-id/...`.
+pub struct Port {
+    /// The side the test writes to.
+    pub master: File,
+}
+
+impl Port {
+    pub fn open_at(link: &Path) -> Port {
+        let pty = openpty(None, None).expect("openpty");
+        // Children must not inherit the master, or closing it here would not hang up the
+        // line. (Tests in this file hold SERIAL while they open ptys and spawn, so no other
+        // thread forks in between.)
+        for fd in [pty.master.as_fd(), pty.slave.as_fd()] {
+            fcntl(fd.as_raw_fd(), FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).expect("cloexec");
+        }
+        let mut termios = tcgetattr(pty.slave.as_fd()).expect("tcgetattr");
+        cfmakeraw(&mut termios);
+        tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &termios).expect("tcsetattr");
+        let path = ttyname(pty.slave.as_fd()).expect("ttyname");
+        let _ = std::fs::remove_file(link);
+        std::os::unix::fs::symlink(&path, link).expect("symlink");
+        // The daemon opens the slave by path; the test keeps only the master.
+        drop::<OwnedFd>(pty.slave);
+        Port {
+            master: File::from(pty.master),
+        }
+    }
+
+    pub fn send(&mut self, sentence_body: &str) {
+        let checksum = sentence_body.bytes().fold(0u8, |a, b| a ^ b);
+        let line = format!("${sentence_body}*{checksum:02X}\r\n");
+        self.master
+            .write_all(line.as_bytes())
+            .expect("write to pty");
+    }
+}
