@@ -146,6 +146,15 @@ enum Command {
         #[command(subcommand)]
         which: BenchCommand,
     },
+    /// Check a vehicle configuration and probe each of its devices once: serial ports
+    /// (valid sentences or frames), CAN interfaces (up), drives (an SDO read), the BMS and
+    /// the broker. Prints a table with ok or the reason and the fix; exits 1 when a probe
+    /// failed, 78 when the configuration is wrong.
+    Check {
+        /// Vehicle configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+    },
     /// Simulate the CAN devices of a vehicle configuration (drives, BMS) on its CAN
     /// interfaces, e.g. vcan0. Standard input takes fault injections; see the README.
     CanSim {
@@ -539,6 +548,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             still,
             plot,
         } => calibrate(procedure, &from, config.as_deref(), out, still, plot),
+        Command::Check { config } => {
+            let vehicle = VehicleConfig::load(&config)?;
+            println!("configuration {}: ok", config.display());
+            let runtime = async_runtime(1)?;
+            let probes = runtime.block_on(chassisd::runtime::check::run(&vehicle));
+            runtime.shutdown_background();
+            print!("{}", chassisd::runtime::check::table(&probes));
+            Ok(probes.iter().all(|p| p.result.is_ok()))
+        }
         Command::CanSim { config } => {
             let vehicle = VehicleConfig::load(&config)?;
             let runtime = async_runtime(1)?;

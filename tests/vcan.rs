@@ -750,3 +750,46 @@ fn a_wall_clock_step_neither_stalls_nor_rushes_the_loop() {
     assert_replays_as_live(&recording, &live);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn check_probes_the_drives_and_the_bms_on_the_bus() {
+    let _turn = one_at_a_time();
+    let vehicle = config("vehicle-vcan.toml");
+    let mut sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
+    std::thread::sleep(Duration::from_millis(500));
+    let out = std::process::Command::new(common::chassisd())
+        .args(["check", "--config"])
+        .arg(&vehicle)
+        .output()
+        .expect("chassisd check runs");
+    let table = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{table}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for device in ["vcan0", "left", "right", "bms"] {
+        let line = table
+            .lines()
+            .find(|l| l.starts_with(device))
+            .unwrap_or_else(|| panic!("{device} in {table}"));
+        assert!(line.contains("ok:"), "{table}");
+    }
+    assert!(table.contains("device type 0x"), "{table}");
+    // Without the simulator nothing answers: the drives' lines say so, with the fix.
+    let _ = sim.child.kill();
+    let _ = sim.child.wait();
+    let out = std::process::Command::new(common::chassisd())
+        .args(["check", "--config"])
+        .arg(&vehicle)
+        .output()
+        .expect("chassisd check runs");
+    let table = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert_eq!(out.status.code(), Some(1), "{table}");
+    assert!(
+        table.contains("no answer to 3 SDO reads from node 1"),
+        "{table}"
+    );
+    assert!(table.contains("fix: check drive[].node"), "{table}");
+}

@@ -141,6 +141,22 @@ pub struct Drivetrain {
     cutter: Option<CutterState>,
 }
 
+/// The BMS `config` describes, ready to poll and decode.
+pub fn bms_device(config: &crate::config::chassis::BmsConfig) -> Option<BmsDevice> {
+    Some(match config.profile.get()? {
+        BmsProfile::Daly(p) => BmsDevice::Daly(DalyBms::new(
+            config.address,
+            p.host_address,
+            match p.current_above_offset {
+                CurrentAboveOffset::Charge => 1.0,
+                CurrentAboveOffset::Discharge => -1.0,
+            },
+            config.poll_hz,
+        )),
+        BmsProfile::Dbc(p) => BmsDevice::Dbc(DbcBms::new(p).ok()?),
+    })
+}
+
 impl Drivetrain {
     /// The interfaces and devices of `config` (profiles must be resolved).
     pub fn new(config: &VehicleConfig) -> Self {
@@ -219,20 +235,7 @@ impl Drivetrain {
                     .bms
                     .as_ref()
                     .filter(|b| b.bus == c.interface)
-                    .and_then(|b| {
-                        Some(match b.profile.get()? {
-                            BmsProfile::Daly(p) => BmsDevice::Daly(DalyBms::new(
-                                b.address,
-                                p.host_address,
-                                match p.current_above_offset {
-                                    CurrentAboveOffset::Charge => 1.0,
-                                    CurrentAboveOffset::Discharge => -1.0,
-                                },
-                                b.poll_hz,
-                            )),
-                            BmsProfile::Dbc(p) => BmsDevice::Dbc(DbcBms::new(p).ok()?),
-                        })
-                    });
+                    .and_then(bms_device);
                 let watches_sync = config.drive.iter().any(|d| {
                     d.bus == c.interface
                         && matches!(

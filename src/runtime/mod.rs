@@ -3,6 +3,7 @@
 pub mod broker;
 pub mod can;
 pub mod can_sim;
+pub mod check;
 pub mod clock;
 pub mod command_rate;
 pub mod heap;

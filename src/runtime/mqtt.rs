@@ -203,7 +203,8 @@ pub fn low_latency() -> NetworkOptions {
     n
 }
 
-fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
+/// The client options of `spec`: id, keep-alive, last will, credentials, TLS.
+pub(crate) fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
     let c = &spec.config;
     let mut o = MqttOptions::new(c.client_id(&spec.vehicle), c.host.clone(), c.port);
     o.set_keep_alive(c.keep_alive());

@@ -1,0 +1,378 @@
+//! `chassisd check --config FILE`: after the configuration has loaded (every key checked),
+//! each device is probed once and the results are printed as a table: ok with what was
+//! seen, or the reason and the fix. The probes only listen, except the drives' SDO read,
+//! the Daly BMS's poll and the broker's connection.
+//!
+//! - A serial port opens and valid NMEA sentences (GNSS) or frames (IMU) arrive.
+//! - A CAN interface exists and is up.
+//! - Each drive answers an SDO read of its device type (0x1000).
+//! - The BMS answers its poll (Daly) or its messages arrive (DBC).
+//! - The broker accepts a connection.
+
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+
+use tokio::io::AsyncReadExt;
+use tokio_serial::SerialPortBuilderExt;
+
+use crate::config::VehicleConfig;
+use crate::config::imu::ImuProtocol;
+use crate::devices::can::Received;
+use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
+use crate::devices::canopen::{NodeId, ObjectAddress};
+use crate::devices::gnss::NmeaReceiver;
+use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
+use crate::time::Timestamp;
+
+/// How long a serial port is listened to.
+const SERIAL_LISTEN: Duration = Duration::from_secs(3);
+/// How long a drive may take to answer its SDO read, per attempt ...
+const SDO_WAIT: Duration = Duration::from_millis(300);
+/// ... and how many attempts it gets.
+const SDO_ATTEMPTS: u32 = 3;
+/// How long the BMS may take.
+const BMS_WAIT: Duration = Duration::from_secs(3);
+/// How long the broker may take to accept.
+const BROKER_WAIT: Duration = Duration::from_secs(5);
+
+/// One probe's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Probe {
+    /// The device, as the configuration names it.
+    pub device: String,
+    /// What was probed.
+    pub what: String,
+    /// `Ok(what was seen)` or `Err((reason, fix))`.
+    pub result: Result<String, (String, String)>,
+}
+
+impl Probe {
+    fn new(device: &str, what: &str, result: Result<String, (String, String)>) -> Self {
+        Self {
+            device: device.to_owned(),
+            what: what.to_owned(),
+            result,
+        }
+    }
+}
+
+/// The results as a table, one probe per line and the fix under a failure.
+pub fn table(probes: &[Probe]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "{:<14} {:<28} result", "device", "probe");
+    for p in probes {
+        match &p.result {
+            Ok(seen) => {
+                let _ = writeln!(out, "{:<14} {:<28} ok: {seen}", p.device, p.what);
+            }
+            Err((reason, fix)) => {
+                let _ = writeln!(out, "{:<14} {:<28} FAILED: {reason}", p.device, p.what);
+                let _ = writeln!(out, "{:<14} {:<28} fix: {fix}", "", "");
+            }
+        }
+    }
+    let failed = probes.iter().filter(|p| p.result.is_err()).count();
+    let _ = writeln!(
+        out,
+        "{} of {} probes ok",
+        probes.len() - failed,
+        probes.len()
+    );
+    out
+}
+
+fn fail(reason: impl Into<String>, fix: impl Into<String>) -> Result<String, (String, String)> {
+    Err((reason.into(), fix.into()))
+}
+
+/// Runs every probe the configuration calls for.
+pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
+    let mut probes = Vec::new();
+    if let Some(g) = &config.gnss {
+        let result = probe_serial(&g.port, g.baud, Listener::Nmea(Box::default())).await;
+        probes.push(Probe::new("gnss", &format!("NMEA on {}", g.port), result));
+    }
+    if let Some(i) = &config.imu {
+        let decoder = match i.protocol {
+            ImuProtocol::Witmotion => ImuDecoder::WitMotion(WitMotion::new()),
+            ImuProtocol::Hipnuc => ImuDecoder::HiPnuc(HiPnuc::new()),
+        };
+        let result = probe_serial(&i.port, i.baud, Listener::Imu(decoder)).await;
+        let what = format!("{} on {}", i.protocol.name(), i.port);
+        probes.push(Probe::new("imu", &what, result));
+    }
+    for bus in &config.can {
+        let name = bus.interface.as_str();
+        let socket = match super::can::open(name) {
+            Ok(s) => s,
+            Err(e) => {
+                probes.push(Probe::new(
+                    name,
+                    "interface up",
+                    fail(
+                        e,
+                        format!(
+                            "bring it up: `ip link set {name} up type can bitrate 500000` \
+                             (the drives' rate), or for a virtual bus `ip link add dev {name} \
+                             type vcan && ip link set {name} up`"
+                        ),
+                    ),
+                ));
+                continue;
+            }
+        };
+        probes.push(Probe::new(name, "interface up", Ok("up".into())));
+        for drive in config.drive.iter().filter(|d| d.bus == name) {
+            let what = format!("SDO read, node {}", drive.node);
+            let result = if bus.listen_only {
+                Ok("not probed: the interface is listen-only".into())
+            } else {
+                probe_sdo(&socket, drive.node).await
+            };
+            probes.push(Probe::new(&drive.name, &what, result));
+        }
+        if let Some(bms) = config.bms.as_ref().filter(|b| b.bus == name) {
+            let result = probe_bms(&socket, bms, bus.listen_only).await;
+            probes.push(Probe::new("bms", &format!("answers on {name}"), result));
+        }
+    }
+    if let Some(m) = &config.mqtt {
+        let what = format!("broker {}:{}", m.host, m.port);
+        let result = if m.embedded_broker {
+            Ok("embedded: chassisd starts it".into())
+        } else {
+            probe_broker(config).await
+        };
+        probes.push(Probe::new("mqtt", &what, result));
+    }
+    probes
+}
+
+/// What listens on a serial port.
+enum Listener {
+    Nmea(Box<NmeaReceiver>),
+    Imu(ImuDecoder),
+}
+
+async fn probe_serial(
+    port: &str,
+    baud: u32,
+    mut listener: Listener,
+) -> Result<String, (String, String)> {
+    let mut serial = match tokio_serial::new(port, baud).open_native_async() {
+        Ok(s) => s,
+        Err(e) => {
+            return fail(
+                format!("cannot open {port}: {e}"),
+                "check the path (`ls -l /dev/serial/by-id/`), the cable, and that this user \
+                 may open it (group dialout)",
+            );
+        }
+    };
+    let end = Instant::now() + SERIAL_LISTEN;
+    let mut buf = [0u8; 4096];
+    let (mut bytes, mut samples) = (0usize, 0u64);
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        let n = match tokio::time::timeout(left, serial.read(&mut buf)).await {
+            Ok(Ok(0)) | Err(_) => break,
+            Ok(Ok(n)) => n,
+            Ok(Err(e)) => return fail(format!("reading {port}: {e}"), "check the cable"),
+        };
+        bytes += n;
+        let chunk = buf.get(..n).unwrap_or_default();
+        match &mut listener {
+            Listener::Nmea(r) => r.push(Timestamp::default(), chunk, |_| {}),
+            Listener::Imu(d) => d.push(Timestamp::default(), chunk, |_| samples += 1),
+        }
+    }
+    let secs = SERIAL_LISTEN.as_secs_f64();
+    match listener {
+        Listener::Nmea(r) => {
+            let stats = r.stats();
+            let kinds: Vec<String> = stats
+                .sentences_by_kind
+                .iter()
+                .map(|(k, n)| format!("{k} {n}"))
+                .collect();
+            if stats.framer.sentences > 0 {
+                Ok(format!(
+                    "{} valid sentences in {secs:.0} s ({})",
+                    stats.framer.sentences,
+                    kinds.join(", ")
+                ))
+            } else if bytes == 0 {
+                fail(
+                    format!("no data in {secs:.0} s"),
+                    "is the receiver powered, and set to send NMEA on this port?",
+                )
+            } else {
+                fail(
+                    format!(
+                        "{bytes} bytes but no valid sentence in {secs:.0} s ({} checksum errors)",
+                        stats.framer.checksum_errors
+                    ),
+                    "check gnss.baud against the receiver's rate, and that it sends NMEA",
+                )
+            }
+        }
+        Listener::Imu(_) if samples > 0 => Ok(format!(
+            "{samples} samples in {secs:.0} s ({:.0} Hz)",
+            samples as f64 / secs
+        )),
+        Listener::Imu(_) if bytes == 0 => fail(
+            format!("no data in {secs:.0} s"),
+            "is the IMU powered and connected to this port?",
+        ),
+        Listener::Imu(_) => fail(
+            format!("{bytes} bytes but no valid frame in {secs:.0} s"),
+            "check imu.baud and imu.protocol against the IMU's settings",
+        ),
+    }
+}
+
+async fn probe_sdo(
+    socket: &socketcan::tokio::CanSocket,
+    node: u8,
+) -> Result<String, (String, String)> {
+    let Some(id) = NodeId::new(node) else {
+        return fail(
+            format!("node {node} is not a CANopen node id"),
+            "use 1 to 127",
+        );
+    };
+    let device_type = ObjectAddress::new(0x1000, 0);
+    let request = SdoRequest::Read(device_type).frame(id);
+    let reply_id = 0x580 + u32::from(node);
+    for _ in 0..SDO_ATTEMPTS {
+        if let Err(e) = socket.write_frame(request.to_socketcan()).await {
+            return fail(format!("cannot send: {e}"), "check the interface");
+        }
+        let end = Instant::now() + SDO_WAIT;
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            let Ok(Ok(frame)) = tokio::time::timeout(left, socket.read_frame()).await else {
+                break;
+            };
+            let Received::Data(frame) =
+                Received::from_socketcan(&socketcan::CanAnyFrame::from(frame))
+            else {
+                continue;
+            };
+            if frame.id() != reply_id || frame.is_extended() {
+                continue;
+            }
+            return match decode_response(&frame) {
+                Ok(SdoResponse::Data(_, data)) => {
+                    Ok(format!("device type 0x{:08X}", data.as_u32()))
+                }
+                Ok(SdoResponse::Abort(_, code)) => fail(
+                    format!("the drive aborted the read ({code})"),
+                    "the node answers but refuses 0x1000: is it a CiA 402 drive?",
+                ),
+                Ok(other) => fail(format!("unexpected answer {other:?}"), "check the node id"),
+                Err(e) => fail(format!("malformed answer: {e}"), "check the node id"),
+            };
+        }
+    }
+    fail(
+        format!("no answer to {SDO_ATTEMPTS} SDO reads from node {node}"),
+        "check drive[].node against the drive's node id, the bit rate, the termination and \
+         the drive's power",
+    )
+}
+
+async fn probe_bms(
+    socket: &socketcan::tokio::CanSocket,
+    config: &crate::config::chassis::BmsConfig,
+    listen_only: bool,
+) -> Result<String, (String, String)> {
+    let Some(mut bms) = crate::engine::drivetrain::bms_device(config) else {
+        return fail("its profile did not load", "check bms.profile");
+    };
+    let end = Instant::now() + BMS_WAIT;
+    let start = Instant::now();
+    let mut next_poll = Instant::now();
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        if !listen_only && Instant::now() >= next_poll {
+            let mut out = Vec::new();
+            let t = Timestamp::from_nanos(start.elapsed().as_nanos() as u64);
+            bms.poll(t, &mut out);
+            for f in out {
+                let _ = socket.write_frame(f.to_socketcan()).await;
+            }
+            next_poll = Instant::now() + Duration::from_millis(100);
+        }
+        let wait = left.min(Duration::from_millis(100));
+        let Ok(Ok(frame)) = tokio::time::timeout(wait, socket.read_frame()).await else {
+            continue;
+        };
+        let Received::Data(frame) = Received::from_socketcan(&socketcan::CanAnyFrame::from(frame))
+        else {
+            continue;
+        };
+        let t = Timestamp::from_nanos(start.elapsed().as_nanos() as u64);
+        if bms.on_frame(t, &frame) {
+            let r = bms.reading();
+            return Ok(match (r.voltage_v, r.soc_pct) {
+                (Some(v), Some(soc)) => format!("{v:.1} V, {soc:.0} %"),
+                (Some(v), None) => format!("{v:.1} V"),
+                _ => "answers".into(),
+            });
+        }
+    }
+    fail(
+        format!("nothing from the BMS in {:.0} s", BMS_WAIT.as_secs_f64()),
+        "check bms.address and the profile against the pack, its CAN wiring and that it is \
+         awake",
+    )
+}
+
+async fn probe_broker(config: &VehicleConfig) -> Result<String, (String, String)> {
+    let Some(m) = &config.mqtt else {
+        return Ok("no broker configured".into());
+    };
+    let spec = super::mqtt::MqttSpec {
+        config: m.clone(),
+        vehicle: format!("{}-check", config.vehicle.name),
+        subscriptions: Vec::new(),
+    };
+    let options = match super::mqtt::options(&spec) {
+        Ok(o) => o,
+        Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),
+    };
+    let (client, mut events) = rumqttc::AsyncClient::new(options, 10);
+    let result = tokio::time::timeout(BROKER_WAIT, async {
+        loop {
+            match events.poll().await {
+                Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(ack))) => {
+                    return match ack.code {
+                        rumqttc::ConnectReturnCode::Success => Ok("accepts the connection".into()),
+                        code => fail(
+                            format!("refused: {code:?}"),
+                            "check mqtt.username and mqtt.password",
+                        ),
+                    };
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    return fail(
+                        format!("cannot connect: {e}"),
+                        format!(
+                            "is the broker running at {}:{} (e.g. `systemctl status mosquitto`)? \
+                             With TLS, check the certificates",
+                            m.host, m.port
+                        ),
+                    );
+                }
+            }
+        }
+    })
+    .await
+    .unwrap_or_else(|_| {
+        fail(
+            format!("no answer in {:.0} s", BROKER_WAIT.as_secs_f64()),
+            "check mqtt.host, mqtt.port and the network",
+        )
+    });
+    let _ = client.try_disconnect();
+    result
+}
