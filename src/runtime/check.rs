@@ -118,6 +118,22 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
                         ),
                     ),
                 ));
+                // What sits on it cannot be reached: said, not left out.
+                for drive in config.drive.iter().filter(|d| d.bus == name) {
+                    let what = format!("SDO read, node {}", drive.node);
+                    let result = fail(
+                        format!("not probed: {name} is not up"),
+                        format!("bring {name} up first"),
+                    );
+                    probes.push(Probe::new(&drive.name, &what, result));
+                }
+                if config.bms.as_ref().is_some_and(|b| b.bus == name) {
+                    let result = fail(
+                        format!("not probed: {name} is not up"),
+                        format!("bring {name} up first"),
+                    );
+                    probes.push(Probe::new("bms", &format!("answers on {name}"), result));
+                }
                 continue;
             }
         };
