@@ -19,7 +19,7 @@ use crate::config::VehicleConfig;
 use crate::config::imu::ImuProtocol;
 use crate::devices::can::Received;
 use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
-use crate::devices::canopen::{NodeId, ObjectAddress};
+use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::NmeaReceiver;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
 use crate::time::Timestamp;
@@ -256,8 +256,7 @@ async fn probe_sdo(
             "use 1 to 127",
         );
     };
-    let device_type = ObjectAddress::new(0x1000, 0);
-    let request = SdoRequest::Read(device_type).frame(id);
+    let request = SdoRequest::Read(DEVICE_TYPE).frame(id);
     let reply_id = 0x580 + u32::from(node);
     for _ in 0..SDO_ATTEMPTS {
         if let Err(e) = socket.write_frame(request.to_socketcan()).await {

@@ -16,7 +16,7 @@ use crate::devices::canopen::emcy::Emcy;
 use crate::devices::canopen::nmt::{NmtState, heartbeat_frame};
 use crate::devices::canopen::pdo::{PdoEntry, PdoMapping};
 use crate::devices::canopen::sdo::{AbortCode, SdoData, SdoRequest, SdoResponse, decode_request};
-use crate::devices::canopen::{Cob, NodeId, ObjectAddress};
+use crate::devices::canopen::{Cob, DEVICE_TYPE, NodeId, ObjectAddress};
 use crate::devices::cia402::DriveProfile;
 use crate::devices::cia402::profile::{
     ABORT_CONNECTION_OPTION, COMMUNICATION_CYCLE, CONSUMER_HEARTBEAT, LossReaction, MasterLoss,
@@ -41,6 +41,10 @@ impl Default for MotorModel {
         }
     }
 }
+
+/// What the simulated drive answers for its device type: profile 402 (0x0192), a servo
+/// drive (additional information 0x0002).
+const CIA402_DEVICE_TYPE: u32 = 0x0002_0192;
 
 /// The quick-stop ramp is this many times the normal acceleration limit.
 const QUICK_STOP_FACTOR: f64 = 2.0;
@@ -436,6 +440,9 @@ impl SimDrive {
         }
         if addr == objects.controlword {
             return Ok(SdoData::u16(self.controlword));
+        }
+        if addr == DEVICE_TYPE {
+            return Ok(SdoData::u32(CIA402_DEVICE_TYPE));
         }
         if addr == objects.mode_of_operation || addr == ObjectAddress::new(0x6061, 0) {
             return Ok(SdoData::i8(self.mode));

@@ -40,6 +40,9 @@ pub struct ObjectAddress {
     pub sub: u8,
 }
 
+/// CiA 301's device type object, which every CANopen node has.
+pub const DEVICE_TYPE: ObjectAddress = ObjectAddress::new(0x1000, 0);
+
 impl ObjectAddress {
     /// Index and sub-index.
     pub const fn new(index: u16, sub: u8) -> Self {
