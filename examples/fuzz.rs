@@ -27,6 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use chassisd::api::mqtt::MQTT_SOURCE;
 use chassisd::api::rtk::trajectory::MemoryStore;
 use chassisd::config::VehicleConfig;
+use chassisd::config::calibration::CalibrationFile;
 use chassisd::config::imu::ImuProtocol;
 use chassisd::config::mqtt::{
     DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
@@ -126,7 +127,7 @@ fn targets() -> Vec<Target> {
         },
         Target {
             name: "config",
-            about: "vehicle configuration loader (profiles, calibration, TLS files named by it)",
+            about: "vehicle configuration loader (profiles and TLS files named by it)",
             seeds: config_seeds,
             tokens: TOML_TOKENS,
             structured: None,
@@ -134,7 +135,7 @@ fn targets() -> Vec<Target> {
         },
         Target {
             name: "profiles",
-            about: "CiA 402 drive, BMS and e-stop profile loaders",
+            about: "CiA 402 drive, BMS and e-stop profile loaders, the plant and calibration files",
             seeds: profile_seeds,
             tokens: TOML_TOKENS,
             structured: None,
@@ -640,7 +641,20 @@ impl<T: Hash> HashU64 for T {
     }
 }
 
+/// A calibration file as `chassisd calibrate` writes it, with every key.
+const CALIBRATION_SEED: &str = "[chassis]\ntrack_m = 0.42\n\
+[chassis.wheel_radius_m]\nvalue = [0.11, 0.1122]\ndate = \"2026-11-24T09:12:03Z\"\n\
+method = \"runs\"\nverdict = \"ok\"\n[chassis.wheel_radius_m.residuals]\nposition_rms_m = 0.0095\n\
+[imu]\ngyro_bias_rps = [0.0, 0.0, 0.0035]\nmounting_rpy_deg = [0.1, -0.2, 0.0]\n\
+[gnss]\nantenna = [0.2, 0.0]\nheading_offset_deg = 2.0\n";
+
 fn profile_seeds() -> Vec<Vec<u8>> {
+    let mut seeds: Vec<Vec<u8>> = vec![CALIBRATION_SEED.as_bytes().to_vec()];
+    seeds.extend(profile_files());
+    seeds
+}
+
+fn profile_files() -> Vec<Vec<u8>> {
     files_in(&repo().join("devices"), "toml")
         .into_iter()
         .filter(|p| {
@@ -660,6 +674,11 @@ fn profile_runner() -> Runner {
         let drive = DriveProfile::from_toml(&text, &file).is_ok();
         let bms = toml::from_str::<BmsProfile>(&text).map(|p| p.validate(&file).is_ok());
         let plant = PlantConfig::from_toml(&text, &file).is_ok();
+        // A calibration file that loads is also put in force on a configuration.
+        let calibration = CalibrationFile::from_toml(&text, &file).map(|c| {
+            let mut config = VehicleConfig::default();
+            c.apply(&mut config).len() as u64
+        });
         signature(&[
             u64::from(drive),
             match bms {
@@ -668,6 +687,7 @@ fn profile_runner() -> Runner {
                 Err(_) => 0,
             },
             u64::from(plant),
+            calibration.map_or(0, |n| n + 1),
         ])
     })
 }
