@@ -320,3 +320,42 @@ fn a_fast_recording_replays_to_the_same_lines() {
     assert!(replayed.status.success(), "{}", text(&replayed));
     assert_eq!(String::from_utf8_lossy(&replayed.stdout), live);
 }
+
+/// `chassisd run` reads the calibration file beside its configuration and logs each value in
+/// force with its method and date.
+#[test]
+fn the_daemon_logs_the_calibration_in_force() {
+    let dir = common::tempdir("calibrate-daemon");
+    let link = dir.join("gnss-port");
+    let _port = common::pty::Port::open_at(&link);
+    std::fs::create_dir_all(dir.join("calib")).expect("calib folder");
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        format!(
+            "[vehicle]\nname = \"field-mower\"\n\n[gnss]\nport = \"{}\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    std::fs::write(
+        dir.join("calib/field-mower.toml"),
+        "[gnss]\nheading_offset_deg = 1.5\n\n[gnss.antenna]\nvalue = [0.31, -0.02]\n\
+         date = \"2026-11-24T09:00:00Z\"\nmethod = \"antenna circles\"\nverdict = \"ok\"\n",
+    )
+    .expect("calibration");
+    let mut daemon = common::process::Proc::start(&[
+        "run".as_ref(),
+        "--config".as_ref(),
+        dir.join("vehicle.toml").as_os_str(),
+    ]);
+    let wait = std::time::Duration::from_secs(10);
+    daemon.wait_log(wait, "calibration file read");
+    daemon.wait_log(
+        wait,
+        "calibration: gnss.antenna = [0.3100, -0.0200] m (antenna circles, 2026-11-24T09:00:00Z)",
+    );
+    daemon.wait_log(wait, "calibration: gnss.heading_offset_deg = 1.500°");
+    // Running (its signal handlers in place) once the receiver's port is open.
+    daemon.wait_log(wait, "ready");
+    daemon.stop();
+}
