@@ -1,7 +1,8 @@
 //! `chassisd run` as a `Type=notify` service, against a real notify socket (a Unix datagram
 //! socket, as systemd gives `NOTIFY_SOCKET`): READY once its receiver (a real pty) is up,
-//! WATCHDOG pings a quarter of `WATCHDOG_USEC` apart while the core runs, none while the core
-//! is stalled, again when it resumes; SIGTERM brings STOPPING and exit 0. Under journald
+//! WATCHDOG pings a quarter of `WATCHDOG_USEC` apart while the core runs, none while the
+//! process is stopped or its control loop alone is stalled (an injected block), again when
+//! it resumes; SIGTERM brings STOPPING and exit 0. Under journald
 //! (`JOURNAL_STREAM`) log lines carry their syslog priority. The unit file passes
 //! `systemd-analyze verify`.
 
@@ -82,9 +83,10 @@ fn ready_watchdog_from_the_control_loop_and_stopping() {
     );
     let running = pings(&first);
     assert!(running.len() >= 15, "about 10 pings a second: {first:?}");
+    // Never a gap that would let systemd's watchdog fire.
     for pair in running.windows(2) {
         let gap = pair[1].duration_since(pair[0]);
-        assert!(gap < Duration::from_millis(200), "a gap of {gap:?}");
+        assert!(gap < Duration::from_micros(WATCHDOG_US), "a gap of {gap:?}");
     }
 
     // A stalled core feeds nothing; once it runs again, it does.
@@ -166,5 +168,55 @@ fn the_unit_file_verifies() {
     assert!(
         !text.contains("chassisd.service:"),
         "systemd-analyze verify: {text}"
+    );
+}
+
+/// The core's own loop stalled (an injected 1 s block of the control loop, the process
+/// otherwise running): the pings stop for that second and come back after it.
+#[test]
+fn a_stalled_control_loop_stops_feeding_the_watchdog() {
+    let dir = common::tempdir("systemd-stall");
+    let link = dir.join("gnss-port");
+    let _port = Port::open_at(&link);
+    let config = dir.join("vehicle.toml");
+    std::fs::write(&config, format!("[gnss]\nport = \"{}\"\n", link.display())).expect("config");
+    let socket_path = dir.join("notify.sock");
+    let socket = UnixDatagram::bind(&socket_path).expect("notify socket");
+    let mut daemon = Command::new(common::chassisd())
+        .args(["run", "--config"])
+        .arg(&config)
+        .env("NOTIFY_SOCKET", &socket_path)
+        .env("WATCHDOG_USEC", WATCHDOG_US.to_string())
+        .env("CHASSISD_INJECT_CORE_STALL", "1@2")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("chassisd starts");
+    let log = lines_of(daemon.stderr.take().expect("stderr"));
+    let got = messages(&socket, Duration::from_secs(5));
+    let fed = pings(&got);
+    assert!(fed.len() >= 20, "{got:?}");
+    let gaps: Vec<Duration> = fed.windows(2).map(|p| p[1].duration_since(p[0])).collect();
+    let longest = gaps.iter().max().copied().unwrap_or_default();
+    assert!(
+        (Duration::from_millis(900)..Duration::from_millis(1500)).contains(&longest),
+        "the stall's gap: {longest:?} in {gaps:?}"
+    );
+    // Apart from the stall, no gap would let the watchdog fire.
+    assert_eq!(
+        gaps.iter()
+            .filter(|g| **g >= Duration::from_micros(WATCHDOG_US))
+            .count(),
+        1,
+        "{gaps:?}"
+    );
+    kill(Pid::from_raw(daemon.id() as i32), Signal::SIGTERM).expect("SIGTERM");
+    assert!(daemon.wait().expect("exits").success());
+    let lines: Vec<String> = log.try_iter().collect();
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("injected control-loop stall")),
+        "{lines:?}"
     );
 }

@@ -17,7 +17,7 @@ use super::clock::RecordClock;
 use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
-use super::notify::ServiceManager;
+use super::notify::{InjectedStall, ServiceManager};
 use super::recorder::Recorder;
 use super::ros1::Ros1Link;
 use super::serial::{self, SerialSpec};
@@ -259,6 +259,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         expected.push(MQTT_SOURCE.into());
     }
     let mut service = ServiceManager::new(expected, READY_GRACE, std::time::Instant::now());
+    let mut stall = InjectedStall::from_env(std::time::Instant::now());
     if let Some(w) = service.watchdog() {
         tracing::info!(
             period_s = w.as_secs_f64(),
@@ -299,6 +300,9 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
                 now = Some(next_tick);
                 // Fed here only: a core that stops ticking stops the pings.
                 service.tick(std::time::Instant::now());
+                if stall.is_some_and(|s| s.block_if_due(std::time::Instant::now())) {
+                    stall = None;
+                }
             }
             _ = summary.tick() => {
                 summarise_faults(&engine, &can_tx, &mut reported);

@@ -115,6 +115,60 @@ impl ServiceManager {
     }
 }
 
+/// A deliberate stall of the control loop, for checking the watchdog on a real system:
+/// `CHASSISD_INJECT_CORE_STALL=SECONDS@AFTER` blocks the loop once for SECONDS, AFTER
+/// seconds from start. Never set on a vehicle in service (the drives stop by themselves, and
+/// systemd kills the daemon); its use is logged as a warning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InjectedStall {
+    at: Instant,
+    length: Duration,
+}
+
+/// The environment variable of [`InjectedStall`].
+pub const INJECT_CORE_STALL: &str = "CHASSISD_INJECT_CORE_STALL";
+
+impl InjectedStall {
+    /// The stall the environment asks for, if any (a malformed value is logged and ignored).
+    pub fn from_env(now: Instant) -> Option<Self> {
+        let text = std::env::var(INJECT_CORE_STALL).ok()?;
+        let parsed = text.split_once('@').and_then(|(length, after)| {
+            let length: f64 = length.trim().parse().ok()?;
+            let after: f64 = after.trim().parse().ok()?;
+            let ok = |v: f64| v.is_finite() && (0.0..=3600.0).contains(&v);
+            (ok(length) && ok(after)).then(|| Self {
+                at: now + Duration::from_secs_f64(after),
+                length: Duration::from_secs_f64(length),
+            })
+        });
+        match parsed {
+            Some(_) => tracing::warn!(
+                value = %text,
+                "{INJECT_CORE_STALL} is set: the control loop will stall on purpose"
+            ),
+            None => tracing::warn!(
+                value = %text,
+                "{INJECT_CORE_STALL} ignored: give SECONDS@AFTER, e.g. 3@5"
+            ),
+        }
+        parsed
+    }
+
+    /// Blocks the calling thread for the stall's length once its time has come; true when
+    /// it did (the stall is then spent).
+    pub fn block_if_due(&self, now: Instant) -> bool {
+        if now < self.at {
+            return false;
+        }
+        tracing::warn!(
+            seconds = self.length.as_secs_f64(),
+            "injected control-loop stall"
+        );
+        std::thread::sleep(self.length);
+        true
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
