@@ -255,17 +255,7 @@ mod ros1 {
     }
 
     pub fn runner() -> Runner {
-        let fresh = || {
-            let plant = PlantConfig::builtin().expect("built-in plant");
-            Lockstep::with_mqtt(
-                plant,
-                5,
-                Timestamp::from_micros(1_000_000),
-                None,
-                Box::new(MemoryStore::default()),
-            )
-            .expect("simulated vehicle")
-        };
+        let fresh = || simulated_vehicle(5, None);
         let mut sim = fresh();
         let mut n = 0u64;
         Box::new(move |input| {
@@ -780,6 +770,19 @@ fn dialect_seeds() -> Vec<Vec<u8>> {
     seeds
 }
 
+/// The built-in simulated vehicle with noise `seed`, speaking the dialects of `mqtt`.
+fn simulated_vehicle(seed: u64, mqtt: Option<MqttConfig>) -> Lockstep {
+    let plant = PlantConfig::builtin().expect("built-in plant");
+    Lockstep::with_mqtt(
+        plant,
+        seed,
+        Timestamp::from_micros(1_000_000),
+        mqtt,
+        Box::new(MemoryStore::default()),
+    )
+    .expect("simulated vehicle")
+}
+
 fn dialect_runner() -> Runner {
     let fresh = || {
         let mqtt = MqttConfig {
@@ -796,15 +799,7 @@ fn dialect_runner() -> Runner {
             }),
             ..MqttConfig::default()
         };
-        let plant = PlantConfig::builtin().expect("built-in plant");
-        Lockstep::with_mqtt(
-            plant,
-            3,
-            Timestamp::from_micros(1_000_000),
-            Some(mqtt),
-            Box::new(MemoryStore::default()),
-        )
-        .expect("simulated vehicle")
+        simulated_vehicle(3, Some(mqtt))
     };
     let mut sim = fresh();
     let mut n = 0u64;

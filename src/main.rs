@@ -660,6 +660,10 @@ fn calibrate(
         data.vehicle.vehicle.name,
         file.to_toml()
     );
+    // What is written must load: a value out of range (or not a number) is refused here,
+    // not at the vehicle's next start.
+    CalibrationFile::from_toml(&text, &out)
+        .context("the result is not a valid calibration; nothing was written")?;
     std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
     println!("written: {}", out.display());
     let plot = plot.unwrap_or_else(|| {

@@ -81,18 +81,26 @@ fn text(o: &Output) -> String {
     )
 }
 
+/// `chassisd sim --fast ARGS [--plant PLANT] --record DIR`, which must succeed.
+fn sim_fast(args: &[&str], plant: Option<&Path>, dir: &Path) -> Output {
+    let mut c = Command::new(common::chassisd());
+    c.args(["sim", "--fast"]).args(args);
+    if let Some(p) = plant {
+        c.arg("--plant").arg(p);
+    }
+    let o = c.arg("--record").arg(dir).output().expect("chassisd runs");
+    assert!(o.status.success(), "{}", text(&o));
+    o
+}
+
 /// Records the calibration scenario of `plant` with `seed` into `dir`.
 fn record(plant: &Path, seed: u64, dir: &Path) {
-    let o = Command::new(common::chassisd())
-        .args(["sim", "--fast", "--scenario", "calibration", "--seed"])
-        .arg(seed.to_string())
-        .arg("--plant")
-        .arg(plant)
-        .arg("--record")
-        .arg(dir)
-        .output()
-        .expect("chassisd runs");
-    assert!(o.status.success(), "{}", text(&o));
+    let seed = seed.to_string();
+    sim_fast(
+        &["--scenario", "calibration", "--seed", &seed],
+        Some(plant),
+        dir,
+    );
 }
 
 /// `calibrate PROCEDURE --from DIR --out FILE`.
@@ -262,41 +270,20 @@ fn data_that_cannot_support_a_result_is_refused() {
     let (plant, _) = miscalibrated("mower", &dir);
     // The straight scenario stands still for 5 s only.
     let straight = dir.join("straight");
-    let o = Command::new(common::chassisd())
-        .args(["sim", "--fast", "--scenario", "straight", "--plant"])
-        .arg(&plant)
-        .arg("--record")
-        .arg(&straight)
-        .output()
-        .expect("runs");
-    assert!(o.status.success(), "{}", text(&o));
+    sim_fast(&["--scenario", "straight"], Some(&plant), &straight);
     let out = dir.join("c.toml");
     let o = calibrate("imu", &straight, &out);
     assert!(!o.status.success());
     assert!(text(&o).contains("longest still span"), "{}", text(&o));
     // Standing still the whole time: nothing to fit the wheels on.
     let still = dir.join("still");
-    let o = Command::new(common::chassisd())
-        .args(["sim", "--fast", "--duration", "40", "--plant"])
-        .arg(&plant)
-        .arg("--record")
-        .arg(&still)
-        .output()
-        .expect("runs");
-    assert!(o.status.success(), "{}", text(&o));
+    sim_fast(&["--duration", "40"], Some(&plant), &still);
     let o = calibrate("odometry", &still, &out);
     assert!(!o.status.success());
     assert!(text(&o).contains("too short"), "{}", text(&o));
     // RTK float or worse for most of the run.
     let float = dir.join("float");
-    let o = Command::new(common::chassisd())
-        .args(["sim", "--fast", "--scenario", "float", "--plant"])
-        .arg(&plant)
-        .arg("--record")
-        .arg(&float)
-        .output()
-        .expect("runs");
-    assert!(o.status.success(), "{}", text(&o));
+    sim_fast(&["--scenario", "float"], Some(&plant), &float);
     let o = calibrate("gnss", &float, &out);
     assert!(!o.status.success());
     assert!(text(&o).contains("RTK is not fixed"), "{}", text(&o));
@@ -308,12 +295,7 @@ fn data_that_cannot_support_a_result_is_refused() {
 fn a_fast_recording_replays_to_the_same_lines() {
     let dir = common::tempdir("calibrate-fast-replay");
     let rec = dir.join("rec");
-    let o = Command::new(common::chassisd())
-        .args(["sim", "--fast", "--scenario", "turns", "--record"])
-        .arg(&rec)
-        .output()
-        .expect("runs");
-    assert!(o.status.success(), "{}", text(&o));
+    let o = sim_fast(&["--scenario", "turns"], None, &rec);
     let live = String::from_utf8_lossy(&o.stdout).into_owned();
     assert!(live.lines().count() > 1000, "10 lines a simulated second");
     let replayed = common::replay(&rec);

@@ -47,27 +47,54 @@ fn pings(got: &[(Instant, String)]) -> Vec<Instant> {
         .collect()
 }
 
+/// `chassisd run` on a pty receiver as systemd starts it: a notify socket, the watchdog on,
+/// and one more environment variable.
+struct Service {
+    _port: Port,
+    socket: UnixDatagram,
+    daemon: std::process::Child,
+    log: std::sync::mpsc::Receiver<String>,
+}
+
+impl Service {
+    fn start(name: &str, env: (&str, &str)) -> Service {
+        let dir = common::tempdir(name);
+        let link = dir.join("gnss-port");
+        let port = Port::open_at(&link);
+        let config = dir.join("vehicle.toml");
+        std::fs::write(&config, format!("[gnss]\nport = \"{}\"\n", link.display()))
+            .expect("config");
+        let socket_path = dir.join("notify.sock");
+        let socket = UnixDatagram::bind(&socket_path).expect("notify socket");
+        let mut daemon = Command::new(common::chassisd())
+            .args(["run", "--config"])
+            .arg(&config)
+            .env("NOTIFY_SOCKET", &socket_path)
+            .env("WATCHDOG_USEC", WATCHDOG_US.to_string())
+            .env("RUST_LOG", "info")
+            .env(env.0, env.1)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("chassisd starts");
+        let log = lines_of(daemon.stderr.take().expect("stderr"));
+        Service {
+            _port: port,
+            socket,
+            daemon,
+            log,
+        }
+    }
+}
+
 #[test]
 fn ready_watchdog_from_the_control_loop_and_stopping() {
-    let dir = common::tempdir("systemd-notify");
-    let link = dir.join("gnss-port");
-    let _port = Port::open_at(&link);
-    let config = dir.join("vehicle.toml");
-    std::fs::write(&config, format!("[gnss]\nport = \"{}\"\n", link.display())).expect("config");
-    let socket_path = dir.join("notify.sock");
-    let socket = UnixDatagram::bind(&socket_path).expect("notify socket");
-    let mut daemon = Command::new(common::chassisd())
-        .args(["run", "--config"])
-        .arg(&config)
-        .env("NOTIFY_SOCKET", &socket_path)
-        .env("WATCHDOG_USEC", WATCHDOG_US.to_string())
-        .env("JOURNAL_STREAM", "8:12345")
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("chassisd starts");
-    let log = lines_of(daemon.stderr.take().expect("stderr"));
+    let Service {
+        _port,
+        socket,
+        mut daemon,
+        log,
+    } = Service::start("systemd-notify", ("JOURNAL_STREAM", "8:12345"));
     let pid = Pid::from_raw(daemon.id() as i32);
 
     let first = messages(&socket, Duration::from_secs(3));
@@ -175,24 +202,12 @@ fn the_unit_file_verifies() {
 /// otherwise running): the pings stop for that second and come back after it.
 #[test]
 fn a_stalled_control_loop_stops_feeding_the_watchdog() {
-    let dir = common::tempdir("systemd-stall");
-    let link = dir.join("gnss-port");
-    let _port = Port::open_at(&link);
-    let config = dir.join("vehicle.toml");
-    std::fs::write(&config, format!("[gnss]\nport = \"{}\"\n", link.display())).expect("config");
-    let socket_path = dir.join("notify.sock");
-    let socket = UnixDatagram::bind(&socket_path).expect("notify socket");
-    let mut daemon = Command::new(common::chassisd())
-        .args(["run", "--config"])
-        .arg(&config)
-        .env("NOTIFY_SOCKET", &socket_path)
-        .env("WATCHDOG_USEC", WATCHDOG_US.to_string())
-        .env("CHASSISD_INJECT_CORE_STALL", "1@2")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("chassisd starts");
-    let log = lines_of(daemon.stderr.take().expect("stderr"));
+    let Service {
+        _port,
+        socket,
+        mut daemon,
+        log,
+    } = Service::start("systemd-stall", ("CHASSISD_INJECT_CORE_STALL", "1@2"));
     let got = messages(&socket, Duration::from_secs(5));
     let fed = pings(&got);
     assert!(fed.len() >= 20, "{got:?}");

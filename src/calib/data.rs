@@ -114,6 +114,8 @@ impl Gather {
                 h_m: height,
             };
             self.positions.push((t, at, fix.quality));
+            // A recording without IMU or wheels is bounded by its fixes.
+            self.truncated = t > MAX_SPAN_S;
         }
         if let Some(h) = fix.heading_deg
             && self.last_heading != Some(h.rx)

@@ -2,18 +2,58 @@
 //! configured device and the broker have come up (or, with some still missing, after a grace
 //! period, saying which in STATUS), WATCHDOG pings from the control loop itself (a hung core
 //! stops them, and systemd restarts it), and STOPPING on the way out. Without
-//! `NOTIFY_SOCKET` every call does nothing.
+//! `NOTIFY_SOCKET` every call does nothing. READY and the pings leave from a thread of their
+//! own: a datagram send blocks when systemd's queue is full, and the control loop must never
+//! wait on a socket.
 
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
 use sd_notify::NotifyState;
 
+/// What the sending thread passes on.
+#[derive(Debug)]
+enum Note {
+    Ready(String),
+    Watchdog,
+}
+
+/// Notes waiting for the sending thread; beyond this they are dropped (a sender that far
+/// behind is stuck, and a missed ping is what systemd should then see).
+const OUTBOX: usize = 4;
+
+/// Starts the thread that hands notes to the service manager.
+fn spawn_sender() -> Option<std::sync::mpsc::SyncSender<Note>> {
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Note>(OUTBOX);
+    let spawned = std::thread::Builder::new()
+        .name("sd-notify".into())
+        .spawn(move || {
+            for note in rx {
+                let result = match &note {
+                    Note::Ready(status) => {
+                        sd_notify::notify(&[NotifyState::Ready, NotifyState::Status(status)])
+                    }
+                    Note::Watchdog => sd_notify::notify(&[NotifyState::Watchdog]),
+                };
+                if let Err(e) = result {
+                    tracing::warn!(error = %e, "cannot notify the service manager");
+                }
+            }
+        });
+    match spawned {
+        Ok(_) => Some(tx),
+        Err(e) => {
+            tracing::error!(error = %e, "cannot start the notify thread: systemd hears nothing");
+            None
+        }
+    }
+}
+
 /// The service manager as the run loop tells it how things stand.
 #[derive(Debug)]
 pub struct ServiceManager {
-    /// Whether anyone listens (`NOTIFY_SOCKET` is set).
-    listening: bool,
+    /// The sending thread, when anyone listens (`NOTIFY_SOCKET` is set).
+    outbox: Option<std::sync::mpsc::SyncSender<Note>>,
     /// Ping at least this often (a quarter of `WatchdogSec`), when the watchdog is on.
     feed_every: Option<Duration>,
     last_feed: Option<Instant>,
@@ -44,7 +84,7 @@ impl ServiceManager {
         now: Instant,
     ) -> Self {
         Self {
-            listening,
+            outbox: listening.then(spawn_sender).flatten(),
             feed_every: watchdog.map(|w| w / 4),
             last_feed: None,
             waiting: sources.into_iter().collect(),
@@ -80,14 +120,20 @@ impl ServiceManager {
                 .is_none_or(|l| now.duration_since(l) >= every)
         {
             self.last_feed = Some(now);
-            self.send(&[NotifyState::Watchdog]);
+            self.post(Note::Watchdog);
         }
     }
 
-    /// The daemon is shutting down for `why`.
+    /// The daemon is shutting down for `why` (sent from the calling thread: the control loop
+    /// has ended).
     pub fn stopping(&self, why: &str) {
+        if self.outbox.is_none() {
+            return;
+        }
         let status = format!("stopping ({why}): drives quick-stopped, targets zero");
-        self.send(&[NotifyState::Stopping, NotifyState::Status(&status)]);
+        if let Err(e) = sd_notify::notify(&[NotifyState::Stopping, NotifyState::Status(&status)]) {
+            tracing::warn!(error = %e, "cannot notify the service manager");
+        }
     }
 
     fn check_ready(&mut self, now: Instant) {
@@ -102,15 +148,13 @@ impl ServiceManager {
             format!("running; not up yet: {}", missing.join(", "))
         };
         tracing::info!(%status, "ready");
-        self.send(&[NotifyState::Ready, NotifyState::Status(&status)]);
+        self.post(Note::Ready(status));
     }
 
-    fn send(&self, states: &[NotifyState]) {
-        if !self.listening {
-            return;
-        }
-        if let Err(e) = sd_notify::notify(states) {
-            tracing::warn!(error = %e, "cannot notify the service manager");
+    /// Hands a note to the sending thread without waiting.
+    fn post(&self, note: Note) {
+        if let Some(outbox) = &self.outbox {
+            let _ = outbox.try_send(note);
         }
     }
 }

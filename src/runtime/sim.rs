@@ -34,7 +34,7 @@ use crate::time::Timestamp;
 /// How often the simulation catches up with the wall clock.
 const PACE: Duration = Duration::from_millis(10);
 /// Without a scenario, the receiver keeps an RTK-fixed solution.
-const RTK_FIXED: GnssCondition = GnssCondition {
+pub(crate) const RTK_FIXED: GnssCondition = GnssCondition {
     quality: Some(FixQuality::RtkFixed),
     offset: (0.0, 0.0),
 };
@@ -245,13 +245,8 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         "{}",
         start_line(&options, sim.config().vehicle.name.as_str())
     );
-    let end = options
-        .duration
-        .or(options
-            .scenario
-            .as_ref()
-            .map(|s| Duration::from_secs_f64(s.duration_s())))
-        .map(|d| start.saturating_add(d));
+    let end =
+        run_length(options.duration, options.scenario.as_ref()).map(|d| start.saturating_add(d));
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("cannot install the SIGTERM handler")?;
     // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
@@ -313,6 +308,15 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         writer.finish(Duration::from_millis(500));
     }
     Ok(())
+}
+
+/// How long a simulation runs: `--duration` wins over the scenario's own length; neither
+/// means until stopped.
+pub(crate) fn run_length(
+    duration: Option<Duration>,
+    scenario: Option<&Scenario>,
+) -> Option<Duration> {
+    duration.or(scenario.map(|s| Duration::from_secs_f64(s.duration_s())))
 }
 
 /// The line a person reads first: what runs, where to watch it, how to stop it.

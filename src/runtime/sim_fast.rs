@@ -10,11 +10,10 @@ use anyhow::Context;
 
 use super::clock::RecordClock;
 use crate::api::rtk::BaseStatus;
-use crate::devices::gnss::FixQuality;
 use crate::engine::EngineOutput;
 use crate::record::{Record, RecordError, RecordingWriter};
 use crate::sim::lockstep::{self, Lockstep, Sink};
-use crate::sim::plant::{GnssCondition, PlantConfig};
+use crate::sim::plant::PlantConfig;
 use crate::sim::scenario::Scenario;
 
 /// Options of `chassisd sim --fast`.
@@ -121,22 +120,12 @@ pub fn run(options: FastOptions, out: impl Write) -> anyhow::Result<FastSummary>
         lines: 0,
         error: None,
     };
-    let length = options
-        .duration
-        .or(options
-            .scenario
-            .as_ref()
-            .map(|s| Duration::from_secs_f64(s.duration_s())))
-        .unwrap_or_default();
-    let end = start.saturating_add(length);
-    let fixed = GnssCondition {
-        quality: Some(FixQuality::RtkFixed),
-        offset: (0.0, 0.0),
-    };
+    let length = super::sim::run_length(options.duration, options.scenario.as_ref());
+    let end = start.saturating_add(length.unwrap_or_default());
     while sim.time() < end && sink.error.is_none() {
         match &options.scenario {
             Some(s) => sim.step_scripted(s, &mut sink),
-            None => sim.step(fixed, &mut sink),
+            None => sim.step(super::sim::RTK_FIXED, &mut sink),
         }
     }
     if let Some(e) = sink.error.take() {
