@@ -70,6 +70,30 @@ enum Command {
         #[arg(long, value_name = "URI")]
         ros_master: Option<String>,
     },
+    /// Record every raw frame of every device, and every command sent to the vehicle over
+    /// MQTT, without driving anything (listen-only: no engine, nothing transmitted). Writes
+    /// segments DIR/0001, DIR/0002, … (each a recording that replays on its own), rotated by
+    /// size or time; the oldest beyond --keep are removed. Stops at SIGINT or SIGTERM.
+    Record {
+        /// Vehicle configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// New folder for the segments.
+        #[arg(long)]
+        out: PathBuf,
+        /// A segment ends once it holds this many megabytes (10^6 bytes).
+        #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u64).range(1..))]
+        segment_mb: u64,
+        /// A segment ends once it spans this many seconds.
+        #[arg(long, default_value = "3600", value_parser = seconds_arg)]
+        segment_s: Duration,
+        /// Keep at most this many segments, removing the oldest (0: keep all).
+        #[arg(long, default_value_t = 48)]
+        keep: usize,
+        /// Stop after this many seconds.
+        #[arg(long, value_parser = seconds_arg)]
+        duration: Option<Duration>,
+    },
     /// Run the simulated vehicle in real time through the live engine (no hardware): print
     /// base_status JSON lines at 10 Hz.
     Sim {
@@ -476,6 +500,34 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             // for it.
             runtime.shutdown_background();
             result.map(|()| true)
+        }
+        Command::Record {
+            config,
+            out,
+            segment_mb,
+            segment_s,
+            keep,
+            duration,
+        } => {
+            let vehicle = VehicleConfig::load(&config)?;
+            let runtime = async_runtime(1)?;
+            let result = runtime.block_on(chassisd::runtime::listen::run(
+                chassisd::runtime::listen::ListenOptions {
+                    config: vehicle,
+                    out,
+                    rotation: chassisd::record::segments::Rotation {
+                        max_bytes: segment_mb.saturating_mul(1_000_000),
+                        max_span: segment_s,
+                        keep: (keep > 0).then_some(keep),
+                    },
+                    duration,
+                    progress: std::io::stderr().is_terminal(),
+                },
+            ));
+            runtime.shutdown_background();
+            let summary = result?;
+            eprintln!("{}", summary.line());
+            Ok(summary.dropped == 0)
         }
         Command::Sim {
             plant,

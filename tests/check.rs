@@ -7,50 +7,14 @@
 
 mod common;
 
-use std::io::Write;
 use std::process::Command;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::sync::Mutex;
 
 use common::mqtt::{Mosquitto, free_port};
-use common::pty::Port;
+use common::pty::{Port, Talker};
 
 /// The pty tests take turns so no child inherits another test's descriptors.
 static SERIAL: Mutex<()> = Mutex::new(());
-
-/// A receiver sending GGA and RMC at 10 Hz until dropped.
-struct Receiver {
-    running: Arc<AtomicBool>,
-}
-
-impl Receiver {
-    fn start(mut port: Port) -> Receiver {
-        let running = Arc::new(AtomicBool::new(true));
-        let flag = running.clone();
-        std::thread::spawn(move || {
-            while flag.load(Ordering::Relaxed) {
-                for body in [
-                    "GNGGA,120000.00,2301.5,N,11301.17918515,E,4,20,0.6,12.3,M,-6.1,M,1.0,0123",
-                    "GNRMC,120000.00,A,2301.5,N,11301.17918515,E,0.0,0.0,241126,,,R",
-                ] {
-                    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
-                    let _ = port
-                        .master
-                        .write_all(format!("${body}*{sum:02X}\r\n").as_bytes());
-                }
-                std::thread::sleep(Duration::from_millis(100));
-            }
-        });
-        Receiver { running }
-    }
-}
-
-impl Drop for Receiver {
-    fn drop(&mut self) {
-        self.running.store(false, Ordering::Relaxed);
-    }
-}
 
 fn check(config: &str, dir: &std::path::Path) -> (Option<i32>, String) {
     let path = dir.join("vehicle.toml");
@@ -85,7 +49,7 @@ fn every_device_gets_ok_or_the_reason_and_the_fix() {
     let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
     let dir = common::tempdir("check-devices");
     let link = dir.join("gnss-port");
-    let _receiver = Receiver::start(Port::open_at(&link));
+    let _receiver = Talker::start(Port::open_at(&link));
     let broker = Mosquitto::start();
     let config = format!(
         "[gnss]\nport = \"{}\"\n\n[imu]\nport = \"{}\"\nprotocol = \"hipnuc\"\n\n\
@@ -114,7 +78,7 @@ fn all_ok_exits_0_and_an_absent_broker_is_named() {
     let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
     let dir = common::tempdir("check-ok");
     let link = dir.join("gnss-port");
-    let _receiver = Receiver::start(Port::open_at(&link));
+    let _receiver = Talker::start(Port::open_at(&link));
     let broker = Mosquitto::start();
     let port = broker
         .address()

@@ -44,6 +44,36 @@ pub struct SourceMeta {
 }
 
 impl SourceMeta {
+    /// A serial device's source, `<name>.log`, read with `protocol`.
+    pub fn serial(name: &str, protocol: &str) -> Self {
+        Self::in_file(
+            name,
+            SourceKind::Serial,
+            format!("{name}.log"),
+            Some(protocol),
+        )
+    }
+
+    /// A CAN interface's source, `<name>.log` (its events file is named on creation).
+    pub fn can(name: &str) -> Self {
+        Self::in_file(name, SourceKind::Can, format!("{name}.log"), None)
+    }
+
+    /// A command channel's source, in `file`.
+    pub fn commands(name: &str, file: &str) -> Self {
+        Self::in_file(name, SourceKind::Commands, file.to_owned(), None)
+    }
+
+    fn in_file(name: &str, kind: SourceKind, file: String, protocol: Option<&str>) -> Self {
+        Self {
+            name: name.to_owned(),
+            kind,
+            file,
+            protocol: protocol.map(str::to_owned),
+            events: None,
+        }
+    }
+
     /// The events file a CAN source gets: `can0.log` → `can0.events.log`.
     pub fn default_events_file(&self) -> Option<String> {
         (self.kind == SourceKind::Can).then(|| {

@@ -5,6 +5,7 @@ pub mod envelope;
 pub mod meta;
 pub mod nmea_import;
 pub mod reader;
+pub mod segments;
 pub mod writer;
 
 use bytes::Bytes;

@@ -30,6 +30,8 @@ pub struct RecordingWriter {
     covered: File,
     /// The latest record time written.
     latest: Option<Timestamp>,
+    /// Bytes of records written (before buffering).
+    written: u64,
     /// The time last noted in `covered`.
     noted: Option<Timestamp>,
 }
@@ -112,6 +114,7 @@ impl RecordingWriter {
             sources: files,
             covered,
             latest: None,
+            written: 0,
             noted: None,
         })
     }
@@ -201,7 +204,18 @@ impl RecordingWriter {
                 source,
             })?;
         self.latest = self.latest.max(Some(record.t));
+        self.written += line.len() as u64;
         Ok(())
+    }
+
+    /// Bytes of records written so far.
+    pub fn bytes_written(&self) -> u64 {
+        self.written
+    }
+
+    /// The folder written.
+    pub fn dir(&self) -> &Path {
+        &self.dir
     }
 
     /// Flushes every file, then notes the time they all cover in [`COVERED_FILE`] (one

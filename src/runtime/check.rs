@@ -345,12 +345,9 @@ async fn probe_broker(config: &VehicleConfig) -> Result<String, (String, String)
     let Some(m) = &config.mqtt else {
         return Ok("no broker configured".into());
     };
-    let spec = super::mqtt::MqttSpec {
-        config: m.clone(),
-        vehicle: format!("{}-check", config.vehicle.name),
-        subscriptions: Vec::new(),
-    };
-    let options = match super::mqtt::options(&spec) {
+    // A client id of its own (the daemon's stays connected) and no last will.
+    let client_id = format!("{}-check", m.client_id(&config.vehicle.name));
+    let options = match super::mqtt::client_options(m, client_id) {
         Ok(o) => o,
         Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),
     };

@@ -12,15 +12,15 @@ use bytes::Bytes;
 use tokio::sync::mpsc;
 
 use super::broker;
-use super::can::{self, CanSpec, CanTx};
+use super::can::{self, CanTx};
 use super::clock::RecordClock;
+use super::drivers;
 use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::notify::{InjectedStall, ServiceManager};
 use super::recorder::Recorder;
 use super::ros1::Ros1Link;
-use super::serial::{self, SerialSpec};
 use super::status_out::StatusOut;
 use super::trajectory_writer;
 use crate::api::local;
@@ -30,8 +30,8 @@ use crate::api::rtk::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
 use crate::core::LinkState;
 use crate::devices::gnss::GnssStats;
-use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
-use crate::record::{Payload, Record, RecordingWriter, SourceKind, SourceMeta};
+use crate::engine::{Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
+use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
 use crate::time::Timestamp;
 
 /// Records waiting for the engine before drivers wait.
@@ -42,10 +42,7 @@ const SUMMARY_EVERY: Duration = Duration::from_secs(30);
 const STOP_FLUSH: Duration = Duration::from_millis(500);
 /// Devices still down this long after start: systemd hears READY anyway, with their names.
 const READY_GRACE: Duration = Duration::from_secs(10);
-/// Source name of the GNSS receiver.
-pub const GNSS_SOURCE: &str = "gnss";
-/// Source name of the IMU.
-pub const IMU_SOURCE: &str = "imu";
+pub use super::drivers::{GNSS_SOURCE, IMU_SOURCE};
 /// Source name of the local command channel.
 pub const STDIN_SOURCE: &str = crate::engine::LOCAL_COMMANDS;
 
@@ -93,78 +90,18 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     heap::spawn();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
     let config = &options.config;
-    let mut sources = Vec::new();
-    let mut source_meta = Vec::new();
-    if let Some(gnss) = &config.gnss {
-        sources.push((GNSS_SOURCE.to_owned(), Decoder::Nmea));
-        source_meta.push(SourceMeta {
-            name: GNSS_SOURCE.into(),
-            kind: SourceKind::Serial,
-            file: format!("{GNSS_SOURCE}.log"),
-            protocol: Some(Decoder::Nmea.protocol().into()),
-            events: None,
-        });
-        let spec = SerialSpec {
-            source: GNSS_SOURCE.into(),
-            port: gnss.port.clone(),
-            baud: gnss.baud,
-            reconnect_max: gnss.reconnect_max(),
-        };
-        tokio::spawn(serial::run(spec, clock, tx.clone()));
-    }
-    if let Some(imu) = &config.imu {
-        let decoder = Decoder::Imu(imu.protocol);
-        sources.push((IMU_SOURCE.to_owned(), decoder));
-        source_meta.push(SourceMeta {
-            name: IMU_SOURCE.into(),
-            kind: SourceKind::Serial,
-            file: format!("{IMU_SOURCE}.log"),
-            protocol: Some(decoder.protocol().into()),
-            events: None,
-        });
-        let spec = SerialSpec {
-            source: IMU_SOURCE.into(),
-            port: imu.port.clone(),
-            baud: imu.baud,
-            reconnect_max: Duration::from_secs_f64(imu.reconnect_max_s),
-        };
-        tokio::spawn(serial::run(spec, clock, tx.clone()));
-    }
-    let mut can_tx: BTreeMap<String, CanTx> = BTreeMap::new();
-    for bus in &config.can {
-        source_meta.push(SourceMeta {
-            name: bus.interface.clone(),
-            kind: SourceKind::Can,
-            file: format!("{}.log", bus.interface),
-            protocol: None,
-            events: None,
-        });
-        let spec = CanSpec {
-            interface: bus.interface.clone(),
-            reconnect_max: Duration::from_secs_f64(bus.reconnect_max_s),
-        };
-        can_tx.insert(
-            bus.interface.clone(),
-            can::spawn(spec, clock, tx.clone(), bus.tx_queue),
-        );
-    }
+    let devices = drivers::start(config, clock, &tx);
+    let sources = devices.decoders;
+    let mut source_meta = devices.sources;
+    let can_tx = devices.can_tx;
     if !config.drive.is_empty() {
-        source_meta.push(SourceMeta {
-            name: PROCESS_SOURCE.into(),
-            kind: SourceKind::Commands,
-            file: format!("{PROCESS_SOURCE}.log"),
-            protocol: None,
-            events: None,
-        });
+        source_meta.push(SourceMeta::commands(
+            PROCESS_SOURCE,
+            &format!("{PROCESS_SOURCE}.log"),
+        ));
     }
     if options.commands_stdin {
-        source_meta.push(SourceMeta {
-            name: STDIN_SOURCE.into(),
-            kind: SourceKind::Commands,
-            file: "commands.log".into(),
-            protocol: None,
-            events: None,
-        });
+        source_meta.push(SourceMeta::commands(STDIN_SOURCE, "commands.log"));
         tokio::spawn(read_commands(clock, tx.clone()));
     }
     if config
@@ -183,26 +120,20 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             if m.embedded_broker {
                 broker::start(&m.host, m.port, m.max_payload)?;
             }
-            source_meta.push(SourceMeta {
-                name: MQTT_SOURCE.into(),
-                kind: SourceKind::Commands,
-                file: format!("{MQTT_SOURCE}.log"),
-                protocol: None,
-                events: None,
-            });
+            source_meta.push(SourceMeta::commands(
+                MQTT_SOURCE,
+                &format!("{MQTT_SOURCE}.log"),
+            ));
             let spec = MqttSpec {
                 config: m.clone(),
                 vehicle: config.vehicle.name.clone(),
                 subscriptions: engine.subscriptions(),
             };
             if m.root.is_some() {
-                source_meta.push(SourceMeta {
-                    name: HOST_SOURCE.into(),
-                    kind: SourceKind::Commands,
-                    file: format!("{HOST_SOURCE}.log"),
-                    protocol: None,
-                    events: None,
-                });
+                source_meta.push(SourceMeta::commands(
+                    HOST_SOURCE,
+                    &format!("{HOST_SOURCE}.log"),
+                ));
                 host::spawn(clock, tx.clone());
             }
             Some(mqtt::spawn(spec, clock, tx.clone())?)
@@ -247,14 +178,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     };
 
     // What must come up before systemd hears READY: each device, and the broker.
-    let mut expected: Vec<String> = Vec::new();
-    if config.gnss.is_some() {
-        expected.push(GNSS_SOURCE.into());
-    }
-    if config.imu.is_some() {
-        expected.push(IMU_SOURCE.into());
-    }
-    expected.extend(config.can.iter().map(|c| c.interface.clone()));
+    let mut expected = devices.names;
     if config.mqtt.is_some() {
         expected.push(MQTT_SOURCE.into());
     }

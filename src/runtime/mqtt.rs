@@ -206,18 +206,25 @@ pub fn low_latency() -> NetworkOptions {
 /// The client options of `spec`: id, keep-alive, last will, credentials, TLS.
 pub(crate) fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
     let c = &spec.config;
-    let mut o = MqttOptions::new(c.client_id(&spec.vehicle), c.host.clone(), c.port);
-    o.set_keep_alive(c.keep_alive());
-    o.set_clean_session(true);
-    // Oversized commands get an error reply from their dialect; only far larger packets
-    // are refused by the client itself (and cost a reconnect).
-    o.set_max_packet_size(c.max_payload.saturating_mul(4).max(1 << 20), 64 << 20);
+    let mut o = client_options(c, c.client_id(&spec.vehicle))?;
     o.set_last_will(LastWill::new(
         c.status_topic(&spec.vehicle),
         "offline",
         QoS::AtLeastOnce,
         true,
     ));
+    Ok(o)
+}
+
+/// The options of any client of chassisd's on the broker of `c`, as `client_id`:
+/// keep-alive, a clean session, packet sizes, credentials, TLS. No last will.
+pub(crate) fn client_options(c: &MqttConfig, client_id: String) -> anyhow::Result<MqttOptions> {
+    let mut o = MqttOptions::new(client_id, c.host.clone(), c.port);
+    o.set_keep_alive(c.keep_alive());
+    o.set_clean_session(true);
+    // Oversized commands get an error reply from their dialect; only far larger packets
+    // are refused by the client itself (and cost a reconnect).
+    o.set_max_packet_size(c.max_payload.saturating_mul(4).max(1 << 20), 64 << 20);
     if let (Some(user), password) = (&c.username, &c.password) {
         o.set_credentials(user.clone(), password.clone().unwrap_or_default());
     }

@@ -6,7 +6,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::lossy::LossySender;
-use crate::record::{Payload, Record, RecordingWriter};
+use crate::record::segments::SegmentedWriter;
+use crate::record::{Payload, Record, RecordError, RecordingWriter};
 use crate::time::Timestamp;
 
 /// Records queued for the writer thread before new ones are dropped (and counted).
@@ -15,15 +16,54 @@ const QUEUE: usize = 65_536;
 /// recording's files then end within this of each other, and replay cuts them there.
 const FLUSH_EVERY: Duration = Duration::from_millis(100);
 
+/// Where the recorder thread writes: one recording folder, or a series of them.
+pub trait RecordSink: Send + 'static {
+    /// Appends one record.
+    fn write(&mut self, record: &Record) -> Result<(), RecordError>;
+    /// Puts what is written on disk and notes how far it reaches.
+    fn checkpoint(&mut self) -> Result<(), RecordError>;
+    /// Puts everything on disk and marks the clean end at `end`.
+    fn finish(self: Box<Self>, end: Timestamp) -> Result<(), RecordError>;
+}
+
+impl RecordSink for RecordingWriter {
+    fn write(&mut self, record: &Record) -> Result<(), RecordError> {
+        RecordingWriter::write(self, record)
+    }
+
+    fn checkpoint(&mut self) -> Result<(), RecordError> {
+        RecordingWriter::checkpoint(self)
+    }
+
+    fn finish(self: Box<Self>, end: Timestamp) -> Result<(), RecordError> {
+        RecordingWriter::finish(*self, end)
+    }
+}
+
+impl RecordSink for SegmentedWriter {
+    fn write(&mut self, record: &Record) -> Result<(), RecordError> {
+        SegmentedWriter::write(self, record)
+    }
+
+    fn checkpoint(&mut self) -> Result<(), RecordError> {
+        SegmentedWriter::checkpoint(self)
+    }
+
+    fn finish(self: Box<Self>, end: Timestamp) -> Result<(), RecordError> {
+        SegmentedWriter::finish(*self, end)
+    }
+}
+
 /// Handle to the recorder thread.
 pub struct Recorder {
     tx: LossySender<Record>,
-    thread: Option<JoinHandle<RecordingWriter>>,
+    thread: Option<JoinHandle<Box<dyn RecordSink>>>,
 }
 
 impl Recorder {
     /// Starts the writer thread.
-    pub fn start(writer: RecordingWriter) -> Self {
+    pub fn start(writer: impl RecordSink) -> Self {
+        let writer: Box<dyn RecordSink> = Box::new(writer);
         let (tx, rx) = LossySender::new(QUEUE, "recording cannot keep up; records dropped");
         let thread = std::thread::Builder::new()
             .name("recorder".into())
@@ -60,7 +100,7 @@ impl Recorder {
     }
 }
 
-fn write_loop(mut writer: RecordingWriter, rx: Receiver<Record>) -> RecordingWriter {
+fn write_loop(mut writer: Box<dyn RecordSink>, rx: Receiver<Record>) -> Box<dyn RecordSink> {
     let mut failures: u64 = 0;
     let mut next_flush = Instant::now() + FLUSH_EVERY;
     loop {

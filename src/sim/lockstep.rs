@@ -22,7 +22,7 @@ use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
 use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
-use crate::record::{Payload, Record, SourceKind, SourceMeta};
+use crate::record::{Payload, Record, SourceMeta};
 use crate::time::Timestamp;
 
 /// The plant's time step.
@@ -230,44 +230,13 @@ pub fn drive_profile() -> Result<DriveProfile, ConfigError> {
 
 /// The sources of a simulated session, as a recording lists them.
 pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
-    let serial = |name: &str, decoder: Decoder| SourceMeta {
-        name: name.into(),
-        kind: SourceKind::Serial,
-        file: format!("{name}.log"),
-        protocol: Some(decoder.protocol().into()),
-        events: None,
-    };
     vec![
-        serial(GNSS_SOURCE, Decoder::Nmea),
-        serial(IMU_SOURCE, Decoder::Imu(plant.imu.protocol)),
-        SourceMeta {
-            name: SIM_BUS.into(),
-            kind: SourceKind::Can,
-            file: format!("{SIM_BUS}.log"),
-            protocol: None,
-            events: None,
-        },
-        SourceMeta {
-            name: LOCAL_COMMANDS.into(),
-            kind: SourceKind::Commands,
-            file: "commands.log".into(),
-            protocol: None,
-            events: None,
-        },
-        SourceMeta {
-            name: MQTT_SOURCE.into(),
-            kind: SourceKind::Commands,
-            file: format!("{MQTT_SOURCE}.log"),
-            protocol: None,
-            events: None,
-        },
-        SourceMeta {
-            name: HOST_SOURCE.into(),
-            kind: SourceKind::Commands,
-            file: format!("{HOST_SOURCE}.log"),
-            protocol: None,
-            events: None,
-        },
+        SourceMeta::serial(GNSS_SOURCE, Decoder::Nmea.protocol()),
+        SourceMeta::serial(IMU_SOURCE, Decoder::Imu(plant.imu.protocol).protocol()),
+        SourceMeta::can(SIM_BUS),
+        SourceMeta::commands(LOCAL_COMMANDS, "commands.log"),
+        SourceMeta::commands(MQTT_SOURCE, &format!("{MQTT_SOURCE}.log")),
+        SourceMeta::commands(HOST_SOURCE, &format!("{HOST_SOURCE}.log")),
     ]
 }
 

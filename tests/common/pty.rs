@@ -46,3 +46,38 @@ impl Port {
             .expect("write to pty");
     }
 }
+
+/// A receiver on a pty: GGA (RTK fixed) and RMC at 10 Hz until dropped.
+pub struct Talker {
+    running: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Talker {
+    pub fn start(mut port: Port) -> Talker {
+        use std::sync::atomic::Ordering;
+        let running = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let flag = running.clone();
+        std::thread::spawn(move || {
+            while flag.load(Ordering::Relaxed) {
+                for body in [
+                    "GNGGA,120000.00,2301.5,N,11301.17918515,E,4,20,0.6,12.3,M,-6.1,M,1.0,0123",
+                    "GNRMC,120000.00,A,2301.5,N,11301.17918515,E,0.0,0.0,241126,,,R",
+                ] {
+                    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+                    let _ = port
+                        .master
+                        .write_all(format!("${body}*{sum:02X}\r\n").as_bytes());
+                }
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+        });
+        Talker { running }
+    }
+}
+
+impl Drop for Talker {
+    fn drop(&mut self) {
+        self.running
+            .store(false, std::sync::atomic::Ordering::Relaxed);
+    }
+}

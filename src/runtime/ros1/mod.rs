@@ -162,13 +162,7 @@ pub fn spec_for(
 
 /// The recording's entry for the node's commands.
 pub fn source_meta() -> crate::record::SourceMeta {
-    crate::record::SourceMeta {
-        name: SOURCE.into(),
-        kind: crate::record::SourceKind::Commands,
-        file: format!("{SOURCE}.log"),
-        protocol: None,
-        events: None,
-    }
+    crate::record::SourceMeta::commands(SOURCE, &format!("{SOURCE}.log"))
 }
 
 /// Starts the node of `ros1` for a vehicle of `config` whose engine is `engine` (it then
