@@ -141,17 +141,20 @@ enum Command {
         #[arg(long, value_name = "FILE")]
         calibration: Option<PathBuf>,
     },
-    /// Calibrate from a recording: `imu` (standing still: gyro bias, mounting roll and
-    /// pitch), `odometry` (wheel radii, track) or `gnss` (antenna position, dual-antenna
-    /// heading offset). Writes or updates the calibration file and prints a report.
+    /// Calibrate: `imu` (standing still: gyro bias, mounting roll and pitch), `odometry`
+    /// (wheel radii, track) or `gnss` (antenna position, dual-antenna heading offset), from a
+    /// recording (--from) or live on the vehicle (--config alone: collect, then fit).
+    /// Writes or updates the calibration file and prints a report.
     Calibrate {
         /// What to calibrate.
         #[arg(value_enum)]
         procedure: CalibrateProcedure,
-        /// The recording folder (`chassisd run --record` or `chassisd sim --record`).
-        #[arg(long)]
-        from: PathBuf,
-        /// Vehicle configuration to use instead of the one stored with the recording.
+        /// The recording folder (`chassisd run --record`, `chassisd record` segment, or
+        /// `chassisd sim --record`).
+        #[arg(long, required_unless_present = "config")]
+        from: Option<PathBuf>,
+        /// Vehicle configuration: with --from, used instead of the one stored with the
+        /// recording; without, the vehicle to collect from live.
         #[arg(long)]
         config: Option<PathBuf>,
         /// Calibration file to write or update (default calib/<vehicle>.toml).
@@ -164,6 +167,31 @@ enum Command {
         /// <vehicle>.<procedure>.svg).
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Live: collect this long, s (default: --still and 10 s for imu, 900 s otherwise;
+        /// Ctrl-C ends the collection early and the fit follows).
+        #[arg(long, value_parser = seconds_arg, conflicts_with = "from")]
+        collect: Option<Duration>,
+        /// Live: keep the collected recording in this new folder (default
+        /// calib/recordings/<vehicle>-<procedure>-<unix time> beside the calibration file).
+        #[arg(long, conflicts_with = "from")]
+        record: Option<PathBuf>,
+        /// Live, odometry or gnss: drive the calibration pattern (standing still, straight
+        /// runs both ways, turns on the spot both ways, a figure eight) under every safety
+        /// rule of `chassisd run`. Prints the plan and needs --yes to move.
+        #[arg(long, requires = "config", conflicts_with_all = ["from", "collect"])]
+        drive: bool,
+        /// Confirms that the area is clear and the e-stop at hand: the vehicle moves.
+        #[arg(long, requires = "drive")]
+        yes: bool,
+        /// --drive: speed of the runs, m/s (at most the configuration's max_speed_mps).
+        #[arg(long, default_value_t = 0.3, requires = "drive")]
+        speed: f64,
+        /// --drive: length of each straight run, m.
+        #[arg(long, default_value_t = 10.0, requires = "drive")]
+        run_m: f64,
+        /// --drive: pairs of runs, out and back.
+        #[arg(long, default_value_t = 5, requires = "drive", value_parser = clap::value_parser!(u32).range(1..=20))]
+        runs: u32,
     },
     /// Run a benchmark that prints figures.
     Bench {
@@ -493,6 +521,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     config: vehicle,
                     record,
                     commands_stdin,
+                    pattern: None,
                 },
                 std::io::stdout(),
             ));
@@ -599,7 +628,42 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             out,
             still,
             plot,
-        } => calibrate(procedure, &from, config.as_deref(), out, still, plot),
+            collect,
+            record,
+            drive,
+            yes,
+            speed,
+            run_m,
+            runs,
+        } => {
+            // A live collection's recording holds the configuration as it was recorded
+            // (CAN listen-only when only listening): the fit reads it from there.
+            let (from, config) = match from {
+                Some(from) => (from, config),
+                None => {
+                    let path = config.as_deref().context("--config or --from is needed")?;
+                    let vehicle = VehicleConfig::load(path)?;
+                    let live = LiveCalibration {
+                        procedure,
+                        record,
+                        out: out.clone(),
+                        still,
+                        collect,
+                        drive: drive.then_some(DrivePlan {
+                            yes,
+                            speed,
+                            run_m,
+                            runs,
+                        }),
+                    };
+                    match collect_live(&vehicle, live)? {
+                        Some(recording) => (recording, None),
+                        None => return Ok(false),
+                    }
+                }
+            };
+            calibrate(procedure, &from, config.as_deref(), out, still, plot)
+        }
         Command::Check { config } => {
             let vehicle = VehicleConfig::load(&config)?;
             println!("configuration {}: ok", config.display());
@@ -729,6 +793,136 @@ fn calibrate(
     calib::plot::draw(procedure, &data, &found, &plot)?;
     println!("plot: {}", plot.display());
     Ok(true)
+}
+
+/// `chassisd calibrate --drive`'s pattern settings.
+struct DrivePlan {
+    yes: bool,
+    speed: f64,
+    run_m: f64,
+    runs: u32,
+}
+
+/// A live calibration: collect (or drive) first, then fit.
+struct LiveCalibration {
+    procedure: CalibrateProcedure,
+    record: Option<PathBuf>,
+    out: Option<PathBuf>,
+    still: Duration,
+    collect: Option<Duration>,
+    drive: Option<DrivePlan>,
+}
+
+/// Collects a recording live for `calibrate`: listening (someone else moves the vehicle, or
+/// it stands still), or driving the pattern itself. Returns the recording folder, or `None`
+/// when the plan was only shown (no --yes).
+fn collect_live(vehicle: &VehicleConfig, live: LiveCalibration) -> anyhow::Result<Option<PathBuf>> {
+    use chassisd::config::calibration::default_path;
+    use chassisd::record::segments::{Rotation, segment_dir};
+    use chassisd::sim::scenario::CalibrationPattern;
+
+    let name = &vehicle.vehicle.name;
+    let procedure = match live.procedure {
+        CalibrateProcedure::Imu => "imu",
+        CalibrateProcedure::Odometry => "odometry",
+        CalibrateProcedure::Gnss => "gnss",
+    };
+    let folder = live.record.unwrap_or_else(|| {
+        let out = live.out.clone().unwrap_or_else(|| default_path(name));
+        let unix = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        out.with_file_name("recordings")
+            .join(format!("{name}-{procedure}-{unix}"))
+    });
+    if let Some(plan) = live.drive {
+        anyhow::ensure!(
+            live.procedure != CalibrateProcedure::Imu,
+            "calibrate imu stands still: it needs no --drive"
+        );
+        anyhow::ensure!(
+            !vehicle.drive.is_empty() && vehicle.chassis.is_some(),
+            "--drive needs the drive train: a [chassis] and [[drive]]s in {name}'s configuration"
+        );
+        let chassis = vehicle.chassis.as_ref().context("[chassis]")?;
+        anyhow::ensure!(
+            plan.speed > 0.0 && plan.speed <= chassis.max_speed_mps,
+            "--speed {} m/s: give a speed above 0 and at most chassis.max_speed_mps ({} m/s)",
+            plan.speed,
+            chassis.max_speed_mps
+        );
+        anyhow::ensure!(
+            plan.run_m.is_finite() && (0.5..=100.0).contains(&plan.run_m),
+            "--run-m {}: give 0.5 to 100 m",
+            plan.run_m
+        );
+        let pattern = CalibrationPattern {
+            still_s: live.still.as_secs_f64() + 10.0,
+            speed: plan.speed,
+            run_m: plan.run_m,
+            run_pairs: plan.runs,
+            turn_rate: chassis.max_yaw_rate_rps.min(0.5),
+        };
+        let scenario = chassisd::sim::scenario::Scenario::calibration_pattern(&pattern);
+        let (along, across) = pattern.area_m();
+        eprintln!(
+            "calibration drive of {name}: {:.0} s standing still, {} pairs of {:.1} m runs at              {:.2} m/s joined by turns on the spot, turns on the spot both ways, a figure              eight of {:.1} m loops; about {:.0} s in all. It needs a clear, level area of              about {along:.0} m by {across:.0} m ahead of the vehicle, RTK fixed, and someone              at the e-stop. Every limit, watchdog and stop of `chassisd run` applies; a stop              abandons the pattern.",
+            pattern.still_s,
+            plan.runs,
+            plan.run_m,
+            plan.speed,
+            pattern.eight_radius_m(),
+            scenario.duration_s()
+        );
+        if !plan.yes {
+            eprintln!("nothing moved: add --yes to drive it");
+            return Ok(None);
+        }
+        let runtime = async_runtime(2)?;
+        let result = runtime.block_on(live::run(
+            LiveOptions {
+                config: vehicle.clone(),
+                record: Some(folder.clone()),
+                commands_stdin: false,
+                pattern: Some(scenario),
+            },
+            std::io::sink(),
+        ));
+        runtime.shutdown_background();
+        result.context("calibration drive")?;
+        return Ok(Some(folder));
+    }
+    let span = live.collect.unwrap_or(match live.procedure {
+        CalibrateProcedure::Imu => live.still + Duration::from_secs(10),
+        _ => Duration::from_secs(900),
+    });
+    eprintln!(
+        "collecting for {:.0} s from {name}'s devices into {} (Ctrl-C ends it early){}",
+        span.as_secs_f64(),
+        folder.display(),
+        match live.procedure {
+            CalibrateProcedure::Imu => "; keep the vehicle still",
+            _ => "; drive the pattern by hand (see the README)",
+        }
+    );
+    let runtime = async_runtime(1)?;
+    let result = runtime.block_on(chassisd::runtime::listen::run(
+        chassisd::runtime::listen::ListenOptions {
+            config: vehicle.clone(),
+            out: folder.clone(),
+            rotation: Rotation {
+                max_bytes: u64::MAX,
+                max_span: Duration::MAX,
+                keep: None,
+            },
+            duration: Some(span),
+            progress: std::io::stderr().is_terminal(),
+        },
+    ));
+    runtime.shutdown_background();
+    let summary = result?;
+    eprintln!("{}", summary.line());
+    Ok(Some(segment_dir(&folder, 1)))
 }
 
 /// The calibration file at `path`, if one is given.

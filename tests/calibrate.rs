@@ -341,3 +341,74 @@ fn the_daemon_logs_the_calibration_in_force() {
     daemon.wait_log(wait, "ready");
     daemon.stop();
 }
+
+/// `calibrate imu --config` with no recording: it collects from a HiPNUC IMU on a
+/// pseudo-terminal (100 Hz, standing still with a known gyro bias), keeps the recording,
+/// and fits it.
+#[test]
+fn imu_calibrates_live_from_a_serial_imu() {
+    use chassisd::devices::imu::hipnuc;
+    use std::io::Write;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    let dir = common::tempdir("calibrate-live-imu");
+    let link = dir.join("imu-port");
+    let mut port = common::pty::Port::open_at(&link);
+    let bias_dps = [0.1f32, -0.2, 0.3];
+    let running = std::sync::Arc::new(AtomicBool::new(true));
+    let flag = running.clone();
+    let imu = std::thread::spawn(move || {
+        let mut ms: u32 = 0;
+        while flag.load(Ordering::Relaxed) {
+            // A little alternating noise, as a real sensor never reads one value twice.
+            let noise = if ms % 20 == 0 { 0.004 } else { -0.004 };
+            let gyro = bias_dps.map(|b| b + noise);
+            let packet = hipnuc::packet_91(ms, [0.0, 0.0, 1.0], gyro, [1.0, 0.0, 0.0, 0.0]);
+            let _ = port.master.write_all(&hipnuc::frame(&packet));
+            ms += 10;
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    });
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"live-imu\"\n\n[imu]\nport = \"{}\"\nprotocol = \"hipnuc\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let out = dir.join("calib/live-imu.toml");
+    let kept = dir.join("collected");
+    let o = Command::new(common::chassisd())
+        .args([
+            "calibrate",
+            "imu",
+            "--still",
+            "5",
+            "--collect",
+            "9",
+            "--config",
+        ])
+        .arg(&config)
+        .arg("--record")
+        .arg(&kept)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("chassisd runs");
+    running.store(false, Ordering::Relaxed);
+    imu.join().expect("imu thread");
+    assert!(o.status.success(), "{}", text(&o));
+    let file: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&out).expect("calibration written")).expect("TOML");
+    let bias = floats(&value(&file, "imu", "gyro_bias_rps"));
+    for (found, truth) in bias.iter().zip(bias_dps) {
+        let error_dps = found.to_degrees() - f64::from(truth);
+        assert!(error_dps.abs() < 0.01, "{bias:?} against {bias_dps:?} °/s");
+    }
+    assert!(
+        kept.join("0001/imu.log").exists(),
+        "the collected recording is kept"
+    );
+}

@@ -790,3 +790,84 @@ fn check_probes_the_drives_and_the_bms_on_the_bus() {
     );
     assert!(table.contains("fix: check drive[].node"), "{table}");
 }
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn record_listens_to_a_driven_bus_and_sends_nothing_of_its_own() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("vcan-record");
+    let vehicle = config("vehicle-vcan.toml");
+    let out = dir.join("listened");
+    let mut candump = std::process::Command::new("candump")
+        .args(["-L", "vcan0"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("candump runs");
+    let dump = common::process::lines_of(candump.stdout.take().expect("candump stdout"));
+    let mut sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
+    let mut recorder = Proc::start(&[
+        "record".as_ref(),
+        "--config".as_ref(),
+        vehicle.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    recorder.wait_log(WAIT, "link up");
+    // Alone with the drives for two seconds: the bus carries only what they send unasked.
+    std::thread::sleep(Duration::from_secs(2));
+    let alone: Vec<String> = dump.try_iter().collect();
+    let ids: std::collections::BTreeSet<String> = alone
+        .iter()
+        .filter_map(|l| {
+            l.split_whitespace()
+                .nth(2)?
+                .split('#')
+                .next()
+                .map(str::to_owned)
+        })
+        .collect();
+    assert!(!ids.is_empty(), "the drives' heartbeats are on the bus");
+    assert!(
+        ids.iter()
+            .all(|id| id.starts_with("70") || id.starts_with("77")),
+        "only the drives' heartbeats, nothing from the recorder: {ids:?}"
+    );
+
+    // Then chassisd run drives the vehicle while the recorder listens.
+    let mut daemon = Proc::start(&[
+        "run".as_ref(),
+        "--config".as_ref(),
+        vehicle.as_os_str(),
+        "--commands-stdin".as_ref(),
+    ]);
+    daemon.wait_log(WAIT, "drive left: running");
+    daemon.wait_out(WAIT, "both drives enabled", |l| {
+        robot_status(l) & ENABLED != 0
+    });
+    let until = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < until {
+        daemon.send(r#"cmd_vel {"linear":{"x":0.3},"angular":{"z":0}}"#);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let report = report_of(&mut sim);
+    daemon.stop();
+    recorder.stop();
+    let _ = candump.kill();
+    let _ = candump.wait();
+
+    // The recording is a bus monitor's: its stored configuration is listen-only, and it
+    // decodes the wheels' travel that chassisd run commanded.
+    let segment = out.join("0001");
+    let stored = std::fs::read_to_string(segment.join("vehicle.toml")).expect("vehicle.toml");
+    assert!(stored.contains("listen_only = true"), "{stored}");
+    let odometry = common::replay_odometry(&segment);
+    let counts_to_m = |c: f64| c / 4096.0 / 10.0 * std::f64::consts::TAU * 0.1;
+    let left_m = counts_to_m(axis(&report, "left")["counts"].as_f64().unwrap());
+    assert!(left_m > 0.4, "travelled {left_m} m");
+    assert!(
+        (odometry.left_m - left_m).abs() < 0.01,
+        "{odometry:?} vs {left_m}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

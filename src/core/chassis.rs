@@ -47,6 +47,31 @@ pub mod status_bits {
     pub const RESETTING: u32 = 1 << 9;
     /// The controlling client's heartbeat is lost.
     pub const CONTROL_LINK_LOST: u32 = 1 << 10;
+
+    /// Each bit's name, in bit order.
+    const NAMES: [(u32, &str); 11] = [
+        (ENABLED, "enabled"),
+        (FAULT, "drive fault"),
+        (HEARTBEAT_LOST, "drive heartbeat lost"),
+        (ESTOP, "emergency stop"),
+        (COMMAND_TIMEOUT, "command timeout"),
+        (BUS_DOWN, "CAN interface down"),
+        (AWAITING_COMMAND, "awaiting a command"),
+        (NOT_READY, "drive not ready"),
+        (MOVING, "moving"),
+        (RESETTING, "fault reset"),
+        (CONTROL_LINK_LOST, "control link lost"),
+    ];
+
+    /// The names of the bits set in `bits`, joined by commas.
+    pub fn describe(bits: u32) -> String {
+        NAMES
+            .iter()
+            .filter(|(bit, _)| bits & bit != 0)
+            .map(|(_, name)| *name)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 /// What the engine reports about one drive node.

@@ -115,11 +115,17 @@ pub async fn run(options: ListenOptions) -> anyhow::Result<ListenSummary> {
         tracing::warn!("ros1: the node is chassisd run's; ROS1 commands are not recorded");
     }
     drop(tx);
+    // The stored configuration says how the bus was used: a replay then decodes it as the
+    // monitor it was, transmitting nothing.
+    let mut as_recorded = config.clone();
+    for bus in &mut as_recorded.can {
+        bus.listen_only = true;
+    }
     let writer = SegmentedWriter::create(
         &options.out,
         &config.vehicle.name,
         start,
-        Some(&config.to_effective_toml()),
+        Some(&as_recorded.to_effective_toml()),
         sources,
         options.rotation,
     )

@@ -29,9 +29,11 @@ use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
 use crate::core::LinkState;
+use crate::core::chassis::status_bits;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
 use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
+use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
 
 /// Records waiting for the engine before drivers wait.
@@ -55,7 +57,22 @@ pub struct LiveOptions {
     pub record: Option<PathBuf>,
     /// Read `TOPIC JSON` commands from standard input.
     pub commands_stdin: bool,
+    /// Drive this scripted pattern on the local command channel, then stop (`chassisd
+    /// calibrate --drive`). A safety stop on the way ends the run with an error.
+    pub pattern: Option<Scenario>,
 }
+
+/// A scripted pattern's velocity commands go out this often (well inside any command
+/// timeout).
+const PATTERN_COMMAND_EVERY: Duration = Duration::from_millis(100);
+/// Stops that end a scripted pattern once the drives have been enabled: each one means a
+/// person or a fault stopped the vehicle, and the pattern must not go on by itself.
+const PATTERN_ABORTS: u32 = status_bits::FAULT
+    | status_bits::HEARTBEAT_LOST
+    | status_bits::ESTOP
+    | status_bits::BUS_DOWN
+    | status_bits::COMMAND_TIMEOUT
+    | status_bits::CONTROL_LINK_LOST;
 
 /// Says which calibrated values are in force, and from which file.
 fn log_calibration(config: &crate::config::VehicleConfig) {
@@ -100,10 +117,16 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             &format!("{PROCESS_SOURCE}.log"),
         ));
     }
-    if options.commands_stdin {
+    if options.commands_stdin || options.pattern.is_some() {
         source_meta.push(SourceMeta::commands(STDIN_SOURCE, "commands.log"));
+    }
+    if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx.clone()));
     }
+    let mut pattern = options
+        .pattern
+        .clone()
+        .map(|p| tokio::spawn(drive_pattern(p, clock, tx.clone())));
     if config
         .mqtt
         .as_ref()
@@ -201,6 +224,8 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
         .context("cannot install the SIGINT handler")?;
     let mut drivers_running = drivers_running;
+    // Under a pattern: whether the drives have been enabled yet.
+    let mut enabled_seen = false;
     let result = loop {
         let next_tick = engine.next_tick().unwrap_or_else(|| clock.now());
         let mut now = None;
@@ -233,9 +258,10 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             }
             _ = sigint.recv() => break Ok("SIGINT"),
             _ = sigterm.recv() => break Ok("SIGTERM"),
+            _ = finished(&mut pattern) => break Ok("pattern complete"),
         }
         let t = now.unwrap_or_else(|| clock.now());
-        dispatch(
+        let bits = dispatch(
             &mut outputs,
             t,
             &can_tx,
@@ -246,7 +272,20 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         if let Some(e) = out.take_error() {
             break Err(e).context("cannot write status output");
         }
+        if let (Some(_), Some(bits)) = (&pattern, bits) {
+            enabled_seen |= bits & status_bits::ENABLED != 0;
+            if enabled_seen && bits & PATTERN_ABORTS != 0 {
+                break Err(anyhow::anyhow!(
+                    "the vehicle was stopped ({}); the pattern is abandoned. Clear the \
+                     cause and start again",
+                    status_bits::describe(bits & PATTERN_ABORTS)
+                ));
+            }
+        }
     };
+    if let Some(p) = pattern.take() {
+        p.abort();
+    }
     service.stopping(match &result {
         Ok(signal) => signal,
         Err(_) => "error",
@@ -312,7 +351,8 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
 }
 
 /// Routes the engine's outputs: status lines to `out`, frames to their interface (and the
-/// recording), command answers to the log.
+/// recording), command answers to the log. Returns the drive train's status bits of the
+/// last status, if there was one.
 fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
@@ -320,13 +360,15 @@ fn dispatch(
     (mqtt, mut ros1): (Option<&MqttSender>, Option<&mut Ros1Link>),
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
-) {
+) -> Option<u32> {
+    let mut bits = None;
     for output in outputs.drain(..) {
         let Some(output) = super::forward_common(output, mqtt, ros1.as_deref_mut()) else {
             continue;
         };
         match output {
             EngineOutput::Status(status) => {
+                bits = status.chassis.as_ref().map(|c| c.status_bits).or(bits);
                 let mut line = BaseStatus::from_status(&status).to_json();
                 line.push('\n');
                 out.send(line);
@@ -345,6 +387,43 @@ fn dispatch(
             }
             _ => {}
         }
+    }
+    bits
+}
+
+/// Sends the pattern's velocity command every [`PATTERN_COMMAND_EVERY`] on the local
+/// command channel, from its start to its end.
+async fn drive_pattern(pattern: Scenario, clock: RecordClock, tx: mpsc::Sender<Record>) {
+    let start = tokio::time::Instant::now();
+    let mut every = tokio::time::interval(PATTERN_COMMAND_EVERY);
+    loop {
+        every.tick().await;
+        let s = start.elapsed().as_secs_f64();
+        if s >= pattern.duration_s() {
+            return;
+        }
+        let (v, w) = pattern.command_at(s);
+        let record = Record {
+            t: clock.now(),
+            source: STDIN_SOURCE.into(),
+            payload: Payload::Command {
+                topic: "cmd_vel".into(),
+                payload: Bytes::from(format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#)),
+            },
+        };
+        if tx.send(record).await.is_err() {
+            return;
+        }
+    }
+}
+
+/// Resolves when the pattern's task has ended; never without one.
+async fn finished(pattern: &mut Option<tokio::task::JoinHandle<()>>) {
+    match pattern {
+        Some(task) => {
+            let _ = task.await;
+        }
+        None => std::future::pending().await,
     }
 }
 

@@ -19,6 +19,48 @@ pub const WARMUP_S: f64 = STILL_S + WARMUP_RUN_S;
 /// The calibration pattern stands still this long first, s.
 pub const CALIBRATION_STILL_S: f64 = 30.0;
 
+/// The shape of the calibration pattern.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationPattern {
+    /// Standing still first, s.
+    pub still_s: f64,
+    /// Speed of the runs, m/s (the figure eight goes at four fifths of it).
+    pub speed: f64,
+    /// Length of each straight run, m.
+    pub run_m: f64,
+    /// Pairs of runs (out and back); also the spot turns each way and the eights, up to 2.
+    pub run_pairs: u32,
+    /// Yaw rate of the turns on the spot, rad/s.
+    pub turn_rate: f64,
+}
+
+impl Default for CalibrationPattern {
+    /// The simulator's: 30 s still, five pairs of 20 m runs at 0.5 m/s, turns at 0.5 rad/s.
+    fn default() -> Self {
+        Self {
+            still_s: CALIBRATION_STILL_S,
+            speed: 0.5,
+            run_m: 20.0,
+            run_pairs: 5,
+            turn_rate: 0.5,
+        }
+    }
+}
+
+impl CalibrationPattern {
+    /// The figure eight's radius: a tenth of a run, 0.5 to 2 m.
+    pub fn eight_radius_m(&self) -> f64 {
+        (self.run_m / 10.0).clamp(0.5, 2.0)
+    }
+
+    /// The ground it needs, m: along the runs, and across (the half turns' offset and the
+    /// eight's loops side by side).
+    pub fn area_m(&self) -> (f64, f64) {
+        let r = self.eight_radius_m();
+        (self.run_m.max(4.0 * r) + 1.0, 4.0 * r + 1.0)
+    }
+}
+
 /// Drive for `duration_s` at forward speed `v` (m/s) and yaw rate `w` (rad/s).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Leg {
@@ -188,27 +230,35 @@ impl Scenario {
     /// standing still (gyro bias, mounting), straight runs both ways joined by half turns
     /// (wheel radii against RTK distance), turns on the spot both ways (track, antenna), and
     /// a figure eight. The runs are commanded straight: a miscalibrated vehicle drives them
-    /// as arcs, which the fits allow for.
+    /// as arcs, which the fits allow for. Ten runs of 20 m: the wheels' random slip averages
+    /// out to a few hundredths of a per cent of each radius over some 400 s of driving.
     pub fn calibration() -> Self {
-        let (speed, turn_rate) = (0.5, 0.5);
+        Self::calibration_pattern(&CalibrationPattern::default())
+    }
+
+    /// The calibration pattern of `p`.
+    pub fn calibration_pattern(p: &CalibrationPattern) -> Self {
+        let (speed, turn_rate) = (p.speed, p.turn_rate);
         let pause = leg(2.0, 0.0, 0.0);
-        let mut legs = vec![leg(CALIBRATION_STILL_S, 0.0, 0.0)];
-        // Ten runs of 20 m: the wheels' random slip averages out to a few hundredths of a
-        // per cent of each radius over some 400 s of driving.
-        for _ in 0..5 {
+        let mut legs = vec![leg(p.still_s, 0.0, 0.0)];
+        for _ in 0..p.run_pairs {
             for direction in [1.0, -1.0] {
-                legs.push(leg(40.0, speed, 0.0));
+                legs.push(leg(p.run_m / speed, speed, 0.0));
                 legs.push(pause);
                 legs.push(leg(PI / turn_rate, 0.0, direction * turn_rate));
                 legs.push(pause);
             }
         }
-        for direction in [1.0, 1.0, -1.0, -1.0] {
-            legs.push(leg(2.0 * PI / turn_rate, 0.0, direction * turn_rate));
-            legs.push(pause);
+        let turns = p.run_pairs.min(2);
+        for direction in [1.0, -1.0] {
+            for _ in 0..turns {
+                legs.push(leg(2.0 * PI / turn_rate, 0.0, direction * turn_rate));
+                legs.push(pause);
+            }
         }
-        let (v, radius) = (0.4, 2.0);
-        for _ in 0..2 {
+        let v = speed * 0.8;
+        let radius = p.eight_radius_m();
+        for _ in 0..turns {
             legs.push(leg(2.0 * PI * radius / v, v, v / radius));
             legs.push(leg(2.0 * PI * radius / v, v, -v / radius));
         }
