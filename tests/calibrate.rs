@@ -361,7 +361,7 @@ fn imu_calibrates_live_from_a_serial_imu() {
         let mut ms: u32 = 0;
         while flag.load(Ordering::Relaxed) {
             // A little alternating noise, as a real sensor never reads one value twice.
-            let noise = if ms % 20 == 0 { 0.004 } else { -0.004 };
+            let noise = if ms.is_multiple_of(20) { 0.004 } else { -0.004 };
             let gyro = bias_dps.map(|b| b + noise);
             let packet = hipnuc::packet_91(ms, [0.0, 0.0, 1.0], gyro, [1.0, 0.0, 0.0, 0.0]);
             let _ = port.master.write_all(&hipnuc::frame(&packet));

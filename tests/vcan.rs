@@ -871,3 +871,97 @@ fn record_listens_to_a_driven_bus_and_sends_nothing_of_its_own() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn calibrate_drive_moves_only_with_yes_and_a_safety_stop_abandons_the_pattern() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("vcan-calibrate-drive");
+    let vehicle = config("vehicle-vcan.toml");
+    let mut sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
+    let calibrate = |extra: &[&str], record: &Path| {
+        let mut args: Vec<&std::ffi::OsStr> = vec![
+            "calibrate".as_ref(),
+            "odometry".as_ref(),
+            "--config".as_ref(),
+            vehicle.as_os_str(),
+            "--drive".as_ref(),
+            "--still".as_ref(),
+            "1".as_ref(),
+            "--run-m".as_ref(),
+            "0.6".as_ref(),
+            "--runs".as_ref(),
+            "1".as_ref(),
+            "--record".as_ref(),
+            record.as_os_str(),
+            "--out".as_ref(),
+        ];
+        let out = dir.join("calib.toml");
+        args.push(out.as_os_str());
+        args.extend(extra.iter().map(std::ffi::OsStr::new));
+        let args: Vec<std::ffi::OsString> = args.into_iter().map(Into::into).collect();
+        Proc::start(&args)
+    };
+
+    // Without --yes: the plan, and nothing moves.
+    let mut plan = calibrate(&[], &dir.join("unused"));
+    plan.wait_log(WAIT, "add --yes to drive it");
+    let exit = plan.child.wait().expect("exit");
+    assert_eq!(exit.code(), Some(1));
+    assert!(!dir.join("unused").exists());
+    assert_drives_at_rest(&report_of(&mut sim));
+
+    // With --yes it drives the pattern: 11 s standing still, then the first 0.6 m run...
+    let recording = dir.join("driven");
+    let mut driving = calibrate(&["--yes"], &recording);
+    let counts_to_m = |c: f64| c / 4096.0 / 10.0 * std::f64::consts::TAU * 0.1;
+    let started = Instant::now();
+    loop {
+        let left_m = counts_to_m(
+            axis(&report_of(&mut sim), "left")["counts"]
+                .as_f64()
+                .unwrap(),
+        );
+        if left_m > 0.3 {
+            break;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the pattern never drove"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // ...until a drive's heartbeat stops: the pattern is abandoned and the drives stop.
+    sim.send("heartbeat left off");
+    let deadline = Instant::now() + WAIT;
+    let code = loop {
+        if let Some(status) = driving.child.try_wait().expect("status") {
+            break status.code();
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the drive went on after the stop"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    driving.log.extend(driving.stderr.iter());
+    let log = driving.log.join("\n");
+    assert_eq!(code, Some(1), "{log}");
+    assert!(
+        log.contains("drive heartbeat lost") && log.contains("the pattern is abandoned"),
+        "{log}"
+    );
+    let report = report_of(&mut sim);
+    assert_ne!(
+        axis(&report, "right")["state"],
+        "operation enabled",
+        "{report}"
+    );
+    for drive in ["left", "right"] {
+        assert_eq!(axis(&report, drive)["target"], 0, "{report}");
+    }
+    let commands =
+        std::fs::read_to_string(recording.join("commands.log")).expect("the drive is recorded");
+    assert!(commands.contains("cmd_vel"), "{commands}");
+    std::fs::remove_dir_all(&dir).ok();
+}
