@@ -16,6 +16,7 @@ use chassisd::config::mqtt::{
     DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
 };
 use chassisd::config::ros1::Ros1Config;
+use chassisd::config::websocket::WebsocketConfig;
 use chassisd::record::nmea_import::ImportOptions;
 use chassisd::replay;
 use chassisd::runtime::live::{self, LiveOptions};
@@ -69,6 +70,10 @@ enum Command {
         /// over the configuration's `[ros1]` master_uri.
         #[arg(long, value_name = "URI")]
         ros_master: Option<String>,
+        /// Serve the rosbridge v2 WebSocket topics on ADDR (e.g. 127.0.0.1:9090), over the
+        /// configuration's `[websocket]` bind.
+        #[arg(long, value_name = "ADDR")]
+        websocket: Option<String>,
     },
     /// Record every raw frame of every device, and every command sent to the vehicle over
     /// MQTT, without driving anything (listen-only: no engine, nothing transmitted). Writes
@@ -132,6 +137,10 @@ enum Command {
         /// e.g. http://127.0.0.1:11311.
         #[arg(long, value_name = "URI")]
         ros_master: Option<String>,
+        /// Serve the rosbridge v2 WebSocket topics (device-mqtt-api.md) on ADDR, e.g.
+        /// 127.0.0.1:9090.
+        #[arg(long, value_name = "ADDR", conflicts_with = "fast")]
+        websocket: Option<String>,
         /// Run in lockstep as fast as the machine allows: no wall clock, no MQTT, no
         /// standard input. Needs --scenario or --duration; --record works as without it.
         #[arg(long, conflicts_with_all = ["mqtt", "broker_port", "commands_stdin", "trajectory_dir", "ros_master"])]
@@ -506,8 +515,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             record,
             commands_stdin,
             ros_master,
+            websocket,
         } => {
             let mut vehicle = VehicleConfig::load(&config)?;
+            if let Some(bind) = websocket {
+                let mut w = vehicle.websocket.take().unwrap_or_default();
+                w.bind = bind;
+                w.validate(Path::new("--websocket"))?;
+                vehicle.websocket = Some(w);
+            }
             if let Some(uri) = ros_master {
                 let mut ros1 = vehicle.ros1.take().unwrap_or_default();
                 ros1.master_uri = uri;
@@ -570,6 +586,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             no_mqtt,
             trajectory_dir,
             ros_master,
+            websocket,
             fast,
             calibration,
         } => {
@@ -594,6 +611,10 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             if let Some(r) = &ros1 {
                 r.validate(Path::new("--ros-master"))?;
             }
+            let websocket = websocket.map(|bind| WebsocketConfig::with_bind(&bind));
+            if let Some(w) = &websocket {
+                w.validate(Path::new("--websocket"))?;
+            }
             ensure_ros1_built(ros1.is_some())?;
             let mut mqtt = (!no_mqtt).then(|| sim_mqtt(mqtt.as_deref())).transpose()?;
             if let (Some(m), Some(port)) = (mqtt.as_mut(), broker_port) {
@@ -614,6 +635,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     duration,
                     mqtt,
                     ros1,
+                    websocket,
                     handle: None,
                 },
                 std::io::stdout(),

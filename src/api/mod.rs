@@ -5,6 +5,7 @@ pub mod local;
 pub mod mqtt;
 pub mod root;
 pub mod ros1;
+pub mod rosbridge;
 pub mod rtk;
 
 /// Every MQTT dialect's entry point, in the order incoming topics are offered to them.

@@ -178,6 +178,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
             duration: Some(options.duration + Duration::from_secs(4)),
             mqtt: Some(options.mqtt.clone()),
             ros1: None,
+            websocket: None,
             handle: None,
         },
         std::io::sink(),

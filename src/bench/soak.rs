@@ -300,6 +300,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
             duration: Some(options.run_for + Duration::from_secs(3)),
             mqtt: Some(mqtt.clone()),
             ros1: None,
+            websocket: None,
             handle: Some(handle),
         },
         std::io::sink(),

@@ -13,6 +13,7 @@ pub mod mission;
 pub mod motion;
 pub mod mqtt;
 pub mod ros1;
+pub mod websocket;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -156,6 +157,9 @@ pub struct VehicleConfig {
     /// The native ROS1 node.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros1: Option<ros1::Ros1Config>,
+    /// The rosbridge WebSocket server.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub websocket: Option<websocket::WebsocketConfig>,
     /// The calibration file read on load and the values it put in force, for the log.
     #[serde(skip)]
     pub calibration_in_force: Option<(PathBuf, Vec<String>)>,
@@ -384,6 +388,9 @@ impl VehicleConfig {
         }
         if let Some(r) = &self.ros1 {
             r.validate(file)?;
+        }
+        if let Some(w) = &self.websocket {
+            w.validate(file)?;
         }
         let Some(gnss) = &self.gnss else {
             return Ok(());

@@ -409,12 +409,15 @@ impl Engine {
                 }
             }
             Payload::Command { .. }
-                if record.source != LOCAL_COMMANDS && record.source != ros1::SOURCE =>
+                if record.source != LOCAL_COMMANDS
+                    && record.source != ros1::SOURCE
+                    && record.source != crate::api::rosbridge::SOURCE =>
             {
                 self.stats.commands_without_dialect += 1;
             }
-            // The local channel and the ROS1 node speak the same commands; what the node
-            // asks for carries its tag, so that it can tell its own mission's end.
+            // The local channel, the ROS1 node and the WebSocket clients speak the same
+            // commands; what the node asks for carries its tag, so that it can tell its own
+            // mission's end.
             Payload::Command { topic, payload } => {
                 self.stats.commands += 1;
                 let decoded = local::decode(topic, payload).map(|command| {

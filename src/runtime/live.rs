@@ -176,6 +176,19 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         }
         None => None,
     };
+    let mut websocket = match config.websocket.clone() {
+        Some(w) => {
+            source_meta.push(super::websocket::source_meta());
+            Some(super::websocket::start(
+                &mut engine,
+                config,
+                w,
+                clock,
+                tx.clone(),
+            )?)
+        }
+        None => None,
+    };
     let drivers_running = !source_meta.is_empty();
     drop(tx);
 
@@ -265,7 +278,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
             &mut outputs,
             t,
             &can_tx,
-            (mqtt.as_ref(), ros1.as_mut()),
+            (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
             recorder.as_mut(),
             &mut out,
         );
@@ -316,7 +329,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
         &mut outputs,
         end,
         &can_tx,
-        (mqtt.as_ref(), ros1.as_mut()),
+        (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
         recorder.as_mut(),
         &mut out,
     );
@@ -357,13 +370,19 @@ fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
     can_tx: &BTreeMap<String, CanTx>,
-    (mqtt, mut ros1): (Option<&MqttSender>, Option<&mut Ros1Link>),
+    (mqtt, mut ros1, mut websocket): (
+        Option<&MqttSender>,
+        Option<&mut Ros1Link>,
+        Option<&mut super::websocket::WebsocketLink>,
+    ),
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
 ) -> Option<u32> {
     let mut bits = None;
     for output in outputs.drain(..) {
-        let Some(output) = super::forward_common(output, mqtt, ros1.as_deref_mut()) else {
+        let Some(output) =
+            super::forward_common(output, mqtt, ros1.as_deref_mut(), websocket.as_deref_mut())
+        else {
             continue;
         };
         match output {

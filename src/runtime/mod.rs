@@ -25,18 +25,23 @@ pub mod sim;
 pub mod sim_fast;
 pub mod status_out;
 pub mod trajectory_writer;
+pub mod websocket;
 
 use crate::engine::EngineOutput;
 
 /// Handles the engine outputs that go the same way in live mode and in the simulation:
-/// what the ROS1 node publishes to it, messages to the MQTT link, events and command
-/// answers to the log. Returns the others
-/// (status lines and frames), which each mode routes itself.
+/// what the WebSocket server sees of them, what the ROS1 node publishes to it, messages to
+/// the MQTT link, events and command answers to the log. Returns the others (status lines
+/// and frames), which each mode routes itself.
 fn forward_common(
     output: EngineOutput,
     mqtt: Option<&mqtt::MqttSender>,
     ros1: Option<&mut ros1::Ros1Link>,
+    websocket: Option<&mut websocket::WebsocketLink>,
 ) -> Option<EngineOutput> {
+    if let Some(link) = websocket {
+        link.see(&output);
+    }
     let output = match ros1 {
         Some(link) => link.take(output)?,
         None => output,

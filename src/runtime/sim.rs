@@ -65,6 +65,8 @@ pub struct SimOptions {
     pub mqtt: Option<MqttConfig>,
     /// Join a ROS1 graph as a node.
     pub ros1: Option<crate::config::ros1::Ros1Config>,
+    /// Serve the rosbridge WebSocket topics.
+    pub websocket: Option<crate::config::websocket::WebsocketConfig>,
     /// A benchmark's hold on the run: faults to inject, truth to read back.
     pub handle: Option<SimHandle>,
 }
@@ -130,6 +132,7 @@ struct Output {
     recorder: Option<Recorder>,
     mqtt: Option<MqttSender>,
     ros1: Option<Ros1Link>,
+    websocket: Option<super::websocket::WebsocketLink>,
 }
 
 impl Sink for Output {
@@ -141,9 +144,12 @@ impl Sink for Output {
 
     fn output(&mut self, output: EngineOutput) {
         // Frames go to the simulated drives inside the lockstep, not here.
-        if let Some(EngineOutput::Status(status)) =
-            super::forward_common(output, self.mqtt.as_ref(), self.ros1.as_mut())
-        {
+        if let Some(EngineOutput::Status(status)) = super::forward_common(
+            output,
+            self.mqtt.as_ref(),
+            self.ros1.as_mut(),
+            self.websocket.as_mut(),
+        ) {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
             self.out.send(line);
@@ -175,6 +181,9 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     let mut sources = lockstep::sources(&options.plant);
     if options.ros1.is_some() {
         sources.push(super::ros1::source_meta());
+    }
+    if options.websocket.is_some() {
+        sources.push(super::websocket::source_meta());
     }
     let recorder = match &options.record {
         Some(dir) => {
@@ -228,19 +237,35 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
         }
         None => None,
     };
+    let websocket = match options.websocket.clone() {
+        Some(w) => {
+            let config = sim.config().clone();
+            Some(super::websocket::start(
+                sim.engine_mut(),
+                &config,
+                w,
+                clock,
+                tx.clone(),
+            )?)
+        }
+        None => None,
+    };
     let mut sink = Output {
         out: StatusOut::start(out),
         recorder,
         mqtt,
         ros1,
+        websocket,
     };
     if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
     } else {
         drop(tx);
     }
-    let mut commands_open =
-        options.commands_stdin || options.mqtt.is_some() || options.ros1.is_some();
+    let mut commands_open = options.commands_stdin
+        || options.mqtt.is_some()
+        || options.ros1.is_some()
+        || options.websocket.is_some();
     eprintln!(
         "{}",
         start_line(&options, sim.config().vehicle.name.as_str())
@@ -355,6 +380,9 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
             "; ROS1 node {} on {} (watch: rostopic echo /tracked_pose)",
             r.node_name, r.master_uri
         );
+    }
+    if let Some(w) = &options.websocket {
+        line += &format!("; rosbridge WebSocket server on ws://{}/", w.bind);
     }
     if let Some(dir) = &options.record {
         line += &format!("; recording into {}", dir.display());

@@ -256,8 +256,9 @@ impl Scenario {
                 legs.push(pause);
             }
         }
-        let v = speed * 0.8;
         let radius = p.eight_radius_m();
+        // Four fifths of the runs' speed, unless that would turn faster than the spot turns.
+        let v = (speed * 0.8).min(turn_rate * radius);
         for _ in 0..turns {
             legs.push(leg(2.0 * PI * radius / v, v, v / radius));
             legs.push(leg(2.0 * PI * radius / v, v, -v / radius));
@@ -365,6 +366,48 @@ fn turns() -> Vec<Leg> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Whatever the settings `calibrate --drive` accepts, the pattern never asks for
+        /// more speed or yaw rate than it was given, starts and ends standing still, and
+        /// drives each run to its length.
+        #[test]
+        fn the_calibration_pattern_stays_within_its_limits(
+            still_s in 1.0f64..60.0,
+            speed in 0.05f64..2.0,
+            run_m in 0.5f64..100.0,
+            run_pairs in 1u32..=20,
+            turn_rate in 0.1f64..1.5,
+        ) {
+            let p = CalibrationPattern { still_s, speed, run_m, run_pairs, turn_rate };
+            let s = Scenario::calibration_pattern(&p);
+            for leg in &s.legs {
+                prop_assert!(leg.v.abs() <= speed + 1e-12, "{leg:?}");
+                prop_assert!(leg.w.abs() <= turn_rate + 1e-12, "{leg:?}");
+                prop_assert!(leg.duration_s > 0.0 && leg.duration_s.is_finite(), "{leg:?}");
+            }
+            prop_assert_eq!(s.command_at(0.0), (0.0, 0.0));
+            prop_assert_eq!(s.command_at(s.duration_s() - 1e-6), (0.0, 0.0));
+            let runs: Vec<f64> = s
+                .legs
+                .iter()
+                .filter(|l| l.w == 0.0 && l.v > 0.0)
+                .map(|l| l.v * l.duration_s)
+                .collect();
+            prop_assert_eq!(runs.len(), 2 * run_pairs as usize);
+            for r in runs {
+                prop_assert!((r - run_m).abs() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn the_default_pattern_is_the_simulators_twelve_minutes() {
+        let s = Scenario::calibration();
+        // 30 s still, ten 20 m runs with their turns and pauses, four spot turns, two eights.
+        assert!((s.duration_s() - 726.8).abs() < 0.1, "{}", s.duration_s());
+    }
 
     #[test]
     fn the_outage_scenario_loses_the_fix_for_30_s() {

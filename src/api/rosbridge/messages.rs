@@ -1,0 +1,356 @@
+//! The ROS messages of the WebSocket topics as rosbridge JSON, in ROS 2's shapes (the spec
+//! names ROS 2 topics: a header's stamp is `sec` and `nanosec`, no `seq`). Frames follow
+//! REP-103 (x forward, y left, z up; yaw counter-clockwise) and REP-105 (`map`, `odom`,
+//! `base_link`). A value the vehicle does not know is `null` (JSON has no NaN), where a ROS
+//! node would send NaN.
+
+use serde_json::{Value, json};
+
+use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
+use crate::api::ros1::{ros_time, yaw_quaternion};
+use crate::core::chassis::status_bits;
+use crate::core::{Localization, VehicleStatus};
+use crate::devices::gnss::FixQuality;
+use crate::fusion::odometry::OdomPose;
+use crate::time::Timestamp;
+
+/// The fused pose's frame.
+pub const MAP_FRAME: &str = "map";
+/// The wheel odometry's frame.
+pub const ODOM_FRAME: &str = "odom";
+/// The vehicle's frame.
+pub const BASE_FRAME: &str = "base_link";
+
+fn header(t: Timestamp, frame: &str) -> Value {
+    let (sec, nanosec) = ros_time(t);
+    json!({"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame})
+}
+
+fn planar_pose(x: f64, y: f64, yaw: f64) -> Value {
+    let [qx, qy, qz, qw] = yaw_quaternion(yaw);
+    json!({
+        "position": {"x": x, "y": y, "z": 0.0},
+        "orientation": {"x": qx, "y": qy, "z": qz, "w": qw},
+    })
+}
+
+/// `/pose` (geometry_msgs/PoseWithCovarianceStamped): the fused pose in `map` with its
+/// covariance; `None` until the vehicle is placed in the map (before that its pose is the
+/// `odom` frame's, which `/odom` carries).
+pub fn pose(status: &VehicleStatus) -> Option<Value> {
+    if status.localization == Localization::Uninitialized {
+        return None;
+    }
+    let c = status.pose_covariance?;
+    let mut covariance = [0.0; 36];
+    covariance[0] = c.xx;
+    covariance[1] = c.xy;
+    covariance[6] = c.xy;
+    covariance[7] = c.yy;
+    // z, roll and pitch are not estimated.
+    for i in [14, 21, 28] {
+        covariance[i] = UNMEASURED;
+    }
+    covariance[35] = c.yaw;
+    let p = status.pose;
+    Some(json!({
+        "header": header(status.time, MAP_FRAME),
+        "pose": {"pose": planar_pose(p.x, p.y, p.yaw), "covariance": covariance.to_vec()},
+    }))
+}
+
+/// `/odom` (nav_msgs/Odometry): the wheels-and-gyro pose in `odom`, speeds in `base_link`.
+pub fn odometry(t: Timestamp, pose: &OdomPose, covariance: &OdometryCovariance) -> Value {
+    json!({
+        "header": header(t, ODOM_FRAME),
+        "child_frame_id": BASE_FRAME,
+        "pose": {
+            "pose": planar_pose(pose.x, pose.y, pose.yaw),
+            "covariance": covariance.pose.to_vec(),
+        },
+        "twist": {
+            "twist": {
+                "linear": {"x": pose.v, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": pose.w},
+            },
+            "covariance": covariance.twist.to_vec(),
+        },
+    })
+}
+
+/// sensor_msgs/BatteryState's power supply status.
+const CHARGING: u8 = 1;
+const DISCHARGING: u8 = 2;
+const UNKNOWN_STATUS: u8 = 0;
+/// Its power supply health: unknown, good.
+const HEALTH_UNKNOWN: u8 = 0;
+const HEALTH_GOOD: u8 = 1;
+/// Its technology: unknown (the BMS does not say).
+const TECHNOLOGY_UNKNOWN: u8 = 0;
+
+/// `/battery_state` (sensor_msgs/BatteryState); `None` without a BMS.
+pub fn battery_state(status: &VehicleStatus) -> Option<Value> {
+    let battery = status.battery?;
+    let r = &battery.reading;
+    let supply = match r.current_a {
+        _ if battery.stale => UNKNOWN_STATUS,
+        Some(a) if a > 0.0 => CHARGING,
+        Some(_) => DISCHARGING,
+        None => UNKNOWN_STATUS,
+    };
+    let health = if battery.stale || r.rx.is_none() {
+        HEALTH_UNKNOWN
+    } else {
+        HEALTH_GOOD
+    };
+    Some(json!({
+        "header": header(status.time, BASE_FRAME),
+        "voltage": r.voltage_v,
+        "temperature": r.temperature_c,
+        "current": r.current_a,
+        "charge": r.remaining_capacity_ah,
+        "capacity": null,
+        "design_capacity": null,
+        "percentage": r.soc_pct.map(|p| p / 100.0),
+        "power_supply_status": supply,
+        "power_supply_health": health,
+        "power_supply_technology": TECHNOLOGY_UNKNOWN,
+        "present": r.rx.is_some(),
+        "cell_voltage": [],
+        "cell_temperature": [],
+        "location": "",
+        "serial_number": "",
+    }))
+}
+
+/// diagnostic_msgs/DiagnosticStatus levels.
+const OK: u8 = 0;
+const WARN: u8 = 1;
+const ERROR: u8 = 2;
+
+fn diagnostic(level: u8, name: &str, message: &str, values: &[(&str, String)]) -> Value {
+    json!({
+        "level": level,
+        "name": format!("chassisd: {name}"),
+        "message": message,
+        "hardware_id": "",
+        "values": values
+            .iter()
+            .map(|(k, v)| json!({"key": k, "value": v}))
+            .collect::<Vec<_>>(),
+    })
+}
+
+/// `/diagnostics` (diagnostic_msgs/DiagnosticArray): one status each for the receiver, the
+/// IMU, the drive train, the battery and the localisation.
+pub fn diagnostics(status: &VehicleStatus) -> Value {
+    let g = &status.gnss;
+    let mut all = vec![diagnostic(
+        if !g.ok {
+            ERROR
+        } else if g.quality == FixQuality::RtkFixed {
+            OK
+        } else {
+            WARN
+        },
+        "gnss",
+        if g.ok { "fix" } else { "no valid fix" },
+        &[("quality", format!("{:?}", g.quality))],
+    )];
+    all.push(diagnostic(
+        if status.imu_ok { OK } else { WARN },
+        "imu",
+        if status.imu_ok {
+            "fresh samples"
+        } else {
+            "no fresh plausible sample (or none configured)"
+        },
+        &[],
+    ));
+    if let Some(c) = &status.chassis {
+        let stopped = status_bits::FAULT
+            | status_bits::HEARTBEAT_LOST
+            | status_bits::ESTOP
+            | status_bits::BUS_DOWN
+            | status_bits::CONTROL_LINK_LOST;
+        let level = if c.status_bits & stopped != 0 {
+            ERROR
+        } else if c.ok {
+            OK
+        } else {
+            WARN
+        };
+        let message = c
+            .stop_reason
+            .clone()
+            .unwrap_or_else(|| status_bits::describe(c.status_bits));
+        all.push(diagnostic(
+            level,
+            "drive train",
+            &message,
+            &[
+                ("status_bits", c.status_bits.to_string()),
+                ("vx", format!("{:.3}", c.vx)),
+                ("wz", format!("{:.3}", c.wz)),
+            ],
+        ));
+    }
+    if let Some(b) = &status.battery {
+        let level = if b.stale || b.reading.alarms != 0 {
+            WARN
+        } else {
+            OK
+        };
+        all.push(diagnostic(
+            level,
+            "battery",
+            if b.stale {
+                "no reading within the stale timeout"
+            } else if b.reading.alarms != 0 {
+                "alarm"
+            } else {
+                "ok"
+            },
+            &[
+                ("alarms", format!("{:#x}", b.reading.alarms)),
+                (
+                    "soc_pct",
+                    b.reading
+                        .soc_pct
+                        .map_or_else(|| "unknown".into(), |s| format!("{s:.1}")),
+                ),
+            ],
+        ));
+    }
+    all.push(diagnostic(
+        match status.localization {
+            Localization::Good => OK,
+            Localization::Lost => WARN,
+            Localization::Uninitialized => WARN,
+        },
+        "localization",
+        match status.localization {
+            Localization::Good => "located",
+            Localization::Lost => "pose beyond its bounds",
+            Localization::Uninitialized => "not placed in the map yet",
+        },
+        &[],
+    ));
+    json!({"header": header(status.time, ""), "status": all})
+}
+
+/// `/plan` (nav_msgs/Path) in `map`: the points of the move, goal or task under way, each
+/// facing the next.
+pub fn path(t: Timestamp, points: &[(f64, f64)]) -> Value {
+    let poses: Vec<Value> = points
+        .iter()
+        .enumerate()
+        .map(|(i, &(x, y))| {
+            // Towards the next point; the last one keeps the direction it was reached in.
+            let toward = |(ax, ay): (f64, f64), (bx, by): (f64, f64)| {
+                ((ax, ay) != (bx, by)).then(|| (by - ay).atan2(bx - ax))
+            };
+            let yaw = points
+                .get(i + 1)
+                .and_then(|&next| toward((x, y), next))
+                .or_else(|| i.checked_sub(1).and_then(|j| toward(points[j], (x, y))))
+                .unwrap_or(0.0);
+            json!({"header": header(t, MAP_FRAME), "pose": planar_pose(x, y, yaw)})
+        })
+        .collect();
+    json!({"header": header(t, MAP_FRAME), "poses": poses})
+}
+
+/// The local `goal` command of a `/goal_pose` message (geometry_msgs/PoseStamped): its
+/// frame must be `map` (or empty, taken as `map`), its orientation a rotation about z.
+pub fn goal_from_pose_stamped(msg: &Value) -> Result<String, String> {
+    let frame = msg
+        .pointer("/header/frame_id")
+        .and_then(Value::as_str)
+        .unwrap_or("");
+    if !(frame.is_empty() || frame == MAP_FRAME) {
+        return Err(format!(
+            "a goal in frame {frame:?} cannot be reached: give it in \"map\""
+        ));
+    }
+    let number = |pointer: &str, default: Option<f64>| -> Result<f64, String> {
+        match msg.pointer(pointer) {
+            Some(v) => v
+                .as_f64()
+                .filter(|f| f.is_finite())
+                .ok_or_else(|| format!("{pointer} must be a finite number")),
+            None => default.ok_or_else(|| format!("{pointer} is missing")),
+        }
+    };
+    let x = number("/pose/position/x", None)?;
+    let y = number("/pose/position/y", None)?;
+    let qx = number("/pose/orientation/x", Some(0.0))?;
+    let qy = number("/pose/orientation/y", Some(0.0))?;
+    let qz = number("/pose/orientation/z", Some(0.0))?;
+    let qw = number("/pose/orientation/w", Some(1.0))?;
+    let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+    if (norm - 1.0).abs() > 0.01 {
+        return Err(format!(
+            "/pose/orientation is not a unit quaternion (norm {norm:.3})"
+        ));
+    }
+    if (qx * qx + qy * qy).sqrt() > 0.02 {
+        return Err("/pose/orientation must be a rotation about z (a planar goal)".into());
+    }
+    let yaw = 2.0 * qz.atan2(qw);
+    Ok(json!({"x": x, "y": y, "yaw": yaw}).to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_goal_pose_becomes_a_local_goal() {
+        let msg = json!({
+            "header": {"frame_id": "map", "stamp": {"sec": 0, "nanosec": 0}},
+            "pose": {"position": {"x": 2.0, "y": 1.0, "z": 0.0},
+                     "orientation": {"x": 0.0, "y": 0.0, "z": std::f64::consts::FRAC_1_SQRT_2,
+                                     "w": std::f64::consts::FRAC_1_SQRT_2}},
+        });
+        let goal: Value = serde_json::from_str(&goal_from_pose_stamped(&msg).unwrap()).unwrap();
+        assert_eq!(goal["x"], 2.0);
+        assert!((goal["yaw"].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn goals_that_cannot_be_reached_are_refused_with_the_reason() {
+        let refuse = |msg: Value| goal_from_pose_stamped(&msg).unwrap_err();
+        assert!(
+            refuse(json!({"header": {"frame_id": "odom"}, "pose": {"position": {"x": 1, "y": 1}}}))
+                .contains("\"map\"")
+        );
+        assert!(refuse(json!({"pose": {"position": {"x": 1}}})).contains("/pose/position/y"));
+        assert!(refuse(json!({"pose": {"position": {"x": 1, "y": "a"}}})).contains("finite"));
+        assert!(refuse(json!({"pose": {"position": {"x": 1, "y": 1}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 2}}})).contains("unit quaternion"));
+        assert!(refuse(json!({"pose": {"position": {"x": 1, "y": 1}, "orientation": {"x": 1, "y": 0, "z": 0, "w": 0}}})).contains("about z"));
+    }
+
+    #[test]
+    fn a_path_faces_along_itself() {
+        let p = path(
+            Timestamp::from_micros(1_500_000),
+            &[(0.0, 0.0), (0.0, 1.0), (0.0, 2.0)],
+        );
+        let poses = p["poses"].as_array().unwrap();
+        assert_eq!(poses.len(), 3);
+        for pose in poses {
+            // Facing north: yaw π/2.
+            let qz = pose["pose"]["orientation"]["z"].as_f64().unwrap();
+            assert!(
+                (qz - (std::f64::consts::FRAC_PI_4).sin()).abs() < 1e-9,
+                "{pose}"
+            );
+        }
+        assert_eq!(
+            p["header"]["stamp"],
+            json!({"sec": 1, "nanosec": 500_000_000})
+        );
+        assert_eq!(p["header"]["frame_id"], "map");
+    }
+}

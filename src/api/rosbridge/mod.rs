@@ -1,0 +1,11 @@
+//! device-mqtt-api.md's "WebSocket/ROS2 Topic" interfaces, served over the rosbridge v2
+//! protocol (what roslibjs, roslibpy and Foxglove speak): the operations, the topic table
+//! and the ROS messages as JSON. Moving them is `runtime::websocket`'s job.
+
+pub mod messages;
+pub mod ops;
+pub mod topics;
+
+/// The command source of what WebSocket clients publish (`/cmd_vel`, `/goal_pose`): the
+/// local channel's commands, so a recording keeps them and replays without a client.
+pub const SOURCE: &str = "websocket";

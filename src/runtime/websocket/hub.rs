@@ -1,0 +1,271 @@
+//! The server's state: its clients, what each subscribed to (with its throttle and queue
+//! length), and each one's outgoing queue. Plain data driven by the server's task, with the
+//! time passed in, so the rules are tested without sockets.
+//!
+//! A client's queue is bounded twice: per subscription by its `queue_length` (its oldest
+//! message of that topic goes first) and in all by `websocket.client_queue`. What is dropped
+//! is counted. Putting a message in a queue never waits, so a client that does not read
+//! never slows the vehicle or another client.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use tokio::sync::Notify;
+
+use crate::api::rosbridge::ops::Level;
+
+/// One message waiting for a client, and the topic it belongs to (`None`: an answer or a
+/// status, never dropped for a topic's queue length). Topics are the server's own, from
+/// its static table.
+type Queued = (Option<&'static str>, String);
+
+/// A client's outgoing queue, shared by the server's task (which fills it) and the client's
+/// writer (which empties it).
+#[derive(Debug)]
+pub struct ClientQueue {
+    items: Mutex<VecDeque<Queued>>,
+    capacity: usize,
+    /// Wakes the writer.
+    pub ready: Notify,
+    dropped: AtomicU64,
+}
+
+impl ClientQueue {
+    /// An empty queue of at most `capacity` messages.
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            items: Mutex::new(VecDeque::with_capacity(capacity.min(64))),
+            capacity: capacity.max(1),
+            dropped: AtomicU64::new(0),
+            ready: Notify::new(),
+        }
+    }
+
+    /// Queues `text`; for a topic's message, first drops that topic's oldest ones beyond
+    /// `keep - 1`. The oldest message of all goes when the queue is full.
+    pub fn push(&self, topic: Option<(&'static str, usize)>, text: String) {
+        let mut dropped = 0;
+        {
+            let Ok(mut items) = self.items.lock() else {
+                return;
+            };
+            if let Some((topic, keep)) = topic {
+                let keep = keep.max(1);
+                let mut waiting = items.iter().filter(|(t, _)| *t == Some(topic)).count();
+                while waiting >= keep {
+                    if let Some(i) = items.iter().position(|(t, _)| *t == Some(topic)) {
+                        items.remove(i);
+                        dropped += 1;
+                    }
+                    waiting -= 1;
+                }
+            }
+            while items.len() >= self.capacity {
+                items.pop_front();
+                dropped += 1;
+            }
+            items.push_back((topic.map(|(t, _)| t), text));
+        }
+        if dropped > 0 {
+            self.dropped.fetch_add(dropped, Ordering::Relaxed);
+        }
+        self.ready.notify_one();
+    }
+
+    /// Takes everything queued, oldest first.
+    pub fn take(&self) -> Vec<String> {
+        match self.items.lock() {
+            Ok(mut items) => items.drain(..).map(|(_, text)| text).collect(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    /// Messages dropped so far.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.load(Ordering::Relaxed)
+    }
+}
+
+/// One subscription of a client.
+#[derive(Debug, Clone)]
+struct Subscription {
+    id: Option<String>,
+    throttle: Duration,
+    queue_length: usize,
+    last_sent: Option<Instant>,
+}
+
+/// One connected client.
+#[derive(Debug)]
+pub struct Client {
+    /// Its outgoing queue.
+    pub queue: Arc<ClientQueue>,
+    /// Presented the token (or none is needed).
+    pub authenticated: bool,
+    /// The lowest level of status messages it wants.
+    pub level: Level,
+    /// Its subscriptions, by topic.
+    subscriptions: BTreeMap<&'static str, Vec<Subscription>>,
+}
+
+impl Client {
+    /// A new client with `queue`.
+    pub fn new(queue: Arc<ClientQueue>, authenticated: bool) -> Self {
+        Self {
+            queue,
+            authenticated,
+            level: Level::Info,
+            subscriptions: BTreeMap::new(),
+        }
+    }
+
+    /// Adds a subscription to `topic`.
+    pub fn subscribe(
+        &mut self,
+        topic: &'static str,
+        id: Option<String>,
+        throttle: Duration,
+        queue_length: usize,
+    ) {
+        let subs = self.subscriptions.entry(topic).or_default();
+        // The same id again replaces its subscription (a client re-subscribing).
+        subs.retain(|s| id.is_none() || s.id != id);
+        subs.push(Subscription {
+            id,
+            throttle,
+            queue_length,
+            last_sent: None,
+        });
+    }
+
+    /// Ends the subscription `id` on `topic`, or every one on `topic` without an id.
+    pub fn unsubscribe(&mut self, topic: &str, id: Option<&str>) {
+        if let Some(subs) = self.subscriptions.get_mut(topic) {
+            match id {
+                Some(id) => subs.retain(|s| s.id.as_deref() != Some(id)),
+                None => subs.clear(),
+            }
+            if subs.is_empty() {
+                self.subscriptions.remove(topic);
+            }
+        }
+    }
+
+    /// Whether any subscription on `topic` would take a message at `now`.
+    pub fn wants(&self, topic: &str, now: Instant) -> bool {
+        self.subscriptions
+            .get(topic)
+            .is_some_and(|subs| subs.iter().any(|s| due(s, now)))
+    }
+
+    /// Queues `text` on `topic` if a subscription is due (once, however many subscribe);
+    /// returns whether it was queued.
+    pub fn offer(&mut self, topic: &'static str, text: &str, now: Instant) -> bool {
+        let Some(subs) = self.subscriptions.get_mut(topic) else {
+            return false;
+        };
+        let mut keep = 0;
+        let mut taken = false;
+        for s in subs.iter_mut().filter(|s| due(s, now)) {
+            s.last_sent = Some(now);
+            keep = keep.max(s.queue_length);
+            taken = true;
+        }
+        if taken {
+            self.queue.push(Some((topic, keep)), text.to_owned());
+        }
+        taken
+    }
+
+    /// Queues a status message if the client wants its level.
+    pub fn status(&self, level: Level, text: String) {
+        if level >= self.level {
+            self.queue.push(None, text);
+        }
+    }
+
+    /// Queues an answer (a service response).
+    pub fn answer(&self, text: String) {
+        self.queue.push(None, text);
+    }
+}
+
+fn due(s: &Subscription, now: Instant) -> bool {
+    s.last_sent
+        .is_none_or(|last| now.saturating_duration_since(last) >= s.throttle)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn client(capacity: usize) -> Client {
+        Client::new(Arc::new(ClientQueue::new(capacity)), true)
+    }
+
+    #[test]
+    fn a_throttled_subscription_takes_one_message_per_period() {
+        let mut c = client(100);
+        c.subscribe("/pose", None, Duration::from_millis(500), 10);
+        let t0 = Instant::now();
+        let taken: Vec<bool> = (0..10)
+            .map(|i| c.offer("/pose", "m", t0 + Duration::from_millis(100 * i)))
+            .collect();
+        assert_eq!(
+            taken,
+            [
+                true, false, false, false, false, true, false, false, false, false
+            ]
+        );
+    }
+
+    #[test]
+    fn a_topics_queue_length_keeps_its_newest_and_the_drops_are_counted() {
+        let mut c = client(100);
+        c.subscribe("/odom", None, Duration::ZERO, 2);
+        c.subscribe("/pose", None, Duration::ZERO, 1);
+        let now = Instant::now();
+        for i in 0..5 {
+            c.offer("/odom", &format!("odom {i}"), now);
+        }
+        c.offer("/pose", "pose", now);
+        c.status(Level::Error, "status".into());
+        assert_eq!(c.queue.take(), ["odom 3", "odom 4", "pose", "status"]);
+        assert_eq!(c.queue.dropped(), 3);
+    }
+
+    #[test]
+    fn a_full_queue_loses_its_oldest_message() {
+        let mut c = client(4);
+        c.subscribe("/odom", None, Duration::ZERO, 100);
+        let now = Instant::now();
+        for i in 0..10 {
+            c.offer("/odom", &i.to_string(), now);
+        }
+        assert_eq!(c.queue.take(), ["6", "7", "8", "9"]);
+        assert_eq!(c.queue.dropped(), 6);
+    }
+
+    #[test]
+    fn unsubscribing_by_id_keeps_the_others() {
+        let mut c = client(10);
+        c.subscribe("/pose", Some("a".into()), Duration::ZERO, 1);
+        c.subscribe("/pose", Some("b".into()), Duration::ZERO, 1);
+        c.unsubscribe("/pose", Some("a"));
+        assert!(c.wants("/pose", Instant::now()));
+        c.unsubscribe("/pose", Some("b"));
+        assert!(!c.wants("/pose", Instant::now()));
+    }
+
+    #[test]
+    fn status_messages_below_the_clients_level_are_not_sent() {
+        let mut c = client(10);
+        c.level = Level::Error;
+        c.status(Level::Info, "info".into());
+        c.status(Level::Error, "error".into());
+        assert_eq!(c.queue.take(), ["error"]);
+    }
+}

@@ -1,0 +1,567 @@
+//! The rosbridge v2 server (`[websocket]`, `--websocket ADDR`): WebSocket clients subscribe
+//! to the vehicle's ROS topics and publish `/cmd_vel` and `/goal_pose`, with no ROS
+//! installation. What the topics mean is `api::rosbridge`; this module moves them.
+//!
+//! Three parts. The engine's task hands the server what it publishes through a
+//! [`WebsocketLink`], which never waits (a full queue drops the newest, counted). One server
+//! task owns every client's subscriptions and fills each client's bounded queue. Each
+//! connection has a task of its own that writes its queue to the socket and reads its
+//! operations: a client that does not read loses its oldest messages and slows nobody.
+//! Commands go to the engine as records of the source `websocket`, so a recording keeps
+//! them and the engine's answer comes back to the client that sent them.
+
+pub mod hub;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Query, State};
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use bytes::Bytes;
+use serde_json::{Value, json};
+use tokio::sync::mpsc;
+
+use self::hub::{Client, ClientQueue};
+use super::clock::RecordClock;
+use super::command_rate::CommandRate;
+use crate::api::local;
+use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
+use crate::api::rosbridge::ops::{self, ClientOp, Level};
+use crate::api::rosbridge::topics::{self, Flow};
+use crate::api::rosbridge::{SOURCE, messages};
+use crate::config::websocket::WebsocketConfig;
+use crate::core::VehicleStatus;
+use crate::engine::{Engine, EngineOutput};
+use crate::fusion::odometry::OdomPose;
+use crate::record::{Payload, Record, SourceMeta};
+use crate::time::Timestamp;
+
+/// Feed items waiting for the server task before the newest are dropped (some 2 s).
+const FEED_QUEUE: usize = 256;
+/// Client events waiting for the server task.
+const EVENT_QUEUE: usize = 1024;
+/// Commands sent to the engine and not answered yet, at most.
+const PENDING_ANSWERS: usize = 1024;
+/// `/odom` goes out every this many control ticks (50 Hz).
+const ODOM_EVERY_TICKS: u64 = 2;
+/// `/battery_state` and `/diagnostics` go out every this many status ticks (1 Hz).
+const SLOW_EVERY_STATUS: u64 = 10;
+
+/// What the engine's outputs give the server.
+#[derive(Debug, Clone)]
+enum Feed {
+    Status(Box<VehicleStatus>),
+    Odom(Timestamp, OdomPose),
+    Answer(Result<(), String>),
+}
+
+/// The engine task's end: sending never blocks, and what does not fit is dropped and
+/// counted (the next status or pose follows soon).
+pub struct WebsocketLink {
+    feed: mpsc::Sender<Feed>,
+    ticks: u64,
+    dropped: u64,
+}
+
+impl WebsocketLink {
+    /// Looks at an engine output on its way elsewhere and takes what the topics need.
+    pub fn see(&mut self, output: &EngineOutput) {
+        let item = match output {
+            EngineOutput::Status(s) => Feed::Status(s.clone()),
+            EngineOutput::Poses(t, report) => {
+                self.ticks += 1;
+                match report.odom {
+                    Some(odom) if self.ticks.is_multiple_of(ODOM_EVERY_TICKS) => {
+                        Feed::Odom(*t, odom)
+                    }
+                    _ => return,
+                }
+            }
+            EngineOutput::CommandResult { source, result, .. } if source == SOURCE => {
+                Feed::Answer(result.clone())
+            }
+            _ => return,
+        };
+        if self.feed.try_send(item).is_err() {
+            self.dropped += 1;
+            if self.dropped.is_power_of_two() {
+                tracing::warn!(
+                    dropped = self.dropped,
+                    "websocket: the server is not keeping up; feed dropped"
+                );
+            }
+        }
+    }
+}
+
+/// The recording's entry for the clients' commands.
+pub fn source_meta() -> SourceMeta {
+    SourceMeta::commands(SOURCE, &format!("{SOURCE}.log"))
+}
+
+/// What the server task hears from connections.
+enum Event {
+    Connected(u64, Arc<ClientQueue>, bool),
+    Op(u64, String),
+    Gone(u64),
+}
+
+/// What every connection shares.
+struct Shared {
+    events: mpsc::Sender<Event>,
+    token: Option<String>,
+    clients: AtomicUsize,
+    max_clients: usize,
+    client_queue: usize,
+    next_id: AtomicUsize,
+}
+
+/// Starts the server of `config` for a vehicle whose engine is `engine` (it then emits the
+/// poses `/odom` needs); the clients' commands go to `records`.
+pub fn start(
+    engine: &mut Engine,
+    vehicle: &crate::config::VehicleConfig,
+    config: WebsocketConfig,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+) -> anyhow::Result<WebsocketLink> {
+    let address = config
+        .address()
+        .with_context(|| format!("websocket.bind {:?} is not an address", config.bind))?;
+    let listener =
+        listen(address).with_context(|| format!("websocket: cannot listen on {address}"))?;
+    engine.emit_poses();
+    let localizer = crate::config::localization::localizer_config(vehicle);
+    let noise = OdometryNoise::from_localizer(&localizer, vehicle.imu.is_some());
+    let (feed_tx, feed_rx) = mpsc::channel(FEED_QUEUE);
+    let (events_tx, events_rx) = mpsc::channel(EVENT_QUEUE);
+    let shared = Arc::new(Shared {
+        events: events_tx,
+        token: config.token.clone(),
+        clients: AtomicUsize::new(0),
+        max_clients: config.max_clients,
+        client_queue: config.client_queue,
+        next_id: AtomicUsize::new(1),
+    });
+    let server = Server {
+        clients: BTreeMap::new(),
+        rates: BTreeMap::new(),
+        command_rate_hz: config.command_rate_hz,
+        pending: VecDeque::new(),
+        odometry: OdometryUncertainty::new(noise),
+        status_ticks: 0,
+        token: config.token.clone(),
+        clock,
+        records,
+    };
+    tokio::spawn(server.run(feed_rx, events_rx));
+    let router = axum::Router::new()
+        .route("/", axum::routing::get(root))
+        .with_state(shared);
+    tracing::info!(%address, token = config.token.is_some(), "websocket: rosbridge v2 server listening");
+    tokio::spawn(async move {
+        if let Err(e) = axum::serve(listener, router).await {
+            tracing::error!(error = %e, "websocket: the server stopped");
+        }
+    });
+    Ok(WebsocketLink {
+        feed: feed_tx,
+        ticks: 0,
+        dropped: 0,
+    })
+}
+
+/// The kernel's send buffer of each client's socket, bytes (inherited from the listener).
+/// Fixed instead of autotuned (up to 4 MB on Linux): a client that stops reading then backs
+/// up within a second of messages, and its own queue, bounded and counted, takes over.
+/// Plenty for a dashboard on Wi-Fi: 64 KiB per 100 ms round trip is 640 KB/s.
+const CLIENT_SEND_BUFFER: usize = 64 * 1024;
+
+/// A listening socket on `address` whose accepted sockets get [`CLIENT_SEND_BUFFER`].
+fn listen(address: std::net::SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    let socket = socket2::Socket::new(
+        socket2::Domain::for_address(address),
+        socket2::Type::STREAM,
+        None,
+    )?;
+    socket.set_reuse_address(true)?;
+    socket.set_send_buffer_size(CLIENT_SEND_BUFFER)?;
+    socket.bind(&address.into())?;
+    socket.listen(128)?;
+    socket.set_nonblocking(true)?;
+    tokio::net::TcpListener::from_std(socket.into())
+}
+
+/// `GET /`: a WebSocket upgrade becomes a rosbridge client.
+async fn root(
+    State(shared): State<Arc<Shared>>,
+    Query(query): Query<BTreeMap<String, String>>,
+    ws: Option<WebSocketUpgrade>,
+) -> Response {
+    let Some(ws) = ws else {
+        return (
+            StatusCode::BAD_REQUEST,
+            "chassisd: this is a rosbridge v2 WebSocket server; connect with a rosbridge \
+             client (roslibjs, roslibpy, Foxglove) to ws://this-address/",
+        )
+            .into_response();
+    };
+    if shared.clients.fetch_add(1, Ordering::AcqRel) >= shared.max_clients {
+        shared.clients.fetch_sub(1, Ordering::AcqRel);
+        tracing::warn!(
+            max = shared.max_clients,
+            "websocket: a client turned away (websocket.max_clients)"
+        );
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "chassisd: too many WebSocket clients (websocket.max_clients)",
+        )
+            .into_response();
+    }
+    let authenticated = match &shared.token {
+        None => true,
+        Some(token) => query.get("token") == Some(token),
+    };
+    ws.max_message_size(ops::MAX_MESSAGE + 1024)
+        .on_upgrade(move |socket| connection(socket, shared, authenticated))
+}
+
+/// One client: its queue to the socket, its operations to the server task.
+async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: bool) {
+    let id = shared.next_id.fetch_add(1, Ordering::Relaxed) as u64;
+    let queue = Arc::new(ClientQueue::new(shared.client_queue));
+    if shared
+        .events
+        .send(Event::Connected(id, queue.clone(), authenticated))
+        .await
+        .is_ok()
+    {
+        tracing::info!(client = id, "websocket: client connected");
+        loop {
+            tokio::select! {
+                message = socket.recv() => match message {
+                    Some(Ok(Message::Text(text))) => {
+                        // A client flooding the server task waits here alone.
+                        if shared.events.send(Event::Op(id, text)).await.is_err() {
+                            break;
+                        }
+                    }
+                    Some(Ok(Message::Binary(_))) => queue.push(
+                        None,
+                        ops::status(Level::Error, None, "binary messages are not taken: send JSON text"),
+                    ),
+                    Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                    Some(Ok(_)) => {}
+                },
+                () = queue.ready.notified() => {
+                    let mut failed = false;
+                    for text in queue.take() {
+                        if socket.send(Message::Text(text)).await.is_err() {
+                            failed = true;
+                            break;
+                        }
+                    }
+                    if failed {
+                        break;
+                    }
+                }
+            }
+        }
+        let _ = shared.events.send(Event::Gone(id)).await;
+        tracing::info!(
+            client = id,
+            dropped = queue.dropped(),
+            "websocket: client gone"
+        );
+    }
+    shared.clients.fetch_sub(1, Ordering::AcqRel);
+}
+
+/// The server task's state.
+struct Server {
+    clients: BTreeMap<u64, Client>,
+    /// Each client's publishing rate limit.
+    rates: BTreeMap<u64, CommandRate>,
+    command_rate_hz: f64,
+    /// Who sent each command the engine has not answered yet, in order.
+    pending: VecDeque<(u64, &'static str)>,
+    odometry: OdometryUncertainty,
+    status_ticks: u64,
+    token: Option<String>,
+    clock: RecordClock,
+    records: mpsc::Sender<Record>,
+}
+
+impl Server {
+    async fn run(mut self, mut feed: mpsc::Receiver<Feed>, mut events: mpsc::Receiver<Event>) {
+        loop {
+            tokio::select! {
+                item = feed.recv() => match item {
+                    Some(item) => self.on_feed(item),
+                    None => return,
+                },
+                event = events.recv() => match event {
+                    Some(Event::Connected(id, queue, authenticated)) => {
+                        self.clients.insert(id, Client::new(queue, authenticated));
+                        self.rates.insert(id, CommandRate::new(self.command_rate_hz, self.command_rate_hz.ceil() as u32));
+                    }
+                    Some(Event::Op(id, text)) => self.on_op(id, &text),
+                    Some(Event::Gone(id)) => {
+                        self.clients.remove(&id);
+                        self.rates.remove(&id);
+                    }
+                    None => return,
+                },
+            }
+        }
+    }
+
+    /// Publishes `topic` to whoever is due for it, building the message only then.
+    fn publish(&mut self, topic: &'static str, build: impl FnOnce() -> Option<Value>) {
+        let now = Instant::now();
+        if !self.clients.values().any(|c| c.wants(topic, now)) {
+            return;
+        }
+        let Some(msg) = build() else { return };
+        let text = ops::publish(topic, &msg);
+        for client in self.clients.values_mut() {
+            client.offer(topic, &text, now);
+        }
+    }
+
+    fn on_feed(&mut self, item: Feed) {
+        match item {
+            Feed::Status(status) => {
+                self.status_ticks += 1;
+                self.publish(topics::POSE, || messages::pose(&status));
+                if self.status_ticks.is_multiple_of(SLOW_EVERY_STATUS) {
+                    self.publish(topics::BATTERY_STATE, || messages::battery_state(&status));
+                    self.publish(topics::DIAGNOSTICS, || Some(messages::diagnostics(&status)));
+                }
+            }
+            Feed::Odom(t, pose) => {
+                // The covariance integrates every sample, subscribed or not.
+                let covariance = self.odometry.update(t, &pose);
+                self.publish(topics::ODOM, || {
+                    Some(messages::odometry(t, &pose, &covariance))
+                });
+            }
+            Feed::Answer(result) => {
+                let Some((id, topic)) = self.pending.pop_front() else {
+                    return;
+                };
+                if let (Some(client), Err(reason)) = (self.clients.get(&id), result) {
+                    client.status(
+                        Level::Error,
+                        ops::status(Level::Error, None, &format!("{topic}: refused: {reason}")),
+                    );
+                }
+            }
+        }
+    }
+
+    fn on_op(&mut self, id: u64, text: &str) {
+        let Some(client) = self.clients.get_mut(&id) else {
+            return;
+        };
+        let op = match ops::parse(text) {
+            Ok(op) => op,
+            Err(refusal) => {
+                client.status(Level::Error, refusal.status());
+                return;
+            }
+        };
+        if !client.authenticated {
+            match op {
+                ClientOp::Auth { token } if Some(&token) == self.token.as_ref() => {
+                    client.authenticated = true;
+                    client.status(Level::Info, ops::status(Level::Info, None, "authenticated"));
+                }
+                _ => client.status(
+                    Level::Error,
+                    ops::status(
+                        Level::Error,
+                        None,
+                        "authenticate first: send {\"op\": \"auth\", \"mac\": TOKEN} or \
+                         connect with ?token=TOKEN (websocket.token)",
+                    ),
+                ),
+            }
+            return;
+        }
+        let refuse = |client: &Client, op_id: Option<&str>, reason: &str| {
+            client.status(Level::Error, ops::status(Level::Error, op_id, reason));
+        };
+        match op {
+            ClientOp::Auth { .. } | ClientOp::Unadvertise { .. } => {}
+            ClientOp::SetLevel { level, .. } => client.level = level,
+            ClientOp::Subscribe {
+                id: sub_id,
+                topic,
+                msg_type,
+                throttle_ms,
+                queue_length,
+            } => match topics::find(&topic) {
+                Some(t) if matches!(t.flow, Flow::Published(_)) => {
+                    match msg_type.filter(|given| !topics::type_matches(t, given)) {
+                        Some(given) => refuse(
+                            client,
+                            sub_id.as_deref(),
+                            &format!("subscribe: {topic} is {}, not {given}", t.msg_type),
+                        ),
+                        None => client.subscribe(
+                            t.name,
+                            sub_id,
+                            Duration::from_millis(throttle_ms),
+                            queue_length,
+                        ),
+                    }
+                }
+                Some(t) => refuse(
+                    client,
+                    sub_id.as_deref(),
+                    &format!(
+                        "subscribe: {topic} ({}) is published by clients, not by chassisd",
+                        t.msg_type
+                    ),
+                ),
+                None => refuse(
+                    client,
+                    sub_id.as_deref(),
+                    &unknown_topic("subscribe", &topic),
+                ),
+            },
+            ClientOp::Unsubscribe { id: sub_id, topic } => {
+                client.unsubscribe(&topic, sub_id.as_deref());
+            }
+            ClientOp::Advertise {
+                id: op_id,
+                topic,
+                msg_type,
+            } => match topics::find(&topic) {
+                Some(t) if t.flow == Flow::Subscribed && topics::type_matches(t, &msg_type) => {}
+                Some(t) if t.flow == Flow::Subscribed => refuse(
+                    client,
+                    op_id.as_deref(),
+                    &format!("advertise: {topic} is {}, not {msg_type}", t.msg_type),
+                ),
+                Some(t) => refuse(
+                    client,
+                    op_id.as_deref(),
+                    &format!("advertise: {topic} ({}) is chassisd's own", t.msg_type),
+                ),
+                None => refuse(
+                    client,
+                    op_id.as_deref(),
+                    &unknown_topic("advertise", &topic),
+                ),
+            },
+            ClientOp::CallService {
+                id: op_id,
+                service,
+                args,
+            } => client.answer(ops::service_response(
+                &service,
+                op_id.as_deref(),
+                call_service(&service, &args),
+            )),
+            ClientOp::Publish {
+                id: op_id,
+                topic,
+                msg,
+            } => self.command(id, op_id.as_deref(), &topic, &msg),
+        }
+    }
+
+    /// A client's `publish`: a command for the engine, or a refusal with the reason.
+    fn command(&mut self, id: u64, op_id: Option<&str>, topic: &str, msg: &Value) {
+        let Some(client) = self.clients.get(&id) else {
+            return;
+        };
+        let refuse = |reason: &str| {
+            client.status(
+                Level::Error,
+                ops::status(Level::Error, op_id, &format!("publish: {reason}")),
+            );
+        };
+        let (name, local_topic, payload) = match topics::find(topic) {
+            Some(t) if t.name == topics::CMD_VEL => (t.name, local::CMD_VEL, msg.to_string()),
+            Some(t) if t.name == topics::GOAL_POSE => match messages::goal_from_pose_stamped(msg) {
+                Ok(goal) => (t.name, local::GOAL, goal),
+                Err(reason) => return refuse(&format!("{topic}: {reason}")),
+            },
+            Some(t) => {
+                return refuse(&format!("{topic} ({}) is chassisd's own", t.msg_type));
+            }
+            None => return refuse(&unknown_topic("publish", topic)),
+        };
+        let now = Instant::now();
+        if let Some(rate) = self.rates.get_mut(&id)
+            && !rate.admit(name, now).0
+        {
+            return client.status(
+                Level::Warning,
+                ops::status(
+                    Level::Warning,
+                    op_id,
+                    &format!(
+                        "publish: {topic} over websocket.command_rate_hz ({}/s); dropped",
+                        self.command_rate_hz
+                    ),
+                ),
+            );
+        }
+        let record = Record {
+            t: self.clock.now(),
+            source: SOURCE.into(),
+            payload: Payload::Command {
+                topic: local_topic.into(),
+                payload: Bytes::from(payload),
+            },
+        };
+        if self.records.try_send(record).is_err() {
+            return refuse(&format!("{topic}: the vehicle's queue is full; dropped"));
+        }
+        if self.pending.len() >= PENDING_ANSWERS {
+            self.pending.pop_front();
+        }
+        self.pending.push_back((id, name));
+    }
+}
+
+/// Why `topic` is not one of the server's, for `op`.
+fn unknown_topic(op: &str, topic: &str) -> String {
+    match topics::refusal(topic) {
+        Some(reason) => format!("{op}: {reason}"),
+        None => format!(
+            "{op}: no topic {topic}; chassisd's topics are {}",
+            topics::TOPICS
+                .iter()
+                .map(|t| t.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// The services a client may call: rosapi's topic list and topic type.
+fn call_service(service: &str, args: &Value) -> Result<Value, String> {
+    match service {
+        "/rosapi/topics" => Ok(json!({
+            "topics": topics::TOPICS.iter().map(|t| t.name).collect::<Vec<_>>(),
+            "types": topics::TOPICS.iter().map(|t| t.msg_type).collect::<Vec<_>>(),
+        })),
+        "/rosapi/topic_type" => {
+            let topic = args.get("topic").and_then(Value::as_str).unwrap_or("");
+            Ok(json!({"type": topics::find(topic).map_or("", |t| t.msg_type)}))
+        }
+        other => Err(format!(
+            "no service {other}; chassisd answers /rosapi/topics and /rosapi/topic_type"
+        )),
+    }
+}

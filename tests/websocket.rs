@@ -1,0 +1,158 @@
+//! The rosbridge v2 server against a real rosbridge client: roslibpy from PyPI (installed by
+//! tests/install-deps into target/test-venv) talking to `chassisd sim --websocket`. The
+//! client script, tests/websocket/client.py, prints what it saw as JSON; these tests judge
+//! it. A second, raw client that subscribes and never reads checks that a slow client
+//! delays no one. Each test has its own simulated vehicle on its own port, so they run side
+//! by side.
+
+mod common;
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use common::mqtt::free_port;
+use common::process::Proc;
+use serde_json::Value;
+
+fn python() -> PathBuf {
+    let venv = common::repo().join("target/test-venv/bin/python");
+    assert!(
+        venv.exists(),
+        "{} is missing: tests/install-deps installs roslibpy there",
+        venv.display()
+    );
+    venv
+}
+
+/// `chassisd sim --no-mqtt --websocket 127.0.0.1:PORT`, listening.
+fn sim(port: u16) -> Proc {
+    let bind = format!("127.0.0.1:{port}");
+    let mut sim = Proc::start(&["sim", "--no-mqtt", "--websocket", &bind]);
+    sim.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    sim
+}
+
+/// Runs one check of the client script against the server on `port`.
+fn client(port: u16, check: &[&str]) -> Value {
+    let out = Command::new(python())
+        .arg(common::repo().join("tests/websocket/client.py"))
+        .arg(port.to_string())
+        .args(check)
+        .output()
+        .expect("the client runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{check:?}: {}\n{stdout}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let last = stdout.lines().last().unwrap_or_default();
+    serde_json::from_str(last).unwrap_or_else(|e| panic!("{e}: {stdout}"))
+}
+
+fn number(v: &Value, pointer: &str) -> f64 {
+    v.pointer(pointer)
+        .and_then(Value::as_f64)
+        .unwrap_or_else(|| panic!("{pointer} in {v}"))
+}
+
+#[test]
+fn pose_and_odom_arrive_at_their_rates_in_their_frames() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(port, &["rates", "4"]);
+    let pose_hz = number(&seen, "/pose_hz");
+    let odom_hz = number(&seen, "/odom_hz");
+    assert!((9.0..=11.0).contains(&pose_hz), "{seen}");
+    assert!((45.0..=55.0).contains(&odom_hz), "{seen}");
+    assert_eq!(seen["pose_frame"], "map", "{seen}");
+    assert_eq!(seen["pose_covariance"], 36, "{seen}");
+    assert_eq!(seen["odom_frame"], "odom", "{seen}");
+    assert_eq!(seen["odom_child"], "base_link", "{seen}");
+    assert!(
+        seen["stamp"]["sec"].as_u64().unwrap() > 1_700_000_000,
+        "{seen}"
+    );
+    drop(sim);
+}
+
+#[test]
+fn a_goal_pose_drives_the_vehicle_there() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(port, &["goal", "2.0", "1.0", "90"]);
+    let x = number(&seen, "/pose/x");
+    let y = number(&seen, "/pose/y");
+    let yaw = number(&seen, "/pose/yaw").to_degrees();
+    assert!(
+        (x - 2.0).hypot(y - 1.0) < 0.05,
+        "arrived at ({x:.3}, {y:.3})"
+    );
+    assert!((yaw - 90.0).abs() < 3.0, "facing {yaw:.1}°");
+    sim.stop();
+}
+
+#[test]
+fn cmd_vel_moves_the_vehicle_and_it_stops_when_publishing_ends() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(port, &["cmd_vel", "0.3", "2"]);
+    assert!(number(&seen, "/max_during") > 0.25, "{seen}");
+    assert!(number(&seen, "/after").abs() < 0.01, "{seen}");
+    drop(sim);
+}
+
+#[test]
+fn map_scan_and_a_goal_in_the_wrong_frame_are_refused_with_a_status() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(port, &["refusals"]);
+    let statuses: Vec<&str> = seen["statuses"]
+        .as_array()
+        .expect("statuses")
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    let said = |text: &str| statuses.iter().any(|s| s.contains(text));
+    assert!(said("/map") && said("mapping stack"), "{seen}");
+    assert!(said("/scan") && said("lidar"), "{seen}");
+    assert!(said("give it in \"map\""), "{seen}");
+    assert!(
+        seen["levels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|l| l == "error"),
+        "{seen}"
+    );
+    let topics: Vec<&str> = seen["topics"]
+        .as_array()
+        .expect("rosapi topics")
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    for topic in ["/pose", "/odom", "/cmd_vel", "/goal_pose", "/plan"] {
+        assert!(topics.contains(&topic), "{seen}");
+    }
+    drop(sim);
+}
+
+#[test]
+fn a_client_that_never_reads_delays_no_other_client() {
+    let port = free_port();
+    let mut sim = sim(port);
+    let seen = client(port, &["slow", "10"]);
+    assert!(number(&seen, "/pose_hz") >= 9.0, "{seen}");
+    assert!(number(&seen, "/largest_gap_s") < 0.3, "{seen}");
+    // The silent client's queue overflowed: its oldest messages were dropped and counted.
+    let (stderr, log) = (&sim.stderr, &mut sim.log);
+    common::process::wait_for(
+        stderr,
+        log,
+        Duration::from_secs(10),
+        "the silent client's drops",
+        |l| l.contains("websocket: client gone") && !l.contains("dropped=0"),
+    );
+}

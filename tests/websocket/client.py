@@ -1,0 +1,177 @@
+"""A rosbridge client (roslibpy, from PyPI) for tests/websocket.rs.
+
+    client.py PORT CHECK [ARGS...]
+
+Each check talks to `chassisd sim --websocket 127.0.0.1:PORT` as an integrator's client
+would, and prints one JSON object with what it saw; the Rust test judges it.
+"""
+
+import json
+import math
+import socket
+import sys
+import threading
+import time
+
+import roslibpy
+
+
+def connect(port):
+    ros = roslibpy.Ros(host="127.0.0.1", port=port)
+    statuses = []
+
+    # roslibpy has no handler for rosbridge's `status` operation: the test adds one.
+    def on_status(message):
+        statuses.append(dict(message))
+
+    ros.factory.on_ready(lambda proto: proto._message_handlers.__setitem__("status", on_status))
+    ros.run(timeout=10)
+    return ros, statuses
+
+
+def rates(ros, _statuses, seconds="4"):
+    seconds = float(seconds)
+    seen = {"/pose": [], "/odom": []}
+    subs = []
+    for topic, kind in [("/pose", "geometry_msgs/PoseWithCovarianceStamped"), ("/odom", "nav_msgs/Odometry")]:
+        t = roslibpy.Topic(ros, topic, kind)
+        t.subscribe(lambda m, topic=topic: seen[topic].append((time.monotonic(), m)))
+        subs.append(t)
+    time.sleep(1.0)
+    for v in seen.values():
+        v.clear()
+    time.sleep(seconds)
+    for t in subs:
+        t.unsubscribe()
+    pose, odom = seen["/pose"][-1][1], seen["/odom"][-1][1]
+    return {
+        "pose_hz": len(seen["/pose"]) / seconds,
+        "odom_hz": len(seen["/odom"]) / seconds,
+        "pose_frame": pose["header"]["frame_id"],
+        "pose_covariance": len(pose["pose"]["covariance"]),
+        "odom_frame": odom["header"]["frame_id"],
+        "odom_child": odom["child_frame_id"],
+        "stamp": odom["header"]["stamp"],
+    }
+
+
+def latest(ros, topic, kind, wait=5.0):
+    box = []
+    t = roslibpy.Topic(ros, topic, kind)
+    t.subscribe(lambda m: box.append(m))
+    deadline = time.monotonic() + wait
+    while not box and time.monotonic() < deadline:
+        time.sleep(0.05)
+    t.unsubscribe()
+    return box[-1] if box else None
+
+
+def yaw_of(q):
+    return 2.0 * math.atan2(q["z"], q["w"])
+
+
+def goal(ros, _statuses, x, y, yaw_deg):
+    x, y, yaw = float(x), float(y), math.radians(float(yaw_deg))
+    pub = roslibpy.Topic(ros, "/goal_pose", "geometry_msgs/PoseStamped")
+    pub.advertise()
+    time.sleep(0.5)
+    pub.publish(roslibpy.Message({
+        "header": {"frame_id": "map", "stamp": {"sec": 0, "nanosec": 0}},
+        "pose": {"position": {"x": x, "y": y, "z": 0.0},
+                 "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}},
+    }))
+    deadline = time.monotonic() + 60
+    pose = None
+    while time.monotonic() < deadline:
+        m = latest(ros, "/pose", "geometry_msgs/PoseWithCovarianceStamped")
+        if m:
+            p = m["pose"]["pose"]
+            pose = {"x": p["position"]["x"], "y": p["position"]["y"], "yaw": yaw_of(p["orientation"])}
+            odom = latest(ros, "/odom", "nav_msgs/Odometry")
+            twist = odom["twist"]["twist"] if odom else None
+            still = twist and abs(twist["linear"]["x"]) < 0.01 and abs(twist["angular"]["z"]) < 0.01
+            if math.hypot(pose["x"] - x, pose["y"] - y) < 0.05 and still:
+                break
+        time.sleep(0.2)
+    return {"pose": pose}
+
+
+def cmd_vel(ros, _statuses, speed="0.3", seconds="2"):
+    speed, seconds = float(speed), float(seconds)
+    twists = []
+    odom = roslibpy.Topic(ros, "/odom", "nav_msgs/Odometry")
+    odom.subscribe(lambda m: twists.append((time.monotonic(), m["twist"]["twist"]["linear"]["x"])))
+    pub = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/Twist")
+    pub.advertise()
+    time.sleep(0.5)
+    start = time.monotonic()
+    while time.monotonic() - start < seconds:
+        pub.publish(roslibpy.Message({"linear": {"x": speed, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}))
+        time.sleep(0.1)
+    stopped = time.monotonic()
+    time.sleep(2.0)
+    odom.unsubscribe()
+    during = [v for t, v in twists if start + 1.0 <= t <= stopped]
+    after = [v for t, v in twists if t >= stopped + 1.5]
+    return {"max_during": max(during, default=0.0), "after": after[-1] if after else None}
+
+
+def refusals(ros, statuses):
+    roslibpy.Topic(ros, "/map", "nav_msgs/OccupancyGrid").subscribe(lambda m: None)
+    roslibpy.Topic(ros, "/scan", "sensor_msgs/LaserScan").subscribe(lambda m: None)
+    bad = roslibpy.Topic(ros, "/goal_pose", "geometry_msgs/PoseStamped")
+    bad.publish(roslibpy.Message({"header": {"frame_id": "odom"}, "pose": {"position": {"x": 1, "y": 1}}}))
+    deadline = time.monotonic() + 5
+    while len(statuses) < 3 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    topics = ros.get_topics()
+    return {"statuses": [s.get("msg", "") for s in statuses], "levels": [s.get("level") for s in statuses], "topics": topics}
+
+
+def silent_client(port):
+    """A client that subscribes to /odom with a long queue and never reads again."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    # A small window, set before connecting: the server's writes back up soon.
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.connect(("127.0.0.1", port))
+    s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+              b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += s.recv(1)
+    for topic in ["/odom", "/pose", "/diagnostics"]:
+        payload = json.dumps({"op": "subscribe", "topic": topic, "queue_length": 100}).encode()
+        mask = b"\x01\x02\x03\x04"
+        frame = bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+        s.sendall(frame)
+    return s
+
+
+def slow(ros, _statuses, port, seconds="10"):
+    seconds = float(seconds)
+    silent = silent_client(int(port))
+    times = []
+    t = roslibpy.Topic(ros, "/pose", "geometry_msgs/PoseWithCovarianceStamped")
+    t.subscribe(lambda m: times.append(time.monotonic()))
+    time.sleep(seconds)
+    t.unsubscribe()
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    silent.close()
+    return {"pose_hz": len(times) / seconds, "largest_gap_s": max(gaps, default=None)}
+
+
+def main():
+    port = int(sys.argv[1])
+    check = sys.argv[2]
+    args = sys.argv[3:]
+    ros, statuses = connect(port)
+    if check == "slow":
+        args = [str(port)] + args
+    result = globals()[check](ros, statuses, *args)
+    print(json.dumps(result), flush=True)
+    ros.close()
+    ros.terminate()
+
+
+if __name__ == "__main__":
+    main()
