@@ -176,6 +176,14 @@ fn targets() -> Vec<Target> {
             structured: None,
             runner: canopen_runner,
         },
+        Target {
+            name: "rosbridge",
+            about: "rosbridge v2 operations of WebSocket clients; /cmd_vel and /goal_pose into the engine",
+            seeds: rosbridge_seeds,
+            tokens: JSON_TOKENS,
+            structured: Some(mutate_json_document),
+            runner: rosbridge_runner,
+        },
         #[cfg(feature = "ros1")]
         Target {
             name: "ros1",
@@ -783,6 +791,73 @@ fn simulated_vehicle(seed: u64, mqtt: Option<MqttConfig>) -> Lockstep {
     .expect("simulated vehicle")
 }
 
+/// What roslibjs and roslibpy send, and the two topics that become commands.
+fn rosbridge_seeds() -> Vec<Vec<u8>> {
+    [
+        r#"{"op":"subscribe","id":"subscribe:/pose:1","type":"geometry_msgs/PoseWithCovarianceStamped","topic":"/pose","compression":"none","throttle_rate":100,"queue_length":2}"#,
+        r#"{"op":"unsubscribe","id":"subscribe:/pose:1","topic":"/pose"}"#,
+        r#"{"op":"advertise","id":"advertise:/cmd_vel:2","type":"geometry_msgs/Twist","topic":"/cmd_vel"}"#,
+        r#"{"op":"publish","id":"publish:/cmd_vel:3","topic":"/cmd_vel","msg":{"linear":{"x":0.3,"y":0,"z":0},"angular":{"x":0,"y":0,"z":0.2}}}"#,
+        r#"{"op":"publish","topic":"/goal_pose","msg":{"header":{"frame_id":"map","stamp":{"sec":0,"nanosec":0}},"pose":{"position":{"x":2.0,"y":1.0,"z":0.0},"orientation":{"x":0,"y":0,"z":0.7071,"w":0.7071}}}}"#,
+        r#"{"op":"call_service","id":"call_service:/rosapi/topics:4","service":"/rosapi/topics","args":[]}"#,
+        r#"{"op":"set_level","level":"warning"}"#,
+        r#"{"op":"auth","mac":"0123456789abcdef","client":"","dest":"","rand":"","t":0,"level":"admin","end":0}"#,
+    ]
+    .iter()
+    .map(|s| s.as_bytes().to_vec())
+    .collect()
+}
+
+fn rosbridge_runner() -> Runner {
+    use chassisd::api::rosbridge::{SOURCE, messages, ops};
+    let mut sim = simulated_vehicle(5, None);
+    let mut n = 0u64;
+    Box::new(move |input| {
+        n += 1;
+        if n.is_multiple_of(2000) {
+            sim = simulated_vehicle(5, None);
+        }
+        let Ok(text) = std::str::from_utf8(input) else {
+            return 0;
+        };
+        let op = match ops::parse(text) {
+            Ok(op) => op,
+            Err(refusal) => return refusal.status().len() as u64,
+        };
+        let ops::ClientOp::Publish { topic, msg, .. } = op else {
+            return 1;
+        };
+        let command = match topic.as_str() {
+            "/cmd_vel" => ("cmd_vel", msg.to_string()),
+            "/goal_pose" => match messages::goal_from_pose_stamped(&msg) {
+                Ok(goal) => ("goal", goal),
+                Err(reason) => return reason.len() as u64,
+            },
+            _ => return 2,
+        };
+        let mut sink = Collect::default();
+        sim.input(
+            SOURCE,
+            Payload::Command {
+                topic: command.0.into(),
+                payload: Bytes::from(command.1),
+            },
+            &mut sink,
+        );
+        // Let what the command started run a little.
+        if n.is_multiple_of(50) {
+            let gnss = GnssCondition {
+                quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
+                offset: (0.0, 0.0),
+            };
+            for _ in 0..10 {
+                sim.step(gnss, &mut sink);
+            }
+        }
+        signature(&[3 + u64::from(command.0 == "goal"), sink.outputs.min(8)])
+    })
+}
+
 fn dialect_runner() -> Runner {
     let fresh = || {
         let mqtt = MqttConfig {
@@ -842,6 +917,17 @@ fn dialect_runner() -> Runner {
 /// A dialect input (topic byte, JSON payload) with one value of its JSON changed: a number
 /// made extreme, a string made odd, a key dropped, a value's type swapped. Inputs that are not
 /// JSON get a new topic byte.
+/// A whole input that is one JSON document: its values mutated as in a command's.
+fn mutate_json_document(rng: &mut ChaCha8Rng, input: &mut Vec<u8>) {
+    let Ok(mut value) = serde_json::from_slice::<serde_json::Value>(input) else {
+        return;
+    };
+    for _ in 0..rng.random_range(1..=3) {
+        mutate_json_value(rng, &mut value, 0);
+    }
+    *input = serde_json::to_vec(&value).unwrap_or_default();
+}
+
 fn mutate_json_command(rng: &mut ChaCha8Rng, input: &mut Vec<u8>) {
     if input.is_empty() {
         input.push(rng.random());
