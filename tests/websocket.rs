@@ -79,7 +79,7 @@ fn pose_and_odom_arrive_at_their_rates_in_their_frames() {
 }
 
 #[test]
-fn a_goal_pose_drives_the_vehicle_there() {
+fn a_goal_pose_drives_the_vehicle_there_along_its_plan() {
     let port = free_port();
     let sim = sim(port);
     let seen = client(port, &["goal", "2.0", "1.0", "90"]);
@@ -91,6 +91,20 @@ fn a_goal_pose_drives_the_vehicle_there() {
         "arrived at ({x:.3}, {y:.3})"
     );
     assert!((yaw - 90.0).abs() < 3.0, "facing {yaw:.1}°");
+    // /plan: empty at subscription, the goal's line while it drives, empty again at the end.
+    let plans: Vec<&Vec<Value>> = seen["plans"]
+        .as_array()
+        .expect("plans")
+        .iter()
+        .filter_map(Value::as_array)
+        .collect();
+    let sizes: Vec<usize> = plans.iter().map(|p| p.len()).collect();
+    assert_eq!(sizes, [0, 2, 0], "{seen}");
+    let end = &plans[1][1];
+    assert!(
+        (number(end, "/0") - 2.0).abs() < 1e-9 && (number(end, "/1") - 1.0).abs() < 1e-9,
+        "{seen}"
+    );
     sim.stop();
 }
 

@@ -230,12 +230,25 @@ enum Active {
     Path(Box<PathFollow>),
 }
 
+/// The path of the motion under way, in the map frame (east, north; m): a path task's
+/// points; a goal's start and goal; a straight move's start and end; a turn's place. Shared,
+/// so a status carries it without a copy.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The motion it belongs to.
+    pub id: MotionId,
+    /// Its points.
+    pub points: std::sync::Arc<Vec<(f64, f64)>>,
+}
+
 /// The motion under way, if any, and the last result.
 #[derive(Debug, Clone)]
 pub struct Motion {
     settings: MotionSettings,
     /// Its id, what it is and who tagged it.
     active: Option<(MotionId, Active, Option<MotionTag>)>,
+    /// Its path in the map frame, when the vehicle was located at its start.
+    plan: Option<Plan>,
     last_id: MotionId,
     results: Vec<MotionResult>,
     navigation: Navigation,
@@ -247,6 +260,7 @@ impl Motion {
         Self {
             settings,
             active: None,
+            plan: None,
             last_id: 0,
             results: Vec::new(),
             navigation: Navigation::Idle,
@@ -307,10 +321,22 @@ impl Motion {
         }
     }
 
+    /// The path of the motion under way, in the map frame.
+    pub fn plan(&self) -> Option<&Plan> {
+        self.plan.as_ref()
+    }
+
     /// Starts a move at `t` from `view`, replacing (cancelling) the one under way.
     pub fn start(&mut self, t: Timestamp, kind: MoveKind, view: &PoseView) -> MotionId {
         let m = Active::Move(RelativeMove::new(t, kind, view, &self.settings));
-        self.begin(t, m, None)
+        let points = view.map_pose().map(|(x, y, yaw)| match kind {
+            MoveKind::Straight { distance_m } => vec![
+                (x, y),
+                (x + distance_m * yaw.cos(), y + distance_m * yaw.sin()),
+            ],
+            MoveKind::Turn { .. } => vec![(x, y)],
+        });
+        self.begin_with_plan(t, m, None, points)
     }
 
     /// Starts a goal at `t` from `view`, replacing (cancelling) the motion under way; `None`
@@ -323,7 +349,8 @@ impl Motion {
         tag: Option<MotionTag>,
     ) -> Option<MotionId> {
         let g = GoalMove::new(t, goal, view, &self.settings)?;
-        Some(self.begin(t, Active::Goal(g), tag))
+        let points = view.map_xy.map(|start| vec![start, (goal.x, goal.y)]);
+        Some(self.begin_with_plan(t, Active::Goal(g), tag, points))
     }
 
     /// Starts a path task along `points` (map frame) at `speed` at `t` from `view`,
@@ -338,13 +365,24 @@ impl Motion {
         tag: Option<MotionTag>,
     ) -> Result<MotionId, StartRefusal> {
         let p = PathFollow::new(t, points, speed, view, &self.settings)?;
-        Ok(self.begin(t, Active::Path(Box::new(p)), tag))
+        let plan = Some(points.to_vec());
+        Ok(self.begin_with_plan(t, Active::Path(Box::new(p)), tag, plan))
     }
 
-    fn begin(&mut self, t: Timestamp, m: Active, tag: Option<MotionTag>) -> MotionId {
+    fn begin_with_plan(
+        &mut self,
+        t: Timestamp,
+        m: Active,
+        tag: Option<MotionTag>,
+        points: Option<Vec<(f64, f64)>>,
+    ) -> MotionId {
         self.end(t, Outcome::Cancelled("replaced by a new move".into()), None);
         self.last_id += 1;
         self.active = Some((self.last_id, m, tag));
+        self.plan = points.map(|points| Plan {
+            id: self.last_id,
+            points: std::sync::Arc::new(points),
+        });
         self.navigation = Navigation::Running;
         self.last_id
     }
@@ -354,6 +392,7 @@ impl Motion {
         let Some((id, m, tag)) = self.active.take() else {
             return;
         };
+        self.plan = None;
         self.navigation = outcome.navigation();
         let result = match m {
             Active::Move(m) => MotionResult {

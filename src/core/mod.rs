@@ -1000,6 +1000,7 @@ impl Vehicle {
                 .motion
                 .as_ref()
                 .map_or(Navigation::Idle, Motion::navigation),
+            plan: self.motion.as_ref().and_then(Motion::plan).cloned(),
             obstacle_stop: false,
             host: self.host,
             mode: self.chassis.as_ref().map(Chassis::mode),

@@ -30,6 +30,8 @@ pub struct VehicleStatus {
     pub localization: Localization,
     /// Navigation task state.
     pub navigation: Navigation,
+    /// The path of the motion under way, in the map frame (when it has one).
+    pub plan: Option<crate::control::Plan>,
     /// Whether an obstacle has stopped the vehicle.
     pub obstacle_stop: bool,
     /// The host computer's load, once sampled.

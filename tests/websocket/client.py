@@ -72,6 +72,9 @@ def yaw_of(q):
 
 def goal(ros, _statuses, x, y, yaw_deg):
     x, y, yaw = float(x), float(y), math.radians(float(yaw_deg))
+    plans = []
+    plan = roslibpy.Topic(ros, "/plan", "nav_msgs/Path")
+    plan.subscribe(lambda m: plans.append([(p["pose"]["position"]["x"], p["pose"]["position"]["y"]) for p in m["poses"]]))
     pub = roslibpy.Topic(ros, "/goal_pose", "geometry_msgs/PoseStamped")
     pub.advertise()
     time.sleep(0.5)
@@ -93,7 +96,9 @@ def goal(ros, _statuses, x, y, yaw_deg):
             if math.hypot(pose["x"] - x, pose["y"] - y) < 0.05 and still:
                 break
         time.sleep(0.2)
-    return {"pose": pose}
+    time.sleep(0.5)
+    plan.unsubscribe()
+    return {"pose": pose, "plans": plans}
 
 
 def cmd_vel(ros, _statuses, speed="0.3", seconds="2"):

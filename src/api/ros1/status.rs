@@ -348,6 +348,7 @@ mod tests {
             odom: None,
             localization: Localization::Good,
             navigation: Navigation::Idle,
+            plan: None,
             obstacle_stop: false,
             host: None,
             mode: None,

@@ -155,6 +155,8 @@ pub fn start(
         pending: VecDeque::new(),
         odometry: OdometryUncertainty::new(noise),
         status_ticks: 0,
+        plan: None,
+        plan_text: None,
         token: config.token.clone(),
         clock,
         records,
@@ -292,6 +294,10 @@ struct Server {
     pending: VecDeque<(u64, &'static str)>,
     odometry: OdometryUncertainty,
     status_ticks: u64,
+    /// The motion whose path `/plan` last carried, and that message (sent to a new
+    /// subscriber at once: a path matters until it changes).
+    plan: Option<Option<crate::control::MotionId>>,
+    plan_text: Option<String>,
     token: Option<String>,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
@@ -339,6 +345,17 @@ impl Server {
             Feed::Status(status) => {
                 self.status_ticks += 1;
                 self.publish(topics::POSE, || messages::pose(&status));
+                let plan = status.plan.as_ref().map(|p| p.id);
+                if self.plan != Some(plan) {
+                    self.plan = Some(plan);
+                    let points = status.plan.as_ref().map_or(&[][..], |p| &p.points[..]);
+                    let text = ops::publish(topics::PLAN, &messages::path(status.time, points));
+                    let now = Instant::now();
+                    for client in self.clients.values_mut() {
+                        client.offer(topics::PLAN, &text, now);
+                    }
+                    self.plan_text = Some(text);
+                }
                 if self.status_ticks.is_multiple_of(SLOW_EVERY_STATUS) {
                     self.publish(topics::BATTERY_STATE, || messages::battery_state(&status));
                     self.publish(topics::DIAGNOSTICS, || Some(messages::diagnostics(&status)));
@@ -414,12 +431,17 @@ impl Server {
                             sub_id.as_deref(),
                             &format!("subscribe: {topic} is {}, not {given}", t.msg_type),
                         ),
-                        None => client.subscribe(
-                            t.name,
-                            sub_id,
-                            Duration::from_millis(throttle_ms),
-                            queue_length,
-                        ),
+                        None => {
+                            client.subscribe(
+                                t.name,
+                                sub_id,
+                                Duration::from_millis(throttle_ms),
+                                queue_length,
+                            );
+                            if let (topics::PLAN, Some(text)) = (t.name, &self.plan_text) {
+                                client.offer(topics::PLAN, text, Instant::now());
+                            }
+                        }
                     }
                 }
                 Some(t) => refuse(
