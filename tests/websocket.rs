@@ -59,7 +59,7 @@ fn number(v: &Value, pointer: &str) -> f64 {
 }
 
 #[test]
-fn pose_and_odom_arrive_at_their_rates_in_their_frames() {
+fn pose_odom_battery_and_diagnostics_arrive_at_their_rates() {
     let port = free_port();
     let sim = sim(port);
     let seen = client(port, &["rates", "4"]);
@@ -169,4 +169,49 @@ fn a_client_that_never_reads_delays_no_other_client() {
         "the silent client's drops",
         |l| l.contains("websocket: client gone") && !l.contains("dropped=0"),
     );
+}
+
+#[test]
+fn with_a_token_nothing_is_served_before_it_is_presented() {
+    let dir = common::tempdir("websocket-token");
+    let link = dir.join("gnss-port");
+    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
+    let port = free_port();
+    let token = "s3cret-token-1234";
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"ws-token\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let seen = client(port, &["auth", token]);
+    assert_eq!(seen["before"], 0, "{seen}");
+    assert!(
+        seen["refused"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m.as_str().unwrap_or("").contains("authenticate first")),
+        "{seen}"
+    );
+    assert!(seen["after"].as_u64().unwrap() >= 1, "{seen}");
+    // The receiver sends RTK fixed: the GNSS diagnostic is OK (level 0).
+    assert_eq!(seen["statuses"][0], 0, "{seen}");
+    let seen = client(port, &["url_token", token]);
+    assert_eq!(seen["with_token"], "publish", "{seen}");
+    assert_eq!(seen["without"], "status", "{seen}");
+    assert!(
+        seen["without_msg"]
+            .as_str()
+            .unwrap()
+            .contains("authenticate first"),
+        "{seen}"
+    );
+    daemon.stop();
 }

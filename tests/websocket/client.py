@@ -16,8 +16,11 @@ import time
 import roslibpy
 
 
-def connect(port):
+def connect(port, token=None):
     ros = roslibpy.Ros(host="127.0.0.1", port=port)
+    if token:
+        # roslibpy sends `auth` when the connection is ready: it must be asked first.
+        ros.authenticate(token, "", "", "", 0, "admin", 0)
     statuses = []
 
     # roslibpy has no handler for rosbridge's `status` operation: the test adds one.
@@ -31,9 +34,10 @@ def connect(port):
 
 def rates(ros, _statuses, seconds="4"):
     seconds = float(seconds)
-    seen = {"/pose": [], "/odom": []}
+    seen = {"/pose": [], "/odom": [], "/battery_state": [], "/diagnostics": []}
     subs = []
-    for topic, kind in [("/pose", "geometry_msgs/PoseWithCovarianceStamped"), ("/odom", "nav_msgs/Odometry")]:
+    for topic, kind in [("/pose", "geometry_msgs/PoseWithCovarianceStamped"), ("/odom", "nav_msgs/Odometry"),
+                        ("/battery_state", "sensor_msgs/BatteryState"), ("/diagnostics", "diagnostic_msgs/DiagnosticArray")]:
         t = roslibpy.Topic(ros, topic, kind)
         t.subscribe(lambda m, topic=topic: seen[topic].append((time.monotonic(), m)))
         subs.append(t)
@@ -44,7 +48,13 @@ def rates(ros, _statuses, seconds="4"):
     for t in subs:
         t.unsubscribe()
     pose, odom = seen["/pose"][-1][1], seen["/odom"][-1][1]
+    battery = seen["/battery_state"][-1][1] if seen["/battery_state"] else {}
+    diagnostics = seen["/diagnostics"][-1][1] if seen["/diagnostics"] else {"status": []}
     return {
+        "battery_hz": len(seen["/battery_state"]) / seconds,
+        "voltage": battery.get("voltage"),
+        "percentage": battery.get("percentage"),
+        "diagnostics": [d["name"] for d in diagnostics["status"]],
         "pose_hz": len(seen["/pose"]) / seconds,
         "odom_hz": len(seen["/odom"]) / seconds,
         "pose_frame": pose["header"]["frame_id"],
@@ -133,6 +143,65 @@ def refusals(ros, statuses):
     return {"statuses": [s.get("msg", "") for s in statuses], "levels": [s.get("level") for s in statuses], "topics": topics}
 
 
+def auth(ros, statuses, token, port):
+    """Nothing on a connection without the token; everything on one that presents it."""
+    before, after = [], []
+    roslibpy.Topic(ros, "/diagnostics", "diagnostic_msgs/DiagnosticArray").subscribe(before.append)
+    time.sleep(2.5)
+    authed, _ = connect(int(port), token)
+    roslibpy.Topic(authed, "/diagnostics", "diagnostic_msgs/DiagnosticArray").subscribe(after.append)
+    deadline = time.monotonic() + 5
+    while not after and time.monotonic() < deadline:
+        time.sleep(0.05)
+    authed.close()
+    return {
+        "before": len(before),
+        "refused": [s.get("msg", "") for s in statuses],
+        "after": len(after),
+        "statuses": [s.get("level", "") for s in after[-1]["status"]] if after else [],
+    }
+
+
+def raw_first_message(port, path, topic, wait=5.0):
+    """Connects to PATH with a raw WebSocket handshake, subscribes to TOPIC and returns the
+    first text message the server sends."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=wait)
+    s.sendall(("GET %s HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+               "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n" % path).encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += s.recv(1)
+    payload = json.dumps({"op": "subscribe", "topic": topic}).encode()
+    mask = b"\x01\x02\x03\x04"
+    s.sendall(bytes([0x81, 0x80 | len(payload)]) + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
+
+    def exactly(n):
+        data = b""
+        while len(data) < n:
+            chunk = s.recv(n - len(data))
+            if not chunk:
+                raise EOFError
+            data += chunk
+        return data
+
+    first, second = exactly(2)
+    length = second & 0x7F
+    if length == 126:
+        length = int.from_bytes(exactly(2), "big")
+    elif length == 127:
+        length = int.from_bytes(exactly(8), "big")
+    text = exactly(length).decode()
+    s.close()
+    return json.loads(text)
+
+
+def url_token(_ros, _statuses, port, token):
+    port = int(port)
+    with_token = raw_first_message(port, "/?token=%s" % token, "/diagnostics")
+    without = raw_first_message(port, "/", "/diagnostics")
+    return {"with_token": with_token.get("op"), "without": without.get("op"), "without_msg": without.get("msg", "")}
+
+
 def silent_client(port):
     """A client that subscribes to /odom with a long queue and never reads again."""
     s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
@@ -170,8 +239,10 @@ def main():
     check = sys.argv[2]
     args = sys.argv[3:]
     ros, statuses = connect(port)
-    if check == "slow":
+    if check in ("slow", "url_token"):
         args = [str(port)] + args
+    if check == "auth":
+        args = args + [str(port)]
     result = globals()[check](ros, statuses, *args)
     print(json.dumps(result), flush=True)
     ros.close()
