@@ -215,3 +215,77 @@ fn with_a_token_nothing_is_served_before_it_is_presented() {
     );
     daemon.stop();
 }
+
+#[test]
+fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal() {
+    let chromium = std::path::Path::new("/usr/bin/chromium");
+    assert!(
+        chromium.exists(),
+        "tests/install-deps installs Debian's chromium"
+    );
+    let port = free_port();
+    let sim = sim(port);
+    let dir = common::tempdir("websocket-page");
+    let out = Command::new(python())
+        .arg(common::repo().join("tests/websocket/page.py"))
+        .arg(chromium)
+        .arg(port.to_string())
+        .arg(&dir)
+        .output()
+        .expect("the page driver runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let seen: Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    // Nothing but the daemon: the page, roslibjs, the WebSocket.
+    let requests: Vec<&str> = seen["requests"]
+        .as_array()
+        .expect("requests")
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    let own = [
+        format!("http://127.0.0.1:{port}/"),
+        format!("ws://127.0.0.1:{port}/"),
+    ];
+    assert!(
+        requests
+            .iter()
+            .all(|r| own.iter().any(|o| r.starts_with(o.as_str()))),
+        "{requests:?}"
+    );
+    assert!(
+        requests.iter().any(|r| r.ends_with("/roslib.min.js"))
+            && requests.iter().any(|r| r.starts_with("ws://")),
+        "{requests:?}"
+    );
+    // Held for 2 s at 0.3 m/s the vehicle moved; released, it stopped at once.
+    assert_eq!(seen["held"], true, "{seen}");
+    let moved = number(&seen, "/jogged/x") - number(&seen, "/start/x");
+    assert!(moved > 0.4, "jogged {moved:.3} m: {seen}");
+    assert!(number(&seen, "/stop_s") < 1.0, "{seen}");
+    // The screenshot shows it: the picture changed as the pose did.
+    let picture = |name: &str| std::fs::read(dir.join(name)).expect("screenshot");
+    assert_ne!(picture("page-start.png"), picture("page-jogged.png"));
+    // A click on the plot set a goal 2 m to its left, and the vehicle reached it.
+    let (tx, ty) = (number(&seen, "/target/0"), number(&seen, "/target/1"));
+    let (ax, ay) = (number(&seen, "/arrived/x"), number(&seen, "/arrived/y"));
+    assert!((ax - tx).hypot(ay - ty) < 0.05, "{seen}");
+    assert!(
+        seen["events"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|e| e.as_str().unwrap_or("").contains("succeeded")),
+        "{seen}"
+    );
+    // A held button stops when the page loses the focus.
+    assert!(number(&seen, "/blur_stop_s") < 1.5, "{seen}");
+    assert_eq!(seen["gnss"], "fix", "{seen}");
+    assert!(number(&seen, "/battery") > 40.0, "{seen}");
+    drop(sim);
+}

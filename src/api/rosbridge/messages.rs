@@ -8,8 +8,9 @@ use serde_json::{Value, json};
 
 use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
 use crate::api::ros1::{ros_time, yaw_quaternion};
+use crate::api::rtk::status::{locate_name, navigation_name};
 use crate::core::chassis::status_bits;
-use crate::core::{Localization, VehicleStatus};
+use crate::core::{Localization, Navigation, VehicleStatus};
 use crate::devices::gnss::FixQuality;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
@@ -234,9 +235,38 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
             Localization::Lost => "pose beyond its bounds",
             Localization::Uninitialized => "not placed in the map yet",
         },
-        &[],
+        &[("nav.locate", locate_name(status.localization).into())],
+    ));
+    let navigation = navigation_name(status.navigation);
+    all.push(diagnostic(
+        if status.navigation == Navigation::Failed {
+            WARN
+        } else {
+            OK
+        },
+        "navigation",
+        navigation,
+        &[("nav.status", navigation.into())],
     ));
     json!({"header": header(status.time, ""), "status": all})
+}
+
+/// rcl_interfaces/msg/Log's level of an event.
+const LOG_INFO: u8 = 20;
+
+/// `/rosout` (rcl_interfaces/msg/Log): one of the engine's events (a drive up, a fault, a
+/// motion's end), as ROS 2 nodes log theirs.
+pub fn log(t: Timestamp, text: &str) -> Value {
+    let (sec, nanosec) = ros_time(t);
+    json!({
+        "stamp": {"sec": sec, "nanosec": nanosec},
+        "level": LOG_INFO,
+        "name": "chassisd",
+        "msg": text,
+        "file": "",
+        "function": "",
+        "line": 0,
+    })
 }
 
 /// `/plan` (nav_msgs/Path) in `map`: the points of the move, goal or task under way, each

@@ -31,13 +31,15 @@ pub const BATTERY_STATE: &str = "/battery_state";
 pub const DIAGNOSTICS: &str = "/diagnostics";
 /// The path of the move under way.
 pub const PLAN: &str = "/plan";
+/// The engine's events.
+pub const ROSOUT: &str = "/rosout";
 /// A goal to drive to.
 pub const GOAL_POSE: &str = "/goal_pose";
 /// A velocity command.
 pub const CMD_VEL: &str = "/cmd_vel";
 
 /// Every topic the server has.
-pub const TOPICS: [Topic; 7] = [
+pub const TOPICS: [Topic; 8] = [
     Topic {
         name: POSE,
         msg_type: "geometry_msgs/msg/PoseWithCovarianceStamped",
@@ -61,6 +63,11 @@ pub const TOPICS: [Topic; 7] = [
     Topic {
         name: PLAN,
         msg_type: "nav_msgs/msg/Path",
+        flow: Flow::Published(0.0),
+    },
+    Topic {
+        name: ROSOUT,
+        msg_type: "rcl_interfaces/msg/Log",
         flow: Flow::Published(0.0),
     },
     Topic {

@@ -85,6 +85,25 @@ pub struct Robot {
     pub vz: f64,
 }
 
+/// `nav.locate`'s value for `localization`.
+pub fn locate_name(localization: Localization) -> &'static str {
+    match localization {
+        Localization::Uninitialized => "LOCATE_UNINIT",
+        Localization::Good => "LOCATE_TRUE",
+        Localization::Lost => "LOCATE_FALSE",
+    }
+}
+
+/// `nav.status`'s value for `navigation`.
+pub fn navigation_name(navigation: Navigation) -> &'static str {
+    match navigation {
+        Navigation::Idle => "NAV_FREE",
+        Navigation::Running => "NAV_RUN",
+        Navigation::Succeeded => "NAV_SUCCESS",
+        Navigation::Failed => "NAV_ERROR",
+    }
+}
+
 /// `rtk`: GNSS fix.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Rtk {
@@ -131,18 +150,9 @@ impl BaseStatus {
                 voltage: num(reading.voltage_v.unwrap_or(0.0)),
             },
             nav: Nav {
-                locate: match status.localization {
-                    Localization::Uninitialized => "LOCATE_UNINIT",
-                    Localization::Good => "LOCATE_TRUE",
-                    Localization::Lost => "LOCATE_FALSE",
-                },
+                locate: locate_name(status.localization),
                 obstacle: status.obstacle_stop,
-                status: match status.navigation {
-                    Navigation::Idle => "NAV_FREE",
-                    Navigation::Running => "NAV_RUN",
-                    Navigation::Succeeded => "NAV_SUCCESS",
-                    Navigation::Failed => "NAV_ERROR",
-                },
+                status: navigation_name(status.navigation),
             },
             pose: Pose {
                 x: num(status.pose.x),

@@ -58,6 +58,7 @@ enum Feed {
     Status(Box<VehicleStatus>),
     Odom(Timestamp, OdomPose),
     Answer(Result<(), String>),
+    Event(String),
 }
 
 /// The engine task's end: sending never blocks, and what does not fit is dropped and
@@ -85,6 +86,7 @@ impl WebsocketLink {
             EngineOutput::CommandResult { source, result, .. } if source == SOURCE => {
                 Feed::Answer(result.clone())
             }
+            EngineOutput::Event(text) => Feed::Event(text.clone()),
             _ => return,
         };
         if self.feed.try_send(item).is_err() {
@@ -164,6 +166,10 @@ pub fn start(
     tokio::spawn(server.run(feed_rx, events_rx));
     let router = axum::Router::new()
         .route("/", axum::routing::get(root))
+        .route(
+            "/roslib.min.js",
+            axum::routing::get(|| async { page(ROSLIB, "text/javascript; charset=utf-8") }),
+        )
         .with_state(shared);
     tracing::info!(%address, token = config.token.is_some(), "websocket: rosbridge v2 server listening");
     tokio::spawn(async move {
@@ -199,6 +205,28 @@ fn listen(address: std::net::SocketAddr) -> std::io::Result<tokio::net::TcpListe
     tokio::net::TcpListener::from_std(socket.into())
 }
 
+/// The live page: a plain `GET /` (a WebSocket upgrade of `/` is a rosbridge client).
+const PAGE: &str = include_str!("page/index.html");
+/// roslibjs 1.4.1 from npm (`roslib`), vendored: the vehicle has no internet.
+const ROSLIB: &str = include_str!("page/roslib.min.js");
+/// The page may load only from chassisd itself and talk only to it.
+const CONTENT_POLICY: &str = "default-src 'none'; script-src 'self' 'unsafe-inline'; \
+     style-src 'unsafe-inline'; connect-src 'self'; img-src 'self' data:; base-uri 'none'; \
+     form-action 'none'";
+
+/// A static file with the page's content policy.
+fn page(body: &'static str, content_type: &'static str) -> Response {
+    (
+        [
+            (axum::http::header::CONTENT_TYPE, content_type),
+            (axum::http::header::CONTENT_SECURITY_POLICY, CONTENT_POLICY),
+            (axum::http::header::CACHE_CONTROL, "no-cache"),
+        ],
+        body,
+    )
+        .into_response()
+}
+
 /// `GET /`: a WebSocket upgrade becomes a rosbridge client.
 async fn root(
     State(shared): State<Arc<Shared>>,
@@ -206,12 +234,7 @@ async fn root(
     ws: Option<WebSocketUpgrade>,
 ) -> Response {
     let Some(ws) = ws else {
-        return (
-            StatusCode::BAD_REQUEST,
-            "chassisd: this is a rosbridge v2 WebSocket server; connect with a rosbridge \
-             client (roslibjs, roslibpy, Foxglove) to ws://this-address/",
-        )
-            .into_response();
+        return page(PAGE, "text/html; charset=utf-8");
     };
     if shared.clients.fetch_add(1, Ordering::AcqRel) >= shared.max_clients {
         shared.clients.fetch_sub(1, Ordering::AcqRel);
@@ -367,6 +390,10 @@ impl Server {
                 self.publish(topics::ODOM, || {
                     Some(messages::odometry(t, &pose, &covariance))
                 });
+            }
+            Feed::Event(text) => {
+                let t = self.clock.now();
+                self.publish(topics::ROSOUT, || Some(messages::log(t, &text)));
             }
             Feed::Answer(result) => {
                 let Some((id, topic)) = self.pending.pop_front() else {

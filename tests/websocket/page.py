@@ -1,0 +1,154 @@
+"""Drives chassisd's live page in headless Chromium over the DevTools protocol, for
+tests/websocket.rs.
+
+    page.py CHROMIUM DAEMON_PORT OUT_DIR
+
+Loads http://127.0.0.1:DAEMON_PORT/ with every other host unresolvable, waits for the page
+to connect, takes a screenshot, holds the jog pad's forward button for 2 s, takes another,
+clicks the plot to set a goal, waits for the vehicle to reach it, releases a held button by
+taking the focus away, and prints one JSON object with what it saw, with every request the
+page made (the DevTools Network domain: documents, scripts, WebSockets).
+"""
+
+import base64
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+from websockets.sync.client import connect
+
+
+class Page:
+    def __init__(self, ws):
+        self.ws = ws
+        self.next_id = 0
+        self.requests = []
+
+    def call(self, method, **params):
+        self.next_id += 1
+        mine = self.next_id
+        self.ws.send(json.dumps({"id": mine, "method": method, "params": params}))
+        while True:
+            reply = json.loads(self.ws.recv())
+            if reply.get("method") == "Network.requestWillBeSent":
+                self.requests.append(reply["params"]["request"]["url"])
+            elif reply.get("method") == "Network.webSocketCreated":
+                self.requests.append(reply["params"]["url"])
+            if reply.get("id") == mine:
+                if "error" in reply:
+                    raise RuntimeError("%s: %s" % (method, reply["error"]))
+                return reply.get("result", {})
+
+    def js(self, expression):
+        result = self.call("Runtime.evaluate", expression=expression, returnByValue=True)
+        return result.get("result", {}).get("value")
+
+    def wait(self, expression, seconds, what):
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            if self.js(expression):
+                return
+            time.sleep(0.1)
+        raise RuntimeError("timed out waiting for " + what)
+
+    def screenshot(self, path):
+        data = self.call("Page.captureScreenshot", format="png")["data"]
+        with open(path, "wb") as f:
+            f.write(base64.b64decode(data))
+
+    def mouse(self, kind, x, y):
+        self.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", buttons=1 if kind != "mouseReleased" else 0, clickCount=1, pointerType="mouse")
+
+
+def pose(page):
+    return page.js("window.chassisdPage.pose")
+
+
+def run(page, port, out):
+    page.call("Page.enable")
+    page.call("Network.enable")
+    page.call("Page.navigate", url="http://127.0.0.1:%d/" % port)
+    page.wait("window.chassisdPage && window.chassisdPage.connected && window.chassisdPage.pose !== null", 20, "the page to connect")
+    page.wait("Object.keys(window.chassisdPage.diagnostics).length >= 4", 10, "the diagnostics")
+    start = pose(page)
+    page.screenshot(os.path.join(out, "page-start.png"))
+
+    # Hold the jog pad's forward button for 2 s.
+    forward = page.js("(() => { const r = document.querySelector('#jog button[data-v=\"1\"]').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+    page.mouse("mouseMoved", *forward)
+    page.mouse("mousePressed", *forward)
+    time.sleep(2.0)
+    held = page.js("window.chassisdPage.jogging")
+    page.mouse("mouseReleased", *forward)
+    released_at = time.monotonic()
+    page.wait("window.chassisdPage.odom && Math.abs(window.chassisdPage.odom.v) < 0.005", 5, "the vehicle to stop after the release")
+    stop_s = time.monotonic() - released_at
+    jogged = pose(page)
+    page.screenshot(os.path.join(out, "page-jogged.png"))
+
+    # Click the plot 2 m to the left of the vehicle: a goal there.
+    target = [jogged["x"], jogged["y"] + 2.0]
+    at = page.js("window.chassisdPage.toScreen(%f, %f)" % tuple(target))
+    page.mouse("mouseMoved", *at)
+    page.mouse("mousePressed", *at)
+    page.mouse("mouseReleased", *at)
+    page.wait("window.chassisdPage.plan.length === 2", 5, "the goal's plan")
+    page.wait("(() => { const p = window.chassisdPage.pose, o = window.chassisdPage.odom; return Math.hypot(p.x - %f, p.y - %f) < 0.05 && Math.abs(o.v) < 0.005 && Math.abs(o.w) < 0.005; })()" % tuple(target), 40, "the vehicle at the goal")
+    page.wait("window.chassisdPage.plan.length === 0", 5, "the plan to clear")
+    arrived = pose(page)
+    page.screenshot(os.path.join(out, "page.png"))
+
+    # Hold a button, then the page loses the focus: the jog stops by itself.
+    page.mouse("mouseMoved", *forward)
+    page.mouse("mousePressed", *forward)
+    time.sleep(1.0)
+    page.js("window.dispatchEvent(new Event('blur'))")
+    blurred_at = time.monotonic()
+    page.wait("!window.chassisdPage.jogging", 2, "the jog to stop on blur")
+    page.wait("window.chassisdPage.odom && Math.abs(window.chassisdPage.odom.v) < 0.005", 5, "the vehicle to stop after the blur")
+    blur_stop_s = time.monotonic() - blurred_at
+    page.mouse("mouseReleased", *forward)
+    events = page.js("window.chassisdPage.events")
+    print(json.dumps({
+        "start": start, "held": held, "jogged": jogged, "stop_s": stop_s,
+        "target": target, "arrived": arrived, "blur_stop_s": blur_stop_s,
+        "events": events, "gnss": page.js("window.chassisdPage.diagnostics.gnss.message"),
+        "battery": page.js("window.chassisdPage.battery && window.chassisdPage.battery.voltage"),
+        "requests": page.requests,
+    }), flush=True)
+
+
+def main():
+    chromium, port, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+    profile = tempfile.mkdtemp(prefix="chassisd-page-")
+    browser = subprocess.Popen([
+        chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+        "--no-first-run", "--disable-background-networking", "--disable-component-update",
+        "--window-size=1280,760", "--remote-debugging-port=0", "--user-data-dir=" + profile,
+        # Any host but the daemon's fails to resolve: the page must need none.
+        "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
+        "about:blank",
+    ], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        devtools = os.path.join(profile, "DevToolsActivePort")
+        deadline = time.monotonic() + 30
+        while not os.path.exists(devtools) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        debug_port = open(devtools).read().split()[0]
+        targets = json.load(urllib.request.urlopen("http://127.0.0.1:%s/json/list" % debug_port))
+        url = [t for t in targets if t["type"] == "page"][0]["webSocketDebuggerUrl"]
+        with connect(url, max_size=None) as ws:
+            run(Page(ws), port, out)
+    finally:
+        browser.terminate()
+        browser.wait(timeout=10)
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
