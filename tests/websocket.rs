@@ -109,13 +109,32 @@ fn a_goal_pose_drives_the_vehicle_there_along_its_plan() {
 }
 
 #[test]
-fn cmd_vel_moves_the_vehicle_and_it_stops_when_publishing_ends() {
+fn cmd_vel_moves_the_vehicle_it_stops_when_publishing_ends_and_the_session_replays() {
     let port = free_port();
-    let sim = sim(port);
+    let dir = common::tempdir("websocket-record").join("rec");
+    let bind = format!("127.0.0.1:{port}");
+    let mut sim = Proc::start(&[
+        "sim".as_ref(),
+        "--no-mqtt".as_ref(),
+        "--websocket".as_ref(),
+        bind.as_ref(),
+        "--record".as_ref(),
+        dir.as_os_str(),
+    ]);
+    sim.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
     let seen = client(port, &["cmd_vel", "0.3", "2"]);
     assert!(number(&seen, "/max_during") > 0.25, "{seen}");
     assert!(number(&seen, "/after").abs() < 0.01, "{seen}");
-    drop(sim);
+    // The clients' commands are in the recording, which replays to the live output.
+    let lines = sim.stop();
+    let live: Vec<u8> = lines
+        .iter()
+        .flat_map(|l| format!("{l}\n").into_bytes())
+        .collect();
+    let replay = common::replay(&dir);
+    assert!(replay.stdout == live, "replay differs from the live output");
+    let commands = std::fs::read_to_string(dir.join("websocket.log")).expect("websocket.log");
+    assert!(commands.lines().count() >= 15, "{commands}");
 }
 
 #[test]

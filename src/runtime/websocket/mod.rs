@@ -250,7 +250,10 @@ async fn root(
     }
     let authenticated = match &shared.token {
         None => true,
-        Some(token) => query.get("token") == Some(token),
+        Some(_) => token_matches(
+            shared.token.as_deref(),
+            query.get("token").map_or("", String::as_str),
+        ),
     };
     ws.max_message_size(ops::MAX_MESSAGE + 1024)
         .on_upgrade(move |socket| connection(socket, shared, authenticated))
@@ -422,7 +425,7 @@ impl Server {
         };
         if !client.authenticated {
             match op {
-                ClientOp::Auth { token } if Some(&token) == self.token.as_ref() => {
+                ClientOp::Auth { token } if token_matches(self.token.as_deref(), &token) => {
                     client.authenticated = true;
                     client.status(Level::Info, ops::status(Level::Info, None, "authenticated"));
                 }
@@ -583,6 +586,20 @@ impl Server {
     }
 }
 
+/// Whether `given` is the configured token, compared in a time that does not depend on
+/// where they differ.
+fn token_matches(configured: Option<&str>, given: &str) -> bool {
+    let Some(configured) = configured else {
+        return false;
+    };
+    let (a, b) = (configured.as_bytes(), given.as_bytes());
+    let differ = a
+        .iter()
+        .zip(b)
+        .fold(u8::from(a.len() != b.len()), |acc, (x, y)| acc | (x ^ y));
+    differ == 0
+}
+
 /// Why `topic` is not one of the server's, for `op`.
 fn unknown_topic(op: &str, topic: &str) -> String {
     match topics::refusal(topic) {
@@ -612,5 +629,23 @@ fn call_service(service: &str, args: &Value) -> Result<Value, String> {
         other => Err(format!(
             "no service {other}; chassisd answers /rosapi/topics and /rosapi/topic_type"
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_configured_token_matches() {
+        assert!(token_matches(Some("s3cret-token"), "s3cret-token"));
+        assert!(!token_matches(Some("s3cret-token"), "s3cret-tokeN"));
+        assert!(!token_matches(Some("s3cret-token"), "s3cret"));
+        assert!(!token_matches(
+            Some("s3cret-token"),
+            "s3cret-token-and-more"
+        ));
+        assert!(!token_matches(Some("s3cret-token"), ""));
+        assert!(!token_matches(None, "anything"));
     }
 }
