@@ -287,15 +287,7 @@ mod ros1 {
                         },
                         &mut sink,
                     );
-                    if n.is_multiple_of(50) {
-                        let gnss = GnssCondition {
-                            quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
-                            offset: (0.0, 0.0),
-                        };
-                        for _ in 0..10 {
-                            sim.step(gnss, &mut sink);
-                        }
-                    }
+                    settle(&mut sim, n, &mut sink);
                     2 + sink.outputs.min(8)
                 }
             };
@@ -844,18 +836,22 @@ fn rosbridge_runner() -> Runner {
             },
             &mut sink,
         );
-        // Let what the command started run a little.
-        if n.is_multiple_of(50) {
-            let gnss = GnssCondition {
-                quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
-                offset: (0.0, 0.0),
-            };
-            for _ in 0..10 {
-                sim.step(gnss, &mut sink);
-            }
-        }
+        settle(&mut sim, n, &mut sink);
         signature(&[3 + u64::from(command.0 == "goal"), sink.outputs.min(8)])
     })
+}
+
+/// Every 50th input, lets what the commands started run for 10 plant steps with RTK fixed.
+fn settle(sim: &mut Lockstep, n: u64, sink: &mut Collect) {
+    if n.is_multiple_of(50) {
+        let gnss = GnssCondition {
+            quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
+            offset: (0.0, 0.0),
+        };
+        for _ in 0..10 {
+            sim.step(gnss, sink);
+        }
+    }
 }
 
 fn dialect_runner() -> Runner {
@@ -897,16 +893,7 @@ fn dialect_runner() -> Runner {
             },
             &mut sink,
         );
-        // Let what the command started run a little.
-        if n.is_multiple_of(50) {
-            let gnss = GnssCondition {
-                quality: Some(chassisd::devices::gnss::FixQuality::RtkFixed),
-                offset: (0.0, 0.0),
-            };
-            for _ in 0..10 {
-                sim.step(gnss, &mut sink);
-            }
-        }
+        settle(&mut sim, n, &mut sink);
         signature(&[
             u64::from(which) % DIALECT_TOPICS.len() as u64,
             sink.outputs.min(8),

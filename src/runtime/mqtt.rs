@@ -331,11 +331,7 @@ async fn run(
                     }
                 }
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
-                    let refused = ack
-                        .return_codes
-                        .iter()
-                        .filter(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
-                        .count();
+                    let refused = refused_subscriptions(&ack);
                     if refused > 0 {
                         tracing::error!(refused, "MQTT broker refused subscriptions");
                     } else {
@@ -382,6 +378,14 @@ async fn run(
             }
         }
     }
+}
+
+/// How many of the filters a SubAck answers the broker refused.
+pub(crate) fn refused_subscriptions(ack: &rumqttc::SubAck) -> usize {
+    ack.return_codes
+        .iter()
+        .filter(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
+        .count()
 }
 
 /// One line when a flood starts on a topic, then one per period while it lasts.

@@ -57,11 +57,7 @@ pub fn spawn(
                 }
                 // A retained message is an old command, not one sent during the recording.
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
-                    let refused = ack
-                        .return_codes
-                        .iter()
-                        .filter(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
-                        .count();
+                    let refused = super::mqtt::refused_subscriptions(&ack);
                     if refused > 0 {
                         tracing::error!(
                             refused,
