@@ -38,6 +38,19 @@ fn config(dir: &Path, gnss: &Path, broker: &Mosquitto) -> std::path::PathBuf {
     path
 }
 
+/// `chassisd record --config CONFIG --out OUT EXTRA...`.
+fn record(config: &Path, out: &Path, extra: &[&str]) -> Proc {
+    let mut args = vec![
+        "record".into(),
+        "--config".into(),
+        config.as_os_str().to_owned(),
+        "--out".into(),
+        out.as_os_str().to_owned(),
+    ];
+    args.extend(extra.iter().map(std::ffi::OsString::from));
+    Proc::start(&args)
+}
+
 /// Waits for the process to exit on its own; returns its exit code and its whole log.
 fn exit(proc: &mut Proc, within: Duration) -> (Option<i32>, String) {
     let deadline = Instant::now() + within;
@@ -74,19 +87,11 @@ fn record_rotates_keeps_the_newest_and_each_segment_replays_and_nothing_is_sent(
     let everything = broker.subscribe(&["#"]);
     let config = config(&dir, &link, &broker);
     let out = dir.join("rec");
-    let mut proc = Proc::start(&[
-        "record".as_ref(),
-        "--config".as_ref(),
-        config.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-        "--segment-s".as_ref(),
-        "2".as_ref(),
-        "--keep".as_ref(),
-        "3".as_ref(),
-        "--duration".as_ref(),
-        "7".as_ref(),
-    ]);
+    let mut proc = record(
+        &config,
+        &out,
+        &["--segment-s", "2", "--keep", "3", "--duration", "7"],
+    );
     proc.wait_log(Duration::from_secs(10), "recording the vehicle's commands");
     // Into the second segment: the first is removed by the end.
     proc.wait_log(Duration::from_secs(10), "recording segment complete");
@@ -153,13 +158,7 @@ fn sigterm_ends_the_segment_cleanly_and_an_absent_port_is_recorded_as_down() {
     let broker = Mosquitto::start();
     let config = config(&dir, &link, &broker);
     let out = dir.join("rec");
-    let mut proc = Proc::start(&[
-        "record".as_ref(),
-        "--config".as_ref(),
-        config.as_os_str(),
-        "--out".as_ref(),
-        out.as_os_str(),
-    ]);
+    let mut proc = record(&config, &out, &[]);
     // No receiver yet: the port is missing, reported, and retried.
     proc.wait_log(Duration::from_secs(10), "cannot open port; retrying");
     let _talker = Talker::start(Port::open_at(&link));

@@ -89,6 +89,9 @@ impl ClientQueue {
     }
 }
 
+/// Subscriptions one client may hold on one topic.
+pub const MAX_SUBSCRIPTIONS: usize = 16;
+
 /// One subscription of a client.
 #[derive(Debug, Clone)]
 struct Subscription {
@@ -122,23 +125,31 @@ impl Client {
         }
     }
 
-    /// Adds a subscription to `topic`.
+    /// Adds a subscription to `topic`; refused beyond [`MAX_SUBSCRIPTIONS`] on one topic
+    /// (a client subscribing in a loop must not grow the server without end).
     pub fn subscribe(
         &mut self,
         topic: &'static str,
         id: Option<String>,
         throttle: Duration,
         queue_length: usize,
-    ) {
+    ) -> Result<(), String> {
         let subs = self.subscriptions.entry(topic).or_default();
         // The same id again replaces its subscription (a client re-subscribing).
         subs.retain(|s| id.is_none() || s.id != id);
+        if subs.len() >= MAX_SUBSCRIPTIONS {
+            return Err(format!(
+                "{topic} has {MAX_SUBSCRIPTIONS} subscriptions of this client already; \
+                 unsubscribe first"
+            ));
+        }
         subs.push(Subscription {
             id,
             throttle,
             queue_length,
             last_sent: None,
         });
+        Ok(())
     }
 
     /// Ends the subscription `id` on `topic`, or every one on `topic` without an id.
@@ -209,7 +220,8 @@ mod tests {
     #[test]
     fn a_throttled_subscription_takes_one_message_per_period() {
         let mut c = client(100);
-        c.subscribe("/pose", None, Duration::from_millis(500), 10);
+        c.subscribe("/pose", None, Duration::from_millis(500), 10)
+            .unwrap();
         let t0 = Instant::now();
         let taken: Vec<bool> = (0..10)
             .map(|i| c.offer("/pose", "m", t0 + Duration::from_millis(100 * i)))
@@ -225,8 +237,8 @@ mod tests {
     #[test]
     fn a_topics_queue_length_keeps_its_newest_and_the_drops_are_counted() {
         let mut c = client(100);
-        c.subscribe("/odom", None, Duration::ZERO, 2);
-        c.subscribe("/pose", None, Duration::ZERO, 1);
+        c.subscribe("/odom", None, Duration::ZERO, 2).unwrap();
+        c.subscribe("/pose", None, Duration::ZERO, 1).unwrap();
         let now = Instant::now();
         for i in 0..5 {
             c.offer("/odom", &format!("odom {i}"), now);
@@ -240,7 +252,7 @@ mod tests {
     #[test]
     fn a_full_queue_loses_its_oldest_message() {
         let mut c = client(4);
-        c.subscribe("/odom", None, Duration::ZERO, 100);
+        c.subscribe("/odom", None, Duration::ZERO, 100).unwrap();
         let now = Instant::now();
         for i in 0..10 {
             c.offer("/odom", &i.to_string(), now);
@@ -250,10 +262,31 @@ mod tests {
     }
 
     #[test]
+    fn subscriptions_on_a_topic_are_bounded() {
+        let mut c = client(10);
+        for _ in 0..MAX_SUBSCRIPTIONS {
+            c.subscribe("/pose", None, Duration::ZERO, 1).unwrap();
+        }
+        assert!(c.subscribe("/pose", None, Duration::ZERO, 1).is_err());
+        // Re-subscribing under an id it holds replaces that one.
+        let mut c = client(10);
+        for i in 0..MAX_SUBSCRIPTIONS {
+            c.subscribe("/pose", Some(i.to_string()), Duration::ZERO, 1)
+                .unwrap();
+        }
+        assert!(
+            c.subscribe("/pose", Some("3".into()), Duration::ZERO, 1)
+                .is_ok()
+        );
+    }
+
+    #[test]
     fn unsubscribing_by_id_keeps_the_others() {
         let mut c = client(10);
-        c.subscribe("/pose", Some("a".into()), Duration::ZERO, 1);
-        c.subscribe("/pose", Some("b".into()), Duration::ZERO, 1);
+        c.subscribe("/pose", Some("a".into()), Duration::ZERO, 1)
+            .unwrap();
+        c.subscribe("/pose", Some("b".into()), Duration::ZERO, 1)
+            .unwrap();
         c.unsubscribe("/pose", Some("a"));
         assert!(c.wants("/pose", Instant::now()));
         c.unsubscribe("/pose", Some("b"));

@@ -462,13 +462,15 @@ impl Server {
                             &format!("subscribe: {topic} is {}, not {given}", t.msg_type),
                         ),
                         None => {
-                            client.subscribe(
+                            let op_id = sub_id.clone();
+                            if let Err(reason) = client.subscribe(
                                 t.name,
                                 sub_id,
                                 Duration::from_millis(throttle_ms),
                                 queue_length,
-                            );
-                            if let (topics::PLAN, Some(text)) = (t.name, &self.plan_text) {
+                            ) {
+                                refuse(client, op_id.as_deref(), &format!("subscribe: {reason}"));
+                            } else if let (topics::PLAN, Some(text)) = (t.name, &self.plan_text) {
                                 client.offer(topics::PLAN, text, Instant::now());
                             }
                         }
