@@ -6,6 +6,7 @@
 
 pub mod api;
 pub mod bench;
+pub mod broker;
 pub mod calib;
 pub mod config;
 pub mod control;
@@ -16,5 +17,6 @@ pub mod fusion;
 pub mod record;
 pub mod replay;
 pub mod runtime;
+pub mod secret;
 pub mod sim;
 pub mod time;

@@ -223,6 +223,10 @@ enum Command {
         #[arg(long)]
         config: PathBuf,
     },
+    /// The embedded broker's own process, started and watched by chassisd (settings on
+    /// standard input); not for use by hand.
+    #[command(name = "broker-child", hide = true)]
+    BrokerChild,
 }
 
 #[derive(Subcommand)]
@@ -702,6 +706,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             runtime.shutdown_background();
             result.map(|()| true)
         }
+        Command::BrokerChild => chassisd::runtime::broker::child::main().map(|()| true),
     }
 }
 

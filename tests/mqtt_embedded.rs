@@ -1,11 +1,16 @@
-//! The embedded broker of the no-hardware default (rumqttd inside `chassisd sim`): real
-//! clients use it like any broker; a port someone else holds is a loud start-up failure.
+//! The embedded broker of the no-hardware default (rumqttd behind chassisd's gate, in a
+//! process of its own): real clients use it like any broker; a port someone else holds is a
+//! loud start-up failure; it holds against clients that flood it, lie to it or hang up on
+//! it; it refuses credentials as mosquitto does for the same settings; and when it dies
+//! anyway, chassisd restarts it within a second.
 
 mod common;
 
 use std::time::{Duration, Instant};
 
-use common::mqtt::{Mosquitto, free_port};
+use std::path::{Path, PathBuf};
+
+use common::mqtt::{Mosquitto, TestPki, free_port, raw};
 use common::process::Proc;
 use serde_json::Value;
 
@@ -63,4 +68,298 @@ fn a_port_held_by_another_broker_fails_loudly() {
         log.contains(&format!("127.0.0.1:{}", other.port)) && log.contains("another broker"),
         "{log}"
     );
+}
+
+/// A root e-stop (messageType 101) through `clients`; its ack's code.
+fn estop(clients: &Mosquitto, on: u8) -> i64 {
+    let acks = clients.subscribe(&["/root/sim/cmd/chassis/ack"]);
+    clients.publish(
+        "/root/sim/cmd/chassis/set",
+        &format!(r#"{{"messageId": 77, "timestamp": "x", "messageType": 101, "data": {on}}}"#),
+    );
+    let ack: Value = serde_json::from_str(
+        &acks
+            .next_on("/root/sim/cmd/chassis/ack", WAIT)
+            .expect("e-stop ack"),
+    )
+    .expect("JSON");
+    ack["data"]["code"].as_i64().expect("code")
+}
+
+/// A base_status within the wait, through `clients`.
+fn one_status(clients: &Mosquitto) -> Value {
+    let sub = clients.subscribe(&["base_status"]);
+    serde_json::from_str(&sub.next_on("base_status", WAIT).expect("base_status")).expect("JSON")
+}
+
+#[test]
+fn a_connection_flood_is_refused_cleanly_and_the_vehicle_stays_commandable() {
+    let port = free_port();
+    let mut daemon = Proc::start(&["sim", "--broker-port", &port.to_string()]);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    // Every place the broker has, held by raw clients with identifiers of their own.
+    let held: Vec<_> = (0..64)
+        .map(|i| {
+            let (socket, code) = raw::connect(port, 4, &format!("flood-{i}"), None);
+            assert_eq!(code, Some(0), "client {i} admitted");
+            socket
+        })
+        .collect();
+    // Beyond the limit: a CONNACK refusal in each client's own version, never a hang.
+    for i in 0..16 {
+        assert_eq!(raw::connect(port, 4, &format!("over-{i}"), None).1, Some(3));
+    }
+    assert_eq!(raw::connect(port, 5, "over-v5", None).1, Some(0x89));
+    // chassisd's own link keeps its place: status still flows to the flood's end.
+    // Identifiers rumqttd cannot route (twice each: the second used to panic it).
+    for _ in 0..2 {
+        assert_eq!(raw::connect(port, 4, "a/b", None).1, Some(2));
+        assert_eq!(raw::connect(port, 5, "x+y", None).1, Some(0x85));
+    }
+    drop(held);
+    // Clients that hang up right after CONNECT, under one identifier (the other panic).
+    for _ in 0..20 {
+        let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect");
+        std::io::Write::write_all(&mut s, &raw::connect_packet(4, "hangup", None)).expect("send");
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let clients = Mosquitto::clients_for(port);
+    assert!(one_status(&clients)["rtk"].is_object());
+    assert_eq!(estop(&clients, 1), 0);
+    let status = one_status(&clients);
+    assert!(
+        status["robot"]["robot_status"].as_u64().expect("bits") & (1 << 3) != 0,
+        "e-stop applied: {status}"
+    );
+    daemon.wait_log(WAIT, "embedded broker: connections refused or closed");
+    let log = daemon.log.join("\n");
+    assert!(!log.contains("panicked"), "{log}");
+    assert!(
+        !log.contains("embedded broker stopped"),
+        "no restart was needed: {log}"
+    );
+    daemon.stop();
+}
+
+/// The broker process's id: the child of `daemon` running `broker-child`.
+fn broker_pid(daemon: &Proc) -> i32 {
+    let out = std::process::Command::new("pgrep")
+        .args(["-P", &daemon.child.id().to_string(), "-f", "broker-child"])
+        .output()
+        .expect("pgrep runs");
+    String::from_utf8_lossy(&out.stdout)
+        .trim()
+        .parse()
+        .expect("one broker process")
+}
+
+#[test]
+fn a_killed_broker_is_noticed_and_restarted_within_a_second() {
+    let port = free_port();
+    let mut daemon = Proc::start(&["sim", "--broker-port", &port.to_string()]);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let first = broker_pid(&daemon);
+    let killed = Instant::now();
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(first),
+        nix::sys::signal::Signal::SIGKILL,
+    )
+    .expect("kill the broker");
+    daemon.wait_log(WAIT, "embedded broker stopped");
+    daemon.wait_log(WAIT, "embedded broker running again");
+    let back = killed.elapsed();
+    assert!(back < Duration::from_secs(1), "back after {back:?}");
+    assert!(
+        daemon.log.iter().any(|l| l.contains("killed by signal 9")),
+        "{:#?}",
+        daemon.log
+    );
+    assert_ne!(broker_pid(&daemon), first);
+    // chassisd's own link reconnects, and the vehicle answers commands again.
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let clients = Mosquitto::clients_for(port);
+    assert_eq!(estop(&clients, 1), 0);
+    // The restart is counted where monitoring and `check` read it.
+    let health = clients.subscribe(&["chassisd/sim-mower/status/broker"]);
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let report: Value = serde_json::from_str(
+            &health
+                .next_on("chassisd/sim-mower/status/broker", WAIT)
+                .expect("health report"),
+        )
+        .expect("JSON");
+        if report["restarts"] == 1 && report["connected"].is_number() {
+            assert!(
+                report["last_exit"]
+                    .as_str()
+                    .is_some_and(|s| s.contains("signal 9")),
+                "{report}"
+            );
+            break;
+        }
+        assert!(Instant::now() < deadline, "{report}");
+    }
+    daemon.stop();
+}
+
+const USER: &str = "operator";
+const PASSWORD: &str = "correct horse battery staple";
+
+/// A vehicle running the embedded broker on `host:port`, with `extra` lines in `[mqtt]`, and
+/// a receiver on a port that is not there (a run needs a device; the link works regardless).
+fn embedded_config(dir: &Path, host: &str, port: u16, extra: &str) -> PathBuf {
+    let path = dir.join("vehicle.toml");
+    let text = format!(
+        "[vehicle]\nname = \"guarded\"\n\n[gnss]\nport = \"{}\"\n\n[mqtt]\nhost = \"{host}\"\n\
+         port = {port}\nembedded_broker = true\nreconnect_max_s = 0.5\n{extra}\n[mqtt.rtk]\n",
+        dir.join("no-such-receiver").display(),
+    );
+    std::fs::write(&path, text).expect("config written");
+    path
+}
+
+fn run(config: &Path) -> Proc {
+    Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()])
+}
+
+/// The CONNACK codes a broker on `port` gives: anonymous, wrong password, unknown user, the
+/// right credentials; in MQTT 3.1.1 then 5.
+fn credential_answers(port: u16) -> Vec<Option<u8>> {
+    let mut codes = Vec::new();
+    for level in [4, 5] {
+        for (i, credentials) in [
+            None,
+            Some((USER, "wrong")),
+            Some(("evil", PASSWORD)),
+            Some((USER, PASSWORD)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            codes.push(raw::connect(port, level, &format!("probe-{level}-{i}"), credentials).1);
+        }
+    }
+    codes
+}
+
+#[test]
+fn credentials_are_refused_exactly_as_mosquitto_refuses_them() {
+    let dir = common::tempdir("embedded-credentials");
+    let port = free_port();
+    let config = embedded_config(
+        &dir,
+        "0.0.0.0",
+        port,
+        &format!("username = \"{USER}\"\npassword = \"{PASSWORD}\"\n"),
+    );
+    let mut daemon = run(&config);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let mosquitto = Mosquitto::start_with_password(&dir, USER, PASSWORD);
+    let ours = credential_answers(port);
+    assert_eq!(ours, credential_answers(mosquitto.port));
+    assert_eq!(
+        ours,
+        [
+            Some(5),
+            Some(5),
+            Some(5),
+            Some(0),
+            Some(0x87),
+            Some(0x87),
+            Some(0x87),
+            Some(0)
+        ]
+    );
+    // Real clients: an anonymous reader and a publisher with a wrong password get nothing in.
+    let anonymous = std::process::Command::new("mosquitto_sub")
+        .args(["-p", &port.to_string(), "-t", "#", "-C", "1", "-W", "3"])
+        .output()
+        .expect("mosquitto_sub runs");
+    assert!(!anonymous.status.success() && anonymous.stdout.is_empty());
+    assert!(
+        String::from_utf8_lossy(&anonymous.stderr).contains("not authorised"),
+        "{}",
+        String::from_utf8_lossy(&anonymous.stderr)
+    );
+    let evil = std::process::Command::new("mosquitto_pub")
+        .args(["-p", &port.to_string(), "-u", "evil", "-P", "wrong", "-t"])
+        .args(["/root/sim/cmd/chassis/set", "-m", "{}"])
+        .output()
+        .expect("mosquitto_pub runs");
+    assert!(!evil.status.success());
+    let clients = Mosquitto::clients_with(port, &["-u", USER, "-P", PASSWORD]);
+    assert!(one_status(&clients)["rtk"].is_object());
+    daemon.wait_log(WAIT, "refused_credentials=");
+    // `check` sees the running broker and what it refused.
+    std::thread::sleep(Duration::from_secs(6));
+    let check = std::process::Command::new(common::chassisd())
+        .args(["check", "--config"])
+        .arg(&config)
+        .output()
+        .expect("check runs");
+    let table = String::from_utf8_lossy(&check.stdout);
+    assert!(
+        table.contains("embedded, running") && table.contains("0 restarts"),
+        "{table}"
+    );
+    let refused: u64 = table
+        .split("refused since the last restart: ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the refusals in the table");
+    // Six probes, the anonymous reader and the wrong publisher.
+    assert!(refused >= 8, "refusals counted: {table}");
+    daemon.stop();
+}
+
+#[test]
+fn a_broker_open_to_the_network_without_credentials_is_refused_at_load() {
+    let dir = common::tempdir("embedded-open");
+    let config = embedded_config(&dir, "0.0.0.0", free_port(), "");
+    for command in ["run", "check"] {
+        let out = std::process::Command::new(common::chassisd())
+            .args([command, "--config"])
+            .arg(&config)
+            .output()
+            .expect("chassisd runs");
+        assert_eq!(out.status.code(), Some(78), "{command}");
+        let message = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            message.contains("mqtt.username") && message.contains("127.0.0.1"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
+fn the_embedded_broker_serves_tls_to_chassisd_and_to_clients() {
+    let dir = common::tempdir("embedded-tls");
+    let pki = TestPki::create(&dir, "embedded");
+    let port = free_port();
+    let config = embedded_config(
+        &dir,
+        "127.0.0.1",
+        port,
+        &format!(
+            "username = \"{USER}\"\npassword = \"{PASSWORD}\"\n\n[mqtt.tls]\nca_file = \"{}\"\n\
+             cert_file = \"{}\"\nkey_file = \"{}\"\n",
+            pki.ca.display(),
+            pki.cert.display(),
+            pki.key.display()
+        ),
+    );
+    let mut daemon = run(&config);
+    // chassisd's own link is a TLS client of its own broker.
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let ca = pki.ca.display().to_string();
+    let clients = Mosquitto::clients_with(port, &["--cafile", &ca, "-u", USER, "-P", PASSWORD]);
+    assert!(one_status(&clients)["rtk"].is_object());
+    // A client without TLS gets no CONNACK: the gate wants a TLS handshake first.
+    assert_eq!(
+        raw::connect(port, 4, "plain", Some((USER, PASSWORD))).1,
+        None
+    );
+    daemon.stop();
 }

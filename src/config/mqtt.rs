@@ -50,9 +50,14 @@ pub struct MqttConfig {
     /// Retained `online` / `offline` (last will) topic; `{name}` is the vehicle name.
     #[serde(default = "default_status_topic")]
     pub status_topic: String,
-    /// Start an MQTT broker inside chassisd on `host:port` (the no-hardware default).
+    /// Start an MQTT broker with chassisd on `host:port` (the no-hardware default). It
+    /// requires `username` and `password` of every client, and refuses to listen beyond
+    /// loopback without them.
     #[serde(default)]
     pub embedded_broker: bool,
+    /// Clients the embedded broker holds at once, chassisd's own link not counted.
+    #[serde(default = "default_embedded_max_clients")]
+    pub embedded_max_clients: usize,
     /// TLS to the broker.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tls: Option<TlsConfig>,
@@ -121,6 +126,13 @@ pub struct TlsConfig {
     /// The client certificate's private key (PEM).
     #[serde(default)]
     pub client_key_file: Option<String>,
+    /// The embedded broker's certificate chain (PEM), signed by `ca_file`'s CA. With a
+    /// client certificate set above, the embedded broker also requires one of every client.
+    #[serde(default)]
+    pub cert_file: Option<String>,
+    /// The embedded broker's private key (PEM).
+    #[serde(default)]
+    pub key_file: Option<String>,
 }
 
 /// `[mqtt.rtk]`
@@ -159,6 +171,9 @@ fn default_command_burst() -> u32 {
 fn default_max_payload() -> usize {
     1 << 20
 }
+fn default_embedded_max_clients() -> usize {
+    64
+}
 fn default_status_topic() -> String {
     "chassisd/{name}/status".into()
 }
@@ -180,6 +195,7 @@ impl Default for MqttConfig {
             max_payload: default_max_payload(),
             status_topic: default_status_topic(),
             embedded_broker: false,
+            embedded_max_clients: default_embedded_max_clients(),
             tls: None,
             rtk: None,
             root: None,
@@ -206,6 +222,11 @@ impl MqttConfig {
             .unwrap_or_else(|| format!("chassisd-{name}"))
     }
 
+    /// Where the embedded broker's health goes (retained JSON), for a vehicle called `name`.
+    pub fn broker_health_topic(&self, name: &str) -> String {
+        format!("{}/broker", self.status_topic(name))
+    }
+
     /// The online/offline topic for a vehicle called `name`.
     pub fn status_topic(&self, name: &str) -> String {
         self.status_topic.replace("{name}", name)
@@ -222,6 +243,8 @@ impl MqttConfig {
             absolute(&mut tls.ca_file);
             tls.client_cert_file.as_mut().map(absolute);
             tls.client_key_file.as_mut().map(absolute);
+            tls.cert_file.as_mut().map(absolute);
+            tls.key_file.as_mut().map(absolute);
         }
         if let Some(dir) = self.rtk.as_mut().and_then(|r| r.trajectory_dir.as_mut()) {
             absolute(dir);
@@ -354,8 +377,75 @@ impl MqttConfig {
                 "set both client_cert_file and client_key_file, or neither",
             ));
         }
+        self.validate_embedded_broker(file)
+    }
+
+    /// The embedded broker's own rules: nobody on the network gets in without credentials,
+    /// and TLS needs the broker's certificate.
+    fn validate_embedded_broker(&self, file: &Path) -> Result<(), ConfigError> {
+        let invalid = |key: &str, problem: &str, fix: &str| {
+            ConfigError::invalid(file, &format!("mqtt.{key}"), problem, fix)
+        };
+        let server_tls = self
+            .tls
+            .as_ref()
+            .map(|t| (t.cert_file.is_some(), t.key_file.is_some()));
+        if !self.embedded_broker {
+            if matches!(server_tls, Some((true, _) | (_, true))) {
+                return Err(invalid(
+                    "tls.cert_file",
+                    "is the embedded broker's certificate, and mqtt.embedded_broker is off",
+                    "remove tls.cert_file and tls.key_file, or set embedded_broker = true",
+                ));
+            }
+            return Ok(());
+        }
+        if self.username.is_none() && !is_loopback(&self.host) {
+            return Err(invalid(
+                "username",
+                &format!(
+                    "is not set, and the embedded broker would listen on {} beyond this                      computer: anyone on the network could read everything and drive the                      vehicle",
+                    self.host
+                ),
+                "set mqtt.username and mqtt.password (every client must then present them),                  or host = \"127.0.0.1\" to keep the broker to this computer",
+            ));
+        }
+        if self.username.is_some() && self.password.as_deref().is_none_or(str::is_empty) {
+            return Err(invalid(
+                "password",
+                "is not set: the embedded broker requires a user name and a password",
+                "set mqtt.password (a long random one), or remove mqtt.username",
+            ));
+        }
+        if let Some(has) = server_tls
+            && has != (true, true)
+        {
+            return Err(invalid(
+                "tls.cert_file",
+                "the embedded broker serves TLS with a certificate and its key, and one is missing",
+                "set tls.cert_file and tls.key_file (PEM, signed by tls.ca_file's CA), or \
+                 remove [mqtt.tls]",
+            ));
+        }
+        if self.embedded_max_clients == 0 || self.embedded_max_clients > 1024 {
+            return Err(invalid(
+                "embedded_max_clients",
+                &format!("{} is outside 1..=1024", self.embedded_max_clients),
+                "a vehicle has a handful of clients; 64 is the default",
+            ));
+        }
         Ok(())
     }
+}
+
+/// Whether `host` names this computer alone (a loopback address or `localhost`).
+pub fn is_loopback(host: &str) -> bool {
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 /// Whether `s` can stand as one level of a topic: non-empty, no separator or wildcard.

@@ -15,6 +15,9 @@ use std::time::{Duration, Instant};
 use tokio::io::AsyncReadExt;
 use tokio_serial::SerialPortBuilderExt;
 
+use std::net::ToSocketAddrs;
+
+use super::broker::BrokerHealth;
 use crate::config::VehicleConfig;
 use crate::config::imu::ImuProtocol;
 use crate::devices::can::Received;
@@ -155,9 +158,9 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
     if let Some(m) = &config.mqtt {
         let what = format!("broker {}:{}", m.host, m.port);
         let result = if m.embedded_broker {
-            Ok("embedded: chassisd starts it".into())
+            probe_embedded_broker(config).await
         } else {
-            probe_broker(config).await
+            probe_broker(config, None).await
         };
         probes.push(Probe::new("mqtt", &what, result));
     }
@@ -341,7 +344,51 @@ async fn probe_bms(
     )
 }
 
-async fn probe_broker(config: &VehicleConfig) -> Result<String, (String, String)> {
+/// The embedded broker: not running (chassisd run starts it), or running, with the health
+/// the daemon publishes (clients, restarts, refusals).
+async fn probe_embedded_broker(config: &VehicleConfig) -> Result<String, (String, String)> {
+    let Some(m) = &config.mqtt else {
+        return Ok("no broker configured".into());
+    };
+    let free = (m.host.as_str(), m.port)
+        .to_socket_addrs()
+        .ok()
+        .and_then(|mut a| a.next())
+        .is_some_and(|a| std::net::TcpListener::bind(a).is_ok());
+    if free {
+        return Ok("embedded: not running now; `chassisd run` starts it".into());
+    }
+    probe_broker(config, Some(m.broker_health_topic(&config.vehicle.name))).await
+}
+
+/// The embedded broker's health in words.
+fn describe_health(h: &BrokerHealth) -> String {
+    let count = |k: &str| h.counters.get(k).copied().unwrap_or(0);
+    let mut text = format!(
+        "embedded, running: {} clients, {} restarts",
+        h.connected.map_or("?".into(), |n| n.to_string()),
+        h.restarts
+    );
+    if let Some(why) = &h.last_exit {
+        let _ = write!(text, " (last: {why})");
+    }
+    let _ = write!(
+        text,
+        "; refused since the last restart: {} credentials, {} full, {} protocol, {} malformed",
+        count("refused_credentials"),
+        count("refused_full"),
+        count("refused_protocol"),
+        count("malformed")
+    );
+    text
+}
+
+/// Connects to the broker once; with `health`, also waits for the embedded broker's
+/// retained health on that topic and describes it.
+async fn probe_broker(
+    config: &VehicleConfig,
+    health: Option<String>,
+) -> Result<String, (String, String)> {
     let Some(m) = &config.mqtt else {
         return Ok("no broker configured".into());
     };
@@ -352,16 +399,36 @@ async fn probe_broker(config: &VehicleConfig) -> Result<String, (String, String)
         Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),
     };
     let (client, mut events) = rumqttc::AsyncClient::new(options, 10);
+    // Set once the embedded broker let the probe in, so a missing health report is told
+    // apart from a broker that does not answer.
+    let mut accepted = false;
     let result = tokio::time::timeout(BROKER_WAIT, async {
         loop {
             match events.poll().await {
-                Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(ack))) => {
-                    return match ack.code {
-                        rumqttc::ConnectReturnCode::Success => Ok("accepts the connection".into()),
-                        code => fail(
+                Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(ack))) => match ack.code {
+                    rumqttc::ConnectReturnCode::Success => match &health {
+                        None => return Ok("accepts the connection".into()),
+                        Some(topic) => {
+                            accepted = true;
+                            if client
+                                .try_subscribe(topic.as_str(), rumqttc::QoS::AtMostOnce)
+                                .is_err()
+                            {
+                                return Ok("accepts the connection".into());
+                            }
+                        }
+                    },
+                    code => {
+                        return fail(
                             format!("refused: {code:?}"),
                             "check mqtt.username and mqtt.password",
-                        ),
+                        );
+                    }
+                },
+                Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
+                    return match serde_json::from_slice::<BrokerHealth>(&p.payload) {
+                        Ok(h) => Ok(describe_health(&h)),
+                        Err(_) => Ok("embedded, running (its health report is unreadable)".into()),
                     };
                 }
                 Ok(_) => {}
@@ -380,6 +447,9 @@ async fn probe_broker(config: &VehicleConfig) -> Result<String, (String, String)
     })
     .await
     .unwrap_or_else(|_| {
+        if accepted {
+            return Ok("embedded, running (no health report yet: it comes every 5 s)".into());
+        }
         fail(
             format!("no answer in {:.0} s", BROKER_WAIT.as_secs_f64()),
             "check mqtt.host, mqtt.port and the network",

@@ -140,9 +140,7 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     can::install_panic_stop(engine.drivetrain().stop_frames());
     let mqtt = match &config.mqtt {
         Some(m) => {
-            if m.embedded_broker {
-                broker::start(&m.host, m.port, m.max_payload)?;
-            }
+            let embedded = broker::start_if_embedded(m, &config.vehicle.name)?;
             source_meta.push(SourceMeta::commands(
                 MQTT_SOURCE,
                 &format!("{MQTT_SOURCE}.log"),
@@ -159,7 +157,15 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
                 ));
                 host::spawn(clock, tx.clone());
             }
-            Some(mqtt::spawn(spec, clock, tx.clone())?)
+            let sender = mqtt::spawn(spec, clock, tx.clone())?;
+            if let Some(b) = embedded {
+                broker::spawn_health_reports(
+                    b,
+                    sender.clone(),
+                    m.broker_health_topic(&config.vehicle.name),
+                );
+            }
+            Some(sender)
         }
         None => None,
     };

@@ -209,9 +209,7 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
     let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
     let mqtt = match &options.mqtt {
         Some(m) => {
-            if m.embedded_broker {
-                broker::start(&m.host, m.port, m.max_payload)?;
-            }
+            let embedded = broker::start_if_embedded(m, &sim.config().vehicle.name)?;
             let spec = MqttSpec {
                 config: m.clone(),
                 vehicle: sim.config().vehicle.name.clone(),
@@ -220,7 +218,15 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
             if m.root.is_some() {
                 host::spawn(clock, tx.clone());
             }
-            Some(mqtt::spawn(spec, clock, tx.clone())?)
+            let sender = mqtt::spawn(spec, clock, tx.clone())?;
+            if let Some(b) = embedded {
+                broker::spawn_health_reports(
+                    b,
+                    sender.clone(),
+                    m.broker_health_topic(&sim.config().vehicle.name),
+                );
+            }
+            Some(sender)
         }
         None => None,
     };

@@ -105,6 +105,24 @@ impl TestPki {
     }
 }
 
+/// mosquitto settings that refuse anonymous clients and accept `user` / `password` (a
+/// password file written in `dir`).
+fn password_settings(dir: &Path, user: &str, password: &str) -> String {
+    let passwd = dir.join("passwd");
+    let status = Command::new("mosquitto_passwd")
+        .args(["-c", "-b"])
+        .arg(&passwd)
+        .args([user, password])
+        .stderr(Stdio::null())
+        .status()
+        .expect("mosquitto_passwd runs");
+    assert!(status.success(), "mosquitto_passwd failed");
+    format!(
+        "allow_anonymous false\npassword_file {}\n",
+        passwd.display()
+    )
+}
+
 /// A port nobody listens on right now.
 pub fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0")
@@ -123,31 +141,27 @@ impl Mosquitto {
     /// The mosquitto_pub / mosquitto_sub helpers for a broker someone else runs on `port`
     /// (chassisd's embedded one).
     pub fn clients_for(port: u16) -> Mosquitto {
+        Self::clients_with(port, &[])
+    }
+
+    /// As [`Mosquitto::clients_for`], each client run with `args` (credentials, CA file).
+    pub fn clients_with(port: u16, args: &[&str]) -> Mosquitto {
         Mosquitto {
             child: None,
             port,
             settings: None,
-            client_args: Vec::new(),
+            client_args: args.iter().map(|a| (*a).to_owned()).collect(),
         }
     }
 
     /// Starts mosquitto with TLS (the certificate of `pki`) and a password file holding
     /// `user` / `password`; anonymous clients are refused. Files go in `dir`.
     pub fn start_secured(dir: &Path, pki: &TestPki, user: &str, password: &str) -> Mosquitto {
-        let passwd = dir.join("passwd");
-        let status = Command::new("mosquitto_passwd")
-            .args(["-c", "-b"])
-            .arg(&passwd)
-            .args([user, password])
-            .stderr(Stdio::null())
-            .status()
-            .expect("mosquitto_passwd runs");
-        assert!(status.success(), "mosquitto_passwd failed");
         let settings = format!(
-            "allow_anonymous false\npassword_file {}\ncafile {}\ncertfile {}\nkeyfile {}\n\
+            "{}cafile {}\ncertfile {}\nkeyfile {}\n\
              # Started as root, mosquitto would drop to its own user, who cannot read the key.\n\
              user root\n",
-            passwd.display(),
+            password_settings(dir, user, password),
             pki.ca.display(),
             pki.cert.display(),
             pki.key.display()
@@ -155,6 +169,19 @@ impl Mosquitto {
         let client_args = vec![
             "--cafile".to_owned(),
             pki.ca.display().to_string(),
+            "-u".to_owned(),
+            user.to_owned(),
+            "-P".to_owned(),
+            password.to_owned(),
+        ];
+        Self::start_with(Some((settings, dir.to_owned())), client_args)
+    }
+
+    /// Starts mosquitto on plain TCP with a password file holding `user` / `password`;
+    /// anonymous clients are refused. Files go in `dir`.
+    pub fn start_with_password(dir: &Path, user: &str, password: &str) -> Mosquitto {
+        let settings = password_settings(dir, user, password);
+        let client_args = vec![
             "-u".to_owned(),
             user.to_owned(),
             "-P".to_owned(),
@@ -345,5 +372,76 @@ impl Drop for Subscriber {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// A client written byte by byte, as an attacker's would be: CONNECT packets of any
+/// version, identifier and credentials, and the broker's answer read raw.
+pub mod raw {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::time::Duration;
+
+    /// A CONNECT packet: MQTT `level` (4 = 3.1.1, 5 = 5.0), clean session, keep-alive 60 s.
+    pub fn connect_packet(
+        level: u8,
+        client_id: &str,
+        credentials: Option<(&str, &str)>,
+    ) -> Vec<u8> {
+        let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level];
+        body.push(if credentials.is_some() { 0xc2 } else { 0x02 });
+        body.extend_from_slice(&60u16.to_be_bytes());
+        if level == 5 {
+            body.push(0);
+        }
+        let mut string = |s: &[u8]| {
+            body.extend_from_slice(&(s.len() as u16).to_be_bytes());
+            body.extend_from_slice(s);
+        };
+        string(client_id.as_bytes());
+        if let Some((user, password)) = credentials {
+            string(user.as_bytes());
+            string(password.as_bytes());
+        }
+        let mut packet = vec![0x10];
+        let mut n = body.len();
+        loop {
+            let digit = (n % 128) as u8;
+            n /= 128;
+            packet.push(if n > 0 { digit | 0x80 } else { digit });
+            if n == 0 {
+                break;
+            }
+        }
+        packet.extend_from_slice(&body);
+        packet
+    }
+
+    /// Connects and sends `packet`; returns the socket and the CONNACK's return code (3.1.1)
+    /// or reason code (5), or `None` when the broker closed without one.
+    pub fn connect_with(port: u16, packet: &[u8]) -> (TcpStream, Option<u8>) {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).expect("connect");
+        s.set_read_timeout(Some(Duration::from_secs(5)))
+            .expect("timeout");
+        s.write_all(packet).expect("send CONNECT");
+        let mut head = [0u8; 2];
+        if s.read_exact(&mut head).is_err() || head[0] != 0x20 {
+            return (s, None);
+        }
+        let mut rest = vec![0u8; usize::from(head[1])];
+        if s.read_exact(&mut rest).is_err() || rest.len() < 2 {
+            return (s, None);
+        }
+        (s, Some(rest[1]))
+    }
+
+    /// [`connect_with`] a [`connect_packet`].
+    pub fn connect(
+        port: u16,
+        level: u8,
+        client_id: &str,
+        credentials: Option<(&str, &str)>,
+    ) -> (TcpStream, Option<u8>) {
+        connect_with(port, &connect_packet(level, client_id, credentials))
     }
 }

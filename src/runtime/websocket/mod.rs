@@ -591,15 +591,7 @@ impl Server {
 /// Whether `given` is the configured token, compared in a time that does not depend on
 /// where they differ.
 fn token_matches(configured: Option<&str>, given: &str) -> bool {
-    let Some(configured) = configured else {
-        return false;
-    };
-    let (a, b) = (configured.as_bytes(), given.as_bytes());
-    let differ = a
-        .iter()
-        .zip(b)
-        .fold(u8::from(a.len() != b.len()), |acc, (x, y)| acc | (x ^ y));
-    differ == 0
+    configured.is_some_and(|c| crate::secret::matches(c.as_bytes(), given.as_bytes()))
 }
 
 /// Why `topic` is not one of the server's, for `op`.

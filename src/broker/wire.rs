@@ -1,0 +1,579 @@
+//! MQTT 3.1.1 and 5.0 wire reading for the embedded broker's gate: fixed headers framed,
+//! CONNECT read field by field, and CONNACK refusals written. Nothing here trusts a length
+//! it is given: every one is checked against the bytes present and the configured bound.
+
+use std::fmt;
+
+/// MQTT control packet types (the fixed header's high nibble).
+pub mod kind {
+    pub const CONNECT: u8 = 1;
+    pub const CONNACK: u8 = 2;
+    pub const PUBLISH: u8 = 3;
+    pub const PUBACK: u8 = 4;
+    pub const PUBREC: u8 = 5;
+    pub const PUBREL: u8 = 6;
+    pub const PUBCOMP: u8 = 7;
+    pub const SUBSCRIBE: u8 = 8;
+    pub const SUBACK: u8 = 9;
+    pub const UNSUBSCRIBE: u8 = 10;
+    pub const UNSUBACK: u8 = 11;
+    pub const PINGREQ: u8 = 12;
+    pub const PINGRESP: u8 = 13;
+    pub const DISCONNECT: u8 = 14;
+    pub const AUTH: u8 = 15;
+}
+
+/// The largest remaining length the encoding can carry (four 7-bit digits).
+pub const MAX_REMAINING_LENGTH: usize = 268_435_455;
+
+/// Why bytes are not an acceptable MQTT packet. Each one ends the connection.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WireError {
+    /// The remaining length runs over four bytes.
+    BadRemainingLength,
+    /// The packet is larger than the gate lets through, bytes.
+    TooLarge { size: usize, limit: usize },
+    /// The first packet is not CONNECT.
+    NotConnect(u8),
+    /// A packet a client may not send (a second CONNECT, a server's packet, type 0).
+    Forbidden(u8),
+    /// Fixed-header flags the packet type does not allow.
+    BadFlags { kind: u8, flags: u8 },
+    /// The protocol name is neither `MQTT` nor `MQIsdp`.
+    UnknownProtocol,
+    /// A field runs past the packet's end, or bytes are left over after the last one.
+    Truncated(&'static str),
+    /// Trailing bytes after CONNECT's last field.
+    TrailingBytes(usize),
+    /// A string is not UTF-8, or holds U+0000.
+    BadString(&'static str),
+    /// The connect flags contradict each other or set the reserved bit.
+    BadConnectFlags(u8),
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BadRemainingLength => write!(f, "remaining length longer than 4 bytes"),
+            Self::TooLarge { size, limit } => {
+                write!(f, "packet of {size} bytes over the limit of {limit}")
+            }
+            Self::NotConnect(k) => write!(f, "first packet is type {k}, not CONNECT"),
+            Self::Forbidden(k) => write!(f, "packet type {k} is not a client's to send here"),
+            Self::BadFlags { kind, flags } => {
+                write!(f, "packet type {kind} with header flags {flags:#06b}")
+            }
+            Self::UnknownProtocol => write!(f, "protocol name is not MQTT"),
+            Self::Truncated(field) => write!(f, "{field} runs past the packet's end"),
+            Self::TrailingBytes(n) => write!(f, "{n} bytes after CONNECT's last field"),
+            Self::BadString(field) => write!(f, "{field} is not valid UTF-8 text"),
+            Self::BadConnectFlags(b) => write!(f, "connect flags {b:#010b} are contradictory"),
+        }
+    }
+}
+
+impl std::error::Error for WireError {}
+
+/// A packet's fixed header: its type, flags and where its body lies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Header {
+    /// Packet type (1..=15).
+    pub kind: u8,
+    /// The low nibble of the first byte.
+    pub flags: u8,
+    /// Bytes of the fixed header (type byte and remaining length).
+    pub header_len: usize,
+    /// Bytes of the body (the remaining length).
+    pub body_len: usize,
+}
+
+impl Header {
+    /// The whole packet's length, bytes.
+    pub fn total(&self) -> usize {
+        self.header_len + self.body_len
+    }
+}
+
+/// Reads the fixed header at the start of `buf`. `Ok(None)`: more bytes are needed.
+/// A packet over `limit` bytes is refused before its body is waited for.
+pub fn header(buf: &[u8], limit: usize) -> Result<Option<Header>, WireError> {
+    let Some(&first) = buf.first() else {
+        return Ok(None);
+    };
+    let mut body_len = 0usize;
+    for i in 0..4 {
+        let Some(&digit) = buf.get(1 + i) else {
+            return Ok(None);
+        };
+        body_len |= usize::from(digit & 0x7f) << (7 * i);
+        if digit & 0x80 == 0 {
+            let header = Header {
+                kind: first >> 4,
+                flags: first & 0x0f,
+                header_len: 2 + i,
+                body_len,
+            };
+            if header.total() > limit {
+                return Err(WireError::TooLarge {
+                    size: header.total(),
+                    limit,
+                });
+            }
+            return Ok(Some(header));
+        }
+    }
+    Err(WireError::BadRemainingLength)
+}
+
+/// Checks a packet a connected client sends: its type is one a client may send with the
+/// version in use, and its header flags are those the type requires.
+pub fn check_client_packet(h: &Header, version: Version) -> Result<(), WireError> {
+    use kind::*;
+    let allowed = match h.kind {
+        PUBLISH | PUBACK | PUBREC | PUBREL | PUBCOMP | SUBSCRIBE | UNSUBSCRIBE | PINGREQ
+        | DISCONNECT => true,
+        AUTH => version == Version::V5,
+        _ => false,
+    };
+    if !allowed {
+        return Err(WireError::Forbidden(h.kind));
+    }
+    let flags_ok = match h.kind {
+        // QoS 3 is malformed; DUP and RETAIN are free.
+        PUBLISH => (h.flags >> 1) & 0b11 != 0b11,
+        PUBREL | SUBSCRIBE | UNSUBSCRIBE => h.flags == 0b0010,
+        _ => h.flags == 0,
+    };
+    if !flags_ok {
+        return Err(WireError::BadFlags {
+            kind: h.kind,
+            flags: h.flags,
+        });
+    }
+    Ok(())
+}
+
+/// The protocol a client asked for in its CONNECT.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Version {
+    /// MQTT 3.1 (`MQIsdp`, level 3): refused, as the broker does not speak it.
+    V3,
+    /// MQTT 3.1.1 (level 4).
+    V4,
+    /// MQTT 5.0 (level 5).
+    V5,
+    /// `MQTT` with a level other than 4 or 5: refused as an unacceptable version.
+    Other(u8),
+}
+
+/// The fields of a CONNECT the gate decides on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Connect {
+    /// The protocol version asked for.
+    pub version: Version,
+    /// The client identifier (may be empty).
+    pub client_id: String,
+    /// Keep-alive interval, s (0: none).
+    pub keep_alive_s: u16,
+    /// The user name, when the flag is set.
+    pub username: Option<String>,
+    /// The password bytes, when the flag is set.
+    pub password: Option<Vec<u8>>,
+    /// Whether a last will is set.
+    pub will: bool,
+}
+
+/// A cursor over a packet body that fails instead of reading past the end.
+struct Fields<'a> {
+    body: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Fields<'a> {
+    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], WireError> {
+        let end = self.at.checked_add(n).ok_or(WireError::Truncated(field))?;
+        let bytes = self
+            .body
+            .get(self.at..end)
+            .ok_or(WireError::Truncated(field))?;
+        self.at = end;
+        Ok(bytes)
+    }
+
+    fn u8(&mut self, field: &'static str) -> Result<u8, WireError> {
+        Ok(self.take(1, field)?[0])
+    }
+
+    fn u16(&mut self, field: &'static str) -> Result<u16, WireError> {
+        let b = self.take(2, field)?;
+        Ok(u16::from_be_bytes([b[0], b[1]]))
+    }
+
+    /// Two length bytes, then that many bytes.
+    fn binary(&mut self, field: &'static str) -> Result<&'a [u8], WireError> {
+        let n = self.u16(field)?;
+        self.take(usize::from(n), field)
+    }
+
+    /// A UTF-8 string without U+0000, as MQTT requires of every string.
+    fn string(&mut self, field: &'static str) -> Result<&'a str, WireError> {
+        let s =
+            std::str::from_utf8(self.binary(field)?).map_err(|_| WireError::BadString(field))?;
+        if s.contains('\0') {
+            return Err(WireError::BadString(field));
+        }
+        Ok(s)
+    }
+
+    /// A variable byte integer (MQTT 5 property lengths).
+    fn varint(&mut self, field: &'static str) -> Result<usize, WireError> {
+        let mut value = 0usize;
+        for i in 0..4 {
+            let digit = self.u8(field)?;
+            value |= usize::from(digit & 0x7f) << (7 * i);
+            if digit & 0x80 == 0 {
+                return Ok(value);
+            }
+        }
+        Err(WireError::BadRemainingLength)
+    }
+
+    /// MQTT 5 properties: their length, then skipped whole.
+    fn skip_properties(&mut self, field: &'static str) -> Result<(), WireError> {
+        let n = self.varint(field)?;
+        self.take(n, field).map(|_| ())
+    }
+}
+
+/// Reads a CONNECT body (the bytes after the fixed header). A version the broker does not
+/// speak is returned, not refused, so that the caller can answer it with a CONNACK.
+pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
+    let mut f = Fields { body, at: 0 };
+    let name = f.binary("protocol name")?;
+    let level = f.u8("protocol level")?;
+    let version = match (name, level) {
+        (b"MQTT", 4) => Version::V4,
+        (b"MQTT", 5) => Version::V5,
+        (b"MQTT", other) => return Ok(refused_version(Version::Other(other))),
+        (b"MQIsdp", _) => return Ok(refused_version(Version::V3)),
+        _ => return Err(WireError::UnknownProtocol),
+    };
+    let flags = f.u8("connect flags")?;
+    let will = flags & 0x04 != 0;
+    let will_qos = (flags >> 3) & 0b11;
+    let will_retain = flags & 0x20 != 0;
+    let has_password = flags & 0x40 != 0;
+    let has_username = flags & 0x80 != 0;
+    let contradictory = flags & 0x01 != 0
+        || will_qos == 3
+        || (!will && (will_qos != 0 || will_retain))
+        || (version == Version::V4 && has_password && !has_username);
+    if contradictory {
+        return Err(WireError::BadConnectFlags(flags));
+    }
+    let keep_alive_s = f.u16("keep alive")?;
+    if version == Version::V5 {
+        f.skip_properties("connect properties")?;
+    }
+    let client_id = f.string("client identifier")?.to_owned();
+    if will {
+        if version == Version::V5 {
+            f.skip_properties("will properties")?;
+        }
+        f.string("will topic")?;
+        f.binary("will payload")?;
+    }
+    let username = has_username
+        .then(|| f.string("user name").map(str::to_owned))
+        .transpose()?;
+    let password = has_password
+        .then(|| f.binary("password").map(<[u8]>::to_vec))
+        .transpose()?;
+    let left = body.len() - f.at;
+    if left != 0 {
+        return Err(WireError::TrailingBytes(left));
+    }
+    Ok(Connect {
+        version,
+        client_id,
+        keep_alive_s,
+        username,
+        password,
+        will,
+    })
+}
+
+fn refused_version(version: Version) -> Connect {
+    Connect {
+        version,
+        client_id: String::new(),
+        keep_alive_s: 0,
+        username: None,
+        password: None,
+        will: false,
+    }
+}
+
+/// Why a CONNECT is refused with a CONNACK.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Refusal {
+    /// MQTT 3.1 or an unknown level.
+    UnacceptableVersion,
+    /// The client identifier is one the broker cannot route.
+    IdentifierRejected,
+    /// The broker holds as many clients as it may.
+    ServerUnavailable,
+    /// Wrong user name or password.
+    BadCredentials,
+    /// No credentials where they are required.
+    NotAuthorized,
+}
+
+impl Refusal {
+    /// A short name for logs and counters.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::UnacceptableVersion => "unacceptable protocol version",
+            Self::IdentifierRejected => "client identifier rejected",
+            Self::ServerUnavailable => "client limit reached",
+            Self::BadCredentials => "wrong user name or password",
+            Self::NotAuthorized => "no credentials",
+        }
+    }
+}
+
+/// The CONNACK that refuses a client, in its own protocol version. Credentials are refused
+/// as mosquitto 2 refuses them: "not authorised" (3.1.1 code 5, 5.0 reason 0x87) whether
+/// they are missing, unknown or wrong, so a prober learns nothing of which part failed.
+pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
+    if version == Version::V5 {
+        let reason = match why {
+            Refusal::UnacceptableVersion => 0x84,
+            Refusal::IdentifierRejected => 0x85,
+            // Server busy: the limit is a passing condition, worth a later retry.
+            Refusal::ServerUnavailable => 0x89,
+            Refusal::BadCredentials | Refusal::NotAuthorized => 0x87,
+        };
+        // Session present 0, reason, no properties.
+        vec![0x20, 0x03, 0x00, reason, 0x00]
+    } else {
+        let code = match why {
+            Refusal::UnacceptableVersion => 1,
+            Refusal::IdentifierRejected => 2,
+            Refusal::ServerUnavailable => 3,
+            Refusal::BadCredentials | Refusal::NotAuthorized => 5,
+        };
+        vec![0x20, 0x02, 0x00, code]
+    }
+}
+
+/// A DISCONNECT that ends a session normally (the same bytes in 3.1.1 and 5.0): the gate
+/// sends it to the broker for a client that left during the handshake, so no will fires.
+pub const DISCONNECT: [u8; 2] = [0xe0, 0x00];
+
+/// Whether a CONNACK (whole packet) accepts the connection.
+pub fn connack_accepts(packet: &[u8]) -> bool {
+    packet.len() >= 4 && packet[0] == 0x20 && packet[3] == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A CONNECT packet (whole) with the given fields.
+    pub(crate) fn connect_packet(
+        level: u8,
+        client_id: &str,
+        credentials: Option<(&str, &[u8])>,
+        will: bool,
+    ) -> Vec<u8> {
+        let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level];
+        let mut flags = 0x02;
+        if will {
+            flags |= 0x04;
+        }
+        if credentials.is_some() {
+            flags |= 0xc0;
+        }
+        body.push(flags);
+        body.extend_from_slice(&30u16.to_be_bytes());
+        if level == 5 {
+            body.push(0);
+        }
+        let string = |body: &mut Vec<u8>, s: &[u8]| {
+            body.extend_from_slice(&(s.len() as u16).to_be_bytes());
+            body.extend_from_slice(s);
+        };
+        string(&mut body, client_id.as_bytes());
+        if will {
+            if level == 5 {
+                body.push(0);
+            }
+            string(&mut body, b"will/topic");
+            string(&mut body, b"gone");
+        }
+        if let Some((user, password)) = credentials {
+            string(&mut body, user.as_bytes());
+            string(&mut body, password);
+        }
+        let mut packet = vec![0x10];
+        let mut n = body.len();
+        loop {
+            let digit = (n % 128) as u8;
+            n /= 128;
+            packet.push(if n > 0 { digit | 0x80 } else { digit });
+            if n == 0 {
+                break;
+            }
+        }
+        packet.extend_from_slice(&body);
+        packet
+    }
+
+    fn parse(packet: &[u8]) -> Result<Connect, WireError> {
+        let h = header(packet, 1 << 20).unwrap().unwrap();
+        assert_eq!(h.kind, kind::CONNECT);
+        connect(&packet[h.header_len..h.total()])
+    }
+
+    #[test]
+    fn a_311_connect_with_credentials_and_a_will_is_read() {
+        let c = parse(&connect_packet(4, "robot", Some(("op", b"s3cret")), true)).unwrap();
+        assert_eq!(c.version, Version::V4);
+        assert_eq!(c.client_id, "robot");
+        assert_eq!(c.keep_alive_s, 30);
+        assert_eq!(c.username.as_deref(), Some("op"));
+        assert_eq!(c.password.as_deref(), Some(&b"s3cret"[..]));
+        assert!(c.will);
+    }
+
+    #[test]
+    fn a_v5_connect_skips_its_properties() {
+        let c = parse(&connect_packet(5, "", None, true)).unwrap();
+        assert_eq!(c.version, Version::V5);
+        assert_eq!(c.client_id, "");
+        assert_eq!(c.username, None);
+    }
+
+    #[test]
+    fn old_and_unknown_versions_are_returned_for_a_refusal() {
+        let mut p = connect_packet(4, "x", None, false);
+        p[8] = 3;
+        assert_eq!(parse(&p).unwrap().version, Version::Other(3));
+        let mut body = vec![0, 6];
+        body.extend_from_slice(b"MQIsdp");
+        body.extend_from_slice(&[3, 2, 0, 10, 0, 1, b'x']);
+        let mut old = vec![0x10, body.len() as u8];
+        old.extend_from_slice(&body);
+        assert_eq!(parse(&old).unwrap().version, Version::V3);
+    }
+
+    #[test]
+    fn every_truncation_of_a_connect_is_an_error_never_a_panic() {
+        let whole = connect_packet(5, "robot", Some(("op", b"pw")), true);
+        let h = header(&whole, 1 << 20).unwrap().unwrap();
+        let body = &whole[h.header_len..];
+        for cut in 0..body.len() {
+            assert!(connect(&body[..cut]).is_err(), "cut at {cut}");
+        }
+        let mut longer = body.to_vec();
+        longer.push(0);
+        assert_eq!(connect(&longer), Err(WireError::TrailingBytes(1)));
+    }
+
+    #[test]
+    fn contradictory_flags_are_refused() {
+        let mut p = connect_packet(4, "x", None, false);
+        // Password without user name (3.1.1).
+        p[9] |= 0x40;
+        assert!(matches!(parse(&p), Err(WireError::BadConnectFlags(_))));
+        let mut p = connect_packet(4, "x", None, false);
+        p[9] |= 0x01;
+        assert!(matches!(parse(&p), Err(WireError::BadConnectFlags(_))));
+        let mut p = connect_packet(4, "x", None, false);
+        // Will QoS without a will.
+        p[9] |= 0x08;
+        assert!(matches!(parse(&p), Err(WireError::BadConnectFlags(_))));
+    }
+
+    #[test]
+    fn strings_must_be_utf8_without_nul() {
+        let mut p = connect_packet(4, "ab", None, false);
+        let at = p.len() - 1;
+        p[at] = 0;
+        assert_eq!(parse(&p), Err(WireError::BadString("client identifier")));
+        p[at] = 0xff;
+        assert_eq!(parse(&p), Err(WireError::BadString("client identifier")));
+    }
+
+    #[test]
+    fn headers_need_their_bytes_and_respect_the_limit() {
+        assert_eq!(header(&[], 100), Ok(None));
+        assert_eq!(header(&[0x30], 100), Ok(None));
+        assert_eq!(header(&[0x30, 0x80], 100), Ok(None));
+        assert_eq!(
+            header(&[0x30, 0x05], 100),
+            Ok(Some(Header {
+                kind: 3,
+                flags: 0,
+                header_len: 2,
+                body_len: 5
+            }))
+        );
+        assert_eq!(
+            header(&[0x30, 0xff, 0xff, 0xff, 0x7f], usize::MAX),
+            Ok(Some(Header {
+                kind: 3,
+                flags: 0,
+                header_len: 5,
+                body_len: MAX_REMAINING_LENGTH
+            }))
+        );
+        assert_eq!(
+            header(&[0x30, 0xff, 0xff, 0xff, 0xff, 0x01], usize::MAX),
+            Err(WireError::BadRemainingLength)
+        );
+        assert_eq!(
+            header(&[0x30, 0x80, 0x01], 100),
+            Err(WireError::TooLarge {
+                size: 131,
+                limit: 100
+            })
+        );
+    }
+
+    #[test]
+    fn clients_may_send_only_their_own_packets_with_their_flags() {
+        let h = |kind, flags| Header {
+            kind,
+            flags,
+            header_len: 2,
+            body_len: 0,
+        };
+        assert!(check_client_packet(&h(kind::PUBLISH, 0b1011), Version::V4).is_ok());
+        assert!(check_client_packet(&h(kind::PUBLISH, 0b0110), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::SUBSCRIBE, 0b0010), Version::V4).is_ok());
+        assert!(check_client_packet(&h(kind::SUBSCRIBE, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::CONNECT, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::CONNACK, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::SUBACK, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(0, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::AUTH, 0), Version::V4).is_err());
+        assert!(check_client_packet(&h(kind::AUTH, 0), Version::V5).is_ok());
+        assert!(check_client_packet(&h(kind::PINGREQ, 1), Version::V4).is_err());
+    }
+
+    #[test]
+    fn refusals_are_written_in_the_clients_version() {
+        assert_eq!(
+            connack_refusal(Version::V4, Refusal::BadCredentials),
+            [0x20, 2, 0, 5]
+        );
+        assert_eq!(
+            connack_refusal(Version::V5, Refusal::NotAuthorized),
+            [0x20, 3, 0, 0x87, 0]
+        );
+        assert!(connack_accepts(&[0x20, 2, 0, 0]));
+        assert!(!connack_accepts(&[0x20, 2, 0, 5]));
+    }
+}
