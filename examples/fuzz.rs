@@ -184,6 +184,14 @@ fn targets() -> Vec<Target> {
             structured: Some(mutate_json_document),
             runner: rosbridge_runner,
         },
+        Target {
+            name: "broker",
+            about: "a client's TCP stream to the embedded broker: the gate's CONNECT, admission and session checks, then rumqttd's own MQTT 3.1.1 and 5 parsers on every packet the gate lets through",
+            seeds: broker::seeds,
+            tokens: broker::TOKENS,
+            structured: Some(broker::mutate_packets),
+            runner: broker::runner,
+        },
         #[cfg(feature = "ros1")]
         Target {
             name: "ros1",
@@ -199,6 +207,326 @@ fn targets() -> Vec<Target> {
             runner: ros1::runner,
         },
     ]
+}
+
+/// The embedded broker's input: the bytes one client sends after its TCP handshake.
+mod broker {
+    use super::*;
+    use bytes::BytesMut;
+    use chassisd::broker::admission::{self, Credentials, Places, Policy};
+    use chassisd::broker::session::{Pass, Session, TopicNames};
+    use chassisd::broker::wire::{self, Version};
+    use rumqttd::protocol::Protocol;
+
+    /// The gate's packet limit in the fuzzed broker (small, so that limits are met).
+    const MAX_PACKET: usize = 4096;
+    const USER: &str = "operator";
+    const PASSWORD: &str = "s3cret";
+
+    pub const TOKENS: &[&[u8]] = &[
+        b"\x10",
+        b"\x20",
+        b"\x30",
+        b"\x32",
+        b"\x34",
+        b"\x3b",
+        b"\x62",
+        b"\x82",
+        b"\xa2",
+        b"\xc0\x00",
+        b"\xe0\x00",
+        b"\xf0",
+        b"\x00\x04MQTT\x04",
+        b"\x00\x04MQTT\x05",
+        b"\x00\x06MQIsdp\x03",
+        b"$share/g/",
+        b"#",
+        b"+",
+        b"/",
+        b"\xff\xff\xff\x7f",
+        b"\x80\x80\x80\x80",
+        b"\x00\x00",
+        b"\xff\xff",
+        b"\x26\x00\x01k\x00\x01v",
+    ];
+
+    fn varint(mut n: usize, out: &mut Vec<u8>) {
+        loop {
+            let digit = (n % 128) as u8;
+            n /= 128;
+            out.push(if n > 0 { digit | 0x80 } else { digit });
+            if n == 0 {
+                return;
+            }
+        }
+    }
+
+    fn packet(first: u8, body: &[u8]) -> Vec<u8> {
+        let mut p = vec![first];
+        varint(body.len(), &mut p);
+        p.extend_from_slice(body);
+        p
+    }
+
+    fn string(s: &[u8], out: &mut Vec<u8>) {
+        out.extend_from_slice(&(s.len() as u16).to_be_bytes());
+        out.extend_from_slice(s);
+    }
+
+    fn connect(level: u8, id: &str, credentials: bool, will: bool) -> Vec<u8> {
+        let mut b = Vec::new();
+        string(b"MQTT", &mut b);
+        b.push(level);
+        b.push(0x02 | if credentials { 0xc0 } else { 0 } | if will { 0x2c } else { 0 });
+        b.extend_from_slice(&30u16.to_be_bytes());
+        if level == 5 {
+            // Session expiry 10 s.
+            b.extend_from_slice(&[5, 0x11, 0, 0, 0, 10]);
+        }
+        string(id.as_bytes(), &mut b);
+        if will {
+            if level == 5 {
+                b.extend_from_slice(&[5, 0x18, 0, 0, 0, 2]);
+            }
+            string(b"chassisd/will", &mut b);
+            string(b"gone", &mut b);
+        }
+        if credentials {
+            string(USER.as_bytes(), &mut b);
+            string(PASSWORD.as_bytes(), &mut b);
+        }
+        packet(0x10, &b)
+    }
+
+    /// The packets of a session after CONNECT, in the version of `level`.
+    fn session(level: u8) -> Vec<u8> {
+        let props = |b: &mut Vec<u8>| {
+            if level == 5 {
+                b.push(0);
+            }
+        };
+        let mut out = Vec::new();
+        // SUBSCRIBE to a filter, a wildcard and a shared subscription.
+        let mut b = vec![0, 1];
+        props(&mut b);
+        for (filter, qos) in [
+            (&b"base_status"[..], 1u8),
+            (b"device/+/#", 2),
+            (b"$share/g/x", 0),
+        ] {
+            string(filter, &mut b);
+            b.push(qos);
+        }
+        out.extend(packet(0x82, &b));
+        // PUBLISH at QoS 0, 1 (retained) and 2.
+        for (first, id) in [(0x30u8, None), (0x33, Some(2u16)), (0x34, Some(3))] {
+            let mut b = Vec::new();
+            string(b"device/SIM0001/goal", &mut b);
+            if let Some(id) = id {
+                b.extend_from_slice(&id.to_be_bytes());
+            }
+            props(&mut b);
+            b.extend_from_slice(br#"{"data":{"x":1.0}}"#);
+            out.extend(packet(first, &b));
+        }
+        // The QoS 2 flow's release, acks of the broker's deliveries, UNSUBSCRIBE, a ping.
+        out.extend(packet(0x62, &[0, 3]));
+        out.extend(packet(0x40, &[0, 9]));
+        out.extend(packet(0x50, &[0, 10]));
+        out.extend(packet(0x70, &[0, 11]));
+        let mut b = vec![0, 4];
+        props(&mut b);
+        string(b"base_status", &mut b);
+        out.extend(packet(0xa2, &b));
+        out.extend([0xc0, 0x00]);
+        if level == 5 {
+            // AUTH with a reason and no properties, then DISCONNECT with a reason.
+            out.extend(packet(0xf0, &[0x18, 0]));
+            out.extend(packet(0xe0, &[0x04, 0]));
+        } else {
+            out.extend([0xe0, 0x00]);
+        }
+        out
+    }
+
+    pub fn seeds() -> Vec<Vec<u8>> {
+        let mut seeds = Vec::new();
+        for level in [4u8, 5] {
+            for (credentials, will) in [(true, false), (true, true), (false, false)] {
+                let mut s = connect(level, "fuzz-client", credentials, will);
+                s.extend(session(level));
+                seeds.push(s);
+            }
+            seeds.push(connect(level, "", true, false));
+            seeds.push(connect(level, "a/b", true, false));
+        }
+        let mut old = Vec::new();
+        string(b"MQIsdp", &mut old);
+        old.extend_from_slice(&[3, 2, 0, 10, 0, 1, b'x']);
+        seeds.push(packet(0x10, &old));
+        seeds
+    }
+
+    /// Swaps, repeats or drops whole packets after the first, or corrupts one's length, so
+    /// that mutations reach the packets rumqttd parses behind a valid CONNECT.
+    pub fn mutate_packets(rng: &mut ChaCha8Rng, input: &mut Vec<u8>) {
+        let mut packets = Vec::new();
+        let mut at = 0;
+        while let Ok(Some(h)) = wire::header(&input[at..], usize::MAX) {
+            if at + h.total() > input.len() {
+                break;
+            }
+            packets.push(input[at..at + h.total()].to_vec());
+            at += h.total();
+        }
+        let tail = input[at..].to_vec();
+        if packets.len() < 2 {
+            mutate(rng, input, &[], TOKENS);
+            return;
+        }
+        let i = rng.random_range(1..packets.len());
+        match rng.random_range(0..5) {
+            0 => {
+                let j = rng.random_range(1..packets.len());
+                packets.swap(i, j);
+            }
+            1 => {
+                let p = packets[i].clone();
+                packets.insert(i, p);
+            }
+            2 => {
+                packets.remove(i);
+            }
+            3 => {
+                // One byte of the packet's body changed.
+                let p = &mut packets[i];
+                if p.len() > 2 {
+                    let k = rng.random_range(2..p.len());
+                    p[k] = rng.random();
+                }
+            }
+            _ => {
+                // The remaining length claims more or less than is there.
+                let p = &mut packets[i];
+                if p.len() > 1 {
+                    p[1] = p[1].wrapping_add(rng.random_range(1..4)) & 0x7f;
+                }
+            }
+        }
+        input.clear();
+        input.extend(packets.into_iter().flatten());
+        input.extend(tail);
+    }
+
+    pub fn runner() -> Runner {
+        let policy = Policy {
+            credentials: Some(Credentials {
+                username: USER.into(),
+                password: PASSWORD.into(),
+            }),
+            max_clients: 4,
+            own_client_id: Some("chassisd-fuzz".into()),
+        };
+        let mut names = TopicNames::default();
+        let mut n = 0u64;
+        Box::new(move |input| {
+            // The broker's names fill up over a run; a fresh broker now and then keeps the
+            // limit from hiding everything behind it.
+            n += 1;
+            if n.is_multiple_of(50_000) {
+                names = TopicNames::default();
+            }
+            // Half the inputs meet a broker without credentials, so that sessions go on.
+            let policy = match input.first() {
+                Some(b) if b & 1 == 0 => policy.clone(),
+                _ => Policy {
+                    credentials: None,
+                    ..policy.clone()
+                },
+            };
+            let header = match wire::header(input, MAX_PACKET) {
+                Ok(Some(h)) if h.kind == wire::kind::CONNECT && input.len() >= h.total() => h,
+                Ok(Some(h)) => return signature(&[1, u64::from(h.kind)]),
+                Ok(None) => return signature(&[2]),
+                Err(e) => return signature(&[3, format!("{e:?}").len() as u64]),
+            };
+            let connect = match wire::connect(&input[header.header_len..header.total()]) {
+                Ok(c) => c,
+                Err(e) => return signature(&[4, format!("{e:?}").len() as u64]),
+            };
+            let mut places = Places::default();
+            if let Err(why) = admission::admit(&policy, &mut places, &connect) {
+                let refusal = wire::connack_refusal(connect.version, why);
+                return signature(&[5, why as u64, refusal.len() as u64]);
+            }
+            // What the gate forwards, rumqttd parses: the CONNECT first.
+            let v5 = connect.version == Version::V5;
+            let mut stream = BytesMut::from(&input[..header.total()]);
+            let mut parts = vec![rumqttd_parse(v5, &mut stream)];
+            let mut session = Session::new(connect.version);
+            let mut at = header.total();
+            loop {
+                let h = match wire::header(&input[at..], MAX_PACKET) {
+                    Ok(Some(h)) => h,
+                    Ok(None) => break,
+                    Err(_) => {
+                        parts.push(100);
+                        break;
+                    }
+                };
+                if input.len() - at < h.total() {
+                    break;
+                }
+                let packet = &input[at..at + h.total()];
+                match session.from_client(&h, packet, &mut names) {
+                    Ok(pass) => {
+                        // The gate forwards it: rumqttd reads it.
+                        let mut stream = BytesMut::from(packet);
+                        parts.push(u64::from(h.kind) << 8 | rumqttd_parse(v5, &mut stream));
+                        if pass == Pass::LastOne {
+                            break;
+                        }
+                    }
+                    Err(v) => {
+                        parts.push(200 + format!("{v:?}").len() as u64);
+                        break;
+                    }
+                }
+                // The broker delivers what the session subscribed to: a QoS 1 and a QoS 2
+                // PUBLISH and a PUBREL, so that acknowledgements can match.
+                if parts.len() == 2 {
+                    for delivered in [
+                        &b"\x32\x05\x00\x01t\x00\x09"[..],
+                        b"\x34\x05\x00\x01t\x00\x0a",
+                        b"\x62\x02\x00\x0b",
+                    ] {
+                        if let Ok(Some(dh)) = wire::header(delivered, MAX_PACKET) {
+                            session.from_broker(&dh, delivered);
+                        }
+                    }
+                }
+                at += h.total();
+            }
+            signature(&parts)
+        })
+    }
+
+    /// rumqttd's own reading of one packet: 0 when it parsed, else a code for its error.
+    fn rumqttd_parse(v5: bool, stream: &mut BytesMut) -> u64 {
+        let result = if v5 {
+            rumqttd::protocol::v5::V5
+                .read_mut(stream, MAX_PACKET)
+                .map(|p| std::mem::discriminant(&p).hash_u64())
+        } else {
+            rumqttd::protocol::v4::V4
+                .read_mut(stream, MAX_PACKET)
+                .map(|p| std::mem::discriminant(&p).hash_u64())
+        };
+        match result {
+            Ok(kind) => kind & 0xff,
+            Err(e) => 1 + (format!("{e:?}").len() as u64 & 0xff),
+        }
+    }
 }
 
 /// The ROS1 node's inputs: a kind byte, then the message as TCPROS carries it.

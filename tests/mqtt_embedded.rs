@@ -363,3 +363,165 @@ fn the_embedded_broker_serves_tls_to_chassisd_and_to_clients() {
     );
     daemon.stop();
 }
+
+/// Random but well-formed MQTT sessions, for the broker's record under load.
+mod chaos {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use std::time::{Duration, Instant};
+
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::raw;
+
+    fn varint(mut n: usize, out: &mut Vec<u8>) {
+        loop {
+            let digit = (n % 128) as u8;
+            n /= 128;
+            out.push(if n > 0 { digit | 0x80 } else { digit });
+            if n == 0 {
+                return;
+            }
+        }
+    }
+
+    fn packet(first: u8, body: &[u8]) -> Vec<u8> {
+        let mut p = vec![first];
+        varint(body.len(), &mut p);
+        p.extend_from_slice(body);
+        p
+    }
+
+    fn string(s: &str, out: &mut Vec<u8>) {
+        out.extend_from_slice(&(s.len() as u16).to_be_bytes());
+        out.extend_from_slice(s.as_bytes());
+    }
+
+    const FILTERS: &[&str] = &[
+        "#",
+        "+",
+        "chaos/#",
+        "chaos/+/x",
+        "chaos/a",
+        "$share/g/chaos/a",
+        "$share/g/#",
+        "$share/h/chaos/+/x",
+        "base_status",
+        "$SYS/#",
+    ];
+    const TOPICS: &[&str] = &["chaos/a", "chaos/b/x", "chaos/c", "chaos"];
+
+    /// One packet a client may send, with random fields.
+    fn any_packet(rng: &mut ChaCha8Rng, v5: bool) -> Vec<u8> {
+        let props = |b: &mut Vec<u8>| {
+            if v5 {
+                b.push(0);
+            }
+        };
+        let id: u16 = rng.random_range(1..20);
+        match rng.random_range(0..9) {
+            0 | 1 => {
+                let mut b = id.to_be_bytes().to_vec();
+                props(&mut b);
+                for _ in 0..rng.random_range(1..4) {
+                    string(FILTERS[rng.random_range(0..FILTERS.len())], &mut b);
+                    b.push(rng.random_range(0..3));
+                }
+                packet(0x82, &b)
+            }
+            2 => {
+                let mut b = id.to_be_bytes().to_vec();
+                props(&mut b);
+                string(FILTERS[rng.random_range(0..FILTERS.len())], &mut b);
+                packet(0xa2, &b)
+            }
+            3..=5 => {
+                let qos: u8 = rng.random_range(0..3);
+                let retain = u8::from(rng.random_bool(0.2));
+                let mut b = Vec::new();
+                string(TOPICS[rng.random_range(0..TOPICS.len())], &mut b);
+                if qos > 0 {
+                    b.extend_from_slice(&id.to_be_bytes());
+                }
+                props(&mut b);
+                b.extend(std::iter::repeat_n(b'p', rng.random_range(0..300)));
+                packet(0x30 | qos << 1 | retain, &b)
+            }
+            6 => {
+                let first = [0x40, 0x50, 0x62, 0x70][rng.random_range(0..4)];
+                packet(first, &id.to_be_bytes())
+            }
+            _ => vec![0xc0, 0x00],
+        }
+    }
+
+    /// Runs random sessions against `port` until `until`; returns how many it ran.
+    pub fn sessions(port: u16, seed: u64, until: Instant) -> u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut n = 0;
+        while Instant::now() < until {
+            n += 1;
+            let v5 = rng.random_bool(0.5);
+            // A small pool of identifiers, so that sessions take each other over.
+            let id = format!("chaos-{}", rng.random_range(0..6));
+            let connect = raw::connect_packet(if v5 { 5 } else { 4 }, &id, None);
+            let Some((mut s, Some(0))) = raw::try_connect_with(port, &connect) else {
+                std::thread::sleep(Duration::from_millis(20));
+                continue;
+            };
+            let _ = s.set_read_timeout(Some(Duration::from_millis(2)));
+            let mut sink = [0u8; 4096];
+            for _ in 0..rng.random_range(0..30) {
+                if s.write_all(&any_packet(&mut rng, v5)).is_err() {
+                    break;
+                }
+                let _ = s.read(&mut sink);
+            }
+            match rng.random_range(0..4) {
+                0 => {
+                    let _ = s.write_all(&[0xe0, 0x00]);
+                }
+                1 => {
+                    let _ = s.shutdown(std::net::Shutdown::Write);
+                    let _ = s.read(&mut sink);
+                }
+                // Hang up without a word, or leave a half packet behind.
+                2 => {}
+                _ => {
+                    let _ = s.write_all(&[0x32, 0x40, 0x00]);
+                }
+            }
+            drop(s);
+            let _ = TcpStream::connect(("127.0.0.1", port)).map(drop);
+        }
+        n
+    }
+}
+
+#[test]
+fn random_sessions_never_bring_the_broker_down() {
+    let port = free_port();
+    let mut daemon = Proc::start(&["sim", "--broker-port", &port.to_string()]);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let until = Instant::now() + Duration::from_secs(20);
+    let workers: Vec<_> = (0..6)
+        .map(|seed| std::thread::spawn(move || chaos::sessions(port, seed, until)))
+        .collect();
+    let sessions: u64 = workers
+        .into_iter()
+        .map(|w| w.join().expect("a chaos client"))
+        .sum();
+    eprintln!("{sessions} random sessions");
+    assert!(sessions > 100, "{sessions} sessions");
+    let clients = Mosquitto::clients_for(port);
+    assert!(one_status(&clients)["rtk"].is_object());
+    assert_eq!(estop(&clients, 1), 0);
+    daemon.log.extend(daemon.stderr.try_iter());
+    let log = daemon.log.join("\n");
+    assert!(
+        !log.contains("embedded broker stopped") && !log.contains("panicked"),
+        "after {sessions} sessions: {log}"
+    );
+    daemon.stop();
+}

@@ -125,7 +125,7 @@ mod tests {
             keep_alive_s: 30,
             username: credentials.map(|c| c.0.into()),
             password: credentials.map(|c| c.1.as_bytes().to_vec()),
-            will: false,
+            will_topic: None,
         }
     }
 

@@ -1,6 +1,7 @@
 //! The embedded broker's gate, sans-IO: MQTT packets framed and CONNECT read ([`wire`]),
-//! and who is let in ([`admission`]). The sockets, the broker process and its supervision
+//! who is let in ([`admission`]), and what each session may send ([`session`]). The sockets, the broker process and its supervision
 //! are `runtime::broker`'s.
 
 pub mod admission;
+pub mod session;
 pub mod wire;

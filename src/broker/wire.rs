@@ -179,8 +179,8 @@ pub struct Connect {
     pub username: Option<String>,
     /// The password bytes, when the flag is set.
     pub password: Option<Vec<u8>>,
-    /// Whether a last will is set.
-    pub will: bool,
+    /// The last will's topic, when a will is set.
+    pub will_topic: Option<String>,
 }
 
 /// A cursor over a packet body that fails instead of reading past the end.
@@ -276,11 +276,12 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
         f.skip_properties("connect properties")?;
     }
     let client_id = f.string("client identifier")?.to_owned();
+    let mut will_topic = None;
     if will {
         if version == Version::V5 {
             f.skip_properties("will properties")?;
         }
-        f.string("will topic")?;
+        will_topic = Some(f.string("will topic")?.to_owned());
         f.binary("will payload")?;
     }
     let username = has_username
@@ -299,7 +300,7 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
         keep_alive_s,
         username,
         password,
-        will,
+        will_topic,
     })
 }
 
@@ -310,7 +311,17 @@ fn refused_version(version: Version) -> Connect {
         keep_alive_s: 0,
         username: None,
         password: None,
-        will: false,
+        will_topic: None,
+    }
+}
+
+/// Sets the clean-session (3.1.1) or clean-start (5) flag of a whole CONNECT packet that
+/// [`connect`] read, whose fixed header is `h`: the embedded broker keeps no sessions, as a
+/// session kept per client identifier is memory any client could grow without bound.
+pub fn force_clean_session(packet: &mut [u8], h: &Header) {
+    // The flags follow the protocol name "MQTT" (2 + 4 bytes) and the level (1 byte).
+    if let Some(flags) = packet.get_mut(h.header_len + 7) {
+        *flags |= 0x02;
     }
 }
 
@@ -444,7 +455,7 @@ mod tests {
         assert_eq!(c.keep_alive_s, 30);
         assert_eq!(c.username.as_deref(), Some("op"));
         assert_eq!(c.password.as_deref(), Some(&b"s3cret"[..]));
-        assert!(c.will);
+        assert_eq!(c.will_topic.as_deref(), Some("will/topic"));
     }
 
     #[test]
@@ -479,6 +490,16 @@ mod tests {
         let mut longer = body.to_vec();
         longer.push(0);
         assert_eq!(connect(&longer), Err(WireError::TrailingBytes(1)));
+    }
+
+    #[test]
+    fn a_persistent_session_is_made_clean() {
+        let mut p = connect_packet(4, "x", None, false);
+        p[9] &= !0x02;
+        let h = header(&p, 1 << 20).unwrap().unwrap();
+        force_clean_session(&mut p, &h);
+        assert_eq!(p[9] & 0x02, 0x02);
+        assert_eq!(parse(&p).unwrap().client_id, "x");
     }
 
     #[test]

@@ -420,19 +420,23 @@ pub mod raw {
     /// Connects and sends `packet`; returns the socket and the CONNACK's return code (3.1.1)
     /// or reason code (5), or `None` when the broker closed without one.
     pub fn connect_with(port: u16, packet: &[u8]) -> (TcpStream, Option<u8>) {
-        let mut s = TcpStream::connect(("127.0.0.1", port)).expect("connect");
-        s.set_read_timeout(Some(Duration::from_secs(5)))
-            .expect("timeout");
-        s.write_all(packet).expect("send CONNECT");
+        try_connect_with(port, packet).expect("connect and send CONNECT")
+    }
+
+    /// As [`connect_with`]; `None` when the connection or the CONNECT's sending failed.
+    pub fn try_connect_with(port: u16, packet: &[u8]) -> Option<(TcpStream, Option<u8>)> {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
+        s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+        s.write_all(packet).ok()?;
         let mut head = [0u8; 2];
         if s.read_exact(&mut head).is_err() || head[0] != 0x20 {
-            return (s, None);
+            return Some((s, None));
         }
         let mut rest = vec![0u8; usize::from(head[1])];
         if s.read_exact(&mut rest).is_err() || rest.len() < 2 {
-            return (s, None);
+            return Some((s, None));
         }
-        (s, Some(rest[1]))
+        Some((s, Some(rest[1])))
     }
 
     /// [`connect_with`] a [`connect_packet`].

@@ -328,9 +328,12 @@ async fn report_stats(gate: Arc<Gate>) {
         every.tick().await;
         let now = gate.counters.snapshot();
         let connected = gate.connected();
+        let mut counters: HashMap<String, u64> =
+            now.iter().map(|(k, v)| ((*k).to_owned(), *v)).collect();
+        counters.insert("topic_names".into(), gate.topic_names() as u64);
         say(&ChildReport::Stats {
             connected,
-            counters: now.iter().map(|(k, v)| ((*k).to_owned(), *v)).collect(),
+            counters,
         });
         let delta = |i: usize| now[i].1 - before[i].1;
         let refused = (1..now.len()).map(delta).sum::<u64>();

@@ -15,29 +15,27 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use bytes::{Buf, BytesMut};
+use bytes::BytesMut;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Semaphore;
 use tokio_rustls::TlsAcceptor;
 
+use super::identifiers::Identifiers;
+use super::relay::{Ended, Relay};
 use crate::broker::admission::{self, Place, Places, Policy};
-use crate::broker::wire::{self, Connect, Refusal, WireError};
+use crate::broker::session::{self, TopicNames};
+use crate::broker::wire::{self, Connect, Header, Refusal, WireError};
 
 /// A client must have sent its whole CONNECT (and finished TLS) within this long.
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
 /// The broker must answer a forwarded CONNECT within this long.
 const UPSTREAM_TIMEOUT: Duration = Duration::from_secs(5);
-/// A write to a client that makes no progress for this long ends the connection: the
-/// client stopped reading, and the broker's queue for it should not wait for ever.
-const WRITE_STALL: Duration = Duration::from_secs(30);
 /// Connections still in their handshake at once. Beyond it a new connection is closed at
 /// once, so a flood of silent sockets costs a bounded amount of memory.
 pub const MAX_HANDSHAKES: usize = 64;
 /// The largest CONNECT read, bytes: a will's payload is the only large field.
 const MAX_CONNECT: usize = 64 << 10;
-/// Bytes read from a socket at a time.
-const READ_CHUNK: usize = 16 << 10;
 /// A client with a keep-alive of k seconds is dropped after 1.5 k of silence (MQTT 3.1.1
 /// section 3.1.2.10).
 const KEEP_ALIVE_GRACE: f64 = 1.5;
@@ -111,6 +109,8 @@ pub struct Gate {
     settings: GateSettings,
     tls: Option<TlsAcceptor>,
     places: Mutex<Places>,
+    identifiers: Arc<Identifiers>,
+    names: Mutex<TopicNames>,
     handshakes: Arc<Semaphore>,
     /// What the gate saw.
     pub counters: GateCounters,
@@ -125,6 +125,8 @@ impl Gate {
             settings,
             tls,
             places: Mutex::new(Places::default()),
+            identifiers: Arc::new(Identifiers::default()),
+            names: Mutex::new(TopicNames::default()),
             handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
             counters: GateCounters::default(),
             last_refused: Mutex::new(None),
@@ -146,10 +148,12 @@ impl Gate {
     }
 
     fn places(&self) -> std::sync::MutexGuard<'_, Places> {
-        // Places are plain counters: a panic elsewhere cannot leave them half-written.
-        self.places
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        lock(&self.places)
+    }
+
+    /// Topic and filter names the broker holds.
+    pub fn topic_names(&self) -> usize {
+        lock(&self.names).len()
     }
 
     /// Accepts connections on `listener` for ever.
@@ -242,27 +246,52 @@ impl Gate {
                 return;
             }
         };
-        let (connect, connect_len) = connect;
-        let admitted = admission::admit(&self.settings.policy, &mut self.places(), &connect);
+        let (connect, header) = connect;
+        let admitted = admission::admit(&self.settings.policy, &mut self.places(), &connect)
+            .and_then(|place| {
+                // A will is published under its topic: one more name for the broker to hold.
+                let will_ok = connect
+                    .will_topic
+                    .as_deref()
+                    .is_none_or(|t| session::valid_topic(t) && lock(&self.names).admit(t).is_ok());
+                if will_ok {
+                    Ok(place)
+                } else {
+                    self.places().leave(place);
+                    Err(Refusal::ServerUnavailable)
+                }
+            });
         let place = match admitted {
             Ok(place) => place,
             Err(why) => {
                 self.counters.refused(why);
                 self.note_refused(peer, why.name());
-                let refusal = wire::connack_refusal(connect.version, why);
-                let _ = tokio::time::timeout(HANDSHAKE_TIMEOUT, async {
-                    stream.write_all(&refusal).await?;
-                    stream.shutdown().await
-                })
-                .await;
+                self.refuse(&mut stream, connect.version, why).await;
                 return;
             }
         };
         // The handshake is over: the place, not the permit, now bounds this client.
         drop(permit);
-        self.counters.admitted.fetch_add(1, Ordering::Relaxed);
         let _leave = Leave { gate: &self, place };
-        let connect_bytes = buf.split_to(connect_len);
+        // One session per identifier: a newer one takes over once the broker let the older
+        // one go. An empty identifier is the broker's to assign, unique each time.
+        let turn = if connect.client_id.is_empty() {
+            None
+        } else {
+            match self.identifiers.take_turn(&connect.client_id).await {
+                Some(turn) => Some(turn),
+                None => {
+                    self.counters.refused(Refusal::ServerUnavailable);
+                    self.note_refused(peer, "identifier still in use");
+                    self.refuse(&mut stream, connect.version, Refusal::ServerUnavailable)
+                        .await;
+                    return;
+                }
+            }
+        };
+        self.counters.admitted.fetch_add(1, Ordering::Relaxed);
+        let mut connect_bytes = buf.split_to(header.total());
+        wire::force_clean_session(&mut connect_bytes, &header);
         let upstream = match connect.version {
             wire::Version::V5 => self.settings.upstream.v5,
             _ => self.settings.upstream.v4,
@@ -273,17 +302,42 @@ impl Gate {
         else {
             return;
         };
-        let keep_alive = (connect.keep_alive_s > 0)
-            .then(|| Duration::from_secs_f64(f64::from(connect.keep_alive_s) * KEEP_ALIVE_GRACE));
-        relay(
-            self.clone(),
-            stream,
-            buf,
-            upstream,
-            &connect,
-            keep_alive,
-            peer,
-        )
+        let relay = Relay {
+            version: connect.version,
+            max_packet: self.settings.max_packet,
+            keep_alive: (connect.keep_alive_s > 0).then(|| {
+                Duration::from_secs_f64(f64::from(connect.keep_alive_s) * KEEP_ALIVE_GRACE)
+            }),
+            names: &self.names,
+        };
+        match relay.run(stream, buf, upstream, turn.as_ref()).await {
+            Ended::Violation(v) => {
+                self.counters.malformed.fetch_add(1, Ordering::Relaxed);
+                self.note_refused(peer, "protocol violation");
+                tracing::debug!(%peer, client = %connect.client_id, violation = %v, "embedded broker: session ended");
+            }
+            Ended::Idle | Ended::Stalled => {
+                self.counters.idle_closed.fetch_add(1, Ordering::Relaxed);
+            }
+            Ended::ClientClosed
+            | Ended::ClientDisconnected
+            | Ended::BrokerClosed
+            | Ended::TakenOver => {}
+        }
+    }
+
+    /// Answers a CONNECT with a refusal in the client's version, and closes.
+    async fn refuse<S: AsyncWrite + Unpin>(
+        &self,
+        stream: &mut S,
+        version: wire::Version,
+        why: Refusal,
+    ) {
+        let refusal = wire::connack_refusal(version, why);
+        let _ = tokio::time::timeout(HANDSHAKE_TIMEOUT, async {
+            stream.write_all(&refusal).await?;
+            stream.shutdown().await
+        })
         .await;
     }
 
@@ -332,20 +386,23 @@ impl Gate {
             .is_ok_and(|r| r.is_ok());
         if !delivered {
             if accepted {
+                // The broker ends the session itself, with no will.
                 let _ = upstream.write_all(&wire::DISCONNECT).await;
+                let mut sink = [0u8; 1024];
+                let _ = tokio::time::timeout(UPSTREAM_TIMEOUT, async {
+                    while upstream.read(&mut sink).await.is_ok_and(|n| n > 0) {}
+                })
+                .await;
             }
             return None;
         }
-        // Bytes after the CONNACK (a retained message already) go on in the relay.
-        if ack.len() > header.total() {
-            let rest = &ack[header.total()..];
-            if client.write_all(rest).await.is_err() {
-                let _ = upstream.write_all(&wire::DISCONNECT).await;
-                return None;
-            }
-        }
         accepted.then_some(upstream)
     }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    // Plain counters and sets: a panic elsewhere cannot leave them half-written.
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Gives a client's place back when its connection ends, however it ends.
@@ -370,12 +427,12 @@ fn tune(socket: &TcpStream) {
     let _ = socket2::SockRef::from(socket).set_tcp_keepalive(&keepalive);
 }
 
-/// Reads the first packet, which must be a CONNECT. Returns it and its length in `buf`;
+/// Reads the first packet, which must be a CONNECT. Returns it and its fixed header;
 /// `None` when the client left first.
 async fn read_connect<S: AsyncRead + Unpin>(
     stream: &mut S,
     buf: &mut BytesMut,
-) -> Result<Option<(Connect, usize)>, ReadError> {
+) -> Result<Option<(Connect, Header)>, ReadError> {
     loop {
         if let Some(h) = wire::header(buf, MAX_CONNECT)? {
             if h.kind != wire::kind::CONNECT {
@@ -383,7 +440,7 @@ async fn read_connect<S: AsyncRead + Unpin>(
             }
             if buf.len() >= h.total() {
                 let connect = wire::connect(&buf[h.header_len..h.total()])?;
-                return Ok(Some((connect, h.total())));
+                return Ok(Some((connect, h)));
             }
         }
         if stream.read_buf(buf).await? == 0 {
@@ -399,210 +456,4 @@ enum ReadError {
     Wire(#[from] WireError),
     #[error("{0}")]
     Io(#[from] std::io::Error),
-}
-
-/// Carries a session both ways until either side ends it: the client's packets checked one
-/// by one on the way in, the broker's copied out.
-async fn relay<S: AsyncRead + AsyncWrite + Unpin>(
-    gate: Arc<Gate>,
-    client: S,
-    pending: BytesMut,
-    upstream: TcpStream,
-    connect: &Connect,
-    keep_alive: Option<Duration>,
-    peer: SocketAddr,
-) {
-    let (mut client_rx, mut client_tx) = tokio::io::split(client);
-    let (mut upstream_rx, mut upstream_tx) = upstream.into_split();
-    let max_packet = gate.settings.max_packet;
-    let version = connect.version;
-    let inbound = async {
-        let mut buf = pending;
-        let result = forward_checked(
-            &mut client_rx,
-            &mut upstream_tx,
-            &mut buf,
-            max_packet,
-            version,
-            keep_alive,
-        )
-        .await;
-        // The broker sees the end of the session; without a DISCONNECT first, the will fires.
-        let _ = upstream_tx.shutdown().await;
-        result
-    };
-    let outbound = async {
-        let mut chunk = vec![0u8; READ_CHUNK];
-        loop {
-            let n = match upstream_rx.read(&mut chunk).await {
-                Ok(0) | Err(_) => break Ok(()),
-                Ok(n) => n,
-            };
-            match tokio::time::timeout(WRITE_STALL, client_tx.write_all(&chunk[..n])).await {
-                Ok(Ok(())) => {}
-                Ok(Err(_)) => break Ok(()),
-                Err(_) => break Err(Ended::Stalled),
-            }
-        }
-    };
-    // Whichever side ends first ends the session.
-    let ended = tokio::select! {
-        r = inbound => r,
-        r = outbound => r,
-    };
-    match ended {
-        Ok(()) => {}
-        Err(Ended::Malformed(e)) => {
-            gate.counters.malformed.fetch_add(1, Ordering::Relaxed);
-            gate.note_refused(peer, "malformed packet");
-            tracing::debug!(%peer, client = %connect.client_id, error = %e, "embedded broker: connection closed");
-        }
-        Err(Ended::Idle | Ended::Stalled) => {
-            gate.counters.idle_closed.fetch_add(1, Ordering::Relaxed);
-        }
-    }
-}
-
-/// Why a session ended other than by a side closing it.
-#[derive(Debug)]
-enum Ended {
-    Malformed(WireError),
-    Idle,
-    Stalled,
-}
-
-/// Moves whole, checked packets from `from` to `to`. Returns when `from` closes.
-async fn forward_checked<R: AsyncRead + Unpin, W: AsyncWrite + Unpin>(
-    from: &mut R,
-    to: &mut W,
-    buf: &mut BytesMut,
-    max_packet: usize,
-    version: wire::Version,
-    keep_alive: Option<Duration>,
-) -> Result<(), Ended> {
-    loop {
-        // Every whole packet in the buffer, checked, then written in one go; the packets
-        // before a bad one still go (they were the client's to send).
-        let mut ready = 0;
-        let verdict = loop {
-            let h = match wire::header(&buf[ready..], max_packet) {
-                Ok(Some(h)) => h,
-                Ok(None) => break Ok(()),
-                Err(e) => break Err(Ended::Malformed(e)),
-            };
-            if let Err(e) = wire::check_client_packet(&h, version) {
-                break Err(Ended::Malformed(e));
-            }
-            if buf.len() - ready < h.total() {
-                break Ok(());
-            }
-            ready += h.total();
-        };
-        if ready > 0 {
-            if to.write_all(&buf[..ready]).await.is_err() {
-                return Ok(());
-            }
-            buf.advance(ready);
-        }
-        verdict?;
-        buf.reserve(READ_CHUNK);
-        let read = from.read_buf(buf);
-        let n = match keep_alive {
-            Some(limit) => match tokio::time::timeout(limit, read).await {
-                Ok(r) => r,
-                Err(_) => return Err(Ended::Idle),
-            },
-            None => read.await,
-        };
-        match n {
-            Ok(0) | Err(_) => return Ok(()),
-            Ok(_) => {}
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[tokio::test]
-    async fn whole_packets_pass_and_a_forbidden_one_ends_the_session() {
-        // PINGREQ, a QoS 1 PUBLISH split across reads, then a CONNACK (a server's packet).
-        let publish = [0x32, 0x07, 0x00, 0x01, b't', 0x00, 0x05, b'h', b'i'];
-        let (mut client, mut gate_side) = tokio::io::duplex(1024);
-        let (mut broker_side, mut broker) = tokio::io::duplex(1024);
-        let task = tokio::spawn(async move {
-            let mut buf = BytesMut::new();
-            // The broker's side closes with the task, so its reader sees the end.
-            forward_checked(
-                &mut gate_side,
-                &mut broker_side,
-                &mut buf,
-                1024,
-                wire::Version::V4,
-                None,
-            )
-            .await
-        });
-        client.write_all(&[0xc0, 0x00]).await.unwrap();
-        client.write_all(&publish[..4]).await.unwrap();
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        client.write_all(&publish[4..]).await.unwrap();
-        client.write_all(&[0x20, 0x02, 0x00, 0x00]).await.unwrap();
-        let result = task.await.unwrap();
-        assert!(
-            matches!(result, Err(Ended::Malformed(WireError::Forbidden(2)))),
-            "{result:?}"
-        );
-        let mut got = Vec::new();
-        broker.read_to_end(&mut got).await.unwrap();
-        let mut expected = vec![0xc0, 0x00];
-        expected.extend_from_slice(&publish);
-        assert_eq!(got, expected);
-    }
-
-    #[tokio::test]
-    async fn a_packet_over_the_limit_is_refused_before_its_body_arrives() {
-        let (mut client, mut gate_side) = tokio::io::duplex(1024);
-        let (mut broker_side, _broker) = tokio::io::duplex(1024);
-        let task = tokio::spawn(async move {
-            let mut buf = BytesMut::new();
-            forward_checked(
-                &mut gate_side,
-                &mut broker_side,
-                &mut buf,
-                100,
-                wire::Version::V4,
-                None,
-            )
-            .await
-        });
-        // A PUBLISH that claims 2 MB.
-        client
-            .write_all(&[0x30, 0x80, 0x80, 0x80, 0x01])
-            .await
-            .unwrap();
-        let result = task.await.unwrap();
-        assert!(
-            matches!(result, Err(Ended::Malformed(WireError::TooLarge { .. }))),
-            "{result:?}"
-        );
-    }
-
-    #[tokio::test]
-    async fn a_silent_client_is_dropped_after_its_keep_alive() {
-        let (_client, mut gate_side) = tokio::io::duplex(1024);
-        let (mut broker_side, _broker) = tokio::io::duplex(1024);
-        let mut buf = BytesMut::new();
-        let result = forward_checked(
-            &mut gate_side,
-            &mut broker_side,
-            &mut buf,
-            100,
-            wire::Version::V4,
-            Some(Duration::from_millis(50)),
-        )
-        .await;
-        assert!(matches!(result, Err(Ended::Idle)), "{result:?}");
-    }
 }

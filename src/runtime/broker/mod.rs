@@ -10,6 +10,8 @@
 
 pub mod child;
 pub mod gate;
+mod identifiers;
+mod relay;
 pub mod tls;
 
 use std::collections::HashMap;

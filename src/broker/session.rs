@@ -1,0 +1,587 @@
+//! One client's session as the gate follows it, packet by packet in both directions, so that
+//! nothing reaches the broker that would make it drop a connection on its own initiative.
+//!
+//! rumqttd 0.20 frees a connection's slot when it drops one for a protocol error, while the
+//! connection's own task may still report the same slot as closed a moment later; if a new
+//! client took the slot in between, that client is dropped mid-handshake and leaves a stale
+//! entry that panics the next connection under its identifier. So the gate refuses what
+//! the broker would refuse (acknowledgements of packets never sent, malformed topics and
+//! filters, subscription identifiers of 0, `$` filters), and ends such a session itself.
+//! It also keeps the broker's memory bounded: every topic and filter name the broker ever
+//! sees costs it a log of its own, so the names are counted across all sessions.
+
+use std::collections::HashSet;
+
+use super::wire::{Header, Version, WireError, kind};
+
+/// Distinct topic and filter names the broker may hold logs for. A vehicle's own dialects
+/// use a few dozen; beyond this, a session that brings a new name is ended.
+pub const MAX_TOPIC_NAMES: usize = 2048;
+
+/// Why a session is ended by the gate.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Violation {
+    /// The packet is malformed.
+    Wire(WireError),
+    /// An acknowledgement (PUBACK, PUBREC, PUBCOMP, PUBREL) for a packet id the other side
+    /// never used.
+    UnknownPacketId { kind: u8, id: u16 },
+    /// A PUBLISH topic that is empty, holds a wildcard, or is not text.
+    BadTopic,
+    /// A subscription filter that is malformed or starts with `$` (shared and system
+    /// subscriptions are not served).
+    BadFilter,
+    /// MQTT 5 features the broker does not serve safely: topic aliases, subscription
+    /// identifiers in PUBLISH or of 0, enhanced authentication.
+    Unsupported(&'static str),
+    /// The broker already holds [`MAX_TOPIC_NAMES`] names.
+    TooManyTopics,
+}
+
+impl std::fmt::Display for Violation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Wire(e) => write!(f, "{e}"),
+            Self::UnknownPacketId { kind, id } => {
+                write!(
+                    f,
+                    "packet type {kind} acknowledges id {id}, which was never sent"
+                )
+            }
+            Self::BadTopic => write!(f, "PUBLISH topic is empty, has a wildcard or is not text"),
+            Self::BadFilter => write!(f, "subscription filter is malformed or starts with $"),
+            Self::Unsupported(what) => write!(f, "{what} is not served"),
+            Self::TooManyTopics => {
+                write!(f, "the broker holds {MAX_TOPIC_NAMES} topic names already")
+            }
+        }
+    }
+}
+
+impl From<WireError> for Violation {
+    fn from(e: WireError) -> Self {
+        Self::Wire(e)
+    }
+}
+
+/// What to do with a client's packet that passed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pass {
+    /// Forward it; the session goes on.
+    Forward,
+    /// Forward it, then read nothing more: the client said DISCONNECT.
+    LastOne,
+}
+
+/// Topic and filter names the broker holds, shared by every session.
+#[derive(Debug, Default)]
+pub struct TopicNames {
+    names: HashSet<String>,
+}
+
+impl TopicNames {
+    /// Admits `name` (already known, or new with room left).
+    pub fn admit(&mut self, name: &str) -> Result<(), Violation> {
+        if self.names.contains(name) {
+            return Ok(());
+        }
+        if self.names.len() >= MAX_TOPIC_NAMES {
+            return Err(Violation::TooManyTopics);
+        }
+        self.names.insert(name.to_owned());
+        Ok(())
+    }
+
+    /// Names held.
+    pub fn len(&self) -> usize {
+        self.names.len()
+    }
+
+    /// Whether none is held.
+    pub fn is_empty(&self) -> bool {
+        self.names.is_empty()
+    }
+}
+
+/// Packet ids in flight, each side's.
+#[derive(Debug)]
+pub struct Session {
+    version: Version,
+    /// QoS 1 PUBLISHes the broker sent, awaiting the client's PUBACK.
+    out_qos1: HashSet<u16>,
+    /// QoS 2 PUBLISHes the broker sent, awaiting the client's PUBREC.
+    out_qos2: HashSet<u16>,
+    /// PUBRELs the broker sent, awaiting the client's PUBCOMP.
+    out_pubrel: HashSet<u16>,
+    /// QoS 2 PUBLISHes the client sent, awaiting its PUBREL.
+    in_qos2: HashSet<u16>,
+}
+
+impl Session {
+    /// A session in `version` (3.1.1 or 5).
+    pub fn new(version: Version) -> Self {
+        Self {
+            version,
+            out_qos1: HashSet::new(),
+            out_qos2: HashSet::new(),
+            out_pubrel: HashSet::new(),
+            in_qos2: HashSet::new(),
+        }
+    }
+
+    /// Judges a whole packet from the client (`packet` includes its fixed header `h`).
+    pub fn from_client(
+        &mut self,
+        h: &Header,
+        packet: &[u8],
+        names: &mut TopicNames,
+    ) -> Result<Pass, Violation> {
+        super::wire::check_client_packet(h, self.version)?;
+        let body = &packet[h.header_len..h.total()];
+        let mut f = Cursor::new(body);
+        let v5 = self.version == Version::V5;
+        match h.kind {
+            kind::PUBLISH => {
+                let qos = (h.flags >> 1) & 0b11;
+                let topic = f.string("topic")?;
+                if !valid_topic(topic) {
+                    return Err(Violation::BadTopic);
+                }
+                let id = if qos > 0 { Some(f.packet_id()?) } else { None };
+                if v5 {
+                    let ids = f.properties()?;
+                    if ids.contains(&0x23) {
+                        return Err(Violation::Unsupported("a topic alias"));
+                    }
+                    if ids.contains(&0x0b) {
+                        return Err(Violation::Unsupported(
+                            "a subscription identifier in PUBLISH",
+                        ));
+                    }
+                }
+                names.admit(topic)?;
+                if let (2, Some(id)) = (qos, id) {
+                    self.in_qos2.insert(id);
+                }
+            }
+            kind::PUBACK => ack(&mut self.out_qos1, h.kind, f.packet_id()?)?,
+            kind::PUBREC => ack(&mut self.out_qos2, h.kind, f.packet_id()?)?,
+            kind::PUBCOMP => ack(&mut self.out_pubrel, h.kind, f.packet_id()?)?,
+            kind::PUBREL => ack(&mut self.in_qos2, h.kind, f.packet_id()?)?,
+            kind::SUBSCRIBE => {
+                f.packet_id()?;
+                if v5 && f.subscription_id_of_zero()? {
+                    return Err(Violation::Unsupported("a subscription identifier of 0"));
+                }
+                let mut filters = 0;
+                while !f.done() {
+                    let filter = f.string("filter")?;
+                    let options = f.u8("subscription options")?;
+                    let reserved = if v5 { options & 0xc0 } else { options & 0xfc };
+                    let bad_options =
+                        reserved != 0 || options & 0b11 == 3 || (v5 && (options >> 4) & 0b11 == 3);
+                    if bad_options {
+                        return Err(Violation::Wire(WireError::Truncated(
+                            "subscription options",
+                        )));
+                    }
+                    if !valid_filter(filter) {
+                        return Err(Violation::BadFilter);
+                    }
+                    names.admit(filter)?;
+                    filters += 1;
+                }
+                if filters == 0 {
+                    return Err(Violation::BadFilter);
+                }
+            }
+            kind::UNSUBSCRIBE => {
+                f.packet_id()?;
+                if v5 {
+                    f.properties()?;
+                }
+                let mut filters = 0;
+                while !f.done() {
+                    f.string("filter")?;
+                    filters += 1;
+                }
+                if filters == 0 {
+                    return Err(Violation::BadFilter);
+                }
+            }
+            kind::AUTH => return Err(Violation::Unsupported("enhanced authentication (AUTH)")),
+            kind::DISCONNECT => return Ok(Pass::LastOne),
+            // PINGREQ: nothing to check beyond its header.
+            _ => {}
+        }
+        Ok(Pass::Forward)
+    }
+
+    /// Notes a whole packet from the broker (PUBLISH and PUBREL ids the client may then
+    /// acknowledge). The broker is trusted: a packet it sends that cannot be read is
+    /// passed on unnoted.
+    pub fn from_broker(&mut self, h: &Header, packet: &[u8]) {
+        let body = &packet[h.header_len.min(packet.len())..h.total().min(packet.len())];
+        let mut f = Cursor::new(body);
+        match h.kind {
+            kind::PUBLISH => {
+                let qos = (h.flags >> 1) & 0b11;
+                if qos > 0
+                    && f.string("topic").is_ok()
+                    && let Ok(id) = f.packet_id()
+                {
+                    if qos == 1 {
+                        self.out_qos1.insert(id);
+                    } else {
+                        self.out_qos2.insert(id);
+                    }
+                }
+            }
+            kind::PUBREL => {
+                if let Ok(id) = f.packet_id() {
+                    self.out_pubrel.insert(id);
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn ack(pending: &mut HashSet<u16>, kind: u8, id: u16) -> Result<(), Violation> {
+    if pending.remove(&id) {
+        Ok(())
+    } else {
+        Err(Violation::UnknownPacketId { kind, id })
+    }
+}
+
+/// A PUBLISH topic: non-empty, no wildcard (MQTT 3.1.1 section 4.7.3).
+pub fn valid_topic(topic: &str) -> bool {
+    !topic.is_empty() && !topic.contains(['+', '#'])
+}
+
+/// A subscription filter: non-empty, `#` only as the whole last level, `+` only as a
+/// whole level, and not one of the `$` families (system topics, shared subscriptions).
+pub fn valid_filter(filter: &str) -> bool {
+    if filter.is_empty() || filter.starts_with('$') {
+        return false;
+    }
+    let levels: Vec<&str> = filter.split('/').collect();
+    levels.iter().enumerate().all(|(i, level)| {
+        let multi_ok = !level.contains('#') || (*level == "#" && i == levels.len() - 1);
+        let single_ok = !level.contains('+') || *level == "+";
+        multi_ok && single_ok
+    })
+}
+
+/// Reads a packet's body without reading past it.
+struct Cursor<'a> {
+    body: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn new(body: &'a [u8]) -> Self {
+        Self { body, at: 0 }
+    }
+
+    fn done(&self) -> bool {
+        self.at >= self.body.len()
+    }
+
+    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], WireError> {
+        let end = self.at.checked_add(n).ok_or(WireError::Truncated(field))?;
+        let bytes = self
+            .body
+            .get(self.at..end)
+            .ok_or(WireError::Truncated(field))?;
+        self.at = end;
+        Ok(bytes)
+    }
+
+    fn u8(&mut self, field: &'static str) -> Result<u8, WireError> {
+        Ok(self.take(1, field)?[0])
+    }
+
+    fn u16(&mut self, field: &'static str) -> Result<u16, WireError> {
+        let b = self.take(2, field)?;
+        Ok(u16::from_be_bytes([b[0], b[1]]))
+    }
+
+    /// A packet identifier, which MQTT forbids to be 0.
+    fn packet_id(&mut self) -> Result<u16, WireError> {
+        match self.u16("packet identifier")? {
+            0 => Err(WireError::Truncated("packet identifier (0)")),
+            id => Ok(id),
+        }
+    }
+
+    fn string(&mut self, field: &'static str) -> Result<&'a str, WireError> {
+        let n = self.u16(field)?;
+        let s = std::str::from_utf8(self.take(usize::from(n), field)?)
+            .map_err(|_| WireError::BadString(field))?;
+        if s.contains('\0') {
+            return Err(WireError::BadString(field));
+        }
+        Ok(s)
+    }
+
+    fn varint(&mut self, field: &'static str) -> Result<u32, WireError> {
+        let mut value = 0u32;
+        for i in 0..4 {
+            let digit = self.u8(field)?;
+            value |= u32::from(digit & 0x7f) << (7 * i);
+            if digit & 0x80 == 0 {
+                return Ok(value);
+            }
+        }
+        Err(WireError::BadRemainingLength)
+    }
+
+    /// MQTT 5 properties, each read by its type; returns the identifiers present.
+    fn properties(&mut self) -> Result<Vec<u8>, WireError> {
+        Ok(self
+            .read_properties()?
+            .into_iter()
+            .map(|(id, _)| id)
+            .collect())
+    }
+
+    /// Whether the properties carry a subscription identifier of 0.
+    fn subscription_id_of_zero(&mut self) -> Result<bool, WireError> {
+        Ok(self
+            .read_properties()?
+            .iter()
+            .any(|&(id, value)| id == 0x0b && value == Some(0)))
+    }
+
+    /// Properties as (identifier, integer value if it has one).
+    fn read_properties(&mut self) -> Result<Vec<(u8, Option<u32>)>, WireError> {
+        const FIELD: &str = "properties";
+        let length = self.varint(FIELD)? as usize;
+        let end = self
+            .at
+            .checked_add(length)
+            .ok_or(WireError::Truncated(FIELD))?;
+        if end > self.body.len() {
+            return Err(WireError::Truncated(FIELD));
+        }
+        let mut found = Vec::new();
+        while self.at < end {
+            let id = self.u8(FIELD)?;
+            let value = match id {
+                0x01 | 0x17 | 0x19 | 0x24 | 0x25 | 0x28 | 0x29 | 0x2a => {
+                    Some(u32::from(self.u8(FIELD)?))
+                }
+                0x13 | 0x21 | 0x22 | 0x23 => Some(u32::from(self.u16(FIELD)?)),
+                0x02 | 0x11 | 0x18 | 0x27 => {
+                    let b = self.take(4, FIELD)?;
+                    Some(u32::from_be_bytes([b[0], b[1], b[2], b[3]]))
+                }
+                0x0b => Some(self.varint(FIELD)?),
+                0x03 | 0x08 | 0x12 | 0x15 | 0x1a | 0x1c | 0x1f => {
+                    self.string(FIELD)?;
+                    None
+                }
+                0x09 | 0x16 => {
+                    let n = self.u16(FIELD)?;
+                    self.take(usize::from(n), FIELD)?;
+                    None
+                }
+                0x26 => {
+                    self.string(FIELD)?;
+                    self.string(FIELD)?;
+                    None
+                }
+                _ => return Err(WireError::Truncated("property (unknown identifier)")),
+            };
+            found.push((id, value));
+        }
+        if self.at != end {
+            return Err(WireError::Truncated(FIELD));
+        }
+        Ok(found)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::broker::wire::header;
+
+    fn judge(
+        session: &mut Session,
+        packet: &[u8],
+        names: &mut TopicNames,
+    ) -> Result<Pass, Violation> {
+        let h = header(packet, 1 << 16).unwrap().unwrap();
+        session.from_client(&h, packet, names)
+    }
+
+    fn broker_sends(session: &mut Session, packet: &[u8]) {
+        let h = header(packet, 1 << 16).unwrap().unwrap();
+        session.from_broker(&h, packet);
+    }
+
+    fn publish(qos: u8, topic: &str, id: u16, v5: bool) -> Vec<u8> {
+        let mut body = (topic.len() as u16).to_be_bytes().to_vec();
+        body.extend_from_slice(topic.as_bytes());
+        if qos > 0 {
+            body.extend_from_slice(&id.to_be_bytes());
+        }
+        if v5 {
+            body.push(0);
+        }
+        body.extend_from_slice(b"payload");
+        let mut p = vec![0x30 | qos << 1, body.len() as u8];
+        p.extend(body);
+        p
+    }
+
+    fn subscribe(filters: &[&str], v5_props: Option<&[u8]>) -> Vec<u8> {
+        let mut body = vec![0, 7];
+        if let Some(props) = v5_props {
+            body.push(props.len() as u8);
+            body.extend_from_slice(props);
+        }
+        for f in filters {
+            body.extend_from_slice(&(f.len() as u16).to_be_bytes());
+            body.extend_from_slice(f.as_bytes());
+            body.push(1);
+        }
+        let mut p = vec![0x82, body.len() as u8];
+        p.extend(body);
+        p
+    }
+
+    #[test]
+    fn acknowledgements_must_answer_what_was_sent() {
+        let mut s = Session::new(Version::V4);
+        let mut names = TopicNames::default();
+        assert_eq!(
+            judge(&mut s, &[0x40, 2, 0, 9], &mut names),
+            Err(Violation::UnknownPacketId { kind: 4, id: 9 })
+        );
+        broker_sends(&mut s, &publish(1, "base_status", 9, false));
+        assert_eq!(
+            judge(&mut s, &[0x40, 2, 0, 9], &mut names),
+            Ok(Pass::Forward)
+        );
+        // Only once.
+        assert!(judge(&mut s, &[0x40, 2, 0, 9], &mut names).is_err());
+        // The QoS 2 flow, both ways.
+        broker_sends(&mut s, &publish(2, "feedback", 4, false));
+        assert_eq!(
+            judge(&mut s, &[0x50, 2, 0, 4], &mut names),
+            Ok(Pass::Forward)
+        );
+        assert!(judge(&mut s, &[0x70, 2, 0, 4], &mut names).is_err());
+        broker_sends(&mut s, &[0x62, 2, 0, 4]);
+        assert_eq!(
+            judge(&mut s, &[0x70, 2, 0, 4], &mut names),
+            Ok(Pass::Forward)
+        );
+        assert!(judge(&mut s, &[0x62, 2, 0, 5], &mut names).is_err());
+        assert_eq!(
+            judge(&mut s, &publish(2, "mqtt_control", 5, false), &mut names),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &[0x62, 2, 0, 5], &mut names),
+            Ok(Pass::Forward)
+        );
+    }
+
+    #[test]
+    fn topics_and_filters_are_those_the_broker_serves() {
+        let mut s = Session::new(Version::V4);
+        let mut names = TopicNames::default();
+        for bad in ["", "a/+", "a/#"] {
+            assert_eq!(
+                judge(&mut s, &publish(0, bad, 0, false), &mut names),
+                Err(Violation::BadTopic),
+                "{bad:?}"
+            );
+        }
+        for good in ["#", "+", "a/+/b", "a/#", "base_status", "/root/x/+/+/set"] {
+            assert!(valid_filter(good), "{good}");
+        }
+        for bad in ["", "a#", "a/#/b", "a+", "$SYS/#", "$share/g/a", "#/a"] {
+            assert!(!valid_filter(bad), "{bad}");
+        }
+        assert_eq!(
+            judge(&mut s, &subscribe(&["$SYS/#"], None), &mut names),
+            Err(Violation::BadFilter)
+        );
+        assert_eq!(
+            judge(&mut s, &subscribe(&[], None), &mut names),
+            Err(Violation::BadFilter)
+        );
+        assert_eq!(
+            judge(&mut s, &subscribe(&["a/+", "b/#"], None), &mut names),
+            Ok(Pass::Forward)
+        );
+        // A zero packet id is malformed.
+        assert!(judge(&mut s, &[0x40, 2, 0, 0], &mut names).is_err());
+    }
+
+    #[test]
+    fn v5_features_the_broker_mishandles_are_refused() {
+        let mut s = Session::new(Version::V5);
+        let mut names = TopicNames::default();
+        // Subscription identifier 0, then 5.
+        assert_eq!(
+            judge(&mut s, &subscribe(&["a"], Some(&[0x0b, 0])), &mut names),
+            Err(Violation::Unsupported("a subscription identifier of 0"))
+        );
+        assert_eq!(
+            judge(&mut s, &subscribe(&["a"], Some(&[0x0b, 5])), &mut names),
+            Ok(Pass::Forward)
+        );
+        // A topic alias in PUBLISH.
+        let mut p = publish(0, "a", 0, true);
+        let props_at = 2 + 2 + 1;
+        p[props_at] = 3;
+        p.splice(props_at + 1..props_at + 1, [0x23, 0, 1]);
+        p[1] += 3;
+        assert_eq!(
+            judge(&mut s, &p, &mut names),
+            Err(Violation::Unsupported("a topic alias"))
+        );
+        assert!(judge(&mut s, &[0xf0, 2, 0x18, 0], &mut names).is_err());
+        assert_eq!(judge(&mut s, &[0xe0, 0], &mut names), Ok(Pass::LastOne));
+    }
+
+    #[test]
+    fn the_broker_holds_a_bounded_number_of_names() {
+        let mut s = Session::new(Version::V4);
+        let mut names = TopicNames::default();
+        for i in 0..MAX_TOPIC_NAMES {
+            let p = publish(0, &format!("t/{i}"), 0, false);
+            assert_eq!(judge(&mut s, &p, &mut names), Ok(Pass::Forward));
+        }
+        assert_eq!(
+            judge(&mut s, &publish(0, "one/more", 0, false), &mut names),
+            Err(Violation::TooManyTopics)
+        );
+        // Names already held go on being served.
+        assert_eq!(
+            judge(&mut s, &publish(0, "t/7", 0, false), &mut names),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(names.len(), MAX_TOPIC_NAMES);
+    }
+
+    #[test]
+    fn truncated_packets_are_errors_never_panics() {
+        let whole = publish(1, "device/x/goal", 3, true);
+        let mut names = TopicNames::default();
+        // Up to the properties' end (the payload may have any length).
+        for cut in 2..2 + 2 + 13 + 2 + 1 {
+            let mut p = whole[..cut].to_vec();
+            p[1] = (cut - 2) as u8;
+            let mut s = Session::new(Version::V5);
+            assert!(judge(&mut s, &p, &mut names).is_err(), "cut at {cut}");
+        }
+    }
+}
