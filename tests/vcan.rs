@@ -59,6 +59,11 @@ impl Rig {
     }
 
     fn start_with(vehicle: &Path, record: Option<&Path>) -> Rig {
+        Rig::start_env(vehicle, record, &[])
+    }
+
+    /// As [`Rig::start_with`], the daemon with `env` added to its environment.
+    fn start_env(vehicle: &Path, record: Option<&Path>, env: &[(&str, &str)]) -> Rig {
         let sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
         let mut args: Vec<&std::ffi::OsStr> = vec![
             "run".as_ref(),
@@ -69,7 +74,7 @@ impl Rig {
         if let Some(dir) = record {
             args.extend(["--record".as_ref(), dir.as_os_str()]);
         }
-        let daemon = Proc::start(&args);
+        let daemon = Proc::start_with_env(&args, env);
         Rig { sim, daemon }
     }
 
@@ -633,40 +638,131 @@ fn hardware_estop_latches_and_its_silence_counts_as_pressed() {
         });
 }
 
+/// candump of vcan0, line by line, from now on.
+struct Candump {
+    child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+}
+
+impl Candump {
+    fn start() -> Candump {
+        let mut child = Command::new("candump")
+            .args(["-L", "vcan0"])
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("candump runs");
+        let lines = common::process::lines_of(child.stdout.take().expect("candump stdout"));
+        std::thread::sleep(Duration::from_millis(300));
+        Candump { child, lines }
+    }
+
+    /// Stops it and returns every line it printed.
+    fn stop(mut self) -> Vec<String> {
+        std::thread::sleep(Duration::from_millis(300));
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        self.lines.try_iter().collect()
+    }
+}
+
+/// The quick stop with a zero target the daemon sends each drive on exit or on a panic
+/// (RPDO 0x201/0x202: controlword 0x0002, target 0).
+const QUICK_STOPS: [&str; 2] = ["201#020000000000", "202#020000000000"];
+
+fn quick_stopped(lines: &[String], rpdo: &str) -> bool {
+    lines.iter().any(|l| l.ends_with(&format!(" {rpdo}")))
+}
+
 #[test]
 #[ignore = "needs vcan0: run by tests/vm/can-tests"]
-fn a_panic_writes_the_precomputed_stop_frames_to_the_bus() {
+fn a_panic_in_the_control_loop_quick_stops_the_drives_and_ends_the_process() {
     let _turn = one_at_a_time();
-    // The frames the daemon computes at start for the VM vehicle: one RPDO per drive.
-    let vehicle = chassisd::config::VehicleConfig::load(&config("vehicle-vcan.toml"))
-        .expect("vehicle-vcan.toml");
-    let frames = chassisd::engine::drivetrain::Drivetrain::new(&vehicle).stop_frames();
-    assert_eq!(frames.len(), 2, "{frames:?}");
-    let mut candump = Command::new("candump")
-        .args(["-L", "vcan0"])
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .expect("candump runs");
-    let dump = common::process::lines_of(candump.stdout.take().expect("candump stdout"));
-    std::thread::sleep(Duration::from_millis(300));
-    // The daemon's hook, and a real panic on another thread (the engine's, say).
-    chassisd::runtime::can::install_panic_stop(frames);
-    let panicked = std::thread::spawn(|| panic!("deliberate panic for the stop hook"))
-        .join()
-        .is_err();
-    // Back to the default hook for the tests that follow.
-    let _ = std::panic::take_hook();
-    assert!(panicked);
-    std::thread::sleep(Duration::from_millis(300));
-    let _ = candump.kill();
-    let _ = candump.wait();
-    let lines: Vec<String> = dump.try_iter().collect();
-    for rpdo in ["201#020000000000", "202#020000000000"] {
-        assert!(
-            lines.iter().any(|l| l.ends_with(&format!(" {rpdo}"))),
-            "quick stop with zero target {rpdo} on the bus: {lines:?}"
+    let mut rig = Rig::start_env(
+        &config("vehicle-vcan.toml"),
+        None,
+        &[("CHASSISD_INJECT_PANIC", "control")],
+    );
+    rig.wait_enabled();
+    let candump = Candump::start();
+    // The first command meets the injected panic in the control loop.
+    rig.rearm();
+    let deadline = Instant::now() + WAIT;
+    let exit = loop {
+        if let Some(exit) = rig.daemon.child.try_wait().expect("status") {
+            break exit;
+        }
+        assert!(Instant::now() < deadline, "still running after the panic");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(exit.code(), Some(101));
+    let lines = candump.stop();
+    for rpdo in QUICK_STOPS {
+        assert!(quick_stopped(&lines, rpdo), "{rpdo} on the bus: {lines:?}");
+    }
+    rig.daemon.log.extend(rig.daemon.stderr.iter());
+    assert!(
+        rig.daemon
+            .log
+            .iter()
+            .any(|l| l.contains("2 of 2 stop frames sent")),
+        "{:#?}",
+        rig.daemon.log
+    );
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn a_panic_in_an_auxiliary_task_leaves_the_drives_driving() {
+    let _turn = one_at_a_time();
+    // The VM vehicle with the embedded broker and the root dialect; profiles by full path.
+    let dir = common::tempdir("vcan-aux-panic");
+    let port = common::mqtt::free_port();
+    let base = std::fs::read_to_string(config("vehicle-vcan.toml")).expect("vehicle-vcan.toml");
+    let devices = common::repo().join("devices");
+    let vehicle = dir.join("vehicle.toml");
+    std::fs::write(
+        &vehicle,
+        format!(
+            "{}\n[mqtt]\nhost = \"127.0.0.1\"\nport = {port}\nembedded_broker = true\n\n[mqtt.root]\nvehicle_id = \"vm\"\n",
+            base.replace("../../devices/", &format!("{}/", devices.display()))
+        ),
+    )
+    .expect("config written");
+    let mut rig = Rig::start_env(&vehicle, None, &[("CHASSISD_INJECT_PANIC", "mqtt")]);
+    rig.wait_enabled();
+    rig.daemon.wait_log_seen(WAIT, "MQTT subscribed");
+    let candump = Candump::start();
+    rig.drive(0.3, 0.0, Duration::from_secs(1));
+    wait_moving(&mut rig, "moving on stdin commands");
+    // An MQTT command meets the injected panic in the MQTT link, while stdin drives on.
+    let published = Command::new("mosquitto_pub")
+        .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-t", "/root/vm/cmd/chassis/set"])
+        .args(["-m", r#"{"messageId": 1, "timestamp": "x", "messageType": 100, "data": {"linear": 0.3, "angular": 0.0}}"#])
+        .status()
+        .expect("mosquitto_pub runs");
+    assert!(published.success());
+    rig.drive(0.3, 0.0, Duration::from_secs(2));
+    rig.daemon
+        .wait_log(WAIT, "an auxiliary task panicked at src/runtime/mqtt.rs");
+    rig.daemon
+        .wait_log(WAIT, "MQTT link restarted after a panic");
+    wait_moving(&mut rig, "still moving after the panic");
+    let report = rig.report();
+    for drive in ["left", "right"] {
+        assert_eq!(
+            axis(&report, drive)["state"],
+            "operation enabled",
+            "{report}"
         );
     }
+    let lines = candump.stop();
+    for rpdo in QUICK_STOPS {
+        assert!(
+            !quick_stopped(&lines, rpdo),
+            "no stop frame {rpdo}: {lines:?}"
+        );
+    }
+    assert!(rig.daemon.child.try_wait().expect("status").is_none());
 }
 
 /// Lines that arrive on `sim`'s stdout within `span`, while a `cmd_vel` goes every 100 ms.

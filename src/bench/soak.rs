@@ -1,7 +1,8 @@
 //! `chassisd bench soak`: the simulated vehicle with its dialects on a broker, driven by a
-//! client for minutes while faults come round in cycles: a command flood, a broker restart
-//! (mosquitto only: the embedded broker lives and dies with chassisd), a GNSS outage, an
-//! IMU stall, lost drive heartbeats and the CAN interface down.
+//! client for minutes while faults come round in cycles: a command flood, a connection
+//! flood (more clients than the embedded broker holds, held, then one more), a broker
+//! killed (mosquitto started again by the soak, the embedded broker by chassisd itself), a
+//! GNSS outage, an IMU stall, lost drive heartbeats and the CAN interface down.
 //!
 //! A client subscribes to base_status and drives the vehicle as an operator would: a
 //! heartbeat and a root DRIVE every 200 ms, and a zero DRIVE (the deliberate re-arm)
@@ -11,7 +12,7 @@
 //! broker gone so no command arrives) the simulated drives time the command to stop,
 //! which is what the bound is about, and the simulator's truth times the wheels coming to
 //! rest, which adds the drives' own lag. Resident
-//! memory is read every 250 ms and each cycle's floor kept: a leak raises the floor, while
+//! memory (chassisd's and its embedded broker's process together) is read every 250 ms and each cycle's floor kept: a leak raises the floor, while
 //! the faults' own swings do not, so the floors' slope after the first (warm-up) cycle is
 //! not the noise of the faults themselves.
 
@@ -28,10 +29,12 @@ use super::Broker;
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
 use crate::core::chassis::{CONTROL_PERIOD, status_bits};
-use crate::runtime::host::resident_memory_bytes;
+use crate::runtime::broker::CHILD_COMMAND;
+use crate::runtime::host::{children_running, resident_memory_bytes};
 use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
 use crate::sim::lockstep;
 use crate::sim::plant::PlantConfig;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// No base_status gap may be longer, outside a broker restart.
 pub const GAP_LIMIT: Duration = Duration::from_millis(300);
@@ -58,7 +61,11 @@ const OBSERVATIONS_PER_S: u64 = 12;
 pub enum FaultKind {
     /// Two clients publish commands as fast as they can (`mqtt_control` and root).
     CommandFlood,
-    /// mosquitto killed and started again.
+    /// More raw clients connect than the embedded broker holds, and stay; one more tries
+    /// at capacity.
+    ConnectionFlood,
+    /// The broker killed: mosquitto started again after the hold, the embedded broker
+    /// restarted by chassisd on its own.
     BrokerRestart,
     /// The receiver sends nothing.
     GnssOutage,
@@ -74,30 +81,37 @@ impl FaultKind {
     /// How long the fault holds.
     fn hold(self) -> Duration {
         Duration::from_secs(match self {
-            Self::CommandFlood | Self::ImuStall => 5,
+            Self::CommandFlood | Self::ConnectionFlood | Self::ImuStall => 5,
             Self::GnssOutage => 8,
             Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown => 3,
         })
     }
 
-    /// The fault must bring the wheels to a stop.
-    fn demands_stop(self) -> bool {
-        matches!(
-            self,
-            Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown
-        )
+    /// The fault must bring the wheels to a stop. A killed broker demands one only when it
+    /// stays down past the command timeout: mosquitto's does (the soak restarts it after the
+    /// hold); chassisd restarts its embedded one within a fraction of that, and commands
+    /// that arrive in time rightly keep the vehicle going.
+    fn demands_stop(self, broker: Broker) -> bool {
+        match self {
+            Self::BrokerRestart => broker == Broker::Mosquitto,
+            Self::DriveHeartbeatLoss | Self::CanDown => true,
+            _ => false,
+        }
     }
 
     /// Whether base_status can show the fault: a flood is refused silently, and while the
     /// broker is gone nothing arrives.
     fn observable(self) -> bool {
-        !matches!(self, Self::CommandFlood | Self::BrokerRestart)
+        !matches!(
+            self,
+            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart
+        )
     }
 
     /// Whether `o` shows the fault; `None` when base_status cannot show it.
     fn shown(self, o: &Observation) -> Option<bool> {
         match self {
-            Self::CommandFlood | Self::BrokerRestart => None,
+            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart => None,
             Self::GnssOutage => Some(!o.gnss),
             Self::ImuStall => Some(!o.imu),
             Self::DriveHeartbeatLoss => Some(o.bits & status_bits::HEARTBEAT_LOST != 0),
@@ -110,7 +124,7 @@ impl FaultKind {
     fn recovered(self, o: &Observation) -> bool {
         let enabled = o.bits & status_bits::ENABLED != 0;
         match self {
-            Self::CommandFlood | Self::BrokerRestart => true,
+            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart => true,
             Self::GnssOutage => o.gnss,
             Self::ImuStall => o.imu,
             Self::DriveHeartbeatLoss => o.bits & status_bits::HEARTBEAT_LOST == 0 && enabled,
@@ -316,19 +330,17 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
 
     // Warm up: the drives enabled and the vehicle at speed.
     tokio::time::sleep(CALM).await;
-    let schedule: Vec<FaultKind> = [
+    let schedule: Vec<FaultKind> = vec![
         FaultKind::CommandFlood,
+        FaultKind::ConnectionFlood,
         FaultKind::BrokerRestart,
         FaultKind::GnssOutage,
         FaultKind::ImuStall,
         FaultKind::DriveHeartbeatLoss,
         FaultKind::CanDown,
-    ]
-    .into_iter()
-    .filter(|k| *k != FaultKind::BrokerRestart || mosquitto.is_some())
-    .collect();
+    ];
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
-    let rss_start = resident_memory_bytes().unwrap_or(0);
+    let rss_start = resident_memory_with_broker();
     let floors = Arc::new(Floors::new(
         (options.run_for.as_secs_f64() / cycle_length.as_secs_f64()) as usize + 1,
     ));
@@ -351,9 +363,16 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                     topics.clone(),
                     kind.hold(),
                 ))),
+                FaultKind::ConnectionFlood => Some(tokio::spawn(connection_flood(
+                    mqtt.host.clone(),
+                    mqtt.port,
+                    kind.hold(),
+                ))),
                 FaultKind::BrokerRestart => {
-                    if let Some(m) = mosquitto.as_mut() {
-                        m.stop();
+                    match mosquitto.as_mut() {
+                        Some(m) => m.stop(),
+                        // chassisd notices and starts it again by itself.
+                        None => kill_embedded_broker(),
                     }
                     None
                 }
@@ -362,7 +381,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                     None
                 }
             };
-            let timed = kind.demands_stop() && speed.abs() >= MOVING_MPS;
+            let timed = kind.demands_stop(broker) && speed.abs() >= MOVING_MPS;
             let stop = if timed {
                 time_stop(&probe, began, kind.hold()).await
             } else {
@@ -388,7 +407,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
         }
         cycles += 1;
     }
-    let rss_end = resident_memory_bytes().unwrap_or(0);
+    let rss_end = resident_memory_with_broker();
     sampler.abort();
     let rss_floors = floors.take(cycles as usize);
     client.await.context("client task")??;
@@ -424,7 +443,9 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                 .map(|o| o.at.duration_since(began).as_secs_f64());
             let recovered_at = match kind {
                 // Commands are taken again: the driver's next DRIVE is acknowledged.
-                FaultKind::CommandFlood => acks.iter().find(|&&a| a >= cleared).copied(),
+                FaultKind::CommandFlood | FaultKind::ConnectionFlood => {
+                    acks.iter().find(|&&a| a >= cleared).copied()
+                }
                 // Telemetry is back.
                 FaultKind::BrokerRestart => first_status_after(cleared),
                 _ => observations
@@ -433,7 +454,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                     .map(|o| o.at),
             };
             let recovered_s = recovered_at.map(|a| a.duration_since(cleared).as_secs_f64());
-            let timed = kind.demands_stop() && speed.abs() >= MOVING_MPS;
+            let timed = kind.demands_stop(broker) && speed.abs() >= MOVING_MPS;
             let stop_bound_s = timed.then(|| stop_bound(speed.abs()));
             let limit = RECOVERY_LIMIT.as_secs_f64();
             let seen = !kind.observable() || detected_s.is_some_and(|d| d <= limit);
@@ -543,9 +564,7 @@ async fn sample_floors(floors: Arc<Floors>) {
     let mut every = tokio::time::interval(RSS_SAMPLE_EVERY);
     loop {
         every.tick().await;
-        if let Some(bytes) = resident_memory_bytes() {
-            floors.sample(bytes as f64 / 1e6);
-        }
+        floors.sample(resident_memory_with_broker() as f64 / 1e6);
     }
 }
 
@@ -664,6 +683,72 @@ async fn drive(
 
 /// Two misbehaving clients' worth of commands, as fast as the connection takes them, for
 /// `hold`: cancel_task on `mqtt_control` and an unknown root message type.
+/// Resident memory of chassisd and, when it runs one, its embedded broker's process, bytes.
+fn resident_memory_with_broker() -> u64 {
+    let broker: u64 = children_running(CHILD_COMMAND)
+        .iter()
+        .map(|&(_, rss)| rss)
+        .sum();
+    resident_memory_bytes().unwrap_or(0) + broker
+}
+
+/// Kills the embedded broker's process (SIGKILL), as a crash would end it.
+fn kill_embedded_broker() {
+    for (pid, _) in children_running(CHILD_COMMAND) {
+        // SAFETY: a plain signal to a child process of ours, found a moment ago.
+        unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
+    }
+}
+
+/// Raw clients beyond the embedded broker's limit, connected and held for `hold`; then one
+/// more at capacity. Each connects with an identifier of its own and keeps quiet.
+async fn connection_flood(host: String, port: u16, hold: Duration) -> anyhow::Result<()> {
+    let until = Instant::now() + hold;
+    let mut held = Vec::new();
+    for i in 0..FLOOD_CONNECTIONS + 1 {
+        let id = format!("soak-hold-{}-{i}", std::process::id());
+        let connect = tokio::time::timeout(Duration::from_secs(2), async {
+            let mut s = tokio::net::TcpStream::connect((host.as_str(), port)).await?;
+            s.write_all(&raw_connect(&id)).await?;
+            let mut ack = [0u8; 4];
+            s.read_exact(&mut ack).await?;
+            Ok::<_, std::io::Error>(s)
+        })
+        .await;
+        if let Ok(Ok(s)) = connect {
+            held.push(s);
+        }
+    }
+    tokio::time::sleep_until(until.into()).await;
+    drop(held);
+    Ok(())
+}
+
+/// Connections the connection flood holds: beyond the embedded broker's 64.
+const FLOOD_CONNECTIONS: usize = 80;
+
+/// An MQTT 3.1.1 CONNECT with a 60 s keep-alive and a clean session.
+fn raw_connect(client_id: &str) -> Vec<u8> {
+    let id = client_id.as_bytes();
+    let mut packet = vec![
+        0x10,
+        (12 + id.len()) as u8,
+        0,
+        4,
+        b'M',
+        b'Q',
+        b'T',
+        b'T',
+        4,
+        0x02,
+        0,
+        60,
+    ];
+    packet.extend_from_slice(&(id.len() as u16).to_be_bytes());
+    packet.extend_from_slice(id);
+    packet
+}
+
 async fn flood(host: String, port: u16, topics: Topics, hold: Duration) -> anyhow::Result<()> {
     let o = MqttOptions::new(
         format!("chassisd-soak-flood-{}", std::process::id()),

@@ -89,7 +89,10 @@ pub fn spawn(
         dropped: dropped.clone(),
         pending: pending.clone(),
     };
-    tokio::spawn(run(spec, clock, records, frames, counters));
+    // The drives' link: a panic here stops them and ends the process (`panics`).
+    tokio::spawn(super::panics::safety_relevant(run(
+        spec, clock, records, frames, counters,
+    )));
     CanTx {
         queue,
         dropped,
@@ -136,33 +139,6 @@ pub fn write_now(frames: &[(String, Frame)]) -> usize {
         }
     }
     sent
-}
-
-/// On a panic, after the usual report, quick-stop every drive with zero targets by writing
-/// `frames` straight to their interfaces (the engine may be what panicked). A panic inside
-/// the ROS1 library is the exception: it unwraps socket writes in its per-connection tasks,
-/// so a client that hangs up mid-answer panics that task alone, which the runtime contains;
-/// the control loop is untouched and the vehicle goes on.
-pub fn install_panic_stop(frames: Vec<(String, Frame)>) {
-    if frames.is_empty() {
-        return;
-    }
-    let report = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        report(info);
-        if info
-            .location()
-            .is_some_and(|l| l.file().contains("roslibrust"))
-        {
-            eprintln!("chassisd: a ROS1 connection task panicked; that connection is closed");
-            return;
-        }
-        let sent = write_now(&frames);
-        eprintln!(
-            "chassisd: panic: {sent} of {} stop frames sent",
-            frames.len()
-        );
-    }));
 }
 
 /// Whether the kernel says the interface is administratively up (IFF_UP).

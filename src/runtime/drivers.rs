@@ -64,7 +64,10 @@ pub fn start(config: &VehicleConfig, clock: RecordClock, tx: &mpsc::Sender<Recor
             .sources
             .push(SourceMeta::serial(&spec.source, decoder.protocol()));
         devices.names.push(spec.source.clone());
-        tokio::spawn(serial::run(spec, clock, tx.clone()));
+        let tx = tx.clone();
+        tokio::spawn(super::panics::restarting("serial driver", move || {
+            serial::run(spec.clone(), clock, tx.clone())
+        }));
     }
     for bus in &config.can {
         devices.sources.push(SourceMeta::can(&bus.interface));

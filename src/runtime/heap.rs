@@ -64,7 +64,7 @@ pub fn release_free_memory() -> Duration {
 /// Starts the periodic release on a blocking thread of the runtime (the trim walks every
 /// arena under its lock); it stops with the runtime.
 pub fn spawn() {
-    tokio::spawn(async {
+    tokio::spawn(super::panics::restarting("heap release", || async {
         let mut interval = tokio::time::interval(PERIOD);
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
@@ -74,5 +74,5 @@ pub fn spawn() {
                 Err(_) => return,
             }
         }
-    });
+    }));
 }

@@ -59,6 +59,26 @@ pub fn resident_memory_bytes() -> Option<u64> {
     proc_field(&status, "VmRSS:").map(|kib| (kib * 1024.0) as u64)
 }
 
+/// This process's children whose command line holds `arg`: (process id, resident memory
+/// in bytes), where /proc tells them. The embedded broker's process is one.
+pub fn children_running(arg: &str) -> Vec<(u32, u64)> {
+    let me = std::process::id();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter_map(|pid| {
+            let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+            let parent = proc_field(&status, "PPid:")? as u32;
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).ok()?;
+            let ours = parent == me && cmdline.split(|&b| b == 0).any(|a| a == arg.as_bytes());
+            let rss = proc_field(&status, "VmRSS:").map_or(0, |kib| (kib * 1024.0) as u64);
+            ours.then_some((pid, rss))
+        })
+        .collect()
+}
+
 /// CPU busy between two samples, %.
 fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
     let total = now.1.checked_sub(before.1)?;
@@ -68,38 +88,42 @@ fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
 
 /// Starts the sampler; it stops when the engine goes.
 pub fn spawn(clock: RecordClock, tx: mpsc::Sender<Record>) {
-    tokio::spawn(async move {
-        let mut interval = tokio::time::interval(PERIOD);
-        let mut before = None;
-        loop {
-            interval.tick().await;
-            // /proc is served from memory: a plain read does not block the runtime.
-            let stat = std::fs::read_to_string("/proc/stat").ok();
-            let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
-            let now = stat.as_deref().and_then(cpu_ticks);
-            let cpu = before.zip(now).and_then(|(b, n)| cpu_percent(b, n));
-            before = now;
-            let (Some(cpu), Some(memory)) = (cpu, meminfo.as_deref().and_then(memory_percent))
-            else {
-                continue;
-            };
-            let usage = HostUsage { cpu, memory };
-            let Ok(json) = serde_json::to_vec(&usage) else {
-                continue;
-            };
-            let record = Record {
-                t: clock.now(),
-                source: HOST_SOURCE.into(),
-                payload: Payload::Command {
-                    topic: "usage".into(),
-                    payload: Bytes::from(json),
-                },
-            };
-            if tx.send(record).await.is_err() {
-                return;
-            }
+    tokio::spawn(super::panics::restarting("host sampler", move || {
+        sample(clock, tx.clone())
+    }));
+}
+
+/// Sends the host's CPU and memory use every [`PERIOD`] until the engine goes.
+async fn sample(clock: RecordClock, tx: mpsc::Sender<Record>) {
+    let mut interval = tokio::time::interval(PERIOD);
+    let mut before = None;
+    loop {
+        interval.tick().await;
+        // /proc is served from memory: a plain read does not block the runtime.
+        let stat = std::fs::read_to_string("/proc/stat").ok();
+        let meminfo = std::fs::read_to_string("/proc/meminfo").ok();
+        let now = stat.as_deref().and_then(cpu_ticks);
+        let cpu = before.zip(now).and_then(|(b, n)| cpu_percent(b, n));
+        before = now;
+        let (Some(cpu), Some(memory)) = (cpu, meminfo.as_deref().and_then(memory_percent)) else {
+            continue;
+        };
+        let usage = HostUsage { cpu, memory };
+        let Ok(json) = serde_json::to_vec(&usage) else {
+            continue;
+        };
+        let record = Record {
+            t: clock.now(),
+            source: HOST_SOURCE.into(),
+            payload: Payload::Command {
+                topic: "usage".into(),
+                payload: Bytes::from(json),
+            },
+        };
+        if tx.send(record).await.is_err() {
+            return;
         }
-    });
+    }
 }
 
 #[cfg(test)]

@@ -12,13 +12,14 @@ use bytes::Bytes;
 use tokio::sync::mpsc;
 
 use super::broker;
-use super::can::{self, CanTx};
+use super::can::CanTx;
 use super::clock::RecordClock;
 use super::drivers;
 use super::heap;
 use super::host;
 use super::mqtt::{self, MqttSender, MqttSpec};
 use super::notify::{InjectedStall, ServiceManager};
+use super::panics;
 use super::recorder::Recorder;
 use super::ros1::Ros1Link;
 use super::status_out::StatusOut;
@@ -90,8 +91,13 @@ fn log_calibration(config: &crate::config::VehicleConfig) {
 }
 
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out` (from a thread of its
-/// own: a stalled `out` never holds up the control loop).
+/// own: a stalled `out` never holds up the control loop). The whole loop is safety-relevant
+/// code: a panic in it quick-stops the drives and ends the process (`panics`).
 pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+    panics::safety_relevant(run_marked(options, out)).await
+}
+
+async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
     anyhow::ensure!(
         options.config.has_devices(),
         "the configuration names no device ([gnss], [imu] or a [[can]] interface), so there \
@@ -101,6 +107,12 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
          vehicle without hardware"
     );
     log_calibration(&options.config);
+    // The broker first: its process takes a moment to start on a slow PC, and nothing that
+    // keeps time (the drives' set-up) should be waiting meanwhile.
+    let embedded = match &options.config.mqtt {
+        Some(m) => broker::start_if_embedded(m, &options.config.vehicle.name)?,
+        None => None,
+    };
     let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();
@@ -137,10 +149,9 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
     let mut trajectories = trajectory_writer::open(config, Box::new(Unconfigured))?;
     let mut engine = Engine::with_trajectories(config, &sources, trajectories.store);
     engine.start_at(start);
-    can::install_panic_stop(engine.drivetrain().stop_frames());
+    panics::install(engine.drivetrain().stop_frames());
     let mqtt = match &config.mqtt {
         Some(m) => {
-            let embedded = broker::start_if_embedded(m, &config.vehicle.name)?;
             source_meta.push(SourceMeta::commands(
                 MQTT_SOURCE,
                 &format!("{MQTT_SOURCE}.log"),
@@ -256,6 +267,9 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
                 };
                 if let Payload::Link(LinkState::Up) = record.payload {
                     service.link_up(&record.source, std::time::Instant::now());
+                }
+                if matches!(record.payload, Payload::Command { .. }) && panics::inject("control") {
+                    panic!("injected panic ({}=control)", panics::INJECT_PANIC);
                 }
                 record.t = engine.handle(&record, &mut outputs);
                 now = Some(record.t);

@@ -18,6 +18,7 @@ pub mod mqtt;
 pub mod mqtt_observe;
 pub mod notify;
 pub mod outage_log;
+pub mod panics;
 pub mod recorder;
 pub mod ros1;
 pub mod serial;

@@ -188,10 +188,24 @@ pub fn spawn(
     records: mpsc::Sender<Record>,
 ) -> anyhow::Result<MqttSender> {
     let options = options(&spec)?;
-    let (client, mut eventloop) = AsyncClient::new(options, CLIENT_QUEUE);
-    eventloop.set_network_options(low_latency());
-    let (tx, rx) = mpsc::channel(HANDOFF);
-    tokio::spawn(run(spec, client, eventloop, rx, clock, records));
+    let (tx, mut rx) = mpsc::channel(HANDOFF);
+    tokio::spawn(async move {
+        // An auxiliary task: after a panic (logged once by the hook) the link starts afresh
+        // with a new connection; the queue of outgoing messages survives it.
+        loop {
+            let (client, mut eventloop) = AsyncClient::new(options.clone(), CLIENT_QUEUE);
+            eventloop.set_network_options(low_latency());
+            let link = run(&spec, client, eventloop, &mut rx, clock, records.clone());
+            match super::panics::contain(link).await {
+                Ok(LinkEnd::EngineGone) => return,
+                Ok(LinkEnd::PollerLost) => {
+                    tracing::error!("MQTT link restarted: its event loop ended (a panic in it?)");
+                }
+                Err(()) => tracing::error!("MQTT link restarted after a panic"),
+            }
+            tokio::time::sleep(Duration::from_secs(1)).await;
+        }
+    });
     Ok(MqttSender { tx })
 }
 
@@ -246,14 +260,22 @@ pub(crate) fn client_options(c: &MqttConfig, client_id: String) -> anyhow::Resul
     Ok(o)
 }
 
+/// Why the link's loop ended.
+enum LinkEnd {
+    /// The engine is gone: nothing more to carry.
+    EngineGone,
+    /// The event loop's task ended: the link starts afresh.
+    PollerLost,
+}
+
 async fn run(
-    spec: MqttSpec,
+    spec: &MqttSpec,
     client: AsyncClient,
-    mut eventloop: EventLoop,
-    mut rx: mpsc::Receiver<Publish>,
+    eventloop: EventLoop,
+    rx: &mut mpsc::Receiver<Publish>,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
-) {
+) -> LinkEnd {
     let c = &spec.config;
     let broker = format!("{}:{}", c.host, c.port);
     let status_topic = c.status_topic(&spec.vehicle);
@@ -269,7 +291,7 @@ async fn run(
     let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst);
     let mut connected = false;
     let mut last_failure: Option<String> = None;
-    let mut backoff = FIRST_BACKOFF;
+    let mut events = Poller::spawn(eventloop, c.reconnect_max());
     let link = |state| Record {
         t: clock.now(),
         source: MQTT_SOURCE.into(),
@@ -280,11 +302,12 @@ async fn run(
             log_rate(&report, c);
         }
         tokio::select! {
-            event = eventloop.poll() => match event {
+            event = events.next() => {
+                let Some(event) = event else { return LinkEnd::PollerLost };
+                match event {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     connected = true;
                     last_failure = None;
-                    backoff = FIRST_BACKOFF;
                     tracing::info!(%broker, "MQTT connected");
                     let filters = spec
                         .subscriptions
@@ -305,10 +328,13 @@ async fn run(
                     }
                     outbox.flush(&client);
                     if records.send(link(LinkState::Up)).await.is_err() {
-                        return;
+                        return LinkEnd::EngineGone;
                     }
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
+                    if super::panics::inject("mqtt") {
+                        panic!("injected panic ({}=mqtt)", super::panics::INJECT_PANIC);
+                    }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
                         tracing::warn!(topic = %p.topic, "retained command ignored: commands must be live");
@@ -327,7 +353,7 @@ async fn run(
                         payload: Payload::Command { topic: p.topic, payload: p.payload },
                     };
                     if records.send(record).await.is_err() {
-                        return;
+                        return LinkEnd::EngineGone;
                     }
                 }
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
@@ -352,7 +378,7 @@ async fn run(
                         connected = false;
                         tracing::warn!(%broker, error = %e, "MQTT connection lost; reconnecting");
                         if records.send(link(LinkState::Down)).await.is_err() {
-                            return;
+                            return LinkEnd::EngineGone;
                         }
                     } else {
                         // Say why once per cause (a wrong password or CA stays wrong), not
@@ -365,18 +391,65 @@ async fn run(
                             tracing::debug!(%broker, error = %cause, "MQTT connect failed");
                         }
                     }
-                    tokio::time::sleep(backoff).await;
-                    backoff = (backoff * 2).min(c.reconnect_max());
                 }
-            },
+            }},
             message = rx.recv() => {
-                let Some(message) = message else { return };
+                let Some(message) = message else { return LinkEnd::EngineGone };
                 outbox.push(message);
                 if connected {
                     outbox.flush(&client);
                 }
             }
         }
+    }
+}
+
+/// rumqttc's event loop, polled in a task of its own: `poll()` dropped halfway through a
+/// connection attempt starts the attempt over, so a loop that also waits for outgoing
+/// messages would cut every slow connection short (seen on a slow PC: five attempts in
+/// 60 ms, each one taking the last one's place on the broker). The poller also waits out
+/// the reconnect back-off.
+struct Poller {
+    events: mpsc::Receiver<Result<Event, rumqttc::ConnectionError>>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Poller {
+    /// Events waiting for the link before the poller waits.
+    const QUEUE: usize = 64;
+
+    fn spawn(mut eventloop: EventLoop, reconnect_max: Duration) -> Self {
+        let (tx, events) = mpsc::channel(Self::QUEUE);
+        let task = tokio::spawn(async move {
+            let mut backoff = FIRST_BACKOFF;
+            loop {
+                let event = eventloop.poll().await;
+                let failed = event.is_err();
+                if matches!(event, Ok(Event::Incoming(Packet::ConnAck(_)))) {
+                    backoff = FIRST_BACKOFF;
+                }
+                if tx.send(event).await.is_err() {
+                    return;
+                }
+                if failed {
+                    tokio::time::sleep(backoff).await;
+                    backoff = (backoff * 2).min(reconnect_max);
+                }
+            }
+        });
+        Self { events, task }
+    }
+
+    /// The next event; `None` when the poller ended (it never does by itself).
+    async fn next(&mut self) -> Option<Result<Event, rumqttc::ConnectionError>> {
+        self.events.recv().await
+    }
+}
+
+impl Drop for Poller {
+    fn drop(&mut self) {
+        // The link ended (or panicked): its connection goes with it.
+        self.task.abort();
     }
 }
 

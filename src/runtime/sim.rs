@@ -25,7 +25,7 @@ use crate::api::rtk::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
 use crate::engine::{EngineOutput, EngineStats};
-use crate::record::{Record, RecordingWriter};
+use crate::record::{Payload, Record, RecordingWriter};
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
@@ -157,8 +157,15 @@ impl Sink for Output {
     }
 }
 
-/// Runs until the scenario or duration ends, or SIGINT or SIGTERM.
+/// Runs until the scenario or duration ends, or SIGINT or SIGTERM. The simulated vehicle's
+/// loop is marked as `run`'s is: a panic in it ends the process, one elsewhere is contained
+/// (`panics`).
 pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+    super::panics::install(Vec::new());
+    super::panics::safety_relevant(run_marked(options, out)).await
+}
+
+async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
     let clock = RecordClock::start();
     let start = clock.now();
     let config = crate::config::VehicleConfig {
@@ -318,7 +325,12 @@ pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyho
             }
             command = commands.recv(), if commands_open => match command {
                 // Commands and link events take the simulation's time.
-                Some(record) => sim.input(&record.source, record.payload, &mut sink),
+                Some(record) => {
+                    if matches!(record.payload, Payload::Command { .. }) && super::panics::inject("control") {
+                        panic!("injected panic ({}=control)", super::panics::INJECT_PANIC);
+                    }
+                    sim.input(&record.source, record.payload, &mut sink)
+                }
                 None => commands_open = false,
             },
             _ = sigint.recv() => break,

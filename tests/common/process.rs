@@ -73,8 +73,17 @@ impl Proc {
         Self::start_under(&[], args)
     }
 
+    /// Starts `chassisd ARGS` with `env` added to its environment.
+    pub fn start_with_env<S: AsRef<OsStr>>(args: &[S], env: &[(&str, &str)]) -> Proc {
+        Self::spawn(&[], args, env)
+    }
+
     /// Starts `WRAPPER... chassisd ARGS` (e.g. under strace).
     pub fn start_under<S: AsRef<OsStr>>(wrapper: &[&str], args: &[S]) -> Proc {
+        Self::spawn(wrapper, args, &[])
+    }
+
+    fn spawn<S: AsRef<OsStr>>(wrapper: &[&str], args: &[S], env: &[(&str, &str)]) -> Proc {
         let mut command = match wrapper.split_first() {
             Some((program, rest)) => {
                 let mut c = Command::new(program);
@@ -86,6 +95,7 @@ impl Proc {
         let mut child = command
             .args(args)
             .env("RUST_LOG", "info")
+            .envs(env.iter().copied())
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -127,6 +137,13 @@ impl Proc {
         wait_for(&self.stderr, &mut self.log, wait, text, |l| {
             l.contains(text)
         });
+    }
+
+    /// As [`Proc::wait_log`], satisfied too by a line seen before.
+    pub fn wait_log_seen(&mut self, wait: Duration, text: &str) {
+        if !self.log.iter().any(|l| l.contains(text)) {
+            self.wait_log(wait, text);
+        }
     }
 
     /// Takes every stdout line that has arrived, without waiting.

@@ -41,9 +41,6 @@ const MAX_BACKOFF: Duration = Duration::from_secs(5);
 const STABLE_AFTER: Duration = Duration::from_secs(30);
 /// The hidden subcommand that runs [`child::main`].
 pub const CHILD_COMMAND: &str = "broker-child";
-/// Environment variable naming the program to run as the broker process, for test
-/// harnesses whose own executable is not chassisd.
-pub const EXE_ENV: &str = "CHASSISD_BROKER_EXE";
 
 /// What the broker's supervisor knows, shared with whoever reports it.
 #[derive(Debug, Default)]
@@ -193,12 +190,15 @@ pub fn start(settings: ChildSettings) -> anyhow::Result<EmbeddedBroker> {
     Ok(EmbeddedBroker { addr, shared })
 }
 
-/// The program that runs the broker process: chassisd itself, unless overridden.
+/// The program that runs the broker process: chassisd itself, through /proc/self/exe, the
+/// very file this process runs, even after a package upgrade replaced the one at its path
+/// (a restart then starts the same version, not the new one).
 fn broker_exe() -> anyhow::Result<PathBuf> {
-    match std::env::var_os(EXE_ENV) {
-        Some(exe) => Ok(exe.into()),
-        None => std::env::current_exe().context("embedded broker: finding chassisd's program"),
+    let this = PathBuf::from("/proc/self/exe");
+    if this.exists() {
+        return Ok(this);
     }
+    std::env::current_exe().context("embedded broker: finding chassisd's program")
 }
 
 /// A broker process and the pipe whose end tells it chassisd is gone.

@@ -127,7 +127,10 @@ pub fn spawn(
     records: mpsc::Sender<Record>,
     queues: Ros1Queues,
 ) {
-    tokio::spawn(run(spec, clock, records, queues));
+    tokio::spawn(crate::runtime::panics::or_report_down(
+        "ROS1 node",
+        run(spec, clock, records, queues),
+    ));
 }
 
 /// The registered graph: dropping it unregisters everything (the node handle goes last).

@@ -163,7 +163,10 @@ pub fn start(
         clock,
         records,
     };
-    tokio::spawn(server.run(feed_rx, events_rx));
+    tokio::spawn(crate::runtime::panics::or_report_down(
+        "websocket server",
+        server.run(feed_rx, events_rx),
+    ));
     let router = axum::Router::new()
         .route("/", axum::routing::get(root))
         .route(
