@@ -17,13 +17,9 @@ use serde_json::Value;
 const WAIT: Duration = Duration::from_secs(15);
 const FLOOD: Duration = Duration::from_secs(10);
 
+/// chassisd's memory and its embedded broker's process's, kB.
 fn rss_kb(pid: u32) -> u64 {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("proc status");
-    status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .expect("VmRSS")
+    common::rss_with_children_kb(pid)
 }
 
 /// A mosquitto_pub that publishes every line of `lines` at QoS 0, as fast as it can.

@@ -147,6 +147,32 @@ impl Dialect for DeviceDialect {
         topics
     }
 
+    fn command_topics(&self) -> Vec<String> {
+        let mut topics: Vec<String> = MAPPING
+            .iter()
+            .chain(&["goal"])
+            .map(|c| format!("{}{c}", self.prefix))
+            .collect();
+        if let Some(f) = &self.forward {
+            topics.extend(MAPPING.iter().map(|c| format!("{f}/{c}/ack")));
+        }
+        topics
+    }
+
+    fn topics(&self) -> Vec<String> {
+        let mut topics = self.command_topics();
+        topics.extend(
+            MAPPING
+                .iter()
+                .chain(&["goal"])
+                .map(|c| format!("{}{c}/ack", self.prefix)),
+        );
+        if let Some(f) = &self.forward {
+            topics.extend(MAPPING.iter().map(|c| format!("{f}/{c}")));
+        }
+        topics
+    }
+
     fn owns(&self, topic: &str) -> bool {
         let own = topic
             .strip_prefix(&self.prefix)

@@ -68,6 +68,12 @@ pub trait Dialect: Send {
     fn name(&self) -> &'static str;
     /// Topic filters to subscribe to.
     fn subscriptions(&self) -> Vec<String>;
+    /// The exact topics it acts on. The wildcard subscriptions also bring invented names,
+    /// which the link rate-limits together, before any decoding.
+    fn command_topics(&self) -> Vec<String>;
+    /// Every exact topic it takes or publishes (its commands, answers and reports): the
+    /// embedded broker serves these whatever names other clients invent.
+    fn topics(&self) -> Vec<String>;
     /// Whether an incoming message on `topic` is for this dialect.
     fn owns(&self, topic: &str) -> bool;
     /// Handles an incoming message at `t`; replies go to `out`.
@@ -144,6 +150,19 @@ impl Dialects {
         self.dialects
             .iter()
             .flat_map(|d| d.subscriptions())
+            .collect()
+    }
+
+    /// Every exact topic the dialects take or publish.
+    pub fn topics(&self) -> Vec<String> {
+        self.dialects.iter().flat_map(|d| d.topics()).collect()
+    }
+
+    /// The exact topics the dialects act on.
+    pub fn command_topics(&self) -> Vec<String> {
+        self.dialects
+            .iter()
+            .flat_map(|d| d.command_topics())
             .collect()
     }
 

@@ -206,6 +206,8 @@ pub struct RootDialect {
     max_payload: usize,
     /// Only heartbeats naming this `clientId` feed the control-link watchdog.
     heartbeat_client: Option<String>,
+    /// Heartbeats ignored because they were not JSON objects.
+    malformed_heartbeats: u64,
     ticks: u64,
     previous: Option<VehicleStatus>,
     /// Missions under way or recently ended: their tag id and `messageId`, for notifies.
@@ -224,6 +226,7 @@ impl RootDialect {
             prefix: format!("/root/{vehicle_id}/"),
             max_payload,
             heartbeat_client,
+            malformed_heartbeats: 0,
             ticks: 0,
             previous: None,
             missions: std::collections::VecDeque::new(),
@@ -249,7 +252,7 @@ impl RootDialect {
             steps: std::sync::Arc::new(steps),
             tag: Some(tag),
         })
-        .map_err(|e| (REFUSED, e.to_string()))?;
+        .map_err(|e| refusal(&e))?;
         if self.missions.len() >= MAX_PENDING_MISSIONS {
             self.missions.pop_front();
         }
@@ -440,7 +443,7 @@ impl RootDialect {
         }
         let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
         core.command(Command::SetPose { x, y, yaw })
-            .map_err(|e| (REFUSED, e.to_string()))
+            .map_err(|e| refusal(&e))
     }
 
     fn reports(&mut self, s: &VehicleStatus, out: &mut Vec<Publish>) {
@@ -667,6 +670,47 @@ pub(crate) fn mission(data: &Value) -> Result<Vec<MissionStep>, (u32, String)> {
     Ok(out)
 }
 
+/// The `{base}/set` topics the dialect acts on (others get an "unknown" answer).
+const SET_BASES: [&str; 6] = [
+    "cmd/navigation",
+    "cmd/map",
+    "cmd/chassis",
+    "setting/map",
+    "setting/navigation",
+    "heartbeat",
+];
+
+/// The report topics the dialect publishes.
+const REPORTS: [&str; 6] = [
+    "report/navigation/localization",
+    "report/navigation/obstacle",
+    "report/chassis/battery",
+    "report/navigation/usage",
+    "report/chassis/general",
+    "report/navigation/general",
+];
+
+/// A heartbeat's payload as a JSON object. The spec's own example ends its object with a
+/// comma (`{"timestamp": "...",}`), which JSON forbids; that one comma is forgiven.
+fn heartbeat_object(payload: &[u8]) -> Option<serde_json::Map<String, Value>> {
+    if let Ok(Value::Object(map)) = serde_json::from_slice(payload) {
+        return Some(map);
+    }
+    let text = std::str::from_utf8(payload).ok()?.trim_end();
+    let body = text.strip_suffix('}')?.trim_end().strip_suffix(',')?;
+    match serde_json::from_str(&format!("{body}}}")) {
+        Ok(Value::Object(map)) => Some(map),
+        _ => None,
+    }
+}
+
+/// The reply code of a command the core refused: a wrong value is the request's fault
+/// (INVALID), anything else the vehicle's state (REFUSED).
+fn refusal(e: &crate::core::chassis::CommandRejected) -> (u32, String) {
+    let code = if e.is_bad_value() { INVALID } else { REFUSED };
+    (code, e.to_string())
+}
+
 /// `DRIVE`: `{"linear": m/s, "angular": rad/s}`.
 fn drive(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, String)> {
     let (Some(linear), Some(angular)) = (
@@ -682,11 +726,7 @@ fn drive(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, String)> {
         vx: linear,
         wz: angular,
     })
-    .map_err(|e| match e {
-        crate::core::chassis::CommandRejected::NotFinite
-        | crate::core::chassis::CommandRejected::BeyondLimit { .. } => (INVALID, e.to_string()),
-        _ => (REFUSED, e.to_string()),
-    })
+    .map_err(|e| refusal(&e))
 }
 
 /// `SET_LNG_LAT`: `[longitude, latitude, height]`, degrees and metres.
@@ -701,21 +741,13 @@ fn set_lng_lat(data: &Value, core: &mut dyn CoreAccess) -> Result<(), (u32, Stri
             "data must be [longitude, latitude, height]".to_owned(),
         ));
     };
-    if !(-180.0..=180.0).contains(&lon_deg)
-        || !(-90.0..=90.0).contains(&lat_deg)
-        || !h_m.is_finite()
-    {
-        return Err((
-            INVALID,
-            "longitude must be within ±180°, latitude within ±90°, height finite".to_owned(),
-        ));
-    }
+    // The core judges the place (latitude, longitude, height ranges) for every channel.
     core.command(Command::SetDatum(Geodetic {
         lat_deg,
         lon_deg,
         h_m,
     }))
-    .map_err(|e| (REFUSED, e.to_string()))
+    .map_err(|e| refusal(&e))
 }
 
 fn round1(v: f64) -> f64 {
@@ -785,6 +817,24 @@ impl Dialect for RootDialect {
         vec![self.topic("+/+/set"), self.topic("heartbeat/set")]
     }
 
+    fn command_topics(&self) -> Vec<String> {
+        SET_BASES
+            .iter()
+            .map(|base| self.topic(&format!("{base}/set")))
+            .collect()
+    }
+
+    fn topics(&self) -> Vec<String> {
+        let answers = SET_BASES.iter().flat_map(|base| {
+            ["set", "ack", "notify"].map(|end| self.topic(&format!("{base}/{end}")))
+        });
+        let reports = REPORTS.iter().map(|r| self.topic(r));
+        answers
+            .chain(reports)
+            .chain([self.topic("log/notify")])
+            .collect()
+    }
+
     fn owns(&self, topic: &str) -> bool {
         topic
             .strip_prefix(&self.prefix)
@@ -806,16 +856,28 @@ impl Dialect for RootDialect {
             .unwrap_or_default()
             .to_owned();
         if base == "heartbeat" {
-            // Any heartbeat is answered; it feeds the watchdog when it comes from the client
-            // followed (or from anyone, when none is named).
-            let sender = (payload.len() <= self.max_payload)
-                .then(|| serde_json::from_slice::<Value>(payload).ok())
+            // A heartbeat is a JSON object (the spec's example, trailing comma and all); it
+            // is answered, and it feeds the watchdog when it comes from the client followed
+            // (or from anyone, when none is named). Anything else is neither: garbage must
+            // not arm the watchdog that then stops an operator who sends only DRIVE.
+            let Some(beat) = (payload.len() <= self.max_payload)
+                .then(|| heartbeat_object(payload))
                 .flatten()
-                .and_then(|v| v.get("clientId").and_then(Value::as_str).map(str::to_owned));
+            else {
+                self.malformed_heartbeats += 1;
+                if self.malformed_heartbeats.is_power_of_two() {
+                    tracing::warn!(
+                        count = self.malformed_heartbeats,
+                        "root heartbeat ignored: not a JSON object (neither answered nor counted)"
+                    );
+                }
+                return;
+            };
+            let sender = beat.get("clientId").and_then(Value::as_str);
             if self
                 .heartbeat_client
-                .as_ref()
-                .is_none_or(|c| sender.as_ref() == Some(c))
+                .as_deref()
+                .is_none_or(|c| sender == Some(c))
             {
                 let _ = core.command(Command::ControlHeartbeat);
             }
@@ -1005,13 +1067,36 @@ mod tests {
             core.commands.as_slice(),
             [Command::ControlHeartbeat]
         ));
-        // Without a named client, any heartbeat counts, even one that is not JSON.
+        // Without a named client, any JSON object counts, the spec's trailing comma too.
         let (mut d, mut core) = (dialect(), FakeCore::default());
-        send(&mut d, &mut core, "/root/v1/heartbeat/set", "beat");
+        let out = send(
+            &mut d,
+            &mut core,
+            "/root/v1/heartbeat/set",
+            "{\n  \"timestamp\": \"2026-01-01 00:00:00\",\n}",
+        );
+        assert_eq!(out.len(), 1);
         assert!(matches!(
             core.commands.as_slice(),
             [Command::ControlHeartbeat]
         ));
+    }
+
+    #[test]
+    fn a_heartbeat_that_is_not_a_json_object_is_neither_answered_nor_counted() {
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        for garbage in [
+            "garbage not json",
+            "beat",
+            "[1, 2]",
+            "7",
+            "{\"a\": 1,,}",
+            "",
+        ] {
+            let out = send(&mut d, &mut core, "/root/v1/heartbeat/set", garbage);
+            assert!(out.is_empty(), "{garbage:?} answered");
+        }
+        assert!(core.commands.is_empty());
     }
 
     #[test]

@@ -16,7 +16,10 @@ use super::wire::{Header, Version, WireError, kind};
 
 /// Distinct topic and filter names the broker may hold logs for. A vehicle's own dialects
 /// use a few dozen; beyond this, a session that brings a new name is ended.
-pub const MAX_TOPIC_NAMES: usize = 2048;
+pub const MAX_TOPIC_NAMES: usize = 4096;
+/// New names one session may bring: a client that invents names is ended long before it
+/// fills the broker, and must reconnect for every few dozen more.
+pub const MAX_NEW_NAMES_PER_SESSION: usize = 64;
 
 /// Why a session is ended by the gate.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -51,9 +54,11 @@ impl std::fmt::Display for Violation {
             Self::BadTopic => write!(f, "PUBLISH topic is empty, has a wildcard or is not text"),
             Self::BadFilter => write!(f, "subscription filter is malformed or starts with $"),
             Self::Unsupported(what) => write!(f, "{what} is not served"),
-            Self::TooManyTopics => {
-                write!(f, "the broker holds {MAX_TOPIC_NAMES} topic names already")
-            }
+            Self::TooManyTopics => write!(
+                f,
+                "a new topic name beyond the session's {MAX_NEW_NAMES_PER_SESSION} or the \
+                 broker's {MAX_TOPIC_NAMES}"
+            ),
         }
     }
 }
@@ -77,12 +82,33 @@ pub enum Pass {
 #[derive(Debug, Default)]
 pub struct TopicNames {
     names: HashSet<String>,
+    /// chassisd's own topics (its commands and reports): always served, never counted, so
+    /// names invented by others can never lock the vehicle's own out.
+    reserved: HashSet<String>,
 }
 
 impl TopicNames {
+    /// Names with `reserved` always admitted.
+    pub fn with_reserved(reserved: impl IntoIterator<Item = String>) -> Self {
+        Self {
+            names: HashSet::new(),
+            reserved: reserved.into_iter().collect(),
+        }
+    }
+
+    /// Holds `name` as chassisd's own, beyond the limit.
+    pub fn reserve(&mut self, name: &str) {
+        self.reserved.insert(name.to_owned());
+    }
+
+    /// Whether `name` is held already (or reserved).
+    pub fn holds(&self, name: &str) -> bool {
+        self.reserved.contains(name) || self.names.contains(name)
+    }
+
     /// Admits `name` (already known, or new with room left).
     pub fn admit(&mut self, name: &str) -> Result<(), Violation> {
-        if self.names.contains(name) {
+        if self.holds(name) {
             return Ok(());
         }
         if self.names.len() >= MAX_TOPIC_NAMES {
@@ -115,6 +141,10 @@ pub struct Session {
     out_pubrel: HashSet<u16>,
     /// QoS 2 PUBLISHes the client sent, awaiting its PUBREL.
     in_qos2: HashSet<u16>,
+    /// Names this session brought to the broker.
+    new_names: usize,
+    /// chassisd's own link: its names are admitted without a budget.
+    trusted: bool,
 }
 
 impl Session {
@@ -126,7 +156,35 @@ impl Session {
             out_qos2: HashSet::new(),
             out_pubrel: HashSet::new(),
             in_qos2: HashSet::new(),
+            new_names: 0,
+            trusted: false,
         }
+    }
+
+    /// chassisd's own link's session: the same checks, but its topic names (its reports)
+    /// are always admitted.
+    pub fn trusted(version: Version) -> Self {
+        Self {
+            trusted: true,
+            ..Self::new(version)
+        }
+    }
+
+    /// Admits `name` into `names`, within this session's budget of new ones.
+    fn admit(&mut self, name: &str, names: &mut TopicNames) -> Result<(), Violation> {
+        if names.holds(name) {
+            return Ok(());
+        }
+        if self.trusted {
+            names.reserve(name);
+            return Ok(());
+        }
+        if self.new_names >= MAX_NEW_NAMES_PER_SESSION {
+            return Err(Violation::TooManyTopics);
+        }
+        names.admit(name)?;
+        self.new_names += 1;
+        Ok(())
     }
 
     /// Judges a whole packet from the client (`packet` includes its fixed header `h`).
@@ -159,7 +217,7 @@ impl Session {
                         ));
                     }
                 }
-                names.admit(topic)?;
+                self.admit(topic, names)?;
                 if let (2, Some(id)) = (qos, id) {
                     self.in_qos2.insert(id);
                 }
@@ -188,7 +246,7 @@ impl Session {
                     if !valid_filter(filter) {
                         return Err(Violation::BadFilter);
                     }
-                    names.admit(filter)?;
+                    self.admit(filter, names)?;
                     filters += 1;
                 }
                 if filters == 0 {
@@ -553,10 +611,10 @@ mod tests {
     }
 
     #[test]
-    fn the_broker_holds_a_bounded_number_of_names() {
+    fn a_session_brings_a_bounded_number_of_new_names() {
+        let mut names = TopicNames::with_reserved(["mqtt_control".to_owned()]);
         let mut s = Session::new(Version::V4);
-        let mut names = TopicNames::default();
-        for i in 0..MAX_TOPIC_NAMES {
+        for i in 0..MAX_NEW_NAMES_PER_SESSION {
             let p = publish(0, &format!("t/{i}"), 0, false);
             assert_eq!(judge(&mut s, &p, &mut names), Ok(Pass::Forward));
         }
@@ -564,9 +622,38 @@ mod tests {
             judge(&mut s, &publish(0, "one/more", 0, false), &mut names),
             Err(Violation::TooManyTopics)
         );
-        // Names already held go on being served.
+        // Names held, and reserved ones, go on being served.
+        assert_eq!(
+            judge(&mut s, &publish(0, "t/3", 0, false), &mut names),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &publish(0, "mqtt_control", 0, false), &mut names),
+            Ok(Pass::Forward)
+        );
+    }
+
+    #[test]
+    fn the_broker_holds_a_bounded_number_of_names() {
+        let mut names = TopicNames::with_reserved(["mqtt_control".to_owned()]);
+        for i in 0..MAX_TOPIC_NAMES {
+            // A fresh session now and then, as a client that reconnects to go on.
+            let mut s = Session::new(Version::V4);
+            let p = publish(0, &format!("t/{i}"), 0, false);
+            assert_eq!(judge(&mut s, &p, &mut names), Ok(Pass::Forward));
+        }
+        let mut s = Session::new(Version::V4);
+        assert_eq!(
+            judge(&mut s, &publish(0, "one/more", 0, false), &mut names),
+            Err(Violation::TooManyTopics)
+        );
+        // Names already held, and chassisd's own, go on being served.
         assert_eq!(
             judge(&mut s, &publish(0, "t/7", 0, false), &mut names),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &publish(0, "mqtt_control", 0, false), &mut names),
             Ok(Pass::Forward)
         );
         assert_eq!(names.len(), MAX_TOPIC_NAMES);

@@ -48,6 +48,9 @@ pub struct LocalizationConfig {
     /// The gyro bias's random walk, rad/s per √s.
     #[serde(default = "default_gyro_bias_walk")]
     pub gyro_bias_walk: f64,
+    /// A position set by hand (INIT_POSITION) may lie at most this far from the datum, m.
+    #[serde(default = "default_max_position_radius_m")]
+    pub max_position_radius_m: f64,
 }
 
 fn default_bound() -> f64 {
@@ -71,6 +74,9 @@ fn default_gyro_noise() -> f64 {
 fn default_gyro_bias_walk() -> f64 {
     2e-5
 }
+fn default_max_position_radius_m() -> f64 {
+    10_000.0
+}
 
 impl Default for LocalizationConfig {
     fn default() -> Self {
@@ -85,6 +91,7 @@ impl Default for LocalizationConfig {
             gnss_velocity_sigma_mps: None,
             gyro_noise_rps: default_gyro_noise(),
             gyro_bias_walk: default_gyro_bias_walk(),
+            max_position_radius_m: default_max_position_radius_m(),
         }
     }
 }
@@ -101,7 +108,13 @@ impl LocalizationConfig {
                 -180.0..=180.0,
                 "degrees",
             )?;
-            check_range(file, "localization.datum[2]", h, -1000.0..=10000.0, "m")?;
+            check_range(
+                file,
+                "localization.datum[2]",
+                h,
+                crate::fusion::geodesy::PLAUSIBLE_HEIGHT_M,
+                "m",
+            )?;
         }
         check_range(
             file,
@@ -167,6 +180,13 @@ impl LocalizationConfig {
             self.gyro_bias_walk,
             1e-7..=1e-2,
             "rad/s per √s",
+        )?;
+        check_range(
+            file,
+            "localization.max_position_radius_m",
+            self.max_position_radius_m,
+            1.0..=1_000_000.0,
+            "m",
         )
     }
 }

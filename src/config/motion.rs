@@ -70,6 +70,14 @@ pub struct MotionConfig {
     /// driven straight, unplanned.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub task_max_approach_m: Option<f64>,
+    /// A goal (and each point of a MOVE_TO_POSITION) may lie at most this far from the
+    /// vehicle, m (default 100, as a `set_navi_cmd` move).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_goal_distance_m: Option<f64>,
+    /// Every point of a trajectory task or a COVERAGE path may lie at most this far from
+    /// the vehicle, m (default 2000).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_path_radius_m: Option<f64>,
 }
 
 /// The least GNSS fix quality a trajectory task drives on.
@@ -129,6 +137,15 @@ pub struct TaskSettings {
     pub max_approach_m: f64,
 }
 
+/// How far from the vehicle a motion may lead.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reach {
+    /// A goal, or a MOVE_TO_POSITION point, m.
+    pub goal_m: f64,
+    /// A point of a task or COVERAGE path, m.
+    pub path_m: f64,
+}
+
 /// The settings a move runs with, resolved against the chassis limits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MotionSettings {
@@ -150,6 +167,8 @@ pub struct MotionSettings {
     pub time_allowance_s: f64,
     /// Trajectory tasks.
     pub task: TaskSettings,
+    /// How far a motion may lead.
+    pub reach: Reach,
     /// The slowest speed and yaw rate a move settling on its goal commands (m/s, rad/s):
     /// twice what the odometry and the localiser take for standing still, so a move never
     /// creeps unseen (its measured progress frozen) while off its goal.
@@ -197,6 +216,10 @@ impl MotionConfig {
                 min_gnss: self.task_min_gnss.unwrap_or(MinGnss::RtkFixed),
                 gnss_wait_s: self.task_gnss_wait_s.unwrap_or(120.0),
                 max_approach_m: self.task_max_approach_m.unwrap_or(5.0),
+            },
+            reach: Reach {
+                goal_m: self.max_goal_distance_m.unwrap_or(100.0),
+                path_m: self.max_path_radius_m.unwrap_or(2000.0),
             },
             creep: creep(chassis.track_m),
         }
@@ -303,6 +326,18 @@ impl MotionConfig {
                 "task_max_approach_m",
                 self.task_max_approach_m,
                 0.0..=1000.0,
+                "m",
+            ),
+            (
+                "max_goal_distance_m",
+                self.max_goal_distance_m,
+                0.1..=10_000.0,
+                "m",
+            ),
+            (
+                "max_path_radius_m",
+                self.max_path_radius_m,
+                1.0..=100_000.0,
                 "m",
             ),
         ] {

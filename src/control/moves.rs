@@ -418,6 +418,10 @@ pub(crate) mod tests {
                 gnss_wait_s: 5.0,
                 max_approach_m: 5.0,
             },
+            reach: crate::config::motion::Reach {
+                goal_m: 100.0,
+                path_m: 2000.0,
+            },
             creep: crate::config::motion::creep(0.5),
         }
     }

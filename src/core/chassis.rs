@@ -168,7 +168,7 @@ pub enum CommandRejected {
     NothingPaused,
     /// A velocity beyond the configured limit: refused rather than clamped, so the sender
     /// learns the vehicle cannot do what it asked.
-    #[error("{what} {} {unit} is beyond the limit of {limit} {unit} (chassis.{key})", compact(*.value))]
+    #[error("{what} {} {unit} is beyond the limit of {limit} {unit} ({key})", compact(*.value))]
     BeyondLimit {
         /// What: speed or yaw rate.
         what: &'static str,
@@ -181,12 +181,37 @@ pub enum CommandRejected {
         /// The configuration key that sets it.
         key: &'static str,
     },
+    /// A value outside the range the world allows (a latitude, a height).
+    #[error("{what} {} {unit} is outside {min}..={max} {unit}", compact(*.value))]
+    OutOfRange {
+        /// What: latitude, longitude, height.
+        what: &'static str,
+        /// The value given.
+        value: f64,
+        /// The least allowed.
+        min: f64,
+        /// The most allowed.
+        max: f64,
+        /// Its unit.
+        unit: &'static str,
+    },
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,
     /// The safety supervisor holds the vehicle.
     #[error("{0}")]
     Safety(#[from] Refusal),
+}
+
+impl CommandRejected {
+    /// Whether the command itself is wrong (a value out of range or not finite), as
+    /// opposed to the vehicle's state refusing it: protocols answer the two differently.
+    pub fn is_bad_value(&self) -> bool {
+        matches!(
+            self,
+            Self::NotFinite | Self::BeyondLimit { .. } | Self::OutOfRange { .. }
+        )
+    }
 }
 
 /// A number as a person reads it: huge and tiny ones in exponent form (1e308, not 309 digits).
@@ -385,14 +410,14 @@ impl Chassis {
                 vx,
                 self.config.max_speed_mps,
                 "m/s",
-                "max_speed_mps",
+                "chassis.max_speed_mps",
             ),
             (
                 "yaw rate",
                 wz,
                 self.config.max_yaw_rate_rps,
                 "rad/s",
-                "max_yaw_rate_rps",
+                "chassis.max_yaw_rate_rps",
             ),
         ] {
             if value.abs() > limit * (1.0 + LIMIT_ROUNDING) {
@@ -788,7 +813,7 @@ mod tests {
         assert!(matches!(
             c.command(ms(0), 0.5, -1.01),
             Err(CommandRejected::BeyondLimit {
-                key: "max_yaw_rate_rps",
+                key: "chassis.max_yaw_rate_rps",
                 ..
             })
         ));

@@ -9,9 +9,9 @@ use std::time::Duration;
 
 use crate::config::VehicleConfig;
 use crate::config::chassis::ChassisConfig;
-use crate::config::localization::localizer_config;
+use crate::config::localization::{LocalizationConfig, localizer_config};
 use crate::config::mission::{MissionConfig, MissionSettings};
-use crate::config::motion::{MinGnss, MotionSettings};
+use crate::config::motion::{MinGnss, MotionSettings, Reach};
 use crate::control::MotionId;
 use crate::control::goal::GoalPose;
 use crate::control::mission::{Mission, MissionEvent, MissionStep, Request};
@@ -76,6 +76,8 @@ pub struct CoreConfig {
     pub mission: MissionSettings,
     /// Whether a cutter is configured.
     pub has_cutter: bool,
+    /// A position set by hand may lie at most this far from the datum, m.
+    pub max_position_radius_m: f64,
 }
 
 impl Default for CoreConfig {
@@ -92,6 +94,7 @@ impl Default for CoreConfig {
             motion: None,
             mission: MissionConfig::default().settings(),
             has_cutter: false,
+            max_position_radius_m: LocalizationConfig::default().max_position_radius_m,
         }
     }
 }
@@ -131,8 +134,86 @@ impl CoreConfig {
         core.localizer = localizer_config(config);
         core.mission = config.mission.unwrap_or_default().settings();
         core.has_cutter = config.cutter.is_some();
+        core.max_position_radius_m = config
+            .localization
+            .unwrap_or_default()
+            .max_position_radius_m;
         core
     }
+}
+
+/// The key of the goal reach, named in refusals.
+const GOAL_KEY: &str = "motion.max_goal_distance_m";
+/// The key of the path reach.
+const PATH_KEY: &str = "motion.max_path_radius_m";
+
+/// Refuses `points` when one lies farther than `limit` from the vehicle (when it is
+/// located; a motion that needs the map refuses an unlocated vehicle by itself).
+fn within_reach(
+    view: &PoseView,
+    points: &[(f64, f64)],
+    limit: Option<f64>,
+    key: &'static str,
+) -> Result<(), CommandRejected> {
+    let (Some(limit), Some((x, y))) = (limit, view.map_xy) else {
+        return Ok(());
+    };
+    let farthest = points
+        .iter()
+        .map(|(px, py)| (px - x).hypot(py - y))
+        .fold(0.0, f64::max);
+    if farthest > limit {
+        return Err(CommandRejected::BeyondLimit {
+            what: "distance from the vehicle",
+            value: farthest,
+            limit,
+            unit: "m",
+            key,
+        });
+    }
+    Ok(())
+}
+
+/// A pose set by hand: finite, and within `radius_m` of the datum.
+fn plausible_pose(x: f64, y: f64, yaw: f64, radius_m: f64) -> Result<(), CommandRejected> {
+    if ![x, y, yaw].iter().all(|v| v.is_finite()) {
+        return Err(CommandRejected::NotFinite);
+    }
+    let distance = x.hypot(y);
+    if distance > radius_m {
+        return Err(CommandRejected::BeyondLimit {
+            what: "distance from the datum",
+            value: distance,
+            limit: radius_m,
+            unit: "m",
+            key: "localization.max_position_radius_m",
+        });
+    }
+    Ok(())
+}
+
+/// A place on the Earth: latitude ±90°, longitude ±180°, a height a ground vehicle can have.
+fn plausible_place(p: &Geodetic) -> Result<(), CommandRejected> {
+    let height = crate::fusion::geodesy::PLAUSIBLE_HEIGHT_M;
+    for (what, value, min, max, unit) in [
+        ("latitude", p.lat_deg, -90.0, 90.0, "degrees"),
+        ("longitude", p.lon_deg, -180.0, 180.0, "degrees"),
+        ("height", p.h_m, *height.start(), *height.end(), "m"),
+    ] {
+        if !value.is_finite() {
+            return Err(CommandRejected::NotFinite);
+        }
+        if !(min..=max).contains(&value) {
+            return Err(CommandRejected::OutOfRange {
+                what,
+                value,
+                min,
+                max,
+                unit,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// A device whose link state the drivers report.
@@ -572,24 +653,17 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::SetPose { x, y, yaw }) => {
-                let result = if [x, y, yaw].iter().all(|v| v.is_finite()) {
+                let result = plausible_pose(x, y, yaw, self.config.max_position_radius_m);
+                if result.is_ok() {
                     self.localizer.set_pose(t, x, y, yaw);
-                    Ok(())
-                } else {
-                    Err(CommandRejected::NotFinite)
-                };
+                }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::SetDatum(datum)) => {
-                let valid = (-90.0..=90.0).contains(&datum.lat_deg)
-                    && (-180.0..=180.0).contains(&datum.lon_deg)
-                    && datum.h_m.is_finite();
-                let result = if valid {
+                let result = plausible_place(&datum);
+                if result.is_ok() {
                     self.localizer.set_datum(datum);
-                    Ok(())
-                } else {
-                    Err(CommandRejected::NotFinite)
-                };
+                }
                 vec![Output::CommandResult(result)]
             }
             Input::ControlTick => self.control_tick(t),
@@ -691,7 +765,9 @@ impl Vehicle {
         tag: Option<MotionTag>,
     ) -> Result<MotionId, CommandRejected> {
         let finite = goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite();
+        let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
+            within_reach(view, &[(goal.x, goal.y)], reach.map(|r| r.goal_m), GOAL_KEY)?;
             motion
                 .start_goal(t, goal, view, tag)
                 .ok_or(CommandRejected::NotLocated)
@@ -730,7 +806,9 @@ impl Vehicle {
             && !points.is_empty()
             && points.iter().all(|(x, y)| x.is_finite() && y.is_finite());
         let speed = path.speed;
+        let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
+            within_reach(view, &points, reach.map(|r| r.path_m), PATH_KEY)?;
             motion
                 .start_path(t, &points, speed, view, tag)
                 .map_err(|refusal| match refusal {
@@ -775,6 +853,23 @@ impl Vehicle {
             return Err(CommandRejected::Task(
                 "a mission needs at least one step".into(),
             ));
+        }
+        // Where the vehicle is now: MOVE_TO_POSITION points within the goal reach, COVERAGE
+        // within the path reach (each step checks again when it starts).
+        let view = self.pose_view(t);
+        let reach = self.reach();
+        for step in steps {
+            let (points, limit, key) = match step {
+                MissionStep::MoveTo(p) => (p, reach.map(|r| r.goal_m), GOAL_KEY),
+                MissionStep::Coverage(p) => (p, reach.map(|r| r.path_m), PATH_KEY),
+                _ => continue,
+            };
+            if points.iter().any(|(x, y)| !x.is_finite() || !y.is_finite()) {
+                return Err(CommandRejected::NotFinite);
+            }
+            if let Some(view) = &view {
+                within_reach(view, points, limit, key)?;
+            }
         }
         for (i, step) in steps.iter().enumerate() {
             let problem = match step {
@@ -936,6 +1031,11 @@ impl Vehicle {
             return Err(CommandRejected::NoOdometry);
         };
         start(motion, &view)
+    }
+
+    /// How far a motion may lead, when the vehicle has drives.
+    fn reach(&self) -> Option<Reach> {
+        self.config.motion.map(|m| m.reach)
     }
 
     /// Ends the motion under way, if any.

@@ -668,6 +668,11 @@ impl Engine {
         self.dialects.subscriptions()
     }
 
+    /// The exact topics the configured dialects act on.
+    pub fn command_topics(&self) -> Vec<String> {
+        self.dialects.command_topics()
+    }
+
     /// Engine counters.
     pub fn stats(&self) -> &EngineStats {
         &self.stats

@@ -11,6 +11,9 @@ pub const F: f64 = 1.0 / 298.257_223_563;
 pub const E2: f64 = F * (2.0 - F);
 /// Semi-minor axis, m.
 pub const B: f64 = A * (1.0 - F);
+/// Heights a vehicle on the ground can have, m above the ellipsoid: below the Dead Sea's
+/// shore less the geoid's lowest, above any road.
+pub const PLAUSIBLE_HEIGHT_M: std::ops::RangeInclusive<f64> = -500.0..=10_000.0;
 
 /// A WGS84 position.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,9 +6,11 @@
 //! message would be a flood of its own), no record. The log says so once when refusing
 //! starts on a topic, then sums up every [`SUMMARY_EVERY`] while it goes on.
 //!
-//! The wildcard subscriptions let a client invent topic names, so the buckets are bounded:
-//! when [`MAX_TOPICS`] are tracked, full buckets (idle topics) are forgotten, and if none is
-//! idle, new topics share one bucket.
+//! The wildcard subscriptions let a client invent topic names. Where the topics that mean
+//! something are known (the MQTT dialects'), every other name shares one slow bucket
+//! ([`UNKNOWN_RATE_HZ`]), so inventing names buys nothing. Otherwise the buckets are
+//! bounded: when [`MAX_TOPICS`] are tracked, full buckets (idle topics) are forgotten, and
+//! if none is idle, new topics share one bucket.
 
 use std::collections::{BTreeMap, HashMap};
 use std::time::{Duration, Instant};
@@ -19,6 +21,13 @@ pub const MAX_TOPICS: usize = 256;
 pub const SUMMARY_EVERY: Duration = Duration::from_secs(5);
 /// The bucket new topics share when [`MAX_TOPICS`] are busy.
 const SHARED: &str = "(other topics)";
+/// The bucket every name outside the known topics shares.
+const UNKNOWN: &str = "(unknown topics)";
+/// Messages per second on unknown topics altogether: enough to answer a mistyped topic,
+/// too few to be worth a flood.
+pub const UNKNOWN_RATE_HZ: f64 = 1.0;
+/// Messages at once on unknown topics before [`UNKNOWN_RATE_HZ`] applies.
+pub const UNKNOWN_BURST: f64 = 5.0;
 
 #[derive(Debug, Clone, Copy)]
 struct Bucket {
@@ -35,6 +44,8 @@ pub struct CommandRate {
     /// Refused since the last summary, by topic (sorted for a stable log line).
     refused: BTreeMap<String, u64>,
     last_summary: Option<Instant>,
+    /// The topics that mean something, when known: others share [`UNKNOWN`].
+    known: Option<std::collections::HashSet<String>>,
 }
 
 /// What the log should say now.
@@ -55,14 +66,28 @@ impl CommandRate {
             buckets: HashMap::new(),
             refused: BTreeMap::new(),
             last_summary: None,
+            known: None,
         }
+    }
+
+    /// Only `topics` get buckets of their own; every other name shares one slow bucket.
+    pub fn with_known_topics(mut self, topics: impl IntoIterator<Item = String>) -> Self {
+        self.known = Some(topics.into_iter().collect());
+        self
     }
 
     /// Whether a command on `topic` arriving at `now` may pass; takes its token. The second
     /// value is what to log, if anything.
     pub fn admit(&mut self, topic: &str, now: Instant) -> (bool, Option<RateReport>) {
-        let (rate, burst) = (self.rate_hz, self.burst);
-        let key = if self.buckets.contains_key(topic) || self.make_room(now) {
+        let unknown = self.known.as_ref().is_some_and(|k| !k.contains(topic));
+        let (rate, burst) = if unknown {
+            (UNKNOWN_RATE_HZ, UNKNOWN_BURST)
+        } else {
+            (self.rate_hz, self.burst)
+        };
+        let key = if unknown {
+            UNKNOWN
+        } else if self.buckets.contains_key(topic) || self.make_room(now) {
             topic
         } else {
             SHARED
@@ -130,6 +155,30 @@ mod tests {
 
     fn admitted(limiter: &mut CommandRate, topic: &str, now: Instant, n: usize) -> usize {
         (0..n).filter(|_| limiter.admit(topic, now).0).count()
+    }
+
+    #[test]
+    fn invented_topic_names_share_one_slow_bucket() {
+        let t0 = Instant::now();
+        let mut limiter = CommandRate::new(50.0, 50).with_known_topics(["mqtt_control".to_owned()]);
+        let invented = (0..10_000)
+            .filter(|i| limiter.admit(&format!("device/SIM0001/x{i}"), t0).0)
+            .count();
+        assert_eq!(invented, UNKNOWN_BURST as usize);
+        // The known topic keeps its own, full budget.
+        assert_eq!(admitted(&mut limiter, "mqtt_control", t0, 100), 50);
+        // Ten seconds later, ten more (and the burst is not refilled beyond its size).
+        let later = t0 + Duration::from_secs(10);
+        let more = (0..10_000)
+            .filter(|i| limiter.admit(&format!("x/{i}"), later).0)
+            .count();
+        assert_eq!(more, UNKNOWN_BURST as usize);
+        // The summary names the shared bucket, not each invented name.
+        let Some(RateReport::Summary(counts)) = limiter.due_summary(later) else {
+            panic!("a summary");
+        };
+        let names: Vec<&str> = counts.iter().map(|(t, _)| t.as_str()).collect();
+        assert_eq!(names, [UNKNOWN, "mqtt_control"]);
     }
 
     #[test]

@@ -160,6 +160,7 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
                 config: m.clone(),
                 vehicle: config.vehicle.name.clone(),
                 subscriptions: engine.subscriptions(),
+                command_topics: engine.command_topics(),
             };
             if m.root.is_some() {
                 source_meta.push(SourceMeta::commands(

@@ -179,6 +179,8 @@ pub struct MqttSpec {
     pub vehicle: String,
     /// Topic filters to subscribe to.
     pub subscriptions: Vec<String>,
+    /// The exact topics the dialects act on; others share one slow rate limit.
+    pub command_topics: Vec<String>,
 }
 
 /// Starts the link task; incoming commands go to `records`.
@@ -288,7 +290,8 @@ async fn run(
         replies_max: c.reply_queue,
         dropped: Dropped::default(),
     };
-    let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst);
+    let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst)
+        .with_known_topics(spec.command_topics.iter().cloned());
     let mut connected = false;
     let mut last_failure: Option<String> = None;
     let mut events = Poller::spawn(eventloop, c.reconnect_max());

@@ -221,6 +221,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
                 config: m.clone(),
                 vehicle: sim.config().vehicle.name.clone(),
                 subscriptions: sim.engine().subscriptions(),
+                command_topics: sim.engine().command_topics(),
             };
             if m.root.is_some() {
                 host::spawn(clock, tx.clone());

@@ -142,3 +142,28 @@ pub fn shared_spec(file: &str) -> String {
         )
     })
 }
+
+/// Resident memory of `pid` and its children (the embedded broker), kB.
+pub fn rss_with_children_kb(pid: u32) -> u64 {
+    let rss = |pid: u32| -> u64 {
+        std::fs::read_to_string(format!("/proc/{pid}/status"))
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find_map(|l| l.strip_prefix("VmRSS:"))
+                    .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            })
+            .unwrap_or(0)
+    };
+    let children = std::process::Command::new("pgrep")
+        .args(["-P", &pid.to_string()])
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+        .unwrap_or_default();
+    rss(pid)
+        + children
+            .split_whitespace()
+            .filter_map(|p| p.parse().ok())
+            .map(rss)
+            .sum::<u64>()
+}

@@ -267,6 +267,16 @@ impl Dialect for RtkDialect {
         vec![MQTT_CONTROL.to_owned()]
     }
 
+    fn command_topics(&self) -> Vec<String> {
+        vec![MQTT_CONTROL.to_owned()]
+    }
+
+    fn topics(&self) -> Vec<String> {
+        [MQTT_CONTROL, FEEDBACK, TRAJECTORY_DATA, BASE_STATUS]
+            .map(str::to_owned)
+            .to_vec()
+    }
+
     fn owns(&self, topic: &str) -> bool {
         topic == MQTT_CONTROL
     }

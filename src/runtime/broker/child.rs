@@ -64,6 +64,8 @@ pub struct ChildSettings {
     pub own_client_id: Option<String>,
     /// TLS on the listener.
     pub tls: Option<super::tls::ServerTls>,
+    /// chassisd's own topics, always served whatever others invented.
+    pub reserved_topics: Vec<String>,
 }
 
 impl std::fmt::Debug for ChildSettings {
@@ -252,6 +254,7 @@ async fn open_gate(settings: &ChildSettings, upstream: Upstreams) -> anyhow::Res
             },
             upstream,
             max_packet: settings.max_packet,
+            reserved_topics: settings.reserved_topics.clone(),
         },
         tls,
     );
@@ -381,6 +384,7 @@ mod tests {
             credentials: Some(("op".into(), "hunter2".into())),
             own_client_id: None,
             tls: None,
+            reserved_topics: Vec::new(),
         };
         assert!(!format!("{s:?}").contains("hunter2"));
     }

@@ -49,6 +49,8 @@ pub struct GateSettings {
     pub upstream: Upstreams,
     /// The largest packet a client may send, bytes.
     pub max_packet: usize,
+    /// chassisd's own topics, always served whatever others invented.
+    pub reserved_topics: Vec<String>,
 }
 
 /// rumqttd's listeners, one per protocol version (each speaks only its own).
@@ -121,12 +123,13 @@ pub struct Gate {
 impl Gate {
     /// A gate with `settings`, serving TLS when `tls` is given.
     pub fn new(settings: GateSettings, tls: Option<TlsAcceptor>) -> Arc<Self> {
+        let names = TopicNames::with_reserved(settings.reserved_topics.iter().cloned());
         Arc::new(Self {
             settings,
             tls,
             places: Mutex::new(Places::default()),
             identifiers: Arc::new(Identifiers::default()),
-            names: Mutex::new(TopicNames::default()),
+            names: Mutex::new(names),
             handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
             counters: GateCounters::default(),
             last_refused: Mutex::new(None),
@@ -304,6 +307,8 @@ impl Gate {
         };
         let relay = Relay {
             version: connect.version,
+            // chassisd's own link publishes its reports under names of its own choosing.
+            trusted: place == Place::Own,
             max_packet: self.settings.max_packet,
             keep_alive: (connect.keep_alive_s > 0).then(|| {
                 Duration::from_secs_f64(f64::from(connect.keep_alive_s) * KEEP_ALIVE_GRACE)

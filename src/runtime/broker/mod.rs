@@ -39,6 +39,9 @@ const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// A broker that lived this long resets the back-off: its end was an accident, not a loop.
 const STABLE_AFTER: Duration = Duration::from_secs(30);
+/// The broker process may hold this much memory; beyond it, it is restarted. Its own bounds
+/// (names, segments, clients) keep it far below: this is the backstop for what they miss.
+pub const MAX_BROKER_RSS_MB: u64 = 256;
 /// The hidden subcommand that runs [`child::main`].
 pub const CHILD_COMMAND: &str = "broker-child";
 
@@ -99,8 +102,8 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// The broker's settings from `[mqtt]`; `own_client_id` is chassisd's own link's.
-pub fn settings(config: &MqttConfig, own_client_id: &str) -> anyhow::Result<ChildSettings> {
+/// The broker's settings from `[mqtt]`, for the vehicle called `vehicle`.
+pub fn settings(config: &MqttConfig, vehicle: &str) -> anyhow::Result<ChildSettings> {
     let listen: SocketAddr = (config.host.as_str(), config.port)
         .to_socket_addrs()
         .with_context(|| {
@@ -123,6 +126,18 @@ pub fn settings(config: &MqttConfig, own_client_id: &str) -> anyhow::Result<Chil
             client_ca_file: t.client_cert_file.is_some().then(|| t.ca_file.clone()),
         })
     });
+    // chassisd's own topics (commands, answers, reports) stay served whatever names other
+    // clients invent.
+    let mut reserved_topics = crate::api::mqtt::Dialects::from_config(
+        config,
+        Box::new(crate::api::rtk::trajectory::Unconfigured),
+        crate::api::DIALECTS,
+    )
+    .topics();
+    reserved_topics.extend([
+        config.status_topic(vehicle),
+        config.broker_health_topic(vehicle),
+    ]);
     Ok(ChildSettings {
         listen,
         max_clients: config.embedded_max_clients,
@@ -131,8 +146,9 @@ pub fn settings(config: &MqttConfig, own_client_id: &str) -> anyhow::Result<Chil
             .username
             .clone()
             .map(|u| (u, config.password.clone().unwrap_or_default())),
-        own_client_id: Some(own_client_id.to_owned()),
+        own_client_id: Some(config.client_id(vehicle)),
         tls,
+        reserved_topics,
     })
 }
 
@@ -145,7 +161,7 @@ pub fn start_if_embedded(
     if !config.embedded_broker {
         return Ok(None);
     }
-    start(settings(config, &config.client_id(vehicle))?).map(Some)
+    start(settings(config, vehicle)?).map(Some)
 }
 
 /// Publishes the broker's health (restarts, clients, refusals) retained on
@@ -272,9 +288,41 @@ fn read_reports(
             Ok(ChildReport::Stats {
                 connected,
                 counters,
-            }) => *lock(&shared.stats) = Some((connected, counters)),
+            }) => {
+                *lock(&shared.stats) = Some((connected, counters));
+                check_memory(shared.pid.load(Ordering::Relaxed));
+            }
             Err(_) => tracing::debug!(line = line.trim_end(), "embedded broker: unknown report"),
         }
+    }
+}
+
+/// Ends the broker process `pid` (the supervisor then starts another) when it holds more
+/// than [`MAX_BROKER_RSS_MB`].
+fn check_memory(pid: u32) {
+    if pid == 0 {
+        return;
+    }
+    let rss_mb = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|status| {
+            status
+                .lines()
+                .find(|l| l.starts_with("VmRSS:"))?
+                .split_whitespace()
+                .nth(1)?
+                .parse::<u64>()
+                .ok()
+        })
+        .map(|kib| kib / 1024);
+    if let Some(mb) = rss_mb.filter(|&mb| mb > MAX_BROKER_RSS_MB) {
+        tracing::error!(
+            rss_mb = mb,
+            limit_mb = MAX_BROKER_RSS_MB,
+            "embedded broker holds too much memory; it is restarted"
+        );
+        // SAFETY: a plain signal to our own child process.
+        unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
     }
 }
 

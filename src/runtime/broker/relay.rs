@@ -49,6 +49,8 @@ pub enum Ended {
 pub struct Relay<'a> {
     /// The version the client speaks.
     pub version: Version,
+    /// chassisd's own link: its topic names are not limited.
+    pub trusted: bool,
     /// The largest packet the client may send, bytes.
     pub max_packet: usize,
     /// Silence allowed from the client (1.5 keep-alive), if it has a keep-alive.
@@ -71,7 +73,11 @@ impl Relay<'_> {
         upstream: TcpStream,
         turn: Option<&Turn>,
     ) -> Ended {
-        let session = Mutex::new(Session::new(self.version));
+        let session = Mutex::new(if self.trusted {
+            Session::trusted(self.version)
+        } else {
+            Session::new(self.version)
+        });
         let (mut client_rx, mut client_tx) = tokio::io::split(client);
         let (mut upstream_rx, mut upstream_tx) = upstream.into_split();
         let ended = {
@@ -203,6 +209,7 @@ mod tests {
     fn relay(names: &Mutex<TopicNames>, keep_alive: Option<Duration>) -> Relay<'_> {
         Relay {
             version: Version::V4,
+            trusted: false,
             max_packet: 1024,
             keep_alive,
             names,
