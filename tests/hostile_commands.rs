@@ -30,9 +30,18 @@ fn ask(broker: &Mosquitto, acks: &Subscriber, topic: &str, payload: &str, answer
     )
 }
 
-/// The simulated vehicle on `broker`, located (goals need it).
-fn located_vehicle(broker: &Mosquitto) -> Proc {
-    let mut d = Proc::start(&["sim", "--mqtt", &broker.address()]);
+/// The simulated vehicle on `broker` (and a WebSocket server on `websocket`, with the
+/// local channel on standard input), located: goals need it.
+fn located_vehicle(broker: &Mosquitto, websocket: u16) -> Proc {
+    let bind = format!("127.0.0.1:{websocket}");
+    let mut d = Proc::start(&[
+        "sim",
+        "--mqtt",
+        &broker.address(),
+        "--websocket",
+        &bind,
+        "--commands-stdin",
+    ]);
     d.wait_log(WAIT, "MQTT subscribed");
     d.wait_out(Duration::from_secs(30), "LOCATE_TRUE", |l| {
         serde_json::from_str::<Value>(l).is_ok_and(|s| s["nav"]["locate"] == "LOCATE_TRUE")
@@ -53,8 +62,31 @@ fn last_status(d: &mut Proc) -> Value {
 fn goals_and_positions_beyond_their_limits_are_refused_naming_the_key() {
     let broker = Mosquitto::start();
     let acks = broker.subscribe(&["device/SIM0001/goal/ack", "/root/sim/+/+/ack"]);
-    let mut d = located_vehicle(&broker);
+    let websocket = free_port();
+    let mut d = located_vehicle(&broker, websocket);
     let before = last_status(&mut d);
+
+    // The same goal on every channel: the local one (stdin) and rosbridge's /goal_pose.
+    d.send(r#"goal {"x": 1e308, "y": 0.0, "yaw": 0.0}"#);
+    d.wait_log(WAIT, "motion.max_goal_distance_m");
+    let (mut ws, code) =
+        common::ws::handshake(websocket, "/", &format!("127.0.0.1:{websocket}"), None);
+    assert_eq!(code, 101);
+    common::ws::send_text(
+        &mut ws,
+        r#"{"op": "publish", "topic": "/goal_pose", "msg": {"header": {"frame_id": "map"}, "pose": {"position": {"x": 1e300, "y": 0, "z": 0}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}}}"#,
+    )
+    .unwrap();
+    let refusal = loop {
+        let v = common::ws::next_json(&mut ws).expect("a status");
+        if v["op"] == "status" {
+            break v["msg"].as_str().unwrap_or_default().to_owned();
+        }
+    };
+    assert!(
+        refusal.contains("motion.max_goal_distance_m") && refusal.contains("/goal_pose"),
+        "{refusal}"
+    );
 
     // A goal 1e308 m away (device dialect): a failure ack naming the limit.
     let ack = ask(

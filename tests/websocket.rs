@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use common::mqtt::free_port;
 use common::process::Proc;
+use common::ws;
 use serde_json::Value;
 
 fn python() -> PathBuf {
@@ -307,4 +308,151 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
     assert_eq!(seen["gnss"], "fix", "{seen}");
     assert!(number(&seen, "/battery") > 40.0, "{seen}");
     drop(sim);
+}
+
+#[test]
+fn a_handshake_from_another_web_page_is_refused() {
+    let port = free_port();
+    let sim = sim(port);
+    let here = format!("127.0.0.1:{port}");
+    // chassisd's own page, a native client without Origin, and the allowed ones: in.
+    assert_eq!(
+        ws::handshake(port, "/", &here, Some(&format!("http://{here}"))).1,
+        101
+    );
+    assert_eq!(ws::handshake(port, "/", &here, None).1, 101);
+    // A page elsewhere, and a name that only resolves here (DNS rebinding): out.
+    assert_eq!(
+        ws::handshake(port, "/", &here, Some("http://evil.example.com")).1,
+        403
+    );
+    let rebound = format!("evil.example.com:{port}");
+    assert_eq!(
+        ws::handshake(port, "/", &rebound, Some(&format!("http://{rebound}"))).1,
+        403
+    );
+    drop(sim);
+}
+
+#[test]
+fn a_publish_without_a_message_or_over_the_size_limit_is_refused_with_a_status() {
+    let port = free_port();
+    let mut sim = sim(port);
+    let here = format!("127.0.0.1:{port}");
+    let (mut s, code) = ws::handshake(port, "/", &here, None);
+    assert_eq!(code, 101);
+    let status_of = |s: &mut std::net::TcpStream| loop {
+        let v = ws::next_json(s).expect("a message");
+        if v["op"] == "status" {
+            return v["msg"].as_str().unwrap_or_default().to_owned();
+        }
+    };
+    ws::send_text(&mut s, r#"{"op": "publish", "topic": "/cmd_vel"}"#).unwrap();
+    assert!(status_of(&mut s).contains("no `msg` object"));
+    ws::send_text(
+        &mut s,
+        r#"{"op": "publish", "topic": "/cmd_vel", "msg": {}}"#,
+    )
+    .unwrap();
+    assert!(status_of(&mut s).contains("linear.x and angular.z"));
+    // Over 256 KiB: a status saying why, then the close.
+    let big = format!(
+        r#"{{"op": "publish", "topic": "/cmd_vel", "msg": {{"pad": "{}"}}}}"#,
+        "x".repeat(300 << 10)
+    );
+    ws::send_text(&mut s, &big).unwrap();
+    let said = status_of(&mut s);
+    assert!(said.contains("262144"), "{said}");
+    assert_eq!(
+        ws::read_frame(&mut s).map(|f| f.0),
+        Some(8),
+        "a Close frame"
+    );
+    // None of it moved the vehicle, nor re-armed it.
+    sim.wait_log(Duration::from_secs(5), "websocket: client gone");
+    assert!(
+        !sim.log.iter().any(|l| l.contains("command accepted")),
+        "{:#?}",
+        sim.log
+    );
+}
+
+#[test]
+fn wrong_tokens_are_delayed_and_the_fifth_closes_the_connection() {
+    let dir = common::tempdir("websocket-wrong-token");
+    let link = dir.join("gnss-port");
+    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
+    let port = free_port();
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"ws-guess\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"s3cret-token-1234\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let (mut s, code) = ws::handshake(port, "/", &format!("127.0.0.1:{port}"), None);
+    assert_eq!(code, 101);
+    let started = std::time::Instant::now();
+    let guess = r#"{"op": "auth", "mac": "wrong-guess"}"#;
+    let status = |s: &mut std::net::TcpStream| {
+        ws::next_json(s).expect("a status")["msg"]
+            .as_str()
+            .unwrap_or_default()
+            .to_owned()
+    };
+    // 5,000 guesses, as fast as the answers are read (in rounds of 100, within the
+    // client's queue): a guess is checked only once the wait after the last wrong one is
+    // over (1, 2, 4, 8 s); every other one is refused unchecked.
+    let mut failed = 0u32;
+    let mut waited = 0;
+    for _ in 0..50 {
+        for _ in 0..100 {
+            ws::send_text(&mut s, guess).unwrap();
+        }
+        for _ in 0..100 {
+            let said = status(&mut s);
+            if said.contains("authentication failed") {
+                failed += 1;
+            } else if said.contains("wait") {
+                waited += 1;
+            }
+        }
+    }
+    assert!(
+        failed <= 2 && waited >= 4998,
+        "{failed} checked, {waited} waited"
+    );
+    // Then a guess each time the wait is over, until the fifth wrong one closes.
+    while failed < 5 {
+        std::thread::sleep(Duration::from_secs(1 << (failed - 1)) + Duration::from_millis(200));
+        ws::send_text(&mut s, guess).unwrap();
+        let said = status(&mut s);
+        if said.contains("authentication failed") {
+            failed += 1;
+            assert_eq!(
+                said.contains("connection closes"),
+                failed == 5,
+                "{failed}: {said}"
+            );
+        }
+    }
+    assert_eq!(ws::next_json(&mut s), None, "the connection is closed");
+    assert!(
+        started.elapsed() >= Duration::from_secs(15),
+        "{:?}",
+        started.elapsed()
+    );
+    daemon.log.extend(daemon.stderr.try_iter());
+    let lines = daemon
+        .log
+        .iter()
+        .filter(|l| l.contains("a wrong token"))
+        .count();
+    assert_eq!(lines, 1, "logged once: {:#?}", daemon.log);
+    daemon.stop();
 }

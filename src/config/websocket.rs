@@ -28,6 +28,11 @@ pub struct WebsocketConfig {
     /// Messages a client may publish per second (beyond it they are refused with a status).
     #[serde(default = "default_command_rate_hz")]
     pub command_rate_hz: f64,
+    /// Web pages (origins, as `http://host:port`) that may open a WebSocket besides
+    /// chassisd's own page. Clients that send no `Origin` (roslibpy, Foxglove's native
+    /// client) are always let through to the token check.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub allowed_origins: Vec<String>,
 }
 
 fn default_bind() -> String {
@@ -54,6 +59,7 @@ impl Default for WebsocketConfig {
             client_queue: default_client_queue(),
             max_clients: default_max_clients(),
             command_rate_hz: default_command_rate_hz(),
+            allowed_origins: Vec::new(),
         }
     }
 }
@@ -82,6 +88,32 @@ impl WebsocketConfig {
                 "write it as \"127.0.0.1:9090\" (this computer) or \"0.0.0.0:9090\" (every \
                  interface)",
             ));
+        }
+        if self.token.is_none()
+            && let Some(address) = self.address()
+            && !address.ip().is_loopback()
+        {
+            return Err(ConfigError::invalid(
+                file,
+                "websocket.token",
+                format!(
+                    "is not set, and the server would listen on {address} beyond this \
+                     computer: anyone on the network could drive the vehicle"
+                ),
+                "set websocket.token to a long random string (e.g. from `openssl rand -hex \
+                 16`), or bind = \"127.0.0.1:9090\" to keep it to this computer",
+            ));
+        }
+        for origin in &self.allowed_origins {
+            if !is_origin(origin) {
+                return Err(ConfigError::invalid(
+                    file,
+                    "websocket.allowed_origins",
+                    format!("{origin:?} is not an origin"),
+                    "write each as a browser sends it: scheme, host and port, no path, e.g. \
+                     \"http://robot.local:9090\"",
+                ));
+            }
         }
         if let Some(token) = &self.token
             && (token.len() < 8 || token.chars().any(char::is_whitespace))
@@ -117,9 +149,64 @@ impl WebsocketConfig {
     }
 }
 
+/// Whether `s` is an origin as browsers send it: `http` or `https`, a host, a port at most,
+/// nothing after.
+fn is_origin(s: &str) -> bool {
+    let Some(rest) = s
+        .strip_prefix("http://")
+        .or_else(|| s.strip_prefix("https://"))
+    else {
+        return false;
+    };
+    !rest.is_empty()
+        && !rest.contains(['/', '?', '#', '@'])
+        && !rest.chars().any(|c| c.is_whitespace() || c.is_control())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_server_open_to_the_network_needs_a_token() {
+        let file = Path::new("v.toml");
+        let open = WebsocketConfig::with_bind("0.0.0.0:9090");
+        let e = open.validate(file).unwrap_err().to_string();
+        assert!(
+            e.contains("websocket.token") && e.contains("127.0.0.1:9090"),
+            "{e}"
+        );
+        let guarded = WebsocketConfig {
+            token: Some("0123456789abcdef".into()),
+            ..open
+        };
+        assert!(guarded.validate(file).is_ok());
+        assert!(
+            WebsocketConfig::with_bind("[::1]:9090")
+                .validate(file)
+                .is_ok()
+        );
+    }
+
+    #[test]
+    fn allowed_origins_are_origins() {
+        let file = Path::new("v.toml");
+        let with = |o: &str| WebsocketConfig {
+            allowed_origins: vec![o.into()],
+            ..WebsocketConfig::default()
+        };
+        assert!(with("http://robot.local:9090").validate(file).is_ok());
+        assert!(with("https://ops.example.com").validate(file).is_ok());
+        for bad in [
+            "robot.local",
+            "http://",
+            "http://a/b",
+            "ftp://a",
+            "http://a b",
+        ] {
+            assert!(with(bad).validate(file).is_err(), "{bad}");
+        }
+    }
 
     #[test]
     fn addresses_and_tokens_are_checked_with_the_fix() {

@@ -8,6 +8,7 @@ pub mod netcut;
 pub mod process;
 pub mod pty;
 pub mod spec;
+pub mod ws;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

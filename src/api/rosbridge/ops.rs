@@ -157,10 +157,12 @@ pub fn parse(text: &str) -> Result<ClientOp, Refusal> {
         },
         "publish" => ClientOp::Publish {
             topic: f.name("topic")?,
-            msg: fields
-                .get("msg")
-                .cloned()
-                .unwrap_or(Value::Object(Map::new())),
+            // A message, always: an absent one must never stand for a zero command.
+            msg: match fields.get("msg") {
+                Some(msg @ Value::Object(_)) => msg.clone(),
+                Some(_) => return Err(f.refuse("`msg` must be an object (the message)".into())),
+                None => return Err(f.refuse("no `msg` object (the message)".into())),
+            },
             id,
         },
         "subscribe" => ClientOp::Subscribe {

@@ -31,6 +31,8 @@ pub struct ClientQueue {
     /// Wakes the writer.
     pub ready: Notify,
     dropped: AtomicU64,
+    /// The server asked for the connection to close once the queue is sent.
+    closing: std::sync::atomic::AtomicBool,
 }
 
 impl ClientQueue {
@@ -41,7 +43,19 @@ impl ClientQueue {
             capacity: capacity.max(1),
             dropped: AtomicU64::new(0),
             ready: Notify::new(),
+            closing: std::sync::atomic::AtomicBool::new(false),
         }
+    }
+
+    /// Asks the writer to close the connection once what is queued has gone.
+    pub fn close(&self) {
+        self.closing.store(true, Ordering::Relaxed);
+        self.ready.notify_one();
+    }
+
+    /// Whether the server asked for the connection to close.
+    pub fn is_closing(&self) -> bool {
+        self.closing.load(Ordering::Relaxed)
     }
 
     /// Queues `text`; for a topic's message, first drops that topic's oldest ones beyond
@@ -110,6 +124,10 @@ pub struct Client {
     pub authenticated: bool,
     /// The lowest level of status messages it wants.
     pub level: Level,
+    /// Wrong tokens it sent.
+    pub auth_failures: u32,
+    /// No token is checked for it before this (after a wrong one).
+    pub locked_until: Option<Instant>,
     /// Its subscriptions, by topic.
     subscriptions: BTreeMap<&'static str, Vec<Subscription>>,
 }
@@ -121,6 +139,8 @@ impl Client {
             queue,
             authenticated,
             level: Level::Info,
+            auth_failures: 0,
+            locked_until: None,
             subscriptions: BTreeMap::new(),
         }
     }

@@ -117,6 +117,10 @@ enum Event {
 struct Shared {
     events: mpsc::Sender<Event>,
     token: Option<String>,
+    /// Web pages allowed besides chassisd's own (`websocket.allowed_origins`).
+    allowed_origins: Vec<String>,
+    /// Handshakes refused for their Origin, for the log (every power of two).
+    foreign_origins: AtomicUsize,
     clients: AtomicUsize,
     max_clients: usize,
     client_queue: usize,
@@ -145,6 +149,8 @@ pub fn start(
     let shared = Arc::new(Shared {
         events: events_tx,
         token: config.token.clone(),
+        allowed_origins: config.allowed_origins.clone(),
+        foreign_origins: AtomicUsize::new(0),
         clients: AtomicUsize::new(0),
         max_clients: config.max_clients,
         client_queue: config.client_queue,
@@ -234,11 +240,35 @@ fn page(body: &'static str, content_type: &'static str) -> Response {
 async fn root(
     State(shared): State<Arc<Shared>>,
     Query(query): Query<BTreeMap<String, String>>,
+    headers: axum::http::HeaderMap,
     ws: Option<WebSocketUpgrade>,
 ) -> Response {
     let Some(ws) = ws else {
         return page(PAGE, "text/html; charset=utf-8");
     };
+    let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
+    if let Some(origin) = header(axum::http::header::ORIGIN)
+        && !origin_allowed(
+            origin,
+            header(axum::http::header::HOST),
+            &shared.allowed_origins,
+        )
+    {
+        let n = shared.foreign_origins.fetch_add(1, Ordering::Relaxed) + 1;
+        if n.is_power_of_two() {
+            tracing::warn!(
+                %origin,
+                refused = n,
+                "websocket: a handshake from another web page refused (websocket.allowed_origins)"
+            );
+        }
+        return (
+            StatusCode::FORBIDDEN,
+            "chassisd: WebSocket connections from other web pages are refused; add the \
+             page's origin to websocket.allowed_origins to let it in",
+        )
+            .into_response();
+    }
     if shared.clients.fetch_add(1, Ordering::AcqRel) >= shared.max_clients {
         shared.clients.fetch_sub(1, Ordering::AcqRel);
         tracing::warn!(
@@ -286,7 +316,17 @@ async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: b
                         None,
                         ops::status(Level::Error, None, "binary messages are not taken: send JSON text"),
                     ),
-                    Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                    Some(Err(e)) => {
+                        // A message over the limit (or a broken frame): say why, then close.
+                        let text = format!(
+                            "closing: {e} (messages are limited to {} bytes)",
+                            ops::MAX_MESSAGE
+                        );
+                        let _ = socket.send(Message::Text(ops::status(Level::Error, None, &text))).await;
+                        let _ = socket.send(close_frame(1009, "message too big or malformed")).await;
+                        break;
+                    }
+                    Some(Ok(Message::Close(_))) | None => break,
                     Some(Ok(_)) => {}
                 },
                 () = queue.ready.notified() => {
@@ -300,6 +340,10 @@ async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: b
                     if failed {
                         break;
                     }
+                    if queue.is_closing() {
+                        let _ = socket.send(close_frame(1008, "authentication failed")).await;
+                        break;
+                    }
                 }
             }
         }
@@ -311,6 +355,14 @@ async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: b
         );
     }
     shared.clients.fetch_sub(1, Ordering::AcqRel);
+}
+
+/// A Close frame with `code` and `reason`.
+fn close_frame(code: u16, reason: &'static str) -> Message {
+    Message::Close(Some(axum::extract::ws::CloseFrame {
+        code,
+        reason: reason.into(),
+    }))
 }
 
 /// The server task's state.
@@ -427,21 +479,7 @@ impl Server {
             }
         };
         if !client.authenticated {
-            match op {
-                ClientOp::Auth { token } if token_matches(self.token.as_deref(), &token) => {
-                    client.authenticated = true;
-                    client.status(Level::Info, ops::status(Level::Info, None, "authenticated"));
-                }
-                _ => client.status(
-                    Level::Error,
-                    ops::status(
-                        Level::Error,
-                        None,
-                        "authenticate first: send {\"op\": \"auth\", \"mac\": TOKEN} or \
-                         connect with ?token=TOKEN (websocket.token)",
-                    ),
-                ),
-            }
+            authenticate(client, id, op, self.token.as_deref());
             return;
         }
         let refuse = |client: &Client, op_id: Option<&str>, reason: &str| {
@@ -547,7 +585,20 @@ impl Server {
             );
         };
         let (name, local_topic, payload) = match topics::find(topic) {
-            Some(t) if t.name == topics::CMD_VEL => (t.name, local::CMD_VEL, msg.to_string()),
+            Some(t) if t.name == topics::CMD_VEL => {
+                // A Twist names both speeds; one missing is a broken message, not a zero.
+                let number = |v: &str, axis: &str| {
+                    msg.get(v)
+                        .and_then(|o| o.get(axis))
+                        .is_some_and(Value::is_number)
+                };
+                if !number("linear", "x") || !number("angular", "z") {
+                    return refuse(&format!(
+                        "{topic}: msg needs linear.x and angular.z as numbers (a geometry_msgs/Twist)"
+                    ));
+                }
+                (t.name, local::CMD_VEL, msg.to_string())
+            }
             Some(t) if t.name == topics::GOAL_POSE => match messages::goal_from_pose_stamped(msg) {
                 Ok(goal) => (t.name, local::GOAL, goal),
                 Err(reason) => return refuse(&format!("{topic}: {reason}")),
@@ -589,6 +640,87 @@ impl Server {
         }
         self.pending.push_back((id, name));
     }
+}
+
+/// Wrong tokens a client may send; the last one closes its connection.
+const MAX_AUTH_FAILURES: u32 = 5;
+/// After a wrong token, no other is checked for this long, doubled each time (1, 2, 4, 8 s).
+const AUTH_DELAY: Duration = Duration::from_secs(1);
+
+/// An operation from a client that has not authenticated: only `auth` is taken, and a
+/// wrong token costs it time, then its connection.
+fn authenticate(client: &mut Client, id: u64, op: ClientOp, token: Option<&str>) {
+    let now = Instant::now();
+    if let Some(until) = client.locked_until.filter(|&u| now < u) {
+        let wait = until.duration_since(now).as_secs_f64();
+        let text = format!("authentication: wait {wait:.1} s before trying again");
+        client.status(Level::Error, ops::status(Level::Error, None, &text));
+        return;
+    }
+    match op {
+        ClientOp::Auth { token: given } if token_matches(token, &given) => {
+            client.authenticated = true;
+            client.status(Level::Info, ops::status(Level::Info, None, "authenticated"));
+        }
+        ClientOp::Auth { .. } => {
+            client.auth_failures += 1;
+            let n = client.auth_failures;
+            if n == 1 {
+                tracing::warn!(
+                    client = id,
+                    "websocket: a wrong token; the client's next tries are delayed, and its \
+                     {MAX_AUTH_FAILURES}th closes the connection"
+                );
+            }
+            let text = if n >= MAX_AUTH_FAILURES {
+                client.queue.close();
+                format!("authentication failed {n} times: the connection closes")
+            } else {
+                let delay = AUTH_DELAY * 2u32.pow(n - 1);
+                client.locked_until = Some(now + delay);
+                format!(
+                    "authentication failed ({n} of {MAX_AUTH_FAILURES}); the next try is \
+                     taken after {} s",
+                    delay.as_secs()
+                )
+            };
+            client.status(Level::Error, ops::status(Level::Error, None, &text));
+        }
+        _ => client.status(
+            Level::Error,
+            ops::status(
+                Level::Error,
+                None,
+                "authenticate first: send {\"op\": \"auth\", \"mac\": TOKEN} or connect \
+                 with ?token=TOKEN (websocket.token)",
+            ),
+        ),
+    }
+}
+
+/// Whether a browser page from `origin` may open a WebSocket: chassisd's own page (the
+/// origin of the address the browser asked for, when that is an IP address or
+/// `localhost`: a name could be an attacker's that resolves here, DNS rebinding), or a
+/// page in `allowed`. Clients that send no Origin are not browsers and are not asked.
+fn origin_allowed(origin: &str, host: Option<&str>, allowed: &[String]) -> bool {
+    if allowed.iter().any(|a| a.eq_ignore_ascii_case(origin)) {
+        return true;
+    }
+    let Some(host) = host else {
+        return false;
+    };
+    let name = match host.rsplit_once(':') {
+        // An IPv6 literal keeps its brackets: [::1]:9090.
+        Some((name, port)) if port.chars().all(|c| c.is_ascii_digit()) => name,
+        _ => host,
+    };
+    let literal = name.eq_ignore_ascii_case("localhost")
+        || name.parse::<std::net::IpAddr>().is_ok()
+        || name
+            .strip_prefix('[')
+            .and_then(|n| n.strip_suffix(']'))
+            .is_some_and(|n| n.parse::<std::net::Ipv6Addr>().is_ok());
+    literal && origin.eq_ignore_ascii_case(&format!("http://{host}"))
 }
 
 /// Whether `given` is the configured token, compared in a time that does not depend on
