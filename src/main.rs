@@ -49,8 +49,9 @@ enum Command {
         /// starts a new segment instead of ticking through the gap.
         #[arg(long, default_value = "10", value_parser = seconds_arg)]
         max_gap: Duration,
-        /// Accept records that go back in time within a file (they are reported either way;
-        /// without this the replay exits 1).
+        /// Accept records that go back in time within a file, and regenerated transmissions
+        /// that differ from the recorded ones (both are reported either way; without this
+        /// the replay exits 1).
         #[arg(long)]
         lenient: bool,
     },
@@ -504,6 +505,9 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             {
                 eprintln!("no RMC or ZDA date in the log; 1970-01-01 assumed");
             }
+            for correction in &summary.span_corrections {
+                eprintln!("meta.toml: {correction}");
+            }
             eprintln!("{}", summary.one_line());
             let late = summary.out_of_order.1;
             if late > 0 && !lenient {
@@ -512,7 +516,15 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                      edited or its clock stepped; exit status 1 (--lenient accepts them)"
                 );
             }
-            Ok(late == 0 || lenient)
+            let differ = summary.engine.tx_mismatched;
+            if differ > 0 && !lenient {
+                eprintln!(
+                    "{differ} transmissions differ from the recording's: this chassisd does \
+                     not drive the vehicle as the recorded one did; exit status 1 (--lenient \
+                     accepts them)"
+                );
+            }
+            Ok((late == 0 && differ == 0) || lenient)
         }
         Command::Run {
             config,

@@ -53,6 +53,9 @@ pub struct ReplaySummary {
     pub sources_without_decoder: Vec<(String, String)>,
     /// First and last record times.
     pub span: Option<(Timestamp, Timestamp)>,
+    /// `meta.toml`'s start or end that disagreed with the records, and what was used
+    /// instead: a recording's metadata is a claim, checked against its records.
+    pub span_corrections: Vec<String>,
     /// The process's peak resident memory at the end, bytes.
     pub peak_memory: Option<u64>,
 }
@@ -117,7 +120,7 @@ pub fn replay_into(
             end: meta.end_us.map(Timestamp::from_micros),
         };
         let stored = match &meta.vehicle_config {
-            Some(file) => Some(VehicleConfig::load(&path.join(file))?),
+            Some(file) => Some(VehicleConfig::load_within(&path.join(file), path)?),
             None => None,
         };
         let vehicle = config.cloned().or(stored).unwrap_or_default();
@@ -255,6 +258,12 @@ fn read_trajectories(path: &Path) -> Result<Vec<Trajectory>, ReplayError> {
     })
 }
 
+/// How long before its first record a session may have started (the devices' first link
+/// events come within moments; an hour allows a session that waited for all of them).
+const MAX_LEAD: std::time::Duration = std::time::Duration::from_secs(3600);
+/// How long after its last record a session may have ended (devices silent to the end).
+const MAX_TAIL: std::time::Duration = std::time::Duration::from_secs(3600);
+
 /// Start and end of a live session, as its recording's meta stores them.
 #[derive(Debug, Clone, Copy, Default)]
 struct SessionSpan {
@@ -270,14 +279,31 @@ fn run(
     summary: &mut ReplaySummary,
 ) -> Result<(), ReplayError> {
     engine.check_recorded_transmissions();
-    if let Some(start) = session.start {
-        engine.start_at(start);
-    }
     let mut outputs = Vec::new();
     let mut span: Option<(Timestamp, Timestamp)> = None;
     // Ticks before a record belong to the segment of the record before it.
     let mut offset = 0;
     while let Some(record) = input.next() {
+        if span.is_none() {
+            // The session's start, where the records bear it out; else the first record's.
+            let start = match session.start {
+                Some(start)
+                    if start <= record.t && record.t.saturating_since(start) <= MAX_LEAD =>
+                {
+                    start
+                }
+                Some(start) => {
+                    summary.span_corrections.push(format!(
+                        "start_us {} disagrees with the first record at {}: the replay starts there",
+                        start.as_micros(),
+                        record.t.as_micros()
+                    ));
+                    record.t
+                }
+                None => record.t,
+            };
+            engine.start_at(start);
+        }
         // The ticks of a long gap leave in batches, so memory does not grow with it.
         let before = Timestamp::from_nanos(record.t.as_nanos().saturating_sub(1));
         advance(&mut engine, before, &mut outputs, out, offset)?;
@@ -292,10 +318,36 @@ fn run(
         Input::Recording(reader) => reader.cut().map(|(until, _)| until),
         Input::Log(_) => None,
     };
-    let end = session
-        .end
-        .or(cut)
-        .or(span.map(|(_, last)| last.ceil_to(STATUS_PERIOD)));
+    let last = span.map(|(_, last)| last.ceil_to(STATUS_PERIOD));
+    let claimed_end = match (session.end, span) {
+        (Some(end), Some((_, last_record)))
+            if end < last_record || end.saturating_since(last_record) > MAX_TAIL =>
+        {
+            summary.span_corrections.push(format!(
+                "end_us {} disagrees with the last record at {}: the replay ends there",
+                end.as_micros(),
+                last_record.as_micros()
+            ));
+            Some(last_record)
+        }
+        // No record to bear the span out: ticked through only when it is short.
+        (Some(end), None) => match session.start {
+            Some(start) if start <= end && end.saturating_since(start) <= MAX_TAIL => {
+                engine.start_at(start);
+                Some(end)
+            }
+            _ => {
+                summary.span_corrections.push(format!(
+                    "the span claimed ({:?} to {} µs) has no record in it and is not ticked through",
+                    session.start.map(Timestamp::as_micros),
+                    end.as_micros()
+                ));
+                None
+            }
+        },
+        (end, _) => end,
+    };
+    let end = claimed_end.or(cut).or(last);
     if let Some(end) = end {
         advance(&mut engine, end, &mut outputs, out, offset)?;
     }

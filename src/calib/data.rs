@@ -284,7 +284,7 @@ fn stored_config(path: &Path) -> anyhow::Result<(Option<VehicleConfig>, Option<u
         .map(|(a, b)| b.saturating_sub(a) / 1000);
     let config = meta
         .vehicle_config
-        .map(|file| VehicleConfig::load(&path.join(file)))
+        .map(|file| VehicleConfig::load_within(&path.join(file), path))
         .transpose()?;
     Ok((config, span_ms))
 }

@@ -294,6 +294,14 @@ impl<T: LoadProfile> ProfileRef<T> {
         }
     }
 
+    /// The file it names, before it is read.
+    pub fn file_name(&self) -> Option<&str> {
+        match self {
+            Self::File(name) => Some(name),
+            Self::Inline(_) => None,
+        }
+    }
+
     /// The profile, once resolved.
     pub fn get(&self) -> Option<&T> {
         match self {

@@ -59,6 +59,28 @@ pub fn read_text(path: &Path) -> Result<String, ConfigError> {
     })
 }
 
+/// Whether `path` lies inside the folder `root`: by their real paths (links followed) where
+/// they exist, else by their names with `.` and `..` worked out.
+pub fn lies_within(path: &Path, root: &Path) -> bool {
+    let real = |p: &Path| {
+        std::fs::canonicalize(p).unwrap_or_else(|_| {
+            let absolute = std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
+            let mut clean = PathBuf::new();
+            for part in absolute.components() {
+                match part {
+                    std::path::Component::ParentDir => {
+                        clean.pop();
+                    }
+                    std::path::Component::CurDir => {}
+                    other => clean.push(other),
+                }
+            }
+            clean
+        })
+    };
+    real(path).starts_with(real(root))
+}
+
 /// How to mend what the TOML parser found, from its message.
 fn parse_fix(message: &str) -> &'static str {
     if message.contains("unknown field") {
@@ -288,14 +310,34 @@ impl VehicleConfig {
         Self::from_toml(&text, path)
     }
 
+    /// Reads and validates a configuration stored in a recording: every file it names
+    /// must lie inside the recording's folder `root` (a recording's own configuration has
+    /// its profiles inline). A name outside is refused before anything is read from it:
+    /// a recording is data, and must not make chassisd read, or print, other files.
+    pub fn load_within(path: &Path, root: &Path) -> Result<Self, ConfigError> {
+        let text = read_text(path)?;
+        Self::parse_and_resolve(&text, path, Some(root))
+    }
+
     /// Parses and validates TOML text; `file` names it in errors, and profile files are
     /// found relative to its folder.
     pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
+        Self::parse_and_resolve(text, file, None)
+    }
+
+    fn parse_and_resolve(
+        text: &str,
+        file: &Path,
+        root: Option<&Path>,
+    ) -> Result<Self, ConfigError> {
         let mut config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
             file: file.to_owned(),
             message: e.to_string(),
         })?;
         let base = file.parent().unwrap_or(Path::new("."));
+        if let Some(root) = root {
+            config.confine(base, file, root)?;
+        }
         for (i, drive) in config.drive.iter_mut().enumerate() {
             drive
                 .profile
@@ -327,6 +369,58 @@ impl VehicleConfig {
         }
         config.validate(file)?;
         Ok(config)
+    }
+
+    /// Refuses every file this configuration names (relative to `base`) that lies outside
+    /// `root`, before any is read.
+    fn confine(&self, base: &Path, file: &Path, root: &Path) -> Result<(), ConfigError> {
+        let mut named: Vec<(String, String)> = Vec::new();
+        for (i, d) in self.drive.iter().enumerate() {
+            if let Some(name) = d.profile.file_name() {
+                named.push((format!("drive[{i}].profile"), name.to_owned()));
+            }
+        }
+        for (i, e) in self.estop.iter().enumerate() {
+            if let Some(name) = e.profile.file_name() {
+                named.push((format!("estop[{i}].profile"), name.to_owned()));
+            }
+        }
+        if let Some(name) = self.bms.as_ref().and_then(|b| b.profile.file_name()) {
+            named.push(("bms.profile".into(), name.to_owned()));
+        }
+        named.push((
+            "vehicle.calibration".into(),
+            self.vehicle.calibration.clone().unwrap_or_else(|| {
+                calibration::default_path(&self.vehicle.name)
+                    .to_string_lossy()
+                    .into_owned()
+            }),
+        ));
+        if let Some(tls) = self.mqtt.as_ref().and_then(|m| m.tls.as_ref()) {
+            for (key, path) in [
+                ("mqtt.tls.ca_file", Some(&tls.ca_file)),
+                ("mqtt.tls.client_cert_file", tls.client_cert_file.as_ref()),
+                ("mqtt.tls.client_key_file", tls.client_key_file.as_ref()),
+                ("mqtt.tls.cert_file", tls.cert_file.as_ref()),
+                ("mqtt.tls.key_file", tls.key_file.as_ref()),
+            ] {
+                if let Some(path) = path {
+                    named.push((key.into(), path.clone()));
+                }
+            }
+        }
+        for (key, name) in named {
+            if !lies_within(&base.join(&name), root) {
+                return Err(ConfigError::invalid(
+                    file,
+                    &key,
+                    format!("{name:?} lies outside the recording's folder"),
+                    "a recording's configuration names only files inside its folder (its \
+                     profiles are inline); replay it with --config FILE to use files elsewhere",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Reads the calibration file `[vehicle] calibration` names, or `calib/<name>.toml`

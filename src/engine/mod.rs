@@ -48,6 +48,9 @@ pub const LOCAL_COMMANDS: &str = "stdin";
 /// name) marks where live mode stopped the drives on exit, so a replay stops them too.
 pub const PROCESS_SOURCE: &str = "process";
 
+/// Transmissions kept waiting for their pair in a replay, each side: beyond it the oldest
+/// count as differences (a replay's memory must not grow with a gap in the recording).
+const MAX_UNPAIRED_TX: usize = 4096;
 /// The smallest time step of the record clock.
 const ONE_MICRO: Duration = Duration::from_micros(1);
 
@@ -317,6 +320,11 @@ impl Engine {
             && !self.drivetrain.is_listen_only(&record.source)
         {
             self.count_record(&record.source);
+            if self.recorded_tx.len() >= MAX_UNPAIRED_TX {
+                // Recorded frames this engine never sent: differences, not a growing queue.
+                self.recorded_tx.pop_front();
+                self.stats.tx_mismatched += 1;
+            }
             self.recorded_tx
                 .push_back((record.source.clone(), Received::from_socketcan(frame)));
             self.compare_transmissions();
@@ -514,7 +522,15 @@ impl Engine {
     fn transmit(&mut self, tx: Vec<(String, Frame)>, out: &mut Vec<EngineOutput>) {
         for (bus, frame) in tx {
             match &mut self.sent {
-                Some(sent) => sent.push_back((bus, frame)),
+                Some(sent) => {
+                    if sent.len() >= MAX_UNPAIRED_TX {
+                        // A span with no recorded frames (a gap, or metadata that claims
+                        // one): what this engine sent there differs, and is not kept.
+                        sent.pop_front();
+                        self.stats.tx_mismatched += 1;
+                    }
+                    sent.push_back((bus, frame));
+                }
                 None => out.push(EngineOutput::CanTx { bus, frame }),
             }
         }
