@@ -534,6 +534,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             websocket,
         } => {
             let mut vehicle = VehicleConfig::load(&config)?;
+            vehicle.require_devices(&config)?;
             if let Some(bind) = websocket {
                 let mut w = vehicle.websocket.take().unwrap_or_default();
                 w.bind = bind;

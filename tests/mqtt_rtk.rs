@@ -499,3 +499,51 @@ fn the_last_will_says_offline_when_chassisd_dies() {
         Some("offline")
     );
 }
+
+#[test]
+fn names_that_look_alike_are_one_trajectory_and_invisible_ones_are_refused() {
+    let broker = Mosquitto::start();
+    let answers = broker.subscribe(&["feedback", "trajectory_data"]);
+    let _d = daemon(&broker);
+    let save = |name: &str| {
+        let payload = serde_json::json!({
+            "cmd_type": "trajectory_control",
+            "cmd": "save_trajectory",
+            "data": {"name": name, "data": [
+                {"longitude": 113.0, "latitude": 22.0, "angle": 0, "x": 0, "y": 0, "yaw": 0}
+            ]}
+        });
+        feedback(&broker, &answers, &payload.to_string())
+    };
+    // "café" composed, then decomposed (e and a combining accent): one trajectory.
+    assert_eq!(save("caf\u{e9}")["cmd"], "save_trajectory_success");
+    assert_eq!(save("cafe\u{301}")["cmd"], "save_trajectory_success");
+    let (_, list) = ask(
+        &broker,
+        &answers,
+        r#"{"cmd_type":"trajectory_control","cmd":"get_all_trajectory"}"#,
+    );
+    let names: Vec<&str> = list
+        .as_array()
+        .expect("a list")
+        .iter()
+        .filter_map(|t| t["name"].as_str())
+        .collect();
+    assert_eq!(names, ["caf\u{e9}"], "{list}");
+    // Names that show nothing, or hide something, are refused with the reason.
+    for name in ["\u{200B}", "\u{FEFF}", " ", "law\u{200D}n", "lawn "] {
+        let answer = save(name);
+        assert_eq!(
+            answer["cmd"], "save_trajectory_failse",
+            "{name:?}: {answer}"
+        );
+    }
+    // Deleting by the other spelling deletes it.
+    let delete = serde_json::json!({
+        "cmd_type": "trajectory_control", "cmd": "delete_trajectory", "name": "cafe\u{301}"
+    });
+    assert_eq!(
+        feedback(&broker, &answers, &delete.to_string())["cmd"],
+        "delete_trajectory_success"
+    );
+}

@@ -304,6 +304,23 @@ impl VehicleConfig {
         self.gnss.is_some() || self.imu.is_some() || !self.can.is_empty()
     }
 
+    /// Refuses a configuration with no device for `chassisd run` (a configuration error:
+    /// systemd must not restart it in a loop).
+    pub fn require_devices(&self, file: &Path) -> Result<(), ConfigError> {
+        if self.has_devices() {
+            return Ok(());
+        }
+        Err(ConfigError::invalid(
+            file,
+            "gnss",
+            "the configuration names no device ([gnss], [imu] or a [[can]] interface), so \
+             there is nothing to run",
+            "name at least a receiver, e.g. [gnss] port = \"/dev/ttyUSB0\"; \
+             devices/vehicle.example.toml is a complete configuration, and `chassisd sim` \
+             runs a simulated vehicle without hardware",
+        ))
+    }
+
     /// Reads and validates a TOML file. Device profiles it names are read relative to it.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = read_text(path)?;

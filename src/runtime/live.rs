@@ -98,14 +98,9 @@ pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyh
 }
 
 async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        options.config.has_devices(),
-        "the configuration names no device ([gnss], [imu] or a [[can]] interface), so there \
-         is nothing to run. The smallest working configuration is a receiver:\n\n\
-         [gnss]\nport = \"/dev/ttyUSB0\"\n\n\
-         devices/vehicle.example.toml is a complete one, and `chassisd sim` runs a simulated \
-         vehicle without hardware"
-    );
+    options
+        .config
+        .require_devices(std::path::Path::new("the configuration"))?;
     log_calibration(&options.config);
     // The broker first: its process takes a moment to start on a slow PC, and nothing that
     // keeps time (the drives' set-up) should be waiting meanwhile.

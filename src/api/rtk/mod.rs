@@ -141,7 +141,8 @@ impl RtkDialect {
                     .and_then(|d| {
                         Trajectory::deserialize_value(d).map_err(|e| format!("data: {e}"))
                     })
-                    .and_then(|t| {
+                    .and_then(|mut t| {
+                        t.name = trajectory::canonical_name(&t.name).map_err(|e| e.to_string())?;
                         t.check().map_err(|e| e.to_string())?;
                         self.store.save(&t).map_err(|e| e.to_string())
                     });
@@ -150,8 +151,8 @@ impl RtkDialect {
             "delete_trajectory" => {
                 let result = match message.get("name").and_then(Value::as_str) {
                     None => Err("no \"name\" string".to_owned()),
-                    Some(name) => trajectory::check_name(name)
-                        .and_then(|()| self.store.delete(name))
+                    Some(name) => trajectory::canonical_name(name)
+                        .and_then(|name| self.store.delete(&name))
                         .map_err(|e: TrajectoryError| e.to_string()),
                 };
                 Self::feedback(&cmd, result, out);
@@ -215,6 +216,7 @@ impl RtkDialect {
             .ok_or("no \"speed\" number (m/s)")
             .map_err(str::to_owned)
             .and_then(crate::api::task_speed)?;
+        let name = &trajectory::canonical_name(name).map_err(|e| e.to_string())?;
         let trajectory = self.store.get(name).map_err(|e| e.to_string())?;
         if id >= trajectory.data.len() {
             return Err(format!(

@@ -95,12 +95,34 @@ pub enum TrajectoryError {
     Unconfigured,
 }
 
+/// A name as stored: in Unicode NFC (the same letters typed on any system are one name),
+/// then checked.
+pub fn canonical_name(name: &str) -> Result<String, TrajectoryError> {
+    use unicode_normalization::UnicodeNormalization;
+    let nfc: String = name.nfc().collect();
+    check_name(&nfc)?;
+    Ok(nfc)
+}
+
 /// Checks a name: it becomes a file name, so no separators, no dot files, no control
-/// characters, and a bounded length.
+/// characters, and a bounded length; and it reads as what it is: NFC, no invisible
+/// characters, no white space at either end.
 pub fn check_name(name: &str) -> Result<(), TrajectoryError> {
     let bad = |why| Err(TrajectoryError::Name(name.to_owned(), why));
     if name.is_empty() {
         return bad("it is empty");
+    }
+    if name.starts_with(char::is_whitespace) || name.ends_with(char::is_whitespace) {
+        return bad("it begins or ends with white space");
+    }
+    if name.chars().any(is_invisible) {
+        return bad(
+            "it contains an invisible character (a zero-width space, a byte-order mark, a \
+             joiner, a soft hyphen)",
+        );
+    }
+    if !unicode_normalization::is_nfc(name) {
+        return bad("it is not in Unicode NFC (write accented letters as single characters)");
     }
     if name.len() > MAX_NAME_BYTES {
         return bad("it is longer than 64 bytes");
@@ -117,6 +139,16 @@ pub fn check_name(name: &str) -> Result<(), TrajectoryError> {
         );
     }
     Ok(())
+}
+
+/// Unicode's default-ignorable code points: nothing shows where they stand, so two names
+/// that differ by one look the same.
+fn is_invisible(c: char) -> bool {
+    matches!(c,
+        '\u{00AD}' | '\u{034F}' | '\u{061C}' | '\u{115F}'..='\u{1160}' | '\u{17B4}'..='\u{17B5}'
+        | '\u{180B}'..='\u{180F}' | '\u{200B}'..='\u{200F}' | '\u{2060}'..='\u{206F}'
+        | '\u{3164}' | '\u{FE00}'..='\u{FE0F}' | '\u{FEFF}' | '\u{FFA0}' | '\u{FFF0}'..='\u{FFF8}'
+        | '\u{1BCA0}'..='\u{1BCA3}' | '\u{1D173}'..='\u{1D17A}' | '\u{E0000}'..='\u{E0FFF}')
 }
 
 /// The bidirectional embedding, override and isolate controls: they make a name display
@@ -437,9 +469,20 @@ mod tests {
             &"n".repeat(65),
             "lawn\u{202E}1.txt",
             "\u{2066}north\u{2069}",
+            "\u{200B}",
+            "\u{FEFF}",
+            " ",
+            " lawn",
+            "lawn ",
+            "law\u{200D}n",
+            "cafe\u{301}",
         ] {
             assert!(check_name(bad).is_err(), "{bad:?}");
         }
+        // The same letters, composed or not, are one name.
+        assert_eq!(canonical_name("cafe\u{301}").unwrap(), "caf\u{E9}");
+        assert_eq!(canonical_name("caf\u{E9}").unwrap(), "caf\u{E9}");
+        assert!(canonical_name("\u{200B}").is_err());
         for good in ["test5", "13", "北区", "lawn 1"] {
             assert!(check_name(good).is_ok(), "{good:?}");
         }
