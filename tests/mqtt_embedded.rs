@@ -525,3 +525,67 @@ fn random_sessions_never_bring_the_broker_down() {
     );
     daemon.stop();
 }
+
+#[test]
+fn silent_malformed_and_unread_clients_cost_the_broker_nothing() {
+    use std::io::{Read, Write};
+    let port = free_port();
+    let mut daemon = Proc::start(&["sim", "--broker-port", &port.to_string()]);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let clients = Mosquitto::clients_for(port);
+    // 100 connections that never say a word: 64 wait their handshake out, the rest are
+    // closed at once; after the 5 s handshake limit, all of them.
+    let silent: Vec<std::net::TcpStream> = (0..100)
+        .map(|_| std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect"))
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let closed = |s: &std::net::TcpStream| {
+        s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+        matches!((&*s).read(&mut [0u8; 1]), Ok(0))
+    };
+    let early = silent.iter().filter(|s| closed(s)).count();
+    assert!(early >= 36, "{early} closed at once");
+    // A client in its handshake meanwhile still gets in.
+    assert!(one_status(&clients)["rtk"].is_object());
+    std::thread::sleep(Duration::from_secs(6));
+    assert_eq!(silent.iter().filter(|s| closed(s)).count(), 100);
+    // Garbage after a good CONNECT: the session ends, nothing else does.
+    let (mut s, code) = raw::connect(port, 4, "garbage", None);
+    assert_eq!(code, Some(0));
+    s.write_all(&[0xff; 64]).expect("garbage");
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    assert!(
+        matches!(s.read(&mut [0u8; 16]), Ok(0)),
+        "closed by the gate"
+    );
+    // A subscriber to everything that never reads delays nobody else.
+    let (mut lazy, code) = raw::connect(port, 4, "lazy", None);
+    assert_eq!(code, Some(0));
+    lazy.write_all(&[0x82, 0x06, 0x00, 0x01, 0x00, 0x01, b'#', 0x00])
+        .expect("subscribe");
+    let status = clients.subscribe(&["base_status"]);
+    let start = Instant::now();
+    let mut arrivals = Vec::new();
+    while start.elapsed() < Duration::from_secs(10) {
+        if status.next_on("base_status", WAIT).is_some() {
+            arrivals.push(Instant::now());
+        }
+    }
+    let largest = arrivals
+        .windows(2)
+        .map(|w| (w[1] - w[0]).as_secs_f64())
+        .fold(0.0, f64::max);
+    assert!(arrivals.len() >= 90, "{} statuses in 10 s", arrivals.len());
+    assert!(largest < 0.5, "largest gap {largest:.3} s");
+    daemon.log.extend(daemon.stderr.try_iter());
+    assert!(
+        !daemon
+            .log
+            .iter()
+            .any(|l| l.contains("embedded broker stopped")),
+        "{:#?}",
+        daemon.log
+    );
+    drop(lazy);
+    daemon.stop();
+}
