@@ -250,22 +250,8 @@ mod broker {
         b"\x26\x00\x01k\x00\x01v",
     ];
 
-    fn varint(mut n: usize, out: &mut Vec<u8>) {
-        loop {
-            let digit = (n % 128) as u8;
-            n /= 128;
-            out.push(if n > 0 { digit | 0x80 } else { digit });
-            if n == 0 {
-                return;
-            }
-        }
-    }
-
     fn packet(first: u8, body: &[u8]) -> Vec<u8> {
-        let mut p = vec![first];
-        varint(body.len(), &mut p);
-        p.extend_from_slice(body);
-        p
+        wire::packet(first, body)
     }
 
     fn string(s: &[u8], out: &mut Vec<u8>) {

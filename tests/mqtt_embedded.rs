@@ -375,23 +375,7 @@ mod chaos {
 
     use super::raw;
 
-    fn varint(mut n: usize, out: &mut Vec<u8>) {
-        loop {
-            let digit = (n % 128) as u8;
-            n /= 128;
-            out.push(if n > 0 { digit | 0x80 } else { digit });
-            if n == 0 {
-                return;
-            }
-        }
-    }
-
-    fn packet(first: u8, body: &[u8]) -> Vec<u8> {
-        let mut p = vec![first];
-        varint(body.len(), &mut p);
-        p.extend_from_slice(body);
-        p
-    }
+    use chassisd::broker::wire::packet;
 
     fn string(s: &str, out: &mut Vec<u8>) {
         out.extend_from_slice(&(s.len() as u16).to_be_bytes());

@@ -709,7 +709,8 @@ async fn connection_flood(host: String, port: u16, hold: Duration) -> anyhow::Re
         let id = format!("soak-hold-{}-{i}", std::process::id());
         let connect = tokio::time::timeout(Duration::from_secs(2), async {
             let mut s = tokio::net::TcpStream::connect((host.as_str(), port)).await?;
-            s.write_all(&raw_connect(&id)).await?;
+            s.write_all(&crate::broker::wire::plain_connect(&id, 60))
+                .await?;
             let mut ack = [0u8; 4];
             s.read_exact(&mut ack).await?;
             Ok::<_, std::io::Error>(s)
@@ -726,28 +727,6 @@ async fn connection_flood(host: String, port: u16, hold: Duration) -> anyhow::Re
 
 /// Connections the connection flood holds: beyond the embedded broker's 64.
 const FLOOD_CONNECTIONS: usize = 80;
-
-/// An MQTT 3.1.1 CONNECT with a 60 s keep-alive and a clean session.
-fn raw_connect(client_id: &str) -> Vec<u8> {
-    let id = client_id.as_bytes();
-    let mut packet = vec![
-        0x10,
-        (12 + id.len()) as u8,
-        0,
-        4,
-        b'M',
-        b'Q',
-        b'T',
-        b'T',
-        4,
-        0x02,
-        0,
-        60,
-    ];
-    packet.extend_from_slice(&(id.len() as u16).to_be_bytes());
-    packet.extend_from_slice(id);
-    packet
-}
 
 async fn flood(host: String, port: u16, topics: Topics, hold: Duration) -> anyhow::Result<()> {
     let o = MqttOptions::new(

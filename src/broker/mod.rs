@@ -3,5 +3,6 @@
 //! are `runtime::broker`'s.
 
 pub mod admission;
+mod cursor;
 pub mod session;
 pub mod wire;

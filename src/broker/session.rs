@@ -12,6 +12,7 @@
 
 use std::collections::HashSet;
 
+use super::cursor::Cursor;
 use super::wire::{Header, Version, WireError, kind};
 
 /// Distinct topic and filter names the broker may hold logs for. A vehicle's own dialects
@@ -330,136 +331,6 @@ pub fn valid_filter(filter: &str) -> bool {
         let single_ok = !level.contains('+') || *level == "+";
         multi_ok && single_ok
     })
-}
-
-/// Reads a packet's body without reading past it.
-struct Cursor<'a> {
-    body: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Cursor<'a> {
-    fn new(body: &'a [u8]) -> Self {
-        Self { body, at: 0 }
-    }
-
-    fn done(&self) -> bool {
-        self.at >= self.body.len()
-    }
-
-    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], WireError> {
-        let end = self.at.checked_add(n).ok_or(WireError::Truncated(field))?;
-        let bytes = self
-            .body
-            .get(self.at..end)
-            .ok_or(WireError::Truncated(field))?;
-        self.at = end;
-        Ok(bytes)
-    }
-
-    fn u8(&mut self, field: &'static str) -> Result<u8, WireError> {
-        Ok(self.take(1, field)?[0])
-    }
-
-    fn u16(&mut self, field: &'static str) -> Result<u16, WireError> {
-        let b = self.take(2, field)?;
-        Ok(u16::from_be_bytes([b[0], b[1]]))
-    }
-
-    /// A packet identifier, which MQTT forbids to be 0.
-    fn packet_id(&mut self) -> Result<u16, WireError> {
-        match self.u16("packet identifier")? {
-            0 => Err(WireError::Truncated("packet identifier (0)")),
-            id => Ok(id),
-        }
-    }
-
-    fn string(&mut self, field: &'static str) -> Result<&'a str, WireError> {
-        let n = self.u16(field)?;
-        let s = std::str::from_utf8(self.take(usize::from(n), field)?)
-            .map_err(|_| WireError::BadString(field))?;
-        if s.contains('\0') {
-            return Err(WireError::BadString(field));
-        }
-        Ok(s)
-    }
-
-    fn varint(&mut self, field: &'static str) -> Result<u32, WireError> {
-        let mut value = 0u32;
-        for i in 0..4 {
-            let digit = self.u8(field)?;
-            value |= u32::from(digit & 0x7f) << (7 * i);
-            if digit & 0x80 == 0 {
-                return Ok(value);
-            }
-        }
-        Err(WireError::BadRemainingLength)
-    }
-
-    /// MQTT 5 properties, each read by its type; returns the identifiers present.
-    fn properties(&mut self) -> Result<Vec<u8>, WireError> {
-        Ok(self
-            .read_properties()?
-            .into_iter()
-            .map(|(id, _)| id)
-            .collect())
-    }
-
-    /// Whether the properties carry a subscription identifier of 0.
-    fn subscription_id_of_zero(&mut self) -> Result<bool, WireError> {
-        Ok(self
-            .read_properties()?
-            .iter()
-            .any(|&(id, value)| id == 0x0b && value == Some(0)))
-    }
-
-    /// Properties as (identifier, integer value if it has one).
-    fn read_properties(&mut self) -> Result<Vec<(u8, Option<u32>)>, WireError> {
-        const FIELD: &str = "properties";
-        let length = self.varint(FIELD)? as usize;
-        let end = self
-            .at
-            .checked_add(length)
-            .ok_or(WireError::Truncated(FIELD))?;
-        if end > self.body.len() {
-            return Err(WireError::Truncated(FIELD));
-        }
-        let mut found = Vec::new();
-        while self.at < end {
-            let id = self.u8(FIELD)?;
-            let value = match id {
-                0x01 | 0x17 | 0x19 | 0x24 | 0x25 | 0x28 | 0x29 | 0x2a => {
-                    Some(u32::from(self.u8(FIELD)?))
-                }
-                0x13 | 0x21 | 0x22 | 0x23 => Some(u32::from(self.u16(FIELD)?)),
-                0x02 | 0x11 | 0x18 | 0x27 => {
-                    let b = self.take(4, FIELD)?;
-                    Some(u32::from_be_bytes([b[0], b[1], b[2], b[3]]))
-                }
-                0x0b => Some(self.varint(FIELD)?),
-                0x03 | 0x08 | 0x12 | 0x15 | 0x1a | 0x1c | 0x1f => {
-                    self.string(FIELD)?;
-                    None
-                }
-                0x09 | 0x16 => {
-                    let n = self.u16(FIELD)?;
-                    self.take(usize::from(n), FIELD)?;
-                    None
-                }
-                0x26 => {
-                    self.string(FIELD)?;
-                    self.string(FIELD)?;
-                    None
-                }
-                _ => return Err(WireError::Truncated("property (unknown identifier)")),
-            };
-            found.push((id, value));
-        }
-        if self.at != end {
-            return Err(WireError::Truncated(FIELD));
-        }
-        Ok(found)
-    }
 }
 
 #[cfg(test)]

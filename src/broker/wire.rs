@@ -4,6 +4,8 @@
 
 use std::fmt;
 
+use super::cursor::Cursor;
+
 /// MQTT control packet types (the fixed header's high nibble).
 pub mod kind {
     pub const CONNECT: u8 = 1;
@@ -183,72 +185,10 @@ pub struct Connect {
     pub will_topic: Option<String>,
 }
 
-/// A cursor over a packet body that fails instead of reading past the end.
-struct Fields<'a> {
-    body: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Fields<'a> {
-    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], WireError> {
-        let end = self.at.checked_add(n).ok_or(WireError::Truncated(field))?;
-        let bytes = self
-            .body
-            .get(self.at..end)
-            .ok_or(WireError::Truncated(field))?;
-        self.at = end;
-        Ok(bytes)
-    }
-
-    fn u8(&mut self, field: &'static str) -> Result<u8, WireError> {
-        Ok(self.take(1, field)?[0])
-    }
-
-    fn u16(&mut self, field: &'static str) -> Result<u16, WireError> {
-        let b = self.take(2, field)?;
-        Ok(u16::from_be_bytes([b[0], b[1]]))
-    }
-
-    /// Two length bytes, then that many bytes.
-    fn binary(&mut self, field: &'static str) -> Result<&'a [u8], WireError> {
-        let n = self.u16(field)?;
-        self.take(usize::from(n), field)
-    }
-
-    /// A UTF-8 string without U+0000, as MQTT requires of every string.
-    fn string(&mut self, field: &'static str) -> Result<&'a str, WireError> {
-        let s =
-            std::str::from_utf8(self.binary(field)?).map_err(|_| WireError::BadString(field))?;
-        if s.contains('\0') {
-            return Err(WireError::BadString(field));
-        }
-        Ok(s)
-    }
-
-    /// A variable byte integer (MQTT 5 property lengths).
-    fn varint(&mut self, field: &'static str) -> Result<usize, WireError> {
-        let mut value = 0usize;
-        for i in 0..4 {
-            let digit = self.u8(field)?;
-            value |= usize::from(digit & 0x7f) << (7 * i);
-            if digit & 0x80 == 0 {
-                return Ok(value);
-            }
-        }
-        Err(WireError::BadRemainingLength)
-    }
-
-    /// MQTT 5 properties: their length, then skipped whole.
-    fn skip_properties(&mut self, field: &'static str) -> Result<(), WireError> {
-        let n = self.varint(field)?;
-        self.take(n, field).map(|_| ())
-    }
-}
-
 /// Reads a CONNECT body (the bytes after the fixed header). A version the broker does not
 /// speak is returned, not refused, so that the caller can answer it with a CONNACK.
 pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
-    let mut f = Fields { body, at: 0 };
+    let mut f = Cursor::new(body);
     let name = f.binary("protocol name")?;
     let level = f.u8("protocol level")?;
     let version = match (name, level) {
@@ -290,7 +230,7 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
     let password = has_password
         .then(|| f.binary("password").map(<[u8]>::to_vec))
         .transpose()?;
-    let left = body.len() - f.at;
+    let left = f.left();
     if left != 0 {
         return Err(WireError::TrailingBytes(left));
     }
@@ -378,6 +318,33 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
     }
 }
 
+/// A whole packet: the first byte (type and flags), the remaining length, the body.
+pub fn packet(first: u8, body: &[u8]) -> Vec<u8> {
+    let mut p = Vec::with_capacity(body.len() + 5);
+    p.push(first);
+    let mut n = body.len();
+    loop {
+        let digit = (n % 128) as u8;
+        n /= 128;
+        p.push(if n > 0 { digit | 0x80 } else { digit });
+        if n == 0 {
+            break;
+        }
+    }
+    p.extend_from_slice(body);
+    p
+}
+
+/// An MQTT 3.1.1 CONNECT with a clean session, `keep_alive_s` and nothing else (the broker's
+/// own probe, and load tools).
+pub fn plain_connect(client_id: &str, keep_alive_s: u16) -> Vec<u8> {
+    let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', 4, 0x02];
+    body.extend_from_slice(&keep_alive_s.to_be_bytes());
+    body.extend_from_slice(&(client_id.len() as u16).to_be_bytes());
+    body.extend_from_slice(client_id.as_bytes());
+    packet(kind::CONNECT << 4, &body)
+}
+
 /// A DISCONNECT that ends a session normally (the same bytes in 3.1.1 and 5.0): the gate
 /// sends it to the broker for a client that left during the handshake, so no will fires.
 pub const DISCONNECT: [u8; 2] = [0xe0, 0x00];
@@ -427,18 +394,7 @@ mod tests {
             string(&mut body, user.as_bytes());
             string(&mut body, password);
         }
-        let mut packet = vec![0x10];
-        let mut n = body.len();
-        loop {
-            let digit = (n % 128) as u8;
-            n /= 128;
-            packet.push(if n > 0 { digit | 0x80 } else { digit });
-            if n == 0 {
-                break;
-            }
-        }
-        packet.extend_from_slice(&body);
-        packet
+        packet(0x10, &body)
     }
 
     fn parse(packet: &[u8]) -> Result<Connect, WireError> {

@@ -403,18 +403,7 @@ pub mod raw {
             string(user.as_bytes());
             string(password.as_bytes());
         }
-        let mut packet = vec![0x10];
-        let mut n = body.len();
-        loop {
-            let digit = (n % 128) as u8;
-            n /= 128;
-            packet.push(if n > 0 { digit | 0x80 } else { digit });
-            if n == 0 {
-                break;
-            }
-        }
-        packet.extend_from_slice(&body);
-        packet
+        chassisd::broker::wire::packet(0x10, &body)
     }
 
     /// Connects and sends `packet`; returns the socket and the CONNACK's return code (3.1.1)

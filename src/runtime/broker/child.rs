@@ -272,7 +272,7 @@ async fn probe(upstream: SocketAddr, client_id: String) {
     let connected = tokio::time::timeout(START_TIMEOUT, async {
         let mut s = TcpStream::connect(upstream).await?;
         s.set_nodelay(true)?;
-        s.write_all(&connect_packet(&client_id)).await?;
+        s.write_all(&wire::plain_connect(&client_id, 60)).await?;
         let mut ack = [0u8; 4];
         s.read_exact(&mut ack).await?;
         Ok::<_, std::io::Error>((s, ack))
@@ -298,29 +298,6 @@ async fn probe(upstream: SocketAddr, client_id: String) {
             Err(_) => fail("the broker did not answer its probe within 0.7 s"),
         }
     }
-}
-
-/// A minimal MQTT 3.1.1 CONNECT: clean session, keep-alive 60 s, no will or credentials
-/// (the probe talks to rumqttd directly, behind the gate).
-fn connect_packet(client_id: &str) -> Vec<u8> {
-    let id = client_id.as_bytes();
-    let mut packet = vec![
-        0x10,
-        (12 + id.len()) as u8,
-        0,
-        4,
-        b'M',
-        b'Q',
-        b'T',
-        b'T',
-        4,
-        0x02,
-        0,
-        60,
-    ];
-    packet.extend_from_slice(&(id.len() as u16).to_be_bytes());
-    packet.extend_from_slice(id);
-    packet
 }
 
 /// Sends the counters to chassisd every [`STATS_EVERY`], and logs what changed.
@@ -367,7 +344,7 @@ mod tests {
 
     #[test]
     fn the_probes_connect_is_one_the_gate_would_read() {
-        let packet = connect_packet("chassisd-probe-0123456789abcdef");
+        let packet = wire::plain_connect("chassisd-probe-0123456789abcdef", 60);
         let h = wire::header(&packet, 1 << 16).unwrap().unwrap();
         assert_eq!(h.total(), packet.len());
         let c = wire::connect(&packet[h.header_len..]).unwrap();
