@@ -17,7 +17,6 @@
 mod common;
 
 use std::path::Path;
-use std::time::Duration;
 
 use chassisd::engine::EngineOutput;
 use chassisd::record::{Record, RecordingWriter};
@@ -144,8 +143,9 @@ fn the_odom_frame_ends_where_the_reference_filter_does() {
         }
         sim.step(no_fix, &mut sink);
     }
-    let end = sim.time().saturating_add(Duration::from_millis(100));
-    sink.writer.finish(end).expect("recording closed");
+    // The recording ends where the lockstep stopped: a replay runs the control loop to
+    // its end, and ticks past the last recorded one would transmit frames never recorded.
+    sink.writer.finish(sim.time()).expect("recording closed");
 
     let out = common::replay(&recording);
     let last: serde_json::Value = String::from_utf8_lossy(&out.stdout)
