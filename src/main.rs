@@ -232,6 +232,15 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// The map filter on a real robot's recording (a Husky's SBAS fixes, wheels and gyro:
+    /// ../shared/data/ekf/husky-test1): GNSS outages against the odom frame's dead
+    /// reckoning, distance to the fixes, the parked pose and wild fixes; the last line is
+    /// a JSON object with every figure.
+    Husky {
+        /// The recording's folder (gps.csv, odom.csv, imu.csv).
+        #[arg(long, default_value = "../shared/data/ekf/husky-test1")]
+        data: PathBuf,
+    },
     /// Score the fusion filter on scripted drives of the simulated vehicle against its
     /// truth; the last line is a JSON object with every figure and "pass". Exits with
     /// status 1 when a target is missed.
@@ -396,6 +405,16 @@ fn main() -> ExitCode {
 /// a target).
 fn run(cli: Cli) -> anyhow::Result<bool> {
     match cli.command {
+        Command::Bench {
+            which: BenchCommand::Husky { data },
+        } => {
+            use chassisd::bench::husky;
+            let data = husky::HuskyData::load(&data)?;
+            let report = husky::report(&data, Default::default());
+            print!("{report}");
+            println!("{}", serde_json::to_string(&report)?);
+            Ok(true)
+        }
         Command::Bench {
             which:
                 BenchCommand::Fusion {

@@ -3,4 +3,5 @@
 pub mod ekf;
 pub mod geodesy;
 pub mod localizer;
+pub mod map_filter;
 pub mod odometry;

@@ -1,0 +1,964 @@
+//! The map frame of REP-105 stood on the `odom` frame: the map pose is the odom pose carried
+//! by a map→odom correction, and GNSS estimates that correction.
+//!
+//! - The state is the map pose (x, y, yaw) and the slowly wandering part of the GNSS error
+//!   (east, north). It moves only by the odom frame's increments: between fixes, and through
+//!   an outage, the map pose moves exactly as the odom pose does, so its drift is the odom
+//!   frame's. The increments' uncertainty grows with the distance driven and the angle turned
+//!   (and with time while moving, for the gyro's bias), never while the wheels stand still.
+//! - A fix is taken only when it agrees with a neighbour: the displacement between two fixes
+//!   must match the odom frame's between their times, within their noise and the wheels' slip.
+//!   A fix that disagrees with the run before it is held; it is taken once enough later fixes
+//!   agree with it (a relocation starts from them all), and dropped otherwise. A lone wild fix
+//!   is never taken, at any time.
+//! - Fixes of a trusted quality (RTK) that agree with each other are believed over the wheels:
+//!   when they fail the filter's gate the wheels slipped, and the position's uncertainty is
+//!   widened until they pass. Fixes of a lesser quality (DGPS, SBAS, single) that step away
+//!   together are a new realisation of their slow error, which the GNSS-error state absorbs,
+//!   so a step turns neither the heading nor anything the dead reckoning uses.
+//! - With one antenna and no course the heading comes from the motion between fixes: the odom
+//!   path is fitted to the agreeing fixes (a rigid 2-D fit) once they span enough distance
+//!   against their σ.
+//! - Late fixes are placed through the odom frame's recorded poses: no rewinding.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use nalgebra::{SMatrix, SVector};
+
+use super::ekf::wrap;
+use super::odometry::OdomPose;
+use crate::time::Timestamp;
+
+const N: usize = 5;
+const X: usize = 0;
+const Y: usize = 1;
+const YAW: usize = 2;
+const GE: usize = 3;
+const GN: usize = 4;
+
+type State = SVector<f64, N>;
+type Cov = SMatrix<f64, N, N>;
+
+/// χ² gate, 2 degrees of freedom, 99.9 %.
+const GATE_2: f64 = 13.82;
+/// χ² gate, 1 degree of freedom, 99.9 %.
+const GATE_1: f64 = 10.83;
+/// The heading's 1σ before anything has shown it, rad.
+const UNKNOWN_YAW_SIGMA: f64 = std::f64::consts::PI;
+/// The fit of the odom path to the fixes sets the heading once its 1σ is within this, rad.
+const FIT_YAW_SIGMA: f64 = 0.1;
+/// Fixes a heading fit keeps (the latest ones), bounding its memory.
+const FIT_FIXES: usize = 256;
+/// Odom poses kept to place late fixes.
+const ODOM_HISTORY: usize = 1024;
+/// A held run of fixes that disagrees with the one before is taken once it has this many.
+pub const MIN_RUN: usize = 3;
+/// Two fixes agree when their displacement matches the odom frame's within this χ²
+/// (2 degrees of freedom, 99.99 %) ...
+const AGREE_GATE: f64 = 18.4;
+/// ... where the wheels may have slipped by this fraction of the distance between them ...
+const SLIP_FRACTION: f64 = 0.3;
+/// ... and the odom frame's heading may have turned by this much per second between them, rad
+/// (an unknown gyro bias).
+const AGREE_YAW_RATE: f64 = 0.01;
+
+/// How far a fix of one quality is trusted over the wheels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trust {
+    /// RTK fixed or float: when such fixes agree with each other and not with the filter, the
+    /// wheels slipped.
+    OverWheels,
+    /// DGPS, SBAS or single point: fixes that step away together stepped in their slow error.
+    UnderWheels,
+}
+
+/// Settings of the map filter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapFilterConfig {
+    /// GNSS antenna in the vehicle frame (x forward, y left), m.
+    pub antenna: (f64, f64),
+    /// Odom distance error, variance per metre driven along the heading, m²/m.
+    pub along_per_m: f64,
+    /// The same across the heading (sideways slip), m²/m.
+    pub across_per_m: f64,
+    /// Odom heading error, variance per radian turned, rad²/rad.
+    pub yaw_per_rad: f64,
+    /// Odom heading error, variance per second while moving (the gyro bias's residue), rad²/s.
+    pub yaw_per_s: f64,
+    /// The slowly wandering part of a fix's error, as a fraction of its 1σ.
+    pub gnss_correlated_fraction: f64,
+    /// That part's correlation time, s.
+    pub gnss_correlation_s: f64,
+    /// Dual-antenna heading noise, 1σ rad.
+    pub heading_sigma_rad: f64,
+    /// Fixes disagreeing with the filter for this long (and at least [`MIN_RUN`] of them,
+    /// agreeing with each other) mean the vehicle is elsewhere, whatever their quality.
+    pub relocate_after: Duration,
+}
+
+impl Default for MapFilterConfig {
+    fn default() -> Self {
+        Self {
+            antenna: (0.0, 0.0),
+            along_per_m: 1e-2,
+            across_per_m: 4e-3,
+            yaw_per_rad: 4e-4,
+            yaw_per_s: 2e-5,
+            gnss_correlated_fraction: 0.95,
+            gnss_correlation_s: 60.0,
+            heading_sigma_rad: 0.5f64.to_radians(),
+            relocate_after: Duration::from_secs(3),
+        }
+    }
+}
+
+/// One GNSS position fix of the antenna, in the local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fix {
+    /// The epoch it describes.
+    pub t: Timestamp,
+    /// East, north, m.
+    pub en: (f64, f64),
+    /// 1σ east, north, m.
+    pub sigma: (f64, f64),
+    /// How far it is trusted over the wheels.
+    pub trust: Trust,
+}
+
+/// What became of a fix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FixOutcome {
+    /// Applied (with the fixes it released, if any).
+    Taken,
+    /// Held until later fixes agree with it.
+    Held,
+    /// Before the first odom pose: nothing to place it on.
+    NoOdom,
+}
+
+/// Counters.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MapFilterStats {
+    /// Fixes applied.
+    pub taken: u64,
+    /// Fixes dropped for disagreeing with their neighbours.
+    pub dropped: u64,
+    /// Agreeing fixes that failed the filter's gate and widened it (wheels slipped, or a
+    /// relocation).
+    pub widened: u64,
+    /// Headings or courses applied.
+    pub headings: u64,
+    /// Headings or courses rejected by the gate.
+    pub headings_rejected: u64,
+    /// Heading fits of the odom path to the fixes.
+    pub fits: u64,
+}
+
+/// A fix with the odom pose at its time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Placed {
+    fix: Fix,
+    odom: OdomPose,
+}
+
+/// The map filter.
+#[derive(Debug, Clone)]
+pub struct MapFilter {
+    config: MapFilterConfig,
+    x: State,
+    p: Cov,
+    started: bool,
+    /// The odom pose the state stands on, and its time.
+    odom: Option<(Timestamp, OdomPose)>,
+    history: VecDeque<(Timestamp, OdomPose)>,
+    /// The last fix taken.
+    last_accepted: Option<Placed>,
+    /// Fixes that disagreed with the last accepted one, agreeing among themselves.
+    held: Vec<Placed>,
+    /// Accepted fixes for a heading fit, while the heading is unknown.
+    fit: VecDeque<Placed>,
+    /// Agreeing fixes that failed the gate without a break: first time and count.
+    disagreeing: Option<(Timestamp, u32)>,
+    last_sigma: Option<f64>,
+    /// Sum and count of the fixes' normalised innovations squared (2 DOF), to check the
+    /// noise model: their mean is 2 when it is right.
+    nis: (f64, u64),
+    stats: MapFilterStats,
+    events: Vec<String>,
+}
+
+impl MapFilter {
+    /// A filter with nothing known.
+    pub fn new(config: MapFilterConfig) -> Self {
+        Self {
+            config,
+            x: State::zeros(),
+            p: Cov::zeros(),
+            started: false,
+            odom: None,
+            history: VecDeque::new(),
+            last_accepted: None,
+            held: Vec::new(),
+            fit: VecDeque::new(),
+            disagreeing: None,
+            last_sigma: None,
+            nis: (0.0, 0),
+            stats: MapFilterStats::default(),
+            events: Vec::new(),
+        }
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> MapFilterStats {
+        self.stats
+    }
+
+    /// The fixes' mean normalised innovation squared per degree of freedom (1 when the
+    /// noise model is right), once the heading is known.
+    pub fn mean_nis(&self) -> Option<f64> {
+        (self.nis.1 > 0).then(|| self.nis.0 / self.nis.1 as f64 / 2.0)
+    }
+
+    /// Takes what happened that an operator should read in the log.
+    pub fn take_events(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Whether a fix has placed the map pose.
+    pub fn is_started(&self) -> bool {
+        self.started
+    }
+
+    /// The map pose at the latest odom pose: x, y (m), yaw (rad).
+    pub fn pose(&self) -> Option<(f64, f64, f64)> {
+        self.started.then(|| (self.x[X], self.x[Y], self.x[YAW]))
+    }
+
+    /// var x, cov xy, var y (m²), var yaw (rad²).
+    pub fn covariance(&self) -> [f64; 4] {
+        [
+            self.p[(X, X)],
+            self.p[(X, Y)],
+            self.p[(Y, Y)],
+            self.p[(YAW, YAW)],
+        ]
+    }
+
+    /// The 1σ position uncertainty (largest axis), m.
+    pub fn position_sigma(&self) -> f64 {
+        let (a, b, c) = (self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)]);
+        let mean = (a + b) / 2.0;
+        let spread = (((a - b) / 2.0).powi(2) + c * c).sqrt();
+        (mean + spread).max(0.0).sqrt()
+    }
+
+    /// The 1σ yaw uncertainty, rad.
+    pub fn yaw_sigma(&self) -> f64 {
+        self.p[(YAW, YAW)].max(0.0).sqrt()
+    }
+
+    /// The map→odom correction: the odom frame's origin and rotation in the map frame
+    /// (x, y, yaw), so that map pose = correction ∘ odom pose.
+    pub fn map_to_odom(&self) -> Option<(f64, f64, f64)> {
+        let (_, o) = self.odom?;
+        let (x, y, yaw) = self.pose()?;
+        let rot = wrap(yaw - o.yaw);
+        let (s, c) = rot.sin_cos();
+        Some((x - (c * o.x - s * o.y), y - (s * o.x + c * o.y), rot))
+    }
+
+    /// The map pose of an odom pose, through the current correction.
+    pub fn map_pose_of(&self, o: &OdomPose) -> Option<(f64, f64, f64)> {
+        let (tx, ty, rot) = self.map_to_odom()?;
+        let (s, c) = rot.sin_cos();
+        Some((
+            tx + c * o.x - s * o.y,
+            ty + s * o.x + c * o.y,
+            wrap(rot + o.yaw),
+        ))
+    }
+
+    /// The odom frame's pose at `t`: the state moves by its increment.
+    pub fn odom(&mut self, t: Timestamp, pose: OdomPose) {
+        if let Some((t0, o0)) = self.odom.filter(|(t0, _)| t >= *t0) {
+            if self.started {
+                self.propagate(&o0, &pose, t.saturating_since(t0).as_secs_f64());
+            }
+        } else if self.odom.is_some() {
+            // An odom pose older than the last: out of order, ignored.
+            return;
+        }
+        self.odom = Some((t, pose));
+        self.history.push_back((t, pose));
+        while self.history.len() > ODOM_HISTORY {
+            self.history.pop_front();
+        }
+    }
+
+    /// Moves the state by the odom increment from `a` to `b`.
+    fn propagate(&mut self, a: &OdomPose, b: &OdomPose, dt: f64) {
+        let (sa, ca) = a.yaw.sin_cos();
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        // The increment in the vehicle frame at `a`.
+        let (fwd, left) = (ca * dx + sa * dy, -sa * dx + ca * dy);
+        let turn = wrap(b.yaw - a.yaw);
+        let ds = fwd.hypot(left);
+        if ds == 0.0 && turn == 0.0 {
+            return;
+        }
+        let (s, c) = self.x[YAW].sin_cos();
+        self.x[X] += c * fwd - s * left;
+        self.x[Y] += s * fwd + c * left;
+        self.x[YAW] = wrap(self.x[YAW] + turn);
+        let mut f = Cov::identity();
+        f[(X, YAW)] = -(s * fwd + c * left);
+        f[(Y, YAW)] = c * fwd - s * left;
+        let mut q = Cov::zeros();
+        let along = self.config.along_per_m * ds;
+        let across = self.config.across_per_m * ds;
+        // Along and across the direction of the increment, in the map frame.
+        let (sh, ch) = (self.x[YAW] - turn / 2.0).sin_cos();
+        q[(X, X)] = along * ch * ch + across * sh * sh;
+        q[(Y, Y)] = along * sh * sh + across * ch * ch;
+        q[(X, Y)] = (along - across) * sh * ch;
+        q[(Y, X)] = q[(X, Y)];
+        q[(YAW, YAW)] = self.config.yaw_per_rad * turn.abs() + self.config.yaw_per_s * dt;
+        self.p = f * self.p * f.transpose() + q;
+        // The GNSS error's slow part decays with time (while moving or not: handled in
+        // `decay_gnss_error` at each fix).
+    }
+
+    fn decay_gnss_error(&mut self, dt: f64, sigma: (f64, f64)) {
+        if dt <= 0.0 {
+            return;
+        }
+        let phi = (-dt / self.config.gnss_correlation_s.max(1e-3)).exp();
+        let mut f = Cov::identity();
+        f[(GE, GE)] = phi;
+        f[(GN, GN)] = phi;
+        self.x[GE] *= phi;
+        self.x[GN] *= phi;
+        let mut q = Cov::zeros();
+        q[(GE, GE)] = sigma.0.powi(2) * (1.0 - phi * phi);
+        q[(GN, GN)] = sigma.1.powi(2) * (1.0 - phi * phi);
+        self.p = f * self.p * f.transpose() + q;
+    }
+
+    fn reset_gnss_error(&mut self, sigma: (f64, f64)) {
+        for g in [GE, GN] {
+            self.x[g] = 0.0;
+            for i in 0..N {
+                self.p[(i, g)] = 0.0;
+                self.p[(g, i)] = 0.0;
+            }
+        }
+        self.p[(GE, GE)] = sigma.0.powi(2);
+        self.p[(GN, GN)] = sigma.1.powi(2);
+    }
+
+    /// The odom pose at `t`, interpolated from the history (the latest when `t` is newer).
+    fn odom_at(&self, t: Timestamp) -> Option<OdomPose> {
+        let at = self.history.partition_point(|(ht, _)| *ht <= t);
+        if at == 0 {
+            return self.history.front().map(|(_, o)| *o);
+        }
+        let (t0, o0) = self.history.get(at - 1)?;
+        let Some((t1, o1)) = self.history.get(at) else {
+            return Some(*o0);
+        };
+        let span = t1.saturating_since(*t0).as_secs_f64();
+        if span <= 0.0 {
+            return Some(*o0);
+        }
+        let k = t.saturating_since(*t0).as_secs_f64() / span;
+        Some(OdomPose {
+            x: o0.x + (o1.x - o0.x) * k,
+            y: o0.y + (o1.y - o0.y) * k,
+            yaw: wrap(o0.yaw + wrap(o1.yaw - o0.yaw) * k),
+            v: o0.v + (o1.v - o0.v) * k,
+            w: o0.w + (o1.w - o0.w) * k,
+        })
+    }
+
+    /// The antenna's position in the odom frame at odom pose `o`.
+    fn antenna_in_odom(&self, o: &OdomPose) -> (f64, f64) {
+        let (ax, ay) = self.config.antenna;
+        let (s, c) = o.yaw.sin_cos();
+        (o.x + c * ax - s * ay, o.y + s * ax + c * ay)
+    }
+
+    /// Whether fix `b` agrees with fix `a`: their displacement matches the odom frame's.
+    /// With the heading unknown only the lengths are compared.
+    fn agree(&self, a: &Placed, b: &Placed) -> bool {
+        let (pa, pb) = (self.antenna_in_odom(&a.odom), self.antenna_in_odom(&b.odom));
+        let (ox, oy) = (pb.0 - pa.0, pb.1 - pa.1);
+        let (fx, fy) = (b.fix.en.0 - a.fix.en.0, b.fix.en.1 - a.fix.en.1);
+        let dist = ox.hypot(oy);
+        let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
+        let white = (1.0 - self.config.gnss_correlated_fraction.powi(2)).max(0.0);
+        let fix_var = white * (a.fix.sigma.0.max(a.fix.sigma.1).powi(2)
+            + b.fix.sigma.0.max(b.fix.sigma.1).powi(2))
+            // The slow part moves little between neighbours, but it moves.
+            + self.slow_change_var(a, b);
+        let slip_var = (SLIP_FRACTION * dist).powi(2);
+        let turn_var = (AGREE_YAW_RATE * dt * dist).powi(2);
+        if self.started && self.yaw_sigma() < 0.5 {
+            // The odom displacement turned into the map frame by the correction.
+            let rot = self.map_to_odom().map_or(0.0, |(_, _, r)| r);
+            let (s, c) = rot.sin_cos();
+            let (mx, my) = (c * ox - s * oy, s * ox + c * oy);
+            let var = fix_var + slip_var + turn_var + (self.yaw_sigma() * dist).powi(2);
+            let d2 = ((fx - mx).powi(2) + (fy - my).powi(2)) / var;
+            d2 <= AGREE_GATE
+        } else {
+            let var = fix_var + slip_var + turn_var;
+            let d = fx.hypot(fy) - dist;
+            d * d / var <= AGREE_GATE / 2.0
+        }
+    }
+
+    fn slow_change_var(&self, a: &Placed, b: &Placed) -> f64 {
+        let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
+        let phi = (-dt / self.config.gnss_correlation_s.max(1e-3)).exp();
+        let slow = self.config.gnss_correlated_fraction;
+        let sa = slow * a.fix.sigma.0.max(a.fix.sigma.1);
+        let sb = slow * b.fix.sigma.0.max(b.fix.sigma.1);
+        sa * sa + sb * sb - 2.0 * phi * sa * sb
+    }
+
+    /// A GNSS position fix.
+    pub fn fix(&mut self, fix: Fix) -> FixOutcome {
+        if !fix.en.0.is_finite() || !fix.en.1.is_finite() {
+            self.stats.dropped += 1;
+            return FixOutcome::Held;
+        }
+        let Some(odom) = self.odom_at(fix.t) else {
+            return FixOutcome::NoOdom;
+        };
+        let placed = Placed { fix, odom };
+        // Continues the accepted run?
+        if self.held.is_empty()
+            && let Some(last) = self.last_accepted
+            && self.agree(&last, &placed)
+        {
+            self.take(placed);
+            return FixOutcome::Taken;
+        }
+        // Continues the held run? Else it starts one (the held fixes disagreed with it too,
+        // and are dropped), unless it agrees with the last accepted fix after a wild one.
+        if let Some(last_held) = self.held.last().copied() {
+            if self.agree(&last_held, &placed) {
+                self.held.push(placed);
+            } else if self
+                .last_accepted
+                .is_some_and(|last| self.agree(&last, &placed))
+            {
+                self.stats.dropped += self.held.len() as u64;
+                self.held.clear();
+                self.take(placed);
+                return FixOutcome::Taken;
+            } else {
+                self.stats.dropped += self.held.len() as u64;
+                self.held.clear();
+                self.held.push(placed);
+            }
+        } else {
+            self.held.push(placed);
+        }
+        if self.held.len() >= MIN_RUN {
+            let run = std::mem::take(&mut self.held);
+            for p in run {
+                self.take(p);
+            }
+            return FixOutcome::Taken;
+        }
+        FixOutcome::Held
+    }
+
+    /// Applies an agreeing fix.
+    fn take(&mut self, p: Placed) {
+        self.stats.taken += 1;
+        let previous = self.last_accepted.replace(p);
+        if !self.started {
+            self.start(&p);
+            return;
+        }
+        let sigma_now = p.fix.sigma.0.max(p.fix.sigma.1);
+        let slow = self.config.gnss_correlated_fraction;
+        let slow_sigma = (p.fix.sigma.0 * slow, p.fix.sigma.1 * slow);
+        let new_quality = self
+            .last_sigma
+            .is_none_or(|before| sigma_now < before * 0.5 || sigma_now * 0.5 > before);
+        if new_quality {
+            self.reset_gnss_error(slow_sigma);
+        }
+        self.last_sigma = Some(sigma_now);
+        if let Some(previous) = previous {
+            self.decay_gnss_error(
+                p.fix.t.saturating_since(previous.fix.t).as_secs_f64(),
+                slow_sigma,
+            );
+        }
+        if self.yaw_sigma() > FIT_YAW_SIGMA {
+            self.fit.push_back(p);
+            while self.fit.len() > FIT_FIXES {
+                self.fit.pop_front();
+            }
+            if self.try_fit_heading() {
+                return;
+            }
+        } else {
+            self.fit.clear();
+            self.fit.push_back(p);
+        }
+        self.update_position(&p, slow);
+    }
+
+    /// The first accepted fix places the map pose; its heading is unknown.
+    fn start(&mut self, p: &Placed) {
+        let Some((_, now)) = self.odom else {
+            return;
+        };
+        let (ax, ay) = self.config.antenna;
+        let lever = ax * ax + ay * ay;
+        // Heading unknown: the map yaw reads the odom yaw until the motion shows it, and the
+        // fix is carried to now along the odom path as it is.
+        let (nx, ny) = (now.x - p.odom.x, now.y - p.odom.y);
+        let (s0, c0) = p.odom.yaw.sin_cos();
+        self.x = State::zeros();
+        self.x[X] = p.fix.en.0 - (c0 * ax - s0 * ay) + nx;
+        self.x[Y] = p.fix.en.1 - (s0 * ax + c0 * ay) + ny;
+        self.x[YAW] = now.yaw;
+        self.p = Cov::zeros();
+        let distance = nx.hypot(ny);
+        self.p[(X, X)] = p.fix.sigma.0.powi(2) + lever + distance * distance;
+        self.p[(Y, Y)] = p.fix.sigma.1.powi(2) + lever + distance * distance;
+        self.p[(YAW, YAW)] = UNKNOWN_YAW_SIGMA.powi(2);
+        let slow = self.config.gnss_correlated_fraction;
+        for (i, g, sd) in [(X, GE, p.fix.sigma.0), (Y, GN, p.fix.sigma.1)] {
+            self.p[(g, g)] = (slow * sd).powi(2);
+            self.p[(i, g)] = -(slow * sd).powi(2);
+            self.p[(g, i)] = -(slow * sd).powi(2);
+        }
+        self.started = true;
+        self.last_sigma = Some(p.fix.sigma.0.max(p.fix.sigma.1));
+        self.fit.clear();
+        self.fit.push_back(*p);
+        self.events.push(format!(
+            "localisation started: position from agreeing fixes with 1σ {:.2} m; heading \
+             unknown until the motion between fixes, a course or a second antenna shows it",
+            p.fix.sigma.0.max(p.fix.sigma.1)
+        ));
+    }
+
+    /// The odom path fitted to the accepted fixes (a rigid 2-D fit, the antenna's odom
+    /// positions onto the fixes): the heading once the fixes span enough distance.
+    fn try_fit_heading(&mut self) -> bool {
+        let n = self.fit.len();
+        if n < MIN_RUN {
+            return false;
+        }
+        let pairs: Vec<PointPair> = self
+            .fit
+            .iter()
+            .map(|p| (self.antenna_in_odom(&p.odom), p.fix.en))
+            .collect();
+        let Some(fit) = rigid_fit(&pairs) else {
+            return false;
+        };
+        // The fixes' error is partly slow (common to neighbours): count it whole, to be safe.
+        let sigma = self
+            .fit
+            .iter()
+            .map(|p| p.fix.sigma.0.max(p.fix.sigma.1))
+            .fold(0.0, f64::max);
+        if fit.spread <= 0.0 {
+            return false;
+        }
+        let yaw_sigma = sigma / fit.spread.sqrt();
+        if yaw_sigma > FIT_YAW_SIGMA {
+            return false;
+        }
+        let Some((_, now)) = self.odom else {
+            return false;
+        };
+        let (x, y) = fit.apply((now.x, now.y));
+        self.x[X] = x;
+        self.x[Y] = y;
+        self.x[YAW] = wrap(fit.rotation + now.yaw);
+        self.x[GE] = 0.0;
+        self.x[GN] = 0.0;
+        let slow = self.config.gnss_correlated_fraction * sigma;
+        let from_centroid = (now.x - fit.centroid.0).hypot(now.y - fit.centroid.1);
+        let pos_var = sigma * sigma / n as f64 + slow * slow + (yaw_sigma * from_centroid).powi(2);
+        self.p = Cov::zeros();
+        self.p[(X, X)] = pos_var;
+        self.p[(Y, Y)] = pos_var;
+        self.p[(YAW, YAW)] = yaw_sigma * yaw_sigma;
+        for (i, g) in [(X, GE), (Y, GN)] {
+            self.p[(g, g)] = slow * slow;
+            self.p[(i, g)] = -slow * slow * 0.5;
+            self.p[(g, i)] = -slow * slow * 0.5;
+        }
+        self.stats.fits += 1;
+        self.events.push(format!(
+            "heading from the motion between {n} fixes: {:.1}° (1σ {:.1}°)",
+            super::localizer::heading_deg_of_yaw(self.x[YAW]),
+            yaw_sigma.to_degrees()
+        ));
+        true
+    }
+
+    /// The Kalman update of one fix, placed through the odom frame's poses.
+    fn update_position(&mut self, p: &Placed, slow: f64) {
+        let Some((_, now)) = self.odom else {
+            return;
+        };
+        // The fix's antenna in the vehicle frame of now: back along the odom increment.
+        let (sn, cn) = now.yaw.sin_cos();
+        let (ao_x, ao_y) = self.antenna_in_odom(&p.odom);
+        let (dx, dy) = (ao_x - now.x, ao_y - now.y);
+        let v = (cn * dx + sn * dy, -sn * dx + cn * dy);
+        let travelled = (p.odom.x - now.x).hypot(p.odom.y - now.y);
+        let (s, c) = self.x[YAW].sin_cos();
+        let hx = SVector::<f64, 2>::new(
+            self.x[X] + c * v.0 - s * v.1 + self.x[GE],
+            self.x[Y] + s * v.0 + c * v.1 + self.x[GN],
+        );
+        let mut h = SMatrix::<f64, 2, N>::zeros();
+        h[(0, X)] = 1.0;
+        h[(1, Y)] = 1.0;
+        h[(0, YAW)] = -s * v.0 - c * v.1;
+        h[(1, YAW)] = c * v.0 - s * v.1;
+        h[(0, GE)] = 1.0;
+        h[(1, GN)] = 1.0;
+        let white = (1.0 - slow * slow).max(0.0);
+        // The odom increment back to the fix carries its own uncertainty.
+        let back = self.config.along_per_m * travelled;
+        let mut r = SMatrix::<f64, 2, 2>::zeros();
+        r[(0, 0)] = p.fix.sigma.0.powi(2) * white + back;
+        r[(1, 1)] = p.fix.sigma.1.powi(2) * white + back;
+        let z = SVector::<f64, 2>::new(p.fix.en.0, p.fix.en.1);
+        let y = z - hx;
+        let heading_known = self.yaw_sigma() <= FIT_YAW_SIGMA * 3.0;
+        let kept: &[usize] = if heading_known { &[] } else { &[YAW] };
+        let s_mat = h * self.p * h.transpose() + r;
+        let nis = s_mat
+            .try_inverse()
+            .map_or(f64::INFINITY, |inv| (y.transpose() * inv * y)[(0, 0)]);
+        if heading_known && nis.is_finite() {
+            self.nis.0 += nis;
+            self.nis.1 += 1;
+        }
+        if nis > GATE_2 {
+            let (since, count) = self.disagreeing.map_or((p.fix.t, 1), |(s, n)| (s, n + 1));
+            self.disagreeing = Some((since, count));
+            let persistent = count as usize >= MIN_RUN
+                && p.fix.t.saturating_since(since) >= self.config.relocate_after;
+            // Who is wrong: trusted fixes over slipping wheels; a lesser fix's step is its
+            // slow error; fixes that disagree for long mean the vehicle is elsewhere.
+            let widen = |me: &mut Self| {
+                let extra = y.norm_squared() / 2.0;
+                me.p[(X, X)] += extra;
+                me.p[(Y, Y)] += extra;
+                me.stats.widened += 1;
+            };
+            match p.fix.trust {
+                Trust::OverWheels => widen(self),
+                Trust::UnderWheels if persistent => {
+                    widen(self);
+                    self.disagreeing = None;
+                }
+                Trust::UnderWheels => {
+                    let slow_sigma = (p.fix.sigma.0 * slow, p.fix.sigma.1 * slow);
+                    // A new realisation of the slow error: wide enough to take the step.
+                    let step = y.norm();
+                    self.reset_gnss_error((slow_sigma.0.max(step), slow_sigma.1.max(step)));
+                }
+            }
+        } else {
+            self.disagreeing = None;
+        }
+        self.apply(y, &h, &r, kept);
+    }
+
+    /// Kalman update with the Joseph form; `kept` states are not changed (Schmidt).
+    fn apply<const M: usize>(
+        &mut self,
+        y: SVector<f64, M>,
+        h: &SMatrix<f64, M, N>,
+        r: &SMatrix<f64, M, M>,
+        kept: &[usize],
+    ) -> bool {
+        let s = h * self.p * h.transpose() + r;
+        let Some(s_inv) = s.try_inverse() else {
+            return false;
+        };
+        let mut k = self.p * h.transpose() * s_inv;
+        for &i in kept {
+            k.row_mut(i).fill(0.0);
+        }
+        self.x += k * y;
+        self.x[YAW] = wrap(self.x[YAW]);
+        let i_kh = Cov::identity() - k * h;
+        self.p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
+        self.p = (self.p + self.p.transpose()) * 0.5;
+        true
+    }
+
+    /// A heading of the vehicle (dual antenna, or a course turned into the heading), ENU rad.
+    pub fn heading(&mut self, yaw: f64, sigma: f64) -> bool {
+        if !self.started || !yaw.is_finite() {
+            return false;
+        }
+        if self.yaw_sigma() > 0.5 {
+            // Unknown: the measurement sets it.
+            self.x[YAW] = wrap(yaw);
+            for i in 0..N {
+                self.p[(YAW, i)] = 0.0;
+                self.p[(i, YAW)] = 0.0;
+            }
+            self.p[(YAW, YAW)] = sigma * sigma;
+            self.fit.clear();
+            self.stats.headings += 1;
+            return true;
+        }
+        let y = SVector::<f64, 1>::new(wrap(yaw - self.x[YAW]));
+        let mut h = SMatrix::<f64, 1, N>::zeros();
+        h[(0, YAW)] = 1.0;
+        let r = SMatrix::<f64, 1, 1>::new(sigma * sigma);
+        let s = self.p[(YAW, YAW)] + sigma * sigma;
+        if y[0] * y[0] / s > GATE_1 {
+            self.stats.headings_rejected += 1;
+            return false;
+        }
+        self.stats.headings += 1;
+        self.apply(y, &h, &r, &[])
+    }
+
+    /// The dual-antenna heading noise configured.
+    pub fn heading_sigma(&self) -> f64 {
+        self.config.heading_sigma_rad
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &MapFilterConfig {
+        &self.config
+    }
+
+    /// The number of odom poses and fixes kept (bounded).
+    pub fn memory(&self) -> (usize, usize) {
+        (self.history.len(), self.fit.len() + self.held.len())
+    }
+}
+
+/// A point and where it should go.
+pub type PointPair = ((f64, f64), (f64, f64));
+
+/// The rotation and translation that carry the first points of pairs onto their second in
+/// the least-squares sense (a rigid 2-D fit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigidFit {
+    /// Rotation, rad.
+    pub rotation: f64,
+    /// Translation after the rotation, m.
+    pub translation: (f64, f64),
+    /// The centroid of the first points.
+    pub centroid: (f64, f64),
+    /// The sum of the first points' squared distances to their centroid, m²: the fit's
+    /// rotation has 1σ of about the points' σ over its square root.
+    pub spread: f64,
+}
+
+impl RigidFit {
+    /// Where the fit carries `p`.
+    pub fn apply(&self, p: (f64, f64)) -> (f64, f64) {
+        let (s, c) = self.rotation.sin_cos();
+        (
+            self.translation.0 + c * p.0 - s * p.1,
+            self.translation.1 + s * p.0 + c * p.1,
+        )
+    }
+}
+
+/// The rigid fit of `pairs`; `None` for fewer than two.
+pub fn rigid_fit(pairs: &[PointPair]) -> Option<RigidFit> {
+    if pairs.len() < 2 {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (mut px, mut py, mut qx, mut qy) = (0.0, 0.0, 0.0, 0.0);
+    for ((a, b), (c, d)) in pairs {
+        px += a / n;
+        py += b / n;
+        qx += c / n;
+        qy += d / n;
+    }
+    let (mut sxx, mut sxy, mut spread) = (0.0, 0.0, 0.0);
+    for ((a, b), (c, d)) in pairs {
+        let (ax, ay, bx, by) = (a - px, b - py, c - qx, d - qy);
+        sxx += ax * bx + ay * by;
+        sxy += ax * by - ay * bx;
+        spread += ax * ax + ay * ay;
+    }
+    let rotation = sxy.atan2(sxx);
+    let (s, c) = rotation.sin_cos();
+    Some(RigidFit {
+        rotation,
+        translation: (qx - (c * px - s * py), qy - (s * px + c * py)),
+        centroid: (px, py),
+        spread,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_rigid_fit_recovers_a_rotation_and_a_shift() {
+        let pairs: Vec<PointPair> = [(0.0, 0.0), (10.0, 0.0), (10.0, 5.0)]
+            .iter()
+            .map(|&(x, y): &(f64, f64)| {
+                let (s, c) = 0.7f64.sin_cos();
+                ((x, y), (3.0 + c * x - s * y, -2.0 + s * x + c * y))
+            })
+            .collect();
+        let fit = rigid_fit(&pairs).expect("fit");
+        assert!((fit.rotation - 0.7).abs() < 1e-12);
+        let (x, y) = fit.apply((1.0, 1.0));
+        let (s, c) = 0.7f64.sin_cos();
+        assert!((x - (3.0 + c - s)).abs() < 1e-9 && (y - (-2.0 + s + c)).abs() < 1e-9);
+    }
+
+    fn at(ms: u64) -> Timestamp {
+        Timestamp::from_micros(1_000_000_000 + ms * 1000)
+    }
+
+    /// Drives straight east at 1 m/s in the odom frame, whose yaw is `odom_yaw` off the map's,
+    /// with fixes from `fix_of(k, true_east)` at 5 Hz; odom at 50 Hz.
+    fn drive(
+        f: &mut MapFilter,
+        seconds: u64,
+        start_ms: u64,
+        mut fix_of: impl FnMut(u64, (f64, f64)) -> Option<Fix>,
+    ) {
+        let map_yaw = 0.3f64;
+        for k in 0..seconds * 50 {
+            let ms = start_ms + k * 20;
+            let s = ms as f64 / 1000.0;
+            // The vehicle heads along map yaw 0.3; the odom frame started at yaw 0.
+            let odom = OdomPose {
+                x: s,
+                y: 0.0,
+                yaw: 0.0,
+                v: 1.0,
+                w: 0.0,
+            };
+            f.odom(at(ms), odom);
+            if k % 10 == 0 {
+                let truth = (s * map_yaw.cos(), s * map_yaw.sin());
+                if let Some(fix) = fix_of(ms, truth) {
+                    f.fix(fix);
+                }
+            }
+        }
+    }
+
+    fn rtk(ms: u64, en: (f64, f64)) -> Fix {
+        Fix {
+            t: at(ms),
+            en,
+            sigma: (0.02, 0.02),
+            trust: Trust::OverWheels,
+        }
+    }
+
+    #[test]
+    fn the_heading_comes_from_the_motion_between_fixes() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+        let (_, _, yaw) = f.pose().expect("placed");
+        assert!((yaw - 0.3).abs() < 0.01, "{yaw}");
+        assert!(f.yaw_sigma() < 2f64.to_radians(), "{}", f.yaw_sigma());
+    }
+
+    #[test]
+    fn in_an_outage_the_map_pose_moves_exactly_as_the_odom_pose() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+        let before = f.map_to_odom().expect("correction");
+        drive(&mut f, 30, 10_000, |_, _| None);
+        let after = f.map_to_odom().expect("correction");
+        // Equal but for rounding: 30 m of increments carried the pose as they carried odom.
+        assert!((after.0 - before.0).abs() < 1e-9, "{before:?} {after:?}");
+        assert!((after.1 - before.1).abs() < 1e-9, "{before:?} {after:?}");
+        assert!((after.2 - before.2).abs() < 1e-12, "{before:?} {after:?}");
+    }
+
+    #[test]
+    fn a_lone_wild_fix_is_never_taken_and_a_run_elsewhere_relocates_from_its_fixes() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+        let mut wild_seen = 0;
+        drive(&mut f, 5, 10_000, |ms, truth| {
+            if ms == 12_000 {
+                wild_seen += 1;
+                return Some(rtk(ms, (truth.0 + 422.0, truth.1)));
+            }
+            Some(rtk(ms, truth))
+        });
+        assert_eq!(wild_seen, 1);
+        let (x, y, _) = f.pose().expect("placed");
+        let s = 14.98f64;
+        assert!((x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin()) < 0.05);
+        assert_eq!(f.stats().dropped, 1);
+        // Carried 50 m north: three agreeing fixes there move the pose to them.
+        drive(&mut f, 2, 15_000, |ms, truth| {
+            Some(rtk(ms, (truth.0, truth.1 + 50.0)))
+        });
+        let (x, y, _) = f.pose().expect("placed");
+        let s = 16.98f64;
+        assert!(
+            (x - s * 0.3f64.cos()).hypot(y - 50.0 - s * 0.3f64.sin()) < 0.1,
+            "{x} {y}"
+        );
+    }
+
+    #[test]
+    fn agreeing_rtk_fixes_are_believed_over_slipping_wheels() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+        // The wheels read 1 m/s, the vehicle makes 0.8 (20 % slip) for 5 s.
+        let along = |ms: u64| 10.0 + (ms as f64 / 1000.0 - 10.0) * 0.8;
+        drive(&mut f, 5, 10_000, |ms, _| {
+            let s = along(ms);
+            Some(rtk(ms, (s * 0.3f64.cos(), s * 0.3f64.sin())))
+        });
+        // Where the last fix (14.8 s) put it, plus the wheels' 0.18 m since.
+        let s = along(14_800) + 0.18;
+        let (x, y, _) = f.pose().expect("placed");
+        let off = (x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin());
+        assert!(off < 0.05, "{off}");
+        assert_eq!(f.stats().dropped, 0);
+    }
+
+    #[test]
+    fn memory_is_bounded() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        drive(&mut f, 120, 0, |ms, truth| {
+            Some(Fix {
+                t: at(ms),
+                en: truth,
+                sigma: (50.0, 50.0),
+                trust: Trust::UnderWheels,
+            })
+        });
+        let (odom, fixes) = f.memory();
+        assert!(
+            odom <= ODOM_HISTORY && fixes <= FIT_FIXES + MIN_RUN,
+            "{odom} {fixes}"
+        );
+    }
+}
