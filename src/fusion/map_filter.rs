@@ -737,6 +737,48 @@ impl MapFilter {
         self.apply(y, &h, &r, &[])
     }
 
+    /// A course over ground (the direction the antenna moves, ENU rad) as the vehicle's
+    /// heading: the antenna moves at (v − ω·ay, ω·ax) in the vehicle frame, off the heading
+    /// while turning and behind it when reversing. `None` when the antenna barely moves.
+    pub fn heading_of_course(&self, course: f64, v: f64, w: f64) -> Option<f64> {
+        let (ax, ay) = self.config.antenna;
+        let (along, across) = (v - w * ay, w * ax);
+        if along.hypot(across) < 0.1 {
+            return None;
+        }
+        Some(wrap(course - across.atan2(along)))
+    }
+
+    /// Places the map pose by hand (x, y in m, yaw in rad, with their 1σ), forgetting the
+    /// fixes held or fitted so far.
+    pub fn set_pose(&mut self, pose: (f64, f64, f64), sigma: (f64, f64)) {
+        self.x = State::zeros();
+        self.x[X] = pose.0;
+        self.x[Y] = pose.1;
+        self.x[YAW] = wrap(pose.2);
+        self.p = Cov::zeros();
+        self.p[(X, X)] = sigma.0 * sigma.0;
+        self.p[(Y, Y)] = sigma.0 * sigma.0;
+        self.p[(YAW, YAW)] = sigma.1 * sigma.1;
+        self.started = true;
+        self.forget_fixes();
+    }
+
+    /// Moves the map pose by (dx, dy) m without changing what is known of it: the local
+    /// frame's origin moved. Fixes held or fitted were in the old frame and are forgotten.
+    pub fn shift(&mut self, dx: f64, dy: f64) {
+        self.x[X] += dx;
+        self.x[Y] += dy;
+        self.forget_fixes();
+    }
+
+    fn forget_fixes(&mut self) {
+        self.held.clear();
+        self.fit.clear();
+        self.last_accepted = None;
+        self.disagreeing = None;
+    }
+
     /// The dual-antenna heading noise configured.
     pub fn heading_sigma(&self) -> f64 {
         self.config.heading_sigma_rad
@@ -942,6 +984,77 @@ mod tests {
         let off = (x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin());
         assert!(off < 0.05, "{off}");
         assert_eq!(f.stats().dropped, 0);
+    }
+
+    #[test]
+    fn a_course_sets_an_unknown_heading_and_reversing_points_it_back() {
+        let mut f = MapFilter::new(MapFilterConfig {
+            antenna: (0.3, 0.0),
+            ..MapFilterConfig::default()
+        });
+        f.odom(at(0), OdomPose::default());
+        for k in 0..3 {
+            f.fix(rtk(k * 200, (0.0, 0.0)));
+        }
+        assert!(f.yaw_sigma() > 1.0);
+        // Reversing at 1 m/s: the antenna moves along yaw + π.
+        let h = f.heading_of_course(1.0 + std::f64::consts::PI, -1.0, 0.0);
+        assert!(f.heading(h.expect("moving"), 0.05));
+        assert!((f.pose().expect("placed").2 - 1.0).abs() < 1e-9);
+        // Turning on the spot, the antenna ahead of the axle moves sideways.
+        let h = f.heading_of_course(1.0 + std::f64::consts::FRAC_PI_2, 0.0, 1.0);
+        assert!((h.expect("moving") - 1.0).abs() < 1e-9);
+        assert_eq!(f.heading_of_course(0.0, 0.01, 0.0), None);
+    }
+
+    proptest::proptest! {
+        /// Issue 33's finding 4: a wild fix, wherever it falls (in a run that agrees with the
+        /// pose, or among the first fixes after the vehicle was carried, as a relocation
+        /// gathers them), never moves the pose towards it.
+        #[test]
+        fn a_wild_fix_never_moves_the_pose(
+            at_fix in 0u64..25,
+            carried in proptest::bool::ANY,
+            off in 100.0f64..1000.0,
+            angle in 0.0f64..std::f64::consts::TAU,
+        ) {
+            let mut f = MapFilter::new(MapFilterConfig::default());
+            drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+            let shift = if carried { 20.0 } else { 0.0 };
+            let wild_ms = 10_000 + at_fix * 200;
+            let mut worst: f64 = 0.0;
+            for k in 0..25u64 {
+                let ms = 10_000 + k * 200;
+                let g = |ms: u64, truth: (f64, f64)| {
+                    let truth = (truth.0, truth.1 + shift);
+                    if ms == wild_ms {
+                        return Some(rtk(ms, (truth.0 + off * angle.cos(), truth.1 + off * angle.sin())));
+                    }
+                    Some(rtk(ms, truth))
+                };
+                for j in 0..10u64 {
+                    let t = ms + j * 20;
+                    let s = t as f64 / 1000.0;
+                    f.odom(at(t), OdomPose { x: s, v: 1.0, ..OdomPose::default() });
+                    if j == 0 {
+                        let truth = (s * 0.3f64.cos(), s * 0.3f64.sin());
+                        if let Some(fix) = g(t, truth) {
+                            f.fix(fix);
+                        }
+                    }
+                    let (x, y, _) = f.pose().expect("placed");
+                    let (tx, ty) = (s * 0.3f64.cos(), s * 0.3f64.sin());
+                    // Distance from the old place or the new one, whichever is nearer.
+                    let d = (x - tx).hypot(y - ty).min((x - tx).hypot(y - ty - shift));
+                    worst = worst.max(d);
+                }
+            }
+            proptest::prop_assert!(worst < 0.5, "pose {worst} m from both places");
+            let (x, y, _) = f.pose().expect("placed");
+            let s = 14.98f64;
+            let settled = (x - s * 0.3f64.cos()).hypot(y - shift - s * 0.3f64.sin());
+            proptest::prop_assert!(settled < 0.1, "ends {settled} m from the fixes");
+        }
     }
 
     #[test]
