@@ -52,8 +52,12 @@ const FIT_YAW_SIGMA: f64 = 0.1;
 const FIT_FIXES: usize = 256;
 /// Odom poses kept to place late fixes.
 const ODOM_HISTORY: usize = 1024;
-/// A held run of fixes that disagrees with the one before is taken once it has this many.
+/// A held run of fixes is taken once it has this many (and, when it jumped away from the
+/// accepted run, once it has lasted `relocate_after`: wheels cannot slip metres between two
+/// fixes, so a jump is the receiver's until it persists).
 pub const MIN_RUN: usize = 3;
+/// Fixes a held run keeps (the latest), bounding its memory at any rate.
+const MAX_HELD: usize = 256;
 /// Two fixes agree when their displacement matches the odom frame's within this χ²
 /// (2 degrees of freedom, 99.99 %) ...
 const AGREE_GATE: f64 = 18.4;
@@ -176,6 +180,8 @@ pub struct MapFilter {
     last_accepted: Option<Placed>,
     /// Fixes that disagreed with the last accepted one, agreeing among themselves.
     held: Vec<Placed>,
+    /// A fix that disagreed with the held run, until the next shows which was wrong.
+    stray: Option<Placed>,
     /// Accepted fixes for a heading fit, while the heading is unknown.
     fit: VecDeque<Placed>,
     /// Agreeing fixes that failed the gate without a break: first time and count.
@@ -200,6 +206,7 @@ impl MapFilter {
             history: VecDeque::new(),
             last_accepted: None,
             held: Vec::new(),
+            stray: None,
             fit: VecDeque::new(),
             disagreeing: None,
             last_sigma: None,
@@ -438,35 +445,49 @@ impl MapFilter {
         };
         let placed = Placed { fix, odom };
         // Continues the accepted run?
-        if self.held.is_empty()
-            && let Some(last) = self.last_accepted
-            && self.agree(&last, &placed)
+        if self
+            .last_accepted
+            .is_some_and(|last| self.agree(&last, &placed))
         {
+            self.drop_held();
             self.take(placed);
             return FixOutcome::Taken;
         }
-        // Continues the held run? Else it starts one (the held fixes disagreed with it too,
-        // and are dropped), unless it agrees with the last accepted fix after a wild one.
-        if let Some(last_held) = self.held.last().copied() {
-            if self.agree(&last_held, &placed) {
-                self.held.push(placed);
-            } else if self
-                .last_accepted
-                .is_some_and(|last| self.agree(&last, &placed))
-            {
-                self.stats.dropped += self.held.len() as u64;
-                self.held.clear();
-                self.take(placed);
-                return FixOutcome::Taken;
-            } else {
-                self.stats.dropped += self.held.len() as u64;
-                self.held.clear();
+        // Continues the held run? A fix that disagrees with it is a stray: a second stray that
+        // agrees with the first starts a new run (the old one is dropped); a lone stray is
+        // dropped when the next fix disagrees with it, so one wild fix never breaks a run.
+        match self.held.last().copied() {
+            Some(last_held) if self.agree(&last_held, &placed) => {
+                if self.stray.take().is_some() {
+                    self.stats.dropped += 1;
+                }
                 self.held.push(placed);
             }
-        } else {
-            self.held.push(placed);
+            Some(_) => match self.stray.take() {
+                Some(stray) if self.agree(&stray, &placed) => {
+                    self.drop_held();
+                    self.held.push(stray);
+                    self.held.push(placed);
+                }
+                Some(_) => {
+                    self.stats.dropped += 1;
+                    self.stray = Some(placed);
+                }
+                None => self.stray = Some(placed),
+            },
+            None => self.held.push(placed),
         }
-        if self.held.len() >= MIN_RUN {
+        if self.held.len() > MAX_HELD {
+            self.held.remove(0);
+            self.stats.dropped += 1;
+        }
+        let lasted = match (self.held.first(), self.held.last()) {
+            (Some(a), Some(b)) => b.fix.t.saturating_since(a.fix.t),
+            _ => Duration::ZERO,
+        };
+        if self.held.len() >= MIN_RUN
+            && (self.last_accepted.is_none() || lasted >= self.config.relocate_after)
+        {
             let run = std::mem::take(&mut self.held);
             for p in run {
                 self.take(p);
@@ -474,6 +495,13 @@ impl MapFilter {
             return FixOutcome::Taken;
         }
         FixOutcome::Held
+    }
+
+    /// Drops the held run and the stray: they disagreed with what was taken.
+    fn drop_held(&mut self) {
+        self.stats.dropped += self.held.len() as u64 + u64::from(self.stray.is_some());
+        self.held.clear();
+        self.stray = None;
     }
 
     /// Applies an agreeing fix.
@@ -774,6 +802,7 @@ impl MapFilter {
 
     fn forget_fixes(&mut self) {
         self.held.clear();
+        self.stray = None;
         self.fit.clear();
         self.last_accepted = None;
         self.disagreeing = None;
@@ -956,12 +985,27 @@ mod tests {
         let s = 14.98f64;
         assert!((x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin()) < 0.05);
         assert_eq!(f.stats().dropped, 1);
-        // Carried 50 m north: three agreeing fixes there move the pose to them.
+        // A 5 m jump for 1 s (five agreeing fixes) is the receiver's: never taken.
         drive(&mut f, 2, 15_000, |ms, truth| {
-            Some(rtk(ms, (truth.0, truth.1 + 50.0)))
+            let jumped = (15_000..16_000).contains(&ms);
+            Some(rtk(
+                ms,
+                (
+                    truth.0 + if jumped { 3.0 } else { 0.0 },
+                    truth.1 + if jumped { 4.0 } else { 0.0 },
+                ),
+            ))
         });
         let (x, y, _) = f.pose().expect("placed");
         let s = 16.98f64;
+        assert!((x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin()) < 0.05);
+        // Carried 50 m north: once the agreeing fixes there have lasted `relocate_after`, the
+        // pose moves to them.
+        drive(&mut f, 4, 17_000, |ms, truth| {
+            Some(rtk(ms, (truth.0, truth.1 + 50.0)))
+        });
+        let (x, y, _) = f.pose().expect("placed");
+        let s = 20.98f64;
         assert!(
             (x - s * 0.3f64.cos()).hypot(y - 50.0 - s * 0.3f64.sin()) < 0.1,
             "{x} {y}"
