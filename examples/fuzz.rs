@@ -1625,12 +1625,7 @@ fn main() {
     // The panics are expected to be caught; their messages would drown the progress lines.
     std::panic::set_hook(Box::new(|info| {
         let location = info.location().map(|l| l.to_string()).unwrap_or_default();
-        let message = info
-            .payload()
-            .downcast_ref::<&str>()
-            .map(|s| (*s).to_owned())
-            .or_else(|| info.payload().downcast_ref::<String>().cloned())
-            .unwrap_or_default();
+        let message = chassisd::runtime::panics::message_of(info);
         eprintln!("fuzz: panic at {location}: {message}");
     }));
     let crashes = repo().join("fuzz/crashes");

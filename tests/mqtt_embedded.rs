@@ -53,14 +53,7 @@ fn real_clients_talk_to_the_embedded_broker() {
 fn a_port_held_by_another_broker_fails_loudly() {
     let other = Mosquitto::start();
     let mut daemon = Proc::start(&["sim", "--broker-port", &other.port.to_string()]);
-    let deadline = Instant::now() + WAIT;
-    let exit = loop {
-        if let Some(exit) = daemon.child.try_wait().expect("status") {
-            break exit;
-        }
-        assert!(Instant::now() < deadline, "chassisd kept running");
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let exit = daemon.wait_exit(WAIT, "chassisd kept running");
     assert!(!exit.success(), "{exit}");
     daemon.log.extend(daemon.stderr.iter());
     let log = daemon.log.join("\n");

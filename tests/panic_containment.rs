@@ -54,12 +54,7 @@ fn a_panic_in_the_mqtt_link_is_contained_and_the_link_restarts() {
         first.elapsed() < Duration::from_secs(3),
         "10 statuses at 10 Hz"
     );
-    daemon.log.extend(daemon.stderr.try_iter());
-    let reports = daemon
-        .log
-        .iter()
-        .filter(|l| l.contains("an auxiliary task panicked"))
-        .count();
+    let reports = daemon.log_count("an auxiliary task panicked");
     assert_eq!(reports, 1, "logged once: {:#?}", daemon.log);
     assert!(
         daemon.child.try_wait().expect("status").is_none(),
@@ -76,14 +71,7 @@ fn a_panic_in_the_control_loop_ends_the_process() {
     );
     daemon.wait_out(WAIT, "a status line", |l| l.starts_with('{'));
     daemon.send(r#"cmd_vel {"linear":{"x":0.2},"angular":{"z":0}}"#);
-    let deadline = Instant::now() + WAIT;
-    let exit = loop {
-        if let Some(exit) = daemon.child.try_wait().expect("status") {
-            break exit;
-        }
-        assert!(Instant::now() < deadline, "still running after the panic");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let exit = daemon.wait_exit(WAIT, "still running after the panic");
     assert_eq!(exit.code(), Some(101));
     daemon.log.extend(daemon.stderr.iter());
     assert!(

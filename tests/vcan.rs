@@ -170,13 +170,7 @@ fn two_drives_enable_follow_velocity_and_report_odometry() {
     let mut rig = Rig::start(Some(&recording));
     rig.wait_enabled();
     let report = rig.report();
-    for drive in ["left", "right"] {
-        assert_eq!(
-            axis(&report, drive)["state"],
-            "operation enabled",
-            "{report}"
-        );
-    }
+    assert_drives_enabled(&report);
     assert_eq!(report["drives"][0]["nmt"], "Operational");
 
     // 0.3 m/s: 3 rad/s at the wheel, 286.5 r/min at the motor (gear 10); the right motor
@@ -247,6 +241,16 @@ fn two_drives_enable_follow_velocity_and_report_odometry() {
 }
 
 /// Asserts that neither simulated drive is enabled, commanded or turning.
+fn assert_drives_enabled(report: &serde_json::Value) {
+    for drive in ["left", "right"] {
+        assert_eq!(
+            axis(report, drive)["state"],
+            "operation enabled",
+            "{report}"
+        );
+    }
+}
+
 fn assert_drives_at_rest(report: &Value) {
     for drive in ["left", "right"] {
         let a = axis(report, drive);
@@ -686,14 +690,7 @@ fn a_panic_in_the_control_loop_quick_stops_the_drives_and_ends_the_process() {
     let candump = Candump::start();
     // The first command meets the injected panic in the control loop.
     rig.rearm();
-    let deadline = Instant::now() + WAIT;
-    let exit = loop {
-        if let Some(exit) = rig.daemon.child.try_wait().expect("status") {
-            break exit;
-        }
-        assert!(Instant::now() < deadline, "still running after the panic");
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let exit = rig.daemon.wait_exit(WAIT, "still running after the panic");
     assert_eq!(exit.code(), Some(101));
     let lines = candump.stop();
     for rpdo in QUICK_STOPS {
@@ -747,14 +744,7 @@ fn a_panic_in_an_auxiliary_task_leaves_the_drives_driving() {
     rig.daemon
         .wait_log(WAIT, "MQTT link restarted after a panic");
     wait_moving(&mut rig, "still moving after the panic");
-    let report = rig.report();
-    for drive in ["left", "right"] {
-        assert_eq!(
-            axis(&report, drive)["state"],
-            "operation enabled",
-            "{report}"
-        );
-    }
+    assert_drives_enabled(&rig.report());
     let lines = candump.stop();
     for rpdo in QUICK_STOPS {
         assert!(

@@ -447,12 +447,7 @@ fn wrong_tokens_are_delayed_and_the_fifth_closes_the_connection() {
         "{:?}",
         started.elapsed()
     );
-    daemon.log.extend(daemon.stderr.try_iter());
-    let lines = daemon
-        .log
-        .iter()
-        .filter(|l| l.contains("a wrong token"))
-        .count();
+    let lines = daemon.log_count("a wrong token");
     assert_eq!(lines, 1, "logged once: {:#?}", daemon.log);
     daemon.stop();
 }

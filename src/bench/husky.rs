@@ -162,6 +162,8 @@ pub struct Run {
     pub filter: MapFilter,
     /// Before each fix was given: the map pose's distance to it (its time, metres).
     pub to_fixes: Vec<(f64, f64)>,
+    /// When the heading was first known to 5° (1σ), s after the first fix.
+    pub heading_known_at: Option<f64>,
 }
 
 fn at(t: f64) -> Timestamp {
@@ -175,6 +177,7 @@ pub fn run(data: &HuskyData, config: MapFilterConfig, variant: Variant) -> Run {
     let mut filter = MapFilter::new(config);
     let mut samples = Vec::new();
     let mut to_fixes = Vec::new();
+    let mut heading_known_at = None;
     let mut fix_index = 0;
     for &(t, input) in &data.inputs {
         match input {
@@ -195,6 +198,12 @@ pub fn run(data: &HuskyData, config: MapFilterConfig, variant: Variant) -> Run {
                         odom: pose,
                         map: filter.pose(),
                     });
+                }
+                if heading_known_at.is_none()
+                    && filter.is_started()
+                    && filter.yaw_sigma() <= 5f64.to_radians()
+                {
+                    heading_known_at = Some(t);
                 }
             }
             Input::Fix { e, n } => {
@@ -225,6 +234,7 @@ pub fn run(data: &HuskyData, config: MapFilterConfig, variant: Variant) -> Run {
         samples,
         filter,
         to_fixes,
+        heading_known_at,
     }
 }
 
@@ -388,7 +398,6 @@ pub fn report(data: &HuskyData, config: MapFilterConfig) -> HuskyReport {
             }
         }
     }
-    let heading_known_s = heading_known_at(data, config);
     let stats = clean.filter.stats();
     HuskyReport {
         outages,
@@ -397,47 +406,12 @@ pub fn report(data: &HuskyData, config: MapFilterConfig) -> HuskyReport {
         parked_without_gnss_m: moved_while_parked(&parked_without),
         wild_runs,
         wild_max_m,
-        heading_known_s,
+        heading_known_s: clean.heading_known_at,
         mean_nis: clean.filter.mean_nis(),
         taken: stats.taken,
         dropped: stats.dropped,
         widened: stats.widened,
     }
-}
-
-fn heading_known_at(data: &HuskyData, config: MapFilterConfig) -> Option<f64> {
-    let mut odometry = Odometry::new(TRACK_M);
-    let mut filter = MapFilter::new(config);
-    for &(t, input) in &data.inputs {
-        match input {
-            Input::Gyro { wz } => odometry.gyro(at(t), wz),
-            Input::Wheels { v, w } => {
-                let half = w * TRACK_M / 2.0;
-                odometry.wheels(
-                    at(t),
-                    WheelReading {
-                        speeds: (v - half, v + half),
-                        travel: None,
-                    },
-                );
-                if let Some(p) = odometry.pose() {
-                    filter.odom(at(t), p);
-                }
-                if filter.is_started() && filter.yaw_sigma() <= 5f64.to_radians() {
-                    return Some(t);
-                }
-            }
-            Input::Fix { e, n } => {
-                filter.fix(Fix {
-                    t: at(t),
-                    en: (e, n),
-                    sigma: (DGPS_SIGMA_M, DGPS_SIGMA_M),
-                    trust: Trust::UnderWheels,
-                });
-            }
-        }
-    }
-    None
 }
 
 impl std::fmt::Display for HuskyReport {

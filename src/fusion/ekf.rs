@@ -50,6 +50,14 @@ pub fn wrap(a: f64) -> f64 {
     a
 }
 
+/// The 1σ along the major axis of a 2-D covariance (var x, var y, cov xy): the square root
+/// of its largest eigenvalue.
+pub fn largest_sigma(xx: f64, yy: f64, xy: f64) -> f64 {
+    let mean = (xx + yy) / 2.0;
+    let spread = (((xx - yy) / 2.0).powi(2) + xy * xy).sqrt();
+    (mean + spread).max(0.0).sqrt()
+}
+
 /// Process noise densities.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ProcessNoise {
@@ -297,10 +305,7 @@ impl Ekf {
     /// The 1σ position uncertainty: the square root of the largest eigenvalue of the
     /// position covariance, m.
     pub fn position_sigma(&self) -> f64 {
-        let (a, b, c) = (self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)]);
-        let mean = (a + b) / 2.0;
-        let spread = (((a - b) / 2.0).powi(2) + c * c).sqrt();
-        (mean + spread).max(0.0).sqrt()
+        largest_sigma(self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)])
     }
 
     /// The 1σ yaw uncertainty, rad.

@@ -26,7 +26,7 @@ use std::time::Duration;
 
 use nalgebra::{SMatrix, SVector};
 
-use super::ekf::wrap;
+use super::ekf::{largest_sigma, wrap};
 use super::odometry::OdomPose;
 use crate::time::Timestamp;
 
@@ -48,6 +48,10 @@ const GATE_1: f64 = 10.83;
 const UNKNOWN_YAW_SIGMA: f64 = std::f64::consts::PI;
 /// The fit of the odom path to the fixes sets the heading once its 1σ is within this, rad.
 const FIT_YAW_SIGMA: f64 = 0.1;
+/// A heading within this 1σ is known: fixes inform it, and the direction of the motion
+/// between two fixes is checked, not only its length; a heading or course sets a heading
+/// less certain than this outright, rad.
+const HEADING_KNOWN_RAD: f64 = 0.3;
 /// Fixes a heading fit keeps (the latest ones), bounding its memory.
 const FIT_FIXES: usize = 256;
 /// Odom poses kept to place late fixes.
@@ -94,8 +98,6 @@ pub struct MapFilterConfig {
     pub gnss_correlated_fraction: f64,
     /// That part's correlation time, s.
     pub gnss_correlation_s: f64,
-    /// Dual-antenna heading noise, 1σ rad.
-    pub heading_sigma_rad: f64,
     /// Fixes disagreeing with the filter for this long (and at least [`MIN_RUN`] of them,
     /// agreeing with each other) mean the vehicle is elsewhere, whatever their quality.
     pub relocate_after: Duration,
@@ -111,7 +113,6 @@ impl Default for MapFilterConfig {
             yaw_per_s: 2e-5,
             gnss_correlated_fraction: 0.95,
             gnss_correlation_s: 60.0,
-            heading_sigma_rad: 0.5f64.to_radians(),
             relocate_after: Duration::from_secs(3),
         }
     }
@@ -137,6 +138,8 @@ pub enum FixOutcome {
     Taken,
     /// Held until later fixes agree with it.
     Held,
+    /// Not a position (not finite): counted and dropped.
+    Dropped,
     /// Before the first odom pose: nothing to place it on.
     NoOdom,
 }
@@ -254,10 +257,7 @@ impl MapFilter {
 
     /// The 1σ position uncertainty (largest axis), m.
     pub fn position_sigma(&self) -> f64 {
-        let (a, b, c) = (self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)]);
-        let mean = (a + b) / 2.0;
-        let spread = (((a - b) / 2.0).powi(2) + c * c).sqrt();
-        (mean + spread).max(0.0).sqrt()
+        largest_sigma(self.p[(X, X)], self.p[(Y, Y)], self.p[(X, Y)])
     }
 
     /// The 1σ yaw uncertainty, rad.
@@ -410,7 +410,7 @@ impl MapFilter {
             + self.slow_change_var(a, b);
         let slip_var = (SLIP_FRACTION * dist).powi(2);
         let turn_var = (AGREE_YAW_RATE * dt * dist).powi(2);
-        if self.started && self.yaw_sigma() < 0.5 {
+        if self.started && self.yaw_sigma() <= HEADING_KNOWN_RAD {
             // The odom displacement turned into the map frame by the correction.
             let rot = self.map_to_odom().map_or(0.0, |(_, _, r)| r);
             let (s, c) = rot.sin_cos();
@@ -438,7 +438,7 @@ impl MapFilter {
     pub fn fix(&mut self, fix: Fix) -> FixOutcome {
         if !fix.en.0.is_finite() || !fix.en.1.is_finite() {
             self.stats.dropped += 1;
-            return FixOutcome::Held;
+            return FixOutcome::Dropped;
         }
         let Some(odom) = self.odom_at(fix.t) else {
             return FixOutcome::NoOdom;
@@ -669,7 +669,7 @@ impl MapFilter {
         r[(1, 1)] = p.fix.sigma.1.powi(2) * white + back;
         let z = SVector::<f64, 2>::new(p.fix.en.0, p.fix.en.1);
         let y = z - hx;
-        let heading_known = self.yaw_sigma() <= FIT_YAW_SIGMA * 3.0;
+        let heading_known = self.yaw_sigma() <= HEADING_KNOWN_RAD;
         let kept: &[usize] = if heading_known { &[] } else { &[YAW] };
         let s_mat = h * self.p * h.transpose() + r;
         let nis = s_mat
@@ -740,7 +740,7 @@ impl MapFilter {
         if !self.started || !yaw.is_finite() {
             return false;
         }
-        if self.yaw_sigma() > 0.5 {
+        if self.yaw_sigma() > HEADING_KNOWN_RAD {
             // Unknown: the measurement sets it.
             self.x[YAW] = wrap(yaw);
             for i in 0..N {
@@ -806,16 +806,6 @@ impl MapFilter {
         self.fit.clear();
         self.last_accepted = None;
         self.disagreeing = None;
-    }
-
-    /// The dual-antenna heading noise configured.
-    pub fn heading_sigma(&self) -> f64 {
-        self.config.heading_sigma_rad
-    }
-
-    /// The configuration.
-    pub fn config(&self) -> &MapFilterConfig {
-        &self.config
     }
 
     /// The number of odom poses and fixes kept (bounded).
@@ -1099,6 +1089,26 @@ mod tests {
             let settled = (x - s * 0.3f64.cos()).hypot(y - shift - s * 0.3f64.sin());
             proptest::prop_assert!(settled < 0.1, "ends {settled} m from the fixes");
         }
+    }
+
+    #[test]
+    fn a_hand_set_pose_and_a_moved_origin_forget_the_fixes_of_before() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        f.odom(at(0), OdomPose::default());
+        f.set_pose((5.0, 6.0, 1.0), (0.05, 0.01));
+        assert_eq!(f.pose(), Some((5.0, 6.0, 1.0)));
+        // One fix is held, then the origin moves: the held fix was in the old frame.
+        assert_eq!(f.fix(rtk(0, (9.0, 9.0))), FixOutcome::Held);
+        f.shift(-5.0, -6.0);
+        assert_eq!(f.pose(), Some((0.0, 0.0, 1.0)));
+        assert_eq!(f.memory().1, 0);
+        assert_eq!(
+            f.fix(Fix {
+                en: (f64::NAN, 0.0),
+                ..rtk(200, (0.0, 0.0))
+            }),
+            FixOutcome::Dropped
+        );
     }
 
     #[test]

@@ -189,12 +189,7 @@ pub fn install(stop_frames: Vec<(String, Frame)>) {
             places.len() < MAX_LOGGED_PLACES && places.insert(place.clone())
         };
         if first {
-            let message = info
-                .payload()
-                .downcast_ref::<&str>()
-                .map(|s| (*s).to_owned())
-                .or_else(|| info.payload().downcast_ref::<String>().cloned())
-                .unwrap_or_default();
+            let message = message_of(info);
             let thread = std::thread::current();
             eprintln!(
                 "chassisd: an auxiliary task panicked at {place} (thread {}): {message}; it is \
@@ -204,6 +199,16 @@ pub fn install(stop_frames: Vec<(String, Frame)>) {
             );
         }
     }));
+}
+
+/// A panic's message: the text `panic!` was given, or empty for another payload.
+pub fn message_of(info: &std::panic::PanicHookInfo<'_>) -> String {
+    let payload = info.payload();
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_default()
 }
 
 #[cfg(test)]

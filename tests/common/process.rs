@@ -153,18 +153,30 @@ impl Proc {
         &self.out[before..]
     }
 
+    /// Waits for the process to exit by itself within `wait` (`what` names the wait in the
+    /// failure), and returns its status.
+    pub fn wait_exit(&mut self, wait: Duration, what: &str) -> std::process::ExitStatus {
+        let deadline = Instant::now() + wait;
+        loop {
+            if let Some(exit) = self.child.try_wait().expect("process status") {
+                return exit;
+            }
+            assert!(Instant::now() < deadline, "{what}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// How many stderr lines so far contain `text` (those arrived are taken first).
+    pub fn log_count(&mut self, text: &str) -> usize {
+        self.log.extend(self.stderr.try_iter());
+        self.log.iter().filter(|l| l.contains(text)).count()
+    }
+
     /// Stops it with SIGTERM, checks it exits cleanly within ten seconds, and returns every
     /// stdout line.
     pub fn stop(mut self) -> Vec<String> {
         kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).expect("signal");
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let exit = loop {
-            if let Some(exit) = self.child.try_wait().expect("process status") {
-                break exit;
-            }
-            assert!(Instant::now() < deadline, "no exit within 10 s of SIGTERM");
-            std::thread::sleep(Duration::from_millis(20));
-        };
+        let exit = self.wait_exit(Duration::from_secs(10), "no exit within 10 s of SIGTERM");
         assert!(exit.success(), "exit status {exit}");
         let mut out = std::mem::take(&mut self.out);
         out.extend(self.stdout.iter());
