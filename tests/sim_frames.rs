@@ -5,8 +5,8 @@
 use chassisd::core::VehicleStatus;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
-use chassisd::fusion::ekf::wrap;
 use chassisd::fusion::geodesy::Enu;
+use chassisd::fusion::planar::wrap;
 use chassisd::record::Record;
 use chassisd::sim::lockstep::{Lockstep, Sink};
 use chassisd::sim::plant::{GnssCondition, PlantConfig, Truth};

@@ -29,7 +29,7 @@ use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::goal::GoalPose;
 use crate::control::{MotionResult, MotionTag, Outcome};
 use crate::core::{Command, VehicleStatus};
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
 /// Goal cancelled (or: already mapping).

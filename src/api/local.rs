@@ -47,8 +47,8 @@ use serde::Deserialize;
 use crate::control::MoveKind;
 use crate::control::goal::GoalPose;
 use crate::core::{Command, PathPoints, PathRequest};
-use crate::fusion::ekf::wrap;
 use crate::fusion::geodesy::Geodetic;
+use crate::fusion::planar::wrap;
 
 /// Topic of velocity commands.
 pub const CMD_VEL: &str = "cmd_vel";

@@ -19,7 +19,7 @@ use crate::control::{MotionResult, MoveKind, Outcome};
 use crate::core::status::VehicleStatus;
 use crate::devices::gnss::FixQuality;
 use crate::engine::EngineOutput;
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 use crate::record::Record;
 use crate::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};

@@ -16,9 +16,9 @@ use crate::config::ConfigError;
 use crate::core::status::{PoseCovariance, VehicleStatus};
 use crate::devices::gnss::NmeaReceiver;
 use crate::engine::EngineOutput;
-use crate::fusion::ekf::wrap;
 use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::localizer::yaw_of_heading_deg;
+use crate::fusion::planar::wrap;
 use crate::record::{Payload, Record};
 use crate::sim::lockstep::{GNSS_SOURCE, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{PlantConfig, Truth};
@@ -339,12 +339,22 @@ pub fn run(
     Ok(report(plant, seed, runs as u32, figures))
 }
 
+/// A ramping gyro bias is configured as the bias walk that matches it over this span, s.
+const RAMP_HORIZON_S: f64 = 60.0;
+
 /// Drives one scenario and scores it.
 pub fn run_scenario(
     plant: &PlantConfig,
     scenario: &Scenario,
     seed: u64,
 ) -> Result<ScenarioFigures, ConfigError> {
+    let mut plant = plant.clone();
+    if scenario.gyro_bias_ramp != 0.0 && plant.configured.gyro_bias_walk.is_none() {
+        // The integrator of a gyro whose bias ramps (warming up) states a bias walk that
+        // covers the ramp over a minute: a·t equals b·√t at t = 60 s.
+        let covering = scenario.gyro_bias_ramp.abs() * RAMP_HORIZON_S.sqrt();
+        plant.configured.gyro_bias_walk = Some(plant.imu.gyro_bias_walk.max(covering));
+    }
     let mut sim = Lockstep::new(plant.clone(), seed, START)?;
     let mut sink = Collector::default();
     let steps = (scenario.duration_s() / PLANT_STEP.as_secs_f64()).round() as u64;
@@ -363,7 +373,7 @@ pub fn run_scenario(
             "commands refused"
         );
     }
-    Ok(score(plant, scenario, &sink, &truth, &sim))
+    Ok(score(&plant, scenario, &sink, &truth, &sim))
 }
 
 fn score(

@@ -46,7 +46,7 @@ impl MissionConfig {
             dock: self.dock.map(|[x, y, heading]| GoalPose {
                 x,
                 y,
-                yaw: crate::fusion::ekf::wrap(heading.to_radians()),
+                yaw: crate::fusion::planar::wrap(heading.to_radians()),
             }),
             charge_timeout_s: self.charge_timeout_s.unwrap_or(60.0),
         }

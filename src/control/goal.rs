@@ -18,7 +18,7 @@ use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_s
 use super::profile::Profile;
 use super::{Outcome, PoseView};
 use crate::config::motion::MotionSettings;
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
 /// Facing the goal is good enough within this, rad (the arc takes out the rest).

@@ -21,7 +21,7 @@
 use super::profile::{Limits, Profile};
 use super::{MoveKind, Outcome, PoseView};
 use crate::config::motion::MotionSettings;
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
 /// The share of the speed and acceleration limits the profile plans with: the rest is

@@ -20,7 +20,7 @@ use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_s
 use super::track::{MAX_LENGTH_M, SAMPLE_M, Segment, Track, polyline_length};
 use super::{Outcome, PoseView};
 use crate::config::motion::{MinGnss, MotionSettings};
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
 /// The correction settles over at least this distance, m.

@@ -12,7 +12,7 @@
 
 use crate::config::motion::MotionSettings;
 use crate::control::moves::planning_limits;
-use crate::fusion::ekf::wrap;
+use crate::fusion::planar::wrap;
 
 /// The longest path, m: 400,000 samples (some 19 MB) at most. A longer coverage is split
 /// into several steps.

@@ -25,6 +25,7 @@ use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
 };
+use crate::fusion::map_filter::Trust;
 use crate::fusion::odometry::{OdomPose, Odometry, WheelReading};
 use crate::time::Timestamp;
 pub use chassis::DriveMode;
@@ -456,6 +457,12 @@ impl Vehicle {
             Input::Gnss(fix) => {
                 self.gnss_fix = Some(*fix);
                 self.feed_gnss(fix);
+                // A drift of the odom heading proven against GNSS corrects the gyro's bias.
+                if let Some(drift) = self.localizer.take_bias_correction()
+                    && let Some(odometry) = self.odometry.as_mut()
+                {
+                    odometry.correct_bias(drift.rate);
+                }
                 self.localizer
                     .take_events()
                     .into_iter()
@@ -473,8 +480,6 @@ impl Vehicle {
             Input::Imu(sample) => {
                 if sample.is_plausible() {
                     self.imu = Some(*sample);
-                    self.localizer
-                        .add(sample.rx, Measurement::Gyro { wz: sample.gyro.z });
                     if let Some(o) = &mut self.odometry {
                         o.gyro(sample.rx, sample.gyro.z);
                     }
@@ -513,14 +518,12 @@ impl Vehicle {
                                     travel,
                                 },
                             );
+                            // The map pose stands on the odom frame: it moves by its
+                            // increments (REP-105).
+                            if let Some(pose) = o.pose() {
+                                self.localizer.add(measured, Measurement::Odom(pose));
+                            }
                         }
-                        self.localizer.add(
-                            t,
-                            Measurement::Odometry {
-                                v: (vl + vr) / 2.0,
-                                w: (vr - vl) / cfg.track_m,
-                            },
-                        );
                     }
                 }
                 Vec::new()
@@ -1227,6 +1230,12 @@ impl Vehicle {
             Measurement::Position {
                 en: (enu.x, enu.y),
                 sigma,
+                // RTK fixed is believed over the wheels; a lesser fix's step is its own error.
+                trust: if fix.quality == FixQuality::RtkFixed {
+                    Trust::OverWheels
+                } else {
+                    Trust::UnderWheels
+                },
             },
         );
     }

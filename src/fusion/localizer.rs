@@ -1,62 +1,35 @@
-//! The localiser: the EKF fed by wheel odometry, the gyro, GNSS position, dual-antenna
-//! heading and course over ground, in the local ENU frame of a datum.
-//!
-//! - Measurements are applied in the order of the time they describe, not of their arrival:
-//!   the last second of measurements is kept with the filter state after each, and a late one
-//!   (a GNSS fix arrives after the IMU samples of its epoch) rewinds to before its time and
-//!   re-applies what followed.
-//! - GNSS position, heading and course are gated on the innovation's Mahalanobis distance; a
-//!   run of rejected positions means the vehicle really is elsewhere (it was carried, or the
-//!   filter drifted), and resets the position to GNSS.
-//! - The GNSS antenna's lever arm is rotated by the heading.
+//! The localiser: the map frame of REP-105 over the `odom` frame. The core gives it the odom
+//! frame's poses (wheels and gyro, [`super::odometry`]) and the GNSS measurements; the map
+//! filter ([`super::map_filter`]) estimates the map→odom correction from them. Here: the
+//! local ENU frame of the datum, the frame INIT_POSITION sets, what is published (pose,
+//! covariance, `nav.locate`, the correction), and the wheels' scale against RTK, used by the
+//! moves once it is proven and never by the dead reckoning.
 
-use std::collections::VecDeque;
 use std::f64::consts::FRAC_PI_2;
 use std::time::Duration;
 
-use nalgebra::{SMatrix, SVector, Vector3};
+use nalgebra::Vector3;
 
-use super::ekf::{
-    BIAS, BIAS_RATE, Cov, Ekf, GNSS_E, GNSS_N, N, ProcessNoise, SCALE, State, V, W, X, Y, YAW, wrap,
-};
 use super::geodesy::{Enu, Geodetic};
+use super::gyro_drift::{Drift, GyroDrift};
+use super::map_filter::{Fix, FixOutcome, MapFilter, MapFilterConfig, Trust};
+use super::odometry::OdomPose;
+use super::planar::wrap;
+use super::wheel_scale::WheelScale;
 use crate::time::Timestamp;
 
-/// χ² gate, 1 degree of freedom, 99.9 %.
-const GATE_1: f64 = 10.83;
-/// χ² gate, 2 degrees of freedom, 99.9 %.
-const GATE_2: f64 = 13.82;
-/// A gyro whose last rate is younger than this many of its measured periods is the source of
-/// yaw rate, not the wheels ...
-const GYRO_LIVE_PERIODS: f64 = 5.0;
-/// ... and never younger than this.
-const GYRO_LIVE_MIN: Duration = Duration::from_millis(50);
-use crate::fusion::odometry::STILL_MPS;
-/// A vehicle slower than [`STILL_MPS`] and turning slower than this stands still, rad/s.
+/// A vehicle slower than [`crate::fusion::odometry::STILL_MPS`] and turning slower than this
+/// stands still, rad/s.
 pub const STILL_RPS: f64 = 0.005;
-/// The yaw rate of standing wheels, 1σ rad/s.
-const STILL_YAW_RATE_SIGMA: f64 = 0.002;
-/// A fix whose σ is below this fraction of the last one's marks a better fix quality ...
-const QUALITY_STEP: f64 = 0.5;
-/// The gyro bias's rate of change before anything has shown it, 1σ rad/s² (a warming
-/// MEMS gyro's drift).
-const INITIAL_BIAS_RATE_SIGMA: f64 = 3e-5;
-/// The wheels' scale error before GNSS has shown it, 1σ (tyre wear and load).
-const INITIAL_SCALE_SIGMA: f64 = 0.02;
-/// Fixes inform the heading (through the antenna's lever arm and the motion between them)
-/// only once its 1σ is within this, rad.
-const HEADING_FROM_POSITIONS_RAD: f64 = 0.5;
-/// The heading's 1σ before anything has shown it, rad.
-const UNKNOWN_YAW_SIGMA: f64 = std::f64::consts::PI;
-/// A relocation needs at least this many rejected positions, whatever their rate.
-pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
+/// How far ahead of the last odom pose a published pose is extrapolated, at most.
+const MAX_EXTRAPOLATION: Duration = Duration::from_millis(500);
 
 /// Settings of the localiser.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalizerConfig {
     /// GNSS antenna in the vehicle frame (x forward, y left), m.
     pub antenna: (f64, f64),
-    /// The datum, when fixed by configuration; else the first RTK-fixed position.
+    /// The datum, when fixed by configuration; else the first valid fix.
     pub datum: Option<Geodetic>,
     /// How long a position fix takes to arrive after its epoch.
     pub gnss_latency: Duration,
@@ -68,29 +41,35 @@ pub struct LocalizerConfig {
     pub heading_sigma_rad: f64,
     /// Course over ground is used only above this speed, m/s.
     pub cog_min_speed_mps: f64,
-    /// Positions rejected without a break for this long (and at least
-    /// [`MIN_REJECTIONS_TO_RELOCATE`] of them) reset the position to GNSS. A glitch shorter
-    /// than this is ridden out; a vehicle that really moved is found again after it.
+    /// Fixes that jumped away together are taken after this long (the vehicle really is
+    /// elsewhere); headings rejected this long replace the heading.
     pub relocate_after: Duration,
-    /// How far back a late measurement may reach.
-    pub window: Duration,
-    /// Process noise.
-    pub noise: ProcessNoise,
-    /// Wheel speed noise: 1σ m/s plus a fraction of the speed (slip).
+    /// Wheel speed noise: 1σ m/s plus a fraction of the speed (slip), for the ROS odometry's
+    /// covariance.
     pub odometry_sigma: (f64, f64),
-    /// Yaw rate from the wheels, 1σ rad/s (slips when turning).
+    /// Yaw rate from the wheels, 1σ rad/s, for the same.
     pub odometry_yaw_rate_sigma: f64,
     /// Gyro noise, 1σ rad/s.
     pub gyro_sigma: f64,
-    /// The slowly wandering part of a fix's error, as a fraction of its 1σ; its
-    /// correlation time is `noise.gnss_correlation_s`.
+    /// The slowly wandering part of a fix's error, as a fraction of its 1σ.
     pub gnss_correlated_fraction: f64,
+    /// Its correlation time.
+    pub gnss_correlation: Duration,
+    /// The odom heading's random walk while moving, rad/√s (the gyro's angle random walk).
+    pub heading_walk: f64,
+    /// The gyro bias's random walk, rad/s per √s (it leaves what a standstill taught).
+    pub gyro_bias_walk: f64,
+    /// The odom frame's position error per metre driven: variance along and across the
+    /// heading, m²/m (the wheels' slip and scale), and its heading error per radian turned,
+    /// rad²/rad.
+    pub odom_error: (f64, f64, f64),
     /// The receiver's velocity accuracy, 1σ per axis, m/s; `None`: typical by fix quality.
     pub gnss_velocity_sigma_mps: Option<f64>,
 }
 
 impl Default for LocalizerConfig {
     fn default() -> Self {
+        let map = MapFilterConfig::default();
         Self {
             antenna: (0.0, 0.0),
             datum: None,
@@ -99,24 +78,32 @@ impl Default for LocalizerConfig {
             converged_yaw_rad: 5f64.to_radians(),
             heading_sigma_rad: 0.5f64.to_radians(),
             cog_min_speed_mps: 0.3,
-            relocate_after: Duration::from_secs(3),
-            window: Duration::from_secs(1),
-            noise: ProcessNoise {
-                accel: 1.0,
-                angular_accel: 0.5,
-                bias_walk: 2e-5,
-                bias_rate_walk: 3e-6,
-                position: 0.002,
-                position_per_speed: 0.006,
-                scale_walk: 1e-4,
-                gnss_correlation_s: 30.0,
-                gnss_error: (0.0, 0.0),
-            },
-            gnss_correlated_fraction: 0.5,
-            gnss_velocity_sigma_mps: None,
+            relocate_after: map.relocate_after,
             odometry_sigma: (0.01, 0.02),
             odometry_yaw_rate_sigma: 0.05,
             gyro_sigma: 0.003,
+            gnss_correlated_fraction: map.gnss_correlated_fraction,
+            gnss_correlation: Duration::from_secs_f64(map.gnss_correlation_s),
+            heading_walk: map.yaw_per_s.sqrt(),
+            gyro_bias_walk: map.bias_walk,
+            odom_error: (map.along_per_m, map.across_per_m, map.yaw_per_rad),
+            gnss_velocity_sigma_mps: None,
+        }
+    }
+}
+
+impl LocalizerConfig {
+    fn map_filter(&self) -> MapFilterConfig {
+        MapFilterConfig {
+            antenna: self.antenna,
+            gnss_correlated_fraction: self.gnss_correlated_fraction,
+            gnss_correlation_s: self.gnss_correlation.as_secs_f64(),
+            relocate_after: self.relocate_after,
+            yaw_per_s: self.heading_walk * self.heading_walk,
+            bias_walk: self.gyro_bias_walk,
+            along_per_m: self.odom_error.0,
+            across_per_m: self.odom_error.1,
+            yaw_per_rad: self.odom_error.2,
         }
     }
 }
@@ -124,24 +111,16 @@ impl Default for LocalizerConfig {
 /// One measurement, in the local frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Measurement {
-    /// Wheel odometry: forward speed (m/s) and yaw rate (rad/s).
-    Odometry {
-        /// Forward speed, m/s.
-        v: f64,
-        /// Yaw rate, rad/s.
-        w: f64,
-    },
-    /// Gyro yaw rate, rad/s (bias included).
-    Gyro {
-        /// Yaw rate, rad/s.
-        wz: f64,
-    },
-    /// GNSS antenna position: east, north (m) and their 1σ.
+    /// The `odom` frame's pose (wheels and gyro).
+    Odom(OdomPose),
+    /// GNSS antenna position: east, north (m), their 1σ and how far the fix is trusted.
     Position {
         /// East, north, m.
         en: (f64, f64),
         /// 1σ east, north, m.
         sigma: (f64, f64),
+        /// RTK (over the wheels) or not.
+        trust: Trust,
     },
     /// Dual-antenna heading as ENU yaw, rad.
     Heading {
@@ -171,7 +150,7 @@ pub enum LocateState {
     Lost,
 }
 
-/// The localiser's answer at one time, from a single prediction of its filter.
+/// The localiser's answer at one time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Published {
     /// x, y (m), yaw (rad) in the map frame.
@@ -180,43 +159,22 @@ pub struct Published {
     pub map_covariance: [f64; 4],
     /// Whether the pose is good enough to publish as located.
     pub locate: LocateState,
-    /// Odometry distance per true distance.
+    /// Odometry distance per true distance, once proven against RTK; else 1.
     pub wheel_scale: f64,
+    /// The map→odom correction in the map frame: the odom frame's origin (x, y, m) and
+    /// rotation (rad), so that map pose = correction ∘ odom pose.
+    pub map_to_odom: (f64, f64, f64),
 }
 
 /// Counters.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct LocalizerStats {
-    /// Measurements applied.
+    /// Fixes, headings and courses applied.
     pub applied: u64,
-    /// Positions, headings or courses rejected by the gate.
+    /// Fixes dropped for disagreeing with their neighbours, and headings or courses rejected.
     pub rejected: u64,
-    /// Position resets after a run of rejections.
+    /// Agreeing fixes that widened the filter (slipping wheels, a relocation).
     pub resets: u64,
-    /// Measurements applied after later ones (rewound).
-    pub late: u64,
-    /// Measurements older than the window, dropped.
-    pub too_late: u64,
-}
-
-#[derive(Debug, Clone, PartialEq)]
-struct Filter {
-    ekf: Ekf,
-    time: Timestamp,
-    /// The current run of rejected positions: its first time and its length.
-    rejections: Option<(Timestamp, u32)>,
-    /// The same for headings and courses.
-    heading_rejections: Option<(Timestamp, u32)>,
-    /// The last gyro rate applied.
-    last_gyro: Option<Timestamp>,
-    /// The larger 1σ of the last position fix.
-    last_position_sigma: Option<f64>,
-    /// The steady 1σ of the GNSS error at the current fix quality, east and north, m.
-    gnss_error: (f64, f64),
-    /// The wheels stood still at the last odometry: the pose holds.
-    still: bool,
-    /// Smoothed interval between gyro samples, s.
-    gyro_period: Option<f64>,
 }
 
 /// The localiser.
@@ -224,35 +182,70 @@ struct Filter {
 pub struct Localizer {
     config: LocalizerConfig,
     frame: Option<Enu>,
-    /// The filter before the oldest buffered measurement.
-    base: Option<Filter>,
-    /// Measurements in time order, with the filter after each.
-    buffer: VecDeque<(Timestamp, Measurement, Filter)>,
-    /// Latest heading and course seen, to initialise with.
-    last_heading: Option<(Timestamp, f64)>,
-    /// The last position's time, and the interval before it: the receiver's period.
-    last_position: (Option<Timestamp>, Option<Duration>),
-    last_speed: f64,
+    filter: MapFilter,
+    /// The latest odom pose and its time.
+    odom: Option<(Timestamp, OdomPose)>,
+    /// Latest heading seen before the filter started, to start with.
+    last_heading: Option<(Timestamp, f64, f64)>,
+    /// Headings rejected without a break: first time and count.
+    heading_rejections: Option<(Timestamp, u32)>,
+    scale: WheelScale,
+    /// The odom heading's drift against GNSS headings.
+    drift: GyroDrift,
+    /// When the gyro's bias was last learnt (a standstill) or corrected.
+    bias_since: Option<Timestamp>,
+    /// A proven drift, until the core corrects the gyro's bias by it.
+    bias_correction: Option<Drift>,
+    /// The last RTK fix a direction between two starts from.
+    rtk_from: Option<RtkAnchor>,
     /// The frame poses are published in.
     map: MapFrame,
-    stats: LocalizerStats,
     /// What happened that an operator should read in the log, until taken.
     events: Vec<String>,
 }
+
+/// An RTK fix a direction is measured from.
+#[derive(Debug, Clone, Copy)]
+struct RtkAnchor {
+    t: Timestamp,
+    /// East/north, m.
+    en: (f64, f64),
+    sigma: f64,
+    /// The antenna's odom position then, m.
+    antenna: (f64, f64),
+}
+
+/// How uncertain a heading's time is (the receiver's output timing and the latency's jitter;
+/// the gyro's samples' transport), s.
+const HEADING_TIME_SIGMA_S: f64 = 0.02;
+
+/// The direction between two RTK fixes teaches the gyro's drift once its 1σ is within this,
+/// rad (1 cm fixes 1.4 m apart).
+const RTK_DIRECTION_SIGMA_RAD: f64 = 0.01;
+
+/// A drift not yet proven widens the heading by the rate it has at this many of its σ below
+/// its estimate, and bounds the drift's uncertainty by the rate this many σ above it.
+const DRIFT_CONFIDENCE: f64 = 2.0;
+
+/// Headings rejected this many times (over `relocate_after`) replace the heading.
+pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
 
 impl Localizer {
     /// A localiser with nothing known.
     pub fn new(config: LocalizerConfig) -> Self {
         Self {
             frame: config.datum.map(Enu::new),
+            filter: MapFilter::new(config.map_filter()),
             config,
-            base: None,
-            buffer: VecDeque::new(),
+            odom: None,
             last_heading: None,
-            last_position: (None, None),
-            last_speed: 0.0,
+            heading_rejections: None,
+            scale: WheelScale::default(),
+            drift: GyroDrift::default(),
+            bias_since: None,
+            bias_correction: None,
+            rtk_from: None,
             map: MapFrame::default(),
-            stats: LocalizerStats::default(),
             events: Vec::new(),
         }
     }
@@ -267,7 +260,7 @@ impl Localizer {
         self.frame.as_ref()
     }
 
-    /// Sets the datum unless one is set (the first RTK-fixed position).
+    /// Sets the datum unless one is set (the first valid position).
     pub fn offer_datum(&mut self, datum: Geodetic) -> bool {
         if self.frame.is_some() {
             return false;
@@ -283,68 +276,70 @@ impl Localizer {
 
     /// Takes the events since the last call (the filter's start, the datum's choice).
     pub fn take_events(&mut self) -> Vec<String> {
-        std::mem::take(&mut self.events)
+        let mut events = std::mem::take(&mut self.events);
+        events.extend(self.filter.take_events());
+        events
     }
 
     /// Counters.
     pub fn stats(&self) -> LocalizerStats {
-        self.stats
+        let s = self.filter.stats();
+        LocalizerStats {
+            applied: s.taken + s.headings,
+            rejected: s.dropped + s.headings_rejected,
+            resets: s.widened,
+        }
     }
 
-    fn current(&self) -> Option<&Filter> {
-        self.buffer.back().map(|(_, _, f)| f).or(self.base.as_ref())
+    /// The map filter.
+    pub fn filter(&self) -> &MapFilter {
+        &self.filter
     }
 
-    /// The filter's state, if initialised.
-    pub fn ekf(&self) -> Option<&Ekf> {
-        self.current().map(|f| &f.ekf)
-    }
-
-    /// Pose of the vehicle reference point: x, y (m, ENU), yaw (rad).
+    /// Pose of the vehicle reference point in the ENU frame at the latest odom pose.
     pub fn pose(&self) -> Option<(f64, f64, f64)> {
-        self.ekf().map(|e| (e.x[X], e.x[Y], e.x[YAW]))
+        self.filter.pose()
     }
 
-    /// What the vehicle publishes about its place at `t`, from one prediction of the
-    /// filter to `t`: the pose and its covariance in the map frame (INIT_POSITION's frame;
-    /// the ENU frame of the datum until then), `nav.locate` and the wheels' scale; `None`
-    /// before the filter starts.
+    /// What the vehicle publishes about its place at `t`: the map pose (INIT_POSITION's
+    /// frame; the ENU frame of the datum until then) carried from the latest odom pose by
+    /// its speed and yaw rate, its covariance, `nav.locate`, the wheels' scale and the
+    /// map→odom correction; `None` before the filter starts.
     pub fn published(&self, t: Timestamp) -> Option<Published> {
-        let e = self.predicted(t)?;
-        let locate = if e.position_sigma() <= self.config.locate_bound_m
-            && e.yaw_sigma() <= self.config.converged_yaw_rad
+        let (x, y, yaw) = self.filter.pose()?;
+        let (ex, ey, eyaw) = match self.odom {
+            Some((to, o)) if t > to => {
+                let dt = t.saturating_since(to).min(MAX_EXTRAPOLATION).as_secs_f64();
+                let mid = yaw + o.w * dt / 2.0;
+                (
+                    x + o.v * dt * mid.cos(),
+                    y + o.v * dt * mid.sin(),
+                    wrap(yaw + o.w * dt),
+                )
+            }
+            _ => (x, y, yaw),
+        };
+        let locate = if self.filter.position_sigma() <= self.config.locate_bound_m
+            && self.filter.yaw_sigma() <= self.config.converged_yaw_rad
         {
             LocateState::Good
         } else {
             LocateState::Lost
         };
         let (s, c) = self.map.rotation.sin_cos();
-        let (a, b, d) = (e.p[(X, X)], e.p[(X, Y)], e.p[(Y, Y)]);
+        let [a, b, d, var_yaw] = self.filter.covariance();
         // Rᵀ P R with R the rotation by `rotation`.
         let xx = c * c * a + 2.0 * c * s * b + s * s * d;
         let yy = s * s * a - 2.0 * c * s * b + c * c * d;
         let xy = -c * s * a + (c * c - s * s) * b + c * s * d;
+        let correction = self.filter.map_to_odom().unwrap_or((0.0, 0.0, 0.0));
         Some(Published {
-            map_pose: self.map.pose_of(e.x[X], e.x[Y], e.x[YAW]),
-            map_covariance: [xx, xy, yy, e.p[(YAW, YAW)]],
+            map_pose: self.map.pose_of(ex, ey, eyaw),
+            map_covariance: [xx, xy, yy, var_yaw],
             locate,
-            wheel_scale: 1.0 + e.x[SCALE],
+            wheel_scale: self.scale.proven().unwrap_or(1.0),
+            map_to_odom: self.map.pose_of(correction.0, correction.1, correction.2),
         })
-    }
-
-    /// The filter predicted to `t` (no measurement since then), without changing it.
-    pub fn predicted(&self, t: Timestamp) -> Option<Ekf> {
-        let f = self.current()?;
-        let mut ekf = f.ekf.clone();
-        if t > f.time {
-            let dt = t.saturating_since(f.time).as_secs_f64();
-            if f.still {
-                ekf.predict_still(dt, &self.noise(f));
-            } else {
-                ekf.predict(dt, &self.noise(f));
-            }
-        }
-        Some(ekf)
     }
 
     /// The `nav.locate` state at `t`: uninitialised without a map pose, good while both the
@@ -357,411 +352,196 @@ impl Localizer {
     /// Adds a measurement that describes time `t`.
     pub fn add(&mut self, t: Timestamp, m: Measurement) {
         match m {
-            Measurement::Heading { yaw, .. } | Measurement::Course { yaw, .. } => {
-                self.last_heading = Some((t, yaw));
-            }
-            Measurement::Odometry { v, .. } => self.last_speed = v,
-            Measurement::Position { .. } => {
-                if let Some(before) = self.last_position.0.filter(|&b| t > b) {
-                    self.last_position.1 = Some(t.saturating_since(before));
-                }
-                self.last_position.0 = Some(t);
-            }
-            _ => {}
-        }
-        let Some(current) = self.current().cloned() else {
-            self.try_initialise(t, &m);
-            return;
-        };
-        if t >= current.time {
-            let mut f = current;
-            self.apply(&mut f, t, &m);
-            self.buffer.push_back((t, m, f));
-            self.trim();
-            return;
-        }
-        // Late: rewind to before `t`, then re-apply everything after it.
-        let base_time = self.base.as_ref().map_or(t, |b| b.time);
-        if t < base_time {
-            self.stats.too_late += 1;
-            return;
-        }
-        self.stats.late += 1;
-        let at = self.buffer.partition_point(|(bt, _, _)| *bt <= t);
-        let mut f = if at == 0 {
-            self.base.clone()
-        } else {
-            self.buffer.get(at - 1).map(|(_, _, f)| f.clone())
-        }
-        .unwrap_or(current);
-        let later: Vec<(Timestamp, Measurement)> = self
-            .buffer
-            .drain(at..)
-            .map(|(bt, bm, _)| (bt, bm))
-            .collect();
-        self.apply(&mut f, t, &m);
-        self.buffer.push_back((t, m, f.clone()));
-        for (bt, bm) in later {
-            self.apply(&mut f, bt, &bm);
-            self.buffer.push_back((bt, bm, f.clone()));
-        }
-        self.trim();
-    }
-
-    /// Drops buffered measurements older than the window; the filter before the oldest
-    /// kept one becomes the base.
-    fn trim(&mut self) {
-        let Some(newest) = self.buffer.back().map(|(t, _, _)| *t) else {
-            return;
-        };
-        while self.buffer.len() > 1
-            && self
-                .buffer
-                .front()
-                .is_some_and(|(t, _, _)| newest.saturating_since(*t) > self.config.window)
-        {
-            if let Some((_, _, f)) = self.buffer.pop_front() {
-                self.base = Some(f);
-            }
-        }
-    }
-
-    fn try_initialise(&mut self, t: Timestamp, m: &Measurement) {
-        let Measurement::Position { en, sigma } = *m else {
-            return;
-        };
-        // A recent heading (dual antenna, or course while moving): from the last second, or
-        // from the last one and a half of the receiver's periods when that is longer (a
-        // 1 Hz receiver's last heading can be a whole period old). Without one the filter
-        // starts anyway, its heading unknown until course or a second antenna gives it.
-        let max_age = self
-            .last_position
-            .1
-            .map_or(Duration::from_secs(1), |period| {
-                period.mul_f64(1.5).max(Duration::from_secs(1))
-            });
-        let heading = self
-            .last_heading
-            .filter(|(ht, _)| t.saturating_since(*ht) < max_age || *ht > t)
-            .map(|(_, yaw)| yaw);
-        let yaw = heading.unwrap_or(0.0);
-        let (ax, ay) = self.config.antenna;
-        let (s, c) = yaw.sin_cos();
-        let mut x = State::zeros();
-        x[X] = en.0 - (c * ax - s * ay);
-        x[Y] = en.1 - (s * ax + c * ay);
-        x[YAW] = yaw;
-        x[V] = self.last_speed;
-        let mut p = Cov::zeros();
-        // With the heading unknown, so is where the antenna sits around the vehicle.
-        let lever = if heading.is_some() {
-            0.0
-        } else {
-            ax * ax + ay * ay
-        };
-        p[(X, X)] = sigma.0.powi(2) + 0.01 + lever;
-        p[(Y, Y)] = sigma.1.powi(2) + 0.01 + lever;
-        p[(YAW, YAW)] = match heading {
-            Some(_) => 5f64.to_radians().powi(2),
-            None => UNKNOWN_YAW_SIGMA.powi(2),
-        };
-        p[(V, V)] = 0.25;
-        p[(W, W)] = 0.25;
-        p[(BIAS, BIAS)] = 0.02f64.powi(2);
-        p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
-        p[(SCALE, SCALE)] = INITIAL_SCALE_SIGMA.powi(2);
-        // The first fix's slow error is in the position it gave.
-        let slow = self.config.gnss_correlated_fraction;
-        for (i, g, sd) in [(X, GNSS_E, sigma.0), (Y, GNSS_N, sigma.1)] {
-            p[(g, g)] = (slow * sd).powi(2);
-            p[(i, g)] = -(slow * sd).powi(2);
-            p[(g, i)] = -(slow * sd).powi(2);
-        }
-        self.events.push(match heading {
-            Some(yaw) => format!(
-                "localisation started: position from a fix with 1σ {:.2} m, heading {:.1}° from GNSS",
-                sigma.0.max(sigma.1),
-                heading_deg_of_yaw(yaw)
-            ),
-            None => format!(
-                "localisation started: position from a fix with 1σ {:.2} m; heading unknown \
-                 (LOCATE_FALSE) until course over ground while moving or a dual-antenna heading gives it",
-                sigma.0.max(sigma.1)
-            ),
-        });
-        self.base = Some(Filter {
-            ekf: Ekf::new(x, p),
-            time: t,
-            rejections: None,
-            heading_rejections: None,
-            last_gyro: None,
-            last_position_sigma: Some(sigma.0.max(sigma.1)),
-            gnss_error: (slow * sigma.0, slow * sigma.1),
-            still: false,
-            gyro_period: None,
-        });
-        self.buffer.clear();
-    }
-
-    /// Predicts `f` to `t` and applies `m`.
-    fn apply(&mut self, f: &mut Filter, t: Timestamp, m: &Measurement) {
-        if t > f.time {
-            let dt = t.saturating_since(f.time).as_secs_f64();
-            if f.still {
-                f.ekf.predict_still(dt, &self.noise(f));
-            } else {
-                f.ekf.predict(dt, &self.noise(f));
-            }
-            f.time = t;
-        }
-        // A still vehicle's pose moves only by GNSS: wheel and gyro updates leave it.
-        let pose: &[usize] = &[X, Y, YAW];
-        let e = &mut f.ekf;
-        let row = |i: usize| {
-            let mut h = SMatrix::<f64, 1, N>::zeros();
-            h[(0, i)] = 1.0;
-            h
-        };
-        let one = |v: f64| SVector::<f64, 1>::new(v);
-        let var = |s: f64| SMatrix::<f64, 1, 1>::new(s * s);
-        match *m {
-            Measurement::Odometry { v, w } => {
-                let (base, rel) = self.config.odometry_sigma;
-                let still = v.abs() < STILL_MPS && w.abs() < STILL_RPS;
-                let kept: &[usize] = if still { pose } else { &[] };
-                // The wheels read v·(1 + scale).
-                let scale = 1.0 + e.x[SCALE];
-                let mut h = row(V);
-                h[(0, V)] = scale;
-                h[(0, SCALE)] = e.x[V];
-                e.update_except(
-                    one(v - e.x[V] * scale),
-                    &h,
-                    &var(base + rel * v.abs()),
-                    &[],
-                    f64::INFINITY,
-                    kept,
-                );
-                // The wheels' yaw rate carries the slip and track errors, which the gyro bias
-                // would soak up; with a live gyro it is used only when the wheels stand still,
-                // where it is exact (and makes the bias observable).
-                let live_for = f
-                    .gyro_period
-                    .map_or(GYRO_LIVE_MIN, |p| {
-                        Duration::from_secs_f64(p * GYRO_LIVE_PERIODS)
-                    })
-                    .max(GYRO_LIVE_MIN);
-                let gyro_live = f
-                    .last_gyro
-                    .is_some_and(|g| t.saturating_since(g) <= live_for);
-                f.still = still;
-                let yaw_rate_sigma = match (gyro_live, still) {
-                    (false, _) => Some(self.config.odometry_yaw_rate_sigma),
-                    (true, true) => Some(STILL_YAW_RATE_SIGMA),
-                    (true, false) => None,
-                };
-                if let Some(sigma) = yaw_rate_sigma {
-                    f.ekf.update_except(
-                        one(w - f.ekf.x[W]),
-                        &row(W),
-                        &var(sigma),
-                        &[],
-                        f64::INFINITY,
-                        kept,
-                    );
-                }
-                self.stats.applied += 1;
-            }
-            Measurement::Gyro { wz } => {
-                let mut step = 0.0;
-                if let Some(last) = f.last_gyro.filter(|&l| t > l) {
-                    let dt = t.saturating_since(last).as_secs_f64();
-                    // A gap (a lost link) turns the yaw over a few periods at most.
-                    step = f.gyro_period.map_or(dt, |p| dt.min(p * GYRO_LIVE_PERIODS));
-                    f.gyro_period = Some(match f.gyro_period {
-                        // Gaps (a lost link) count as a few periods at most.
-                        Some(p) => p + (dt.min(p * GYRO_LIVE_PERIODS) - p) * 0.05,
-                        None => dt,
-                    });
-                }
-                f.last_gyro = Some(t);
-                let mut h = row(W);
-                h[(0, BIAS)] = 1.0;
-                let kept: &[usize] = if f.still { pose } else { &[] };
-                let rate_before = e.x[W];
-                e.update_except(
-                    one(wz - e.x[W] - e.x[BIAS]),
-                    &h,
-                    &var(self.config.gyro_sigma),
-                    &[],
-                    f64::INFINITY,
-                    kept,
-                );
-                if !f.still {
-                    // The prediction turned the yaw at the old rate since the last sample; the
-                    // trapezoid rule turns it at the mean of the old and the new, so a turn
-                    // that speeds up leaves no lag. A refinement of the mean's integration:
-                    // the covariance already holds the rate's uncertainty.
-                    e.x[YAW] = wrap(e.x[YAW] + (e.x[W] - rate_before) * step / 2.0);
-                }
-                self.stats.applied += 1;
-            }
-            Measurement::Heading { yaw, sigma } => {
-                let r = e.update(
-                    &one(yaw),
-                    &one(e.x[YAW]),
-                    &row(YAW),
-                    &var(sigma),
-                    &[0],
-                    GATE_1,
-                );
-                self.count(r.applied);
-                self.heading_run(f, t, r.applied, yaw, sigma);
-            }
-            Measurement::Course { yaw, sigma } => {
-                // The antenna moves at (v - ω·ay, ω·ax) in the vehicle frame: off the heading
-                // while turning, and behind it when reversing.
-                let (ax, ay) = self.config.antenna;
-                let (along, across) = (e.x[V] - e.x[W] * ay, e.x[W] * ax);
-                let speed_sq = along * along + across * across;
-                if speed_sq < 0.01 {
+            Measurement::Odom(pose) => {
+                if self.odom.is_some_and(|(to, _)| t < to) {
                     return;
                 }
-                let mut h = row(YAW);
-                h[(0, V)] = -across / speed_sq;
-                h[(0, W)] = (along * ax + across * ay) / speed_sq;
-                let offset = across.atan2(along);
-                let predicted = e.x[YAW] + offset;
-                let r = e.update(&one(yaw), &one(predicted), &h, &var(sigma), &[0], GATE_1);
-                self.count(r.applied);
-                self.heading_run(f, t, r.applied, wrap(yaw - offset), sigma);
-            }
-            Measurement::Position { en, sigma } => {
-                // The fix's error is a slowly wandering part (a state of the filter, which
-                // averaging cannot remove) plus white noise. A new fix quality brings an
-                // error unrelated to the last one's.
-                let sigma_now = sigma.0.max(sigma.1);
-                let slow = self.config.gnss_correlated_fraction;
-                let slow_sigma = (sigma.0 * slow, sigma.1 * slow);
-                let new_quality = f.last_position_sigma.is_none_or(|before| {
-                    sigma_now < before * QUALITY_STEP || sigma_now * QUALITY_STEP > before
-                });
-                if new_quality {
-                    e.reset_gnss_error(slow_sigma);
+                self.odom = Some((t, pose));
+                self.filter.odom(t, pose);
+                if pose.v.abs() < super::odometry::STILL_MPS && pose.w.abs() < STILL_RPS {
+                    // A standstill teaches the odom frame its bias afresh.
+                    self.restart_drift(t);
                 }
-                f.gnss_error = slow_sigma;
-                f.last_position_sigma = Some(sigma_now);
-                let white = (1.0 - slow * slow).max(0.0).sqrt();
-                let (ax, ay) = self.config.antenna;
-                let (s, c) = e.x[YAW].sin_cos();
-                let hx = SVector::<f64, 2>::new(
-                    e.x[X] + c * ax - s * ay + e.x[GNSS_E],
-                    e.x[Y] + s * ax + c * ay + e.x[GNSS_N],
-                );
-                let mut h = SMatrix::<f64, 2, N>::zeros();
-                h[(0, X)] = 1.0;
-                h[(1, Y)] = 1.0;
-                h[(0, YAW)] = -s * ax - c * ay;
-                h[(1, YAW)] = c * ax - s * ay;
-                h[(0, GNSS_E)] = 1.0;
-                h[(1, GNSS_N)] = 1.0;
-                let r = SMatrix::<f64, 2, 2>::new(
-                    (sigma.0 * white).powi(2),
-                    0.0,
-                    0.0,
-                    (sigma.1 * white).powi(2),
-                );
-                let z = SVector::<f64, 2>::new(en.0, en.1);
-                // While the heading is unknown, fixes set neither it nor what it would
-                // teach (bias, its rate, the wheels' scale): linearised about a wrong heading
-                // they would make up a confident, wrong one that the course gate then keeps
-                // out. Once it is known they inform every state: a jump fails the gate, and
-                // the fixes' slow wander is a state of its own, not bias.
-                let kept: &[usize] = if e.yaw_sigma() > HEADING_FROM_POSITIONS_RAD {
-                    &[YAW, BIAS, BIAS_RATE, SCALE]
-                } else {
-                    &[]
-                };
-                let result = e.update_except(z - hx, &h, &r, &[], GATE_2, kept);
-                self.count(result.applied);
-                if result.applied {
-                    f.rejections = None;
-                } else {
-                    let (since, count) = f.rejections.map_or((t, 1), |(s, n)| (s, n + 1));
-                    f.rejections = Some((since, count));
-                    if count >= MIN_REJECTIONS_TO_RELOCATE
-                        && t.saturating_since(since) >= self.config.relocate_after
-                    {
-                        // The vehicle is elsewhere: take GNSS's word for the position.
-                        let e = &mut f.ekf;
-                        e.x[X] = en.0 - (c * ax - s * ay);
-                        e.x[Y] = en.1 - (s * ax + c * ay);
-                        for i in 0..N {
-                            e.p[(X, i)] = 0.0;
-                            e.p[(i, X)] = 0.0;
-                            e.p[(Y, i)] = 0.0;
-                            e.p[(i, Y)] = 0.0;
-                        }
-                        e.p[(X, X)] = sigma.0.powi(2);
-                        e.p[(Y, Y)] = sigma.1.powi(2);
-                        e.reset_gnss_error(slow_sigma);
-                        f.rejections = None;
-                        self.stats.resets += 1;
+            }
+            Measurement::Position { en, sigma, trust } => {
+                let started = self.filter.is_started();
+                let outcome = self.filter.fix(Fix {
+                    t,
+                    en,
+                    sigma,
+                    trust,
+                });
+                if outcome == FixOutcome::Taken
+                    && let Some(o) = self.filter.odom_pose_at(t)
+                {
+                    let antenna = self.antenna_in_odom(&o);
+                    self.scale.fix(t, en, sigma, antenna);
+                    if trust == Trust::OverWheels {
+                        self.rtk_direction(t, en, sigma.0.max(sigma.1), antenna);
+                    } else {
+                        self.rtk_from = None;
                     }
                 }
+                if !started
+                    && self.filter.is_started()
+                    && let Some((ht, yaw, hs)) = self.last_heading
+                    && t.saturating_since(ht) <= Duration::from_secs(2)
+                {
+                    self.filter.heading(yaw, hs);
+                }
+            }
+            Measurement::Heading { yaw, sigma } => self.heading(t, yaw, sigma),
+            Measurement::Course { yaw, sigma } => {
+                let Some((_, o)) = self.odom else {
+                    return;
+                };
+                if let Some(heading) = self.filter.heading_of_course(yaw, o.v, o.w) {
+                    self.heading(t, heading, sigma);
+                }
             }
         }
     }
 
-    /// The process noise of `f`, its GNSS error at the current fix quality.
-    fn noise(&self, f: &Filter) -> ProcessNoise {
-        ProcessNoise {
-            gnss_error: f.gnss_error,
-            ..self.config.noise
-        }
+    fn antenna_in_odom(&self, o: &OdomPose) -> (f64, f64) {
+        let (ax, ay) = self.config.antenna;
+        let (s, c) = o.yaw.sin_cos();
+        (o.x + c * ax - s * ay, o.y + s * ax + c * ay)
     }
 
-    /// Tracks runs of rejected headings (dual antenna or course): a run as long as a
-    /// position relocation's means the heading is wrong (a bad start, a slip on the spot),
-    /// and the measured `yaw` (with its `sigma`) replaces it.
-    fn heading_run(&mut self, f: &mut Filter, t: Timestamp, applied: bool, yaw: f64, sigma: f64) {
-        if applied {
-            f.heading_rejections = None;
+    /// A heading measured at `t`: carried to the latest odom pose by the odom frame's turn
+    /// since (a fix arrives after its epoch), then applied when it passes the gate; a run of
+    /// rejections as long as a relocation means the heading is wrong (a bad start, a slip on
+    /// the spot), and the measured one replaces it.
+    fn heading(&mut self, t: Timestamp, yaw: f64, sigma: f64) {
+        let (turned, rate) = match (self.odom, self.filter.odom_pose_at(t)) {
+            (Some((_, now)), Some(then)) => (wrap(now.yaw - then.yaw), then.w),
+            _ => (0.0, 0.0),
+        };
+        // While turning, the heading's time is as uncertain as the receiver's output timing.
+        let sigma = sigma.hypot(rate * HEADING_TIME_SIGMA_S);
+        let measured = yaw;
+        let yaw = wrap(yaw + turned);
+        if !self.filter.is_started() {
+            self.last_heading = Some((t, yaw, sigma));
             return;
         }
-        let (since, count) = f.heading_rejections.map_or((t, 1), |(s, n)| (s, n + 1));
-        f.heading_rejections = Some((since, count));
+        if self.filter.heading(yaw, sigma) {
+            self.heading_rejections = None;
+            if let Some(then) = self.filter.odom_pose_at(t) {
+                self.observe_drift(t, measured, sigma, then.yaw);
+            }
+            return;
+        }
+        let (since, count) = self.heading_rejections.map_or((t, 1), |(s, n)| (s, n + 1));
+        self.heading_rejections = Some((since, count));
         if count >= MIN_REJECTIONS_TO_RELOCATE
             && t.saturating_since(since) >= self.config.relocate_after
         {
-            let e = &mut f.ekf;
-            e.x[YAW] = yaw;
-            for i in 0..N {
-                e.p[(YAW, i)] = 0.0;
-                e.p[(i, YAW)] = 0.0;
-            }
-            e.p[(YAW, YAW)] = sigma * sigma;
-            f.heading_rejections = None;
-            self.stats.resets += 1;
+            self.filter.reset_heading(yaw, sigma);
+            self.heading_rejections = None;
         }
     }
 
-    fn count(&mut self, applied: bool) {
-        if applied {
-            self.stats.applied += 1;
-        } else {
-            self.stats.rejected += 1;
+    /// The direction between two RTK fixes far apart against their σ, against the odom
+    /// frame's between the same times: a measured rotation of the odom frame.
+    fn rtk_direction(&mut self, t: Timestamp, en: (f64, f64), sigma: f64, antenna: (f64, f64)) {
+        let here = RtkAnchor {
+            t,
+            en,
+            sigma,
+            antenna,
+        };
+        let Some(from) = self.rtk_from else {
+            self.rtk_from = Some(here);
+            return;
+        };
+        if t.saturating_since(from.t) > super::gyro_drift::MIN_SPAN {
+            // Too long: the odom frame turned meanwhile.
+            self.rtk_from = Some(here);
+            return;
         }
+        let (gx, gy) = (en.0 - from.en.0, en.1 - from.en.1);
+        let (ox, oy) = (antenna.0 - from.antenna.0, antenna.1 - from.antenna.1);
+        let (g, o) = (gx.hypot(gy), ox.hypot(oy));
+        let direction_sigma = sigma.hypot(from.sigma) / g.max(1e-9);
+        if direction_sigma > RTK_DIRECTION_SIGMA_RAD || o <= 0.0 {
+            return;
+        }
+        self.rtk_from = Some(here);
+        self.observe_drift(t, gy.atan2(gx), direction_sigma, oy.atan2(ox));
+    }
+
+    fn observe_drift(&mut self, t: Timestamp, heading: f64, sigma: f64, odom_yaw: f64) {
+        self.drift.observe(t, heading, sigma, odom_yaw);
+        if let Some(drift) = self.drift.proven() {
+            self.drift.restart();
+            self.events.push(format!(
+                "gyro bias corrected by {:+.5} rad/s: the odom heading drifted so against GNSS \
+                 (1σ {:.5} rad/s over {} headings in {:.0} s)",
+                drift.rate,
+                drift.sigma,
+                drift.samples,
+                drift.span.as_secs_f64()
+            ));
+            // The bias moved by that rate since it was last learnt: it walks at least that
+            // fast (a warming gyro's bias ramps), and the drift's uncertainty grows so.
+            let since = self
+                .bias_since
+                .map_or(drift.span, |s| t.saturating_since(s).max(drift.span));
+            let moved = drift.rate.abs();
+            self.filter
+                .set_bias_walk(moved * moved / since.as_secs_f64().max(1.0));
+            self.filter.reset_drift(drift.sigma);
+            self.bias_since = Some(t);
+            self.bias_correction = Some(drift);
+        }
+        // Only a fit over enough headings and time says anything of the drift (a few courses
+        // while accelerating make any slope).
+        let fit = self.drift.fit().filter(|_| {
+            self.drift.len() >= super::gyro_drift::MIN_SAMPLES
+                && self.drift.span() >= super::gyro_drift::MIN_SPAN
+        });
+        let walk = fit.map_or(0.0, |(slope, sigma, chi2)| {
+            // A line that explains the headings bounds the drift rate itself, at the rate it
+            // has at most with 97.7 % confidence.
+            if chi2 <= super::gyro_drift::MAX_REDUCED_CHI2 {
+                let most = slope.abs() + DRIFT_CONFIDENCE * sigma;
+                self.filter.bound_drift(most * most);
+            }
+            // Until it is proven, the drift widens the heading as it goes (a random walk of
+            // r²·T per second matches the drift's r·t at horizon T, the time it has run
+            // uncorrected), at the rate it has at least with 97.7 % confidence, and no faster
+            // than a bias can drift.
+            let rate = (slope.abs() - DRIFT_CONFIDENCE * sigma)
+                .clamp(0.0, super::gyro_drift::MAX_DRIFT_RPS);
+            rate * rate * self.drift.span().as_secs_f64()
+        });
+        self.filter.set_heading_drift(walk);
+    }
+
+    /// The odom heading's drift starts afresh: a standstill taught the gyro its bias at `t`.
+    fn restart_drift(&mut self, t: Timestamp) {
+        self.drift.restart();
+        self.bias_since = Some(t);
+        self.filter.set_heading_drift(0.0);
+        self.filter.set_bias_walk(0.0);
+        self.filter.reset_drift(0.0);
+    }
+
+    /// A proven drift of the odom heading, once: the gyro's bias is to be corrected by its
+    /// rate.
+    pub fn take_bias_correction(&mut self) -> Option<Drift> {
+        self.bias_correction.take()
     }
 
     /// Re-zeroes the local frame at the position at `t` (`init_rtk_data`): the datum moves
     /// there and the map frame becomes its ENU frame. Returns false when there is no
     /// position yet.
-    pub fn zero_here(&mut self, t: Timestamp) -> bool {
-        let (Some(frame), Some(e)) = (self.frame, self.predicted(t)) else {
+    pub fn zero_here(&mut self, _t: Timestamp) -> bool {
+        let (Some(frame), Some((x, y, _))) = (self.frame, self.filter.pose()) else {
             return false;
         };
-        let here = frame.to_geodetic(&Vector3::new(e.x[X], e.x[Y], 0.0));
+        let here = frame.to_geodetic(&Vector3::new(x, y, 0.0));
         self.set_datum(here);
         true
     }
@@ -771,21 +551,13 @@ impl Localizer {
     pub fn set_datum(&mut self, datum: Geodetic) {
         self.map = MapFrame::default();
         let old = self.frame.replace(Enu::new(datum));
-        let (Some(old), Some(new)) = (old, self.frame) else {
+        let (Some(old), Some(new), Some((x, y, _))) = (old, self.frame, self.filter.pose()) else {
             return;
         };
-        let shift = |f: &mut Filter| {
-            let g = old.to_geodetic(&Vector3::new(f.ekf.x[X], f.ekf.x[Y], 0.0));
-            let enu = new.to_enu(&g);
-            f.ekf.x[X] = enu.x;
-            f.ekf.x[Y] = enu.y;
-        };
-        if let Some(b) = &mut self.base {
-            shift(b);
-        }
-        for (_, _, f) in &mut self.buffer {
-            shift(f);
-        }
+        let g = old.to_geodetic(&Vector3::new(x, y, 0.0));
+        let enu = new.to_enu(&g);
+        self.filter.shift(enu.x - x, enu.y - y);
+        self.scale.forget_fixes();
     }
 
     /// Sets the pose (INIT_POSITION): x, y (m), yaw (rad). Once GNSS places the vehicle, the
@@ -793,50 +565,15 @@ impl Localizer {
     /// so that the vehicle reads this pose there. Before that, the filter starts from it.
     pub fn set_pose(&mut self, t: Timestamp, x: f64, y: f64, yaw: f64) {
         if self.frame.is_some()
-            && let Some(e) = self.predicted(t)
+            && let Some(p) = self.published(t)
         {
-            self.map = MapFrame::placing(e.x[X], e.x[Y], e.x[YAW], x, y, yaw);
+            let (ex, ey, eyaw) = self.filter.pose().unwrap_or(p.map_pose);
+            self.map = MapFrame::placing(ex, ey, eyaw, x, y, yaw);
             return;
         }
         self.map = MapFrame::default();
-        let mut state = self.ekf().map_or_else(State::zeros, |e| e.x);
-        state[X] = x;
-        state[Y] = y;
-        state[YAW] = wrap(yaw);
-        let mut p = self.ekf().map_or_else(
-            || {
-                let mut p = Cov::zeros();
-                p[(V, V)] = 0.25;
-                p[(W, W)] = 0.25;
-                p[(BIAS, BIAS)] = 0.02f64.powi(2);
-                p[(BIAS_RATE, BIAS_RATE)] = INITIAL_BIAS_RATE_SIGMA.powi(2);
-                p[(SCALE, SCALE)] = INITIAL_SCALE_SIGMA.powi(2);
-                p
-            },
-            |e| e.p,
-        );
-        for i in 0..N {
-            for j in [X, Y, YAW] {
-                p[(i, j)] = 0.0;
-                p[(j, i)] = 0.0;
-            }
-        }
-        p[(X, X)] = 0.05f64.powi(2);
-        p[(Y, Y)] = 0.05f64.powi(2);
-        p[(YAW, YAW)] = 1f64.to_radians().powi(2);
-        let time = self.current().map_or(t, |f| f.time.max(t));
-        self.base = Some(Filter {
-            ekf: Ekf::new(state, p),
-            time,
-            rejections: None,
-            heading_rejections: None,
-            last_gyro: None,
-            last_position_sigma: None,
-            gnss_error: (0.0, 0.0),
-            still: false,
-            gyro_period: None,
-        });
-        self.buffer.clear();
+        self.filter
+            .set_pose((x, y, wrap(yaw)), (0.05, 1f64.to_radians()));
     }
 }
 

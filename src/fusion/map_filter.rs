@@ -26,16 +26,21 @@ use std::time::Duration;
 
 use nalgebra::{SMatrix, SVector};
 
-use super::ekf::{largest_sigma, wrap};
 use super::odometry::OdomPose;
+use super::planar::{largest_sigma, wrap};
 use crate::time::Timestamp;
 
-const N: usize = 5;
+const N: usize = 6;
 const X: usize = 0;
 const Y: usize = 1;
 const YAW: usize = 2;
 const GE: usize = 3;
 const GN: usize = 4;
+/// The odom heading's drift rate (the gyro bias's error since it was last learnt), rad/s: a
+/// consider state. Its mean stays zero (the map pose never turns by it, so in an outage it
+/// moves exactly as the odom pose does); its variance makes the heading's uncertainty grow as
+/// a bias error turns it, with the correlation that implies.
+const DRIFT: usize = 5;
 
 type State = SVector<f64, N>;
 type Cov = SMatrix<f64, N, N>;
@@ -92,8 +97,12 @@ pub struct MapFilterConfig {
     pub across_per_m: f64,
     /// Odom heading error, variance per radian turned, rad²/rad.
     pub yaw_per_rad: f64,
-    /// Odom heading error, variance per second while moving (the gyro bias's residue), rad²/s.
+    /// Odom heading error, variance per second while moving (the gyro's angle random walk),
+    /// rad²/s.
     pub yaw_per_s: f64,
+    /// The gyro bias's random walk, rad/s per √s: how fast the bias leaves what the last
+    /// standstill taught.
+    pub bias_walk: f64,
     /// The slowly wandering part of a fix's error, as a fraction of its 1σ.
     pub gnss_correlated_fraction: f64,
     /// That part's correlation time, s.
@@ -111,6 +120,7 @@ impl Default for MapFilterConfig {
             across_per_m: 4e-3,
             yaw_per_rad: 4e-4,
             yaw_per_s: 2e-5,
+            bias_walk: 2e-5,
             gnss_correlated_fraction: 0.95,
             gnss_correlation_s: 60.0,
             relocate_after: Duration::from_secs(3),
@@ -190,6 +200,12 @@ pub struct MapFilter {
     /// Agreeing fixes that failed the gate without a break: first time and count.
     disagreeing: Option<(Timestamp, u32)>,
     last_sigma: Option<f64>,
+    /// The heading random walk that stands for the odom heading's drift measured but not yet
+    /// corrected, rad²/s.
+    drift_walk: f64,
+    /// The gyro bias's walk (rad²/s³) shown by the last proven drift, when faster than the
+    /// configured one.
+    shown_bias_walk: f64,
     /// Sum and count of the fixes' normalised innovations squared (2 DOF), to check the
     /// noise model: their mean is 2 when it is right.
     nis: (f64, u64),
@@ -213,6 +229,8 @@ impl MapFilter {
             fit: VecDeque::new(),
             disagreeing: None,
             last_sigma: None,
+            drift_walk: 0.0,
+            shown_bias_walk: 0.0,
             nis: (0.0, 0),
             stats: MapFilterStats::default(),
             events: Vec::new(),
@@ -286,6 +304,58 @@ impl MapFilter {
         ))
     }
 
+    /// The heading random walk (rad²/s) that stands for the odom heading's drift against GNSS
+    /// headings, measured but not (yet) proven and corrected in the gyro's bias: the heading's
+    /// uncertainty grows by it while moving, on top of the configured walk.
+    pub fn set_heading_drift(&mut self, walk: f64) {
+        self.drift_walk = if walk.is_finite() { walk.max(0.0) } else { 0.0 };
+    }
+
+    /// The gyro bias's walk a proven drift showed, rad²/s³ (a bias change over the time it
+    /// took): the drift's uncertainty grows at least so; zero when a standstill taught it.
+    pub fn set_bias_walk(&mut self, variance_rate: f64) {
+        self.shown_bias_walk = if variance_rate.is_finite() {
+            variance_rate.max(0.0)
+        } else {
+            0.0
+        };
+    }
+
+    /// The headings show the odom heading's drift rate within `variance` (rad²/s²): the
+    /// drift's variance is brought down to it when larger, its correlations kept.
+    pub fn bound_drift(&mut self, variance: f64) {
+        let now = self.p[(DRIFT, DRIFT)];
+        if !(variance.is_finite() && variance >= 0.0 && now > variance) {
+            return;
+        }
+        let k = (variance / now).sqrt();
+        for i in 0..N {
+            self.p[(DRIFT, i)] *= k;
+            self.p[(i, DRIFT)] *= k;
+        }
+    }
+
+    /// A covariance that knows nothing but the drift's variance.
+    fn fresh_covariance(&self) -> Cov {
+        let mut p = Cov::zeros();
+        p[(DRIFT, DRIFT)] = self.p[(DRIFT, DRIFT)];
+        p
+    }
+
+    /// The gyro's bias was just learnt (a standstill) or corrected: the odom heading's drift
+    /// rate is known to 1σ `sigma` rad/s, and uncorrelated with the rest.
+    pub fn reset_drift(&mut self, sigma: f64) {
+        for i in 0..N {
+            self.p[(DRIFT, i)] = 0.0;
+            self.p[(i, DRIFT)] = 0.0;
+        }
+        self.p[(DRIFT, DRIFT)] = if sigma.is_finite() {
+            sigma * sigma
+        } else {
+            0.0
+        };
+    }
+
     /// The odom frame's pose at `t`: the state moves by its increment.
     pub fn odom(&mut self, t: Timestamp, pose: OdomPose) {
         if let Some((t0, o0)) = self.odom.filter(|(t0, _)| t >= *t0) {
@@ -321,7 +391,9 @@ impl MapFilter {
         let mut f = Cov::identity();
         f[(X, YAW)] = -(s * fwd + c * left);
         f[(Y, YAW)] = c * fwd - s * left;
+        f[(YAW, DRIFT)] = dt;
         let mut q = Cov::zeros();
+        q[(DRIFT, DRIFT)] = self.config.bias_walk.powi(2).max(self.shown_bias_walk) * dt;
         let along = self.config.along_per_m * ds;
         let across = self.config.across_per_m * ds;
         // Along and across the direction of the increment, in the map frame.
@@ -330,7 +402,8 @@ impl MapFilter {
         q[(Y, Y)] = along * sh * sh + across * ch * ch;
         q[(X, Y)] = (along - across) * sh * ch;
         q[(Y, X)] = q[(X, Y)];
-        q[(YAW, YAW)] = self.config.yaw_per_rad * turn.abs() + self.config.yaw_per_s * dt;
+        q[(YAW, YAW)] =
+            self.config.yaw_per_rad * turn.abs() + (self.config.yaw_per_s + self.drift_walk) * dt;
         self.p = f * self.p * f.transpose() + q;
         // The GNSS error's slow part decays with time (while moving or not: handled in
         // `decay_gnss_error` at each fix).
@@ -386,6 +459,11 @@ impl MapFilter {
             v: o0.v + (o1.v - o0.v) * k,
             w: o0.w + (o1.w - o0.w) * k,
         })
+    }
+
+    /// The odom frame's pose at `t`, from the poses kept.
+    pub fn odom_pose_at(&self, t: Timestamp) -> Option<OdomPose> {
+        self.odom_at(t)
     }
 
     /// The antenna's position in the odom frame at odom pose `o`.
@@ -558,7 +636,7 @@ impl MapFilter {
         self.x[X] = p.fix.en.0 - (c0 * ax - s0 * ay) + nx;
         self.x[Y] = p.fix.en.1 - (s0 * ax + c0 * ay) + ny;
         self.x[YAW] = now.yaw;
-        self.p = Cov::zeros();
+        self.p = self.fresh_covariance();
         let distance = nx.hypot(ny);
         self.p[(X, X)] = p.fix.sigma.0.powi(2) + lever + distance * distance;
         self.p[(Y, Y)] = p.fix.sigma.1.powi(2) + lever + distance * distance;
@@ -620,7 +698,7 @@ impl MapFilter {
         let slow = self.config.gnss_correlated_fraction * sigma;
         let from_centroid = (now.x - fit.centroid.0).hypot(now.y - fit.centroid.1);
         let pos_var = sigma * sigma / n as f64 + slow * slow + (yaw_sigma * from_centroid).powi(2);
-        self.p = Cov::zeros();
+        self.p = self.fresh_covariance();
         self.p[(X, X)] = pos_var;
         self.p[(Y, Y)] = pos_var;
         self.p[(YAW, YAW)] = yaw_sigma * yaw_sigma;
@@ -711,7 +789,8 @@ impl MapFilter {
         self.apply(y, &h, &r, kept);
     }
 
-    /// Kalman update with the Joseph form; `kept` states are not changed (Schmidt).
+    /// Kalman update with the Joseph form; `kept` states, and the drift always, are not
+    /// changed (Schmidt).
     fn apply<const M: usize>(
         &mut self,
         y: SVector<f64, M>,
@@ -724,7 +803,7 @@ impl MapFilter {
             return false;
         };
         let mut k = self.p * h.transpose() * s_inv;
-        for &i in kept {
+        for &i in kept.iter().chain(&[DRIFT]) {
             k.row_mut(i).fill(0.0);
         }
         self.x += k * y;
@@ -742,13 +821,7 @@ impl MapFilter {
         }
         if self.yaw_sigma() > HEADING_KNOWN_RAD {
             // Unknown: the measurement sets it.
-            self.x[YAW] = wrap(yaw);
-            for i in 0..N {
-                self.p[(YAW, i)] = 0.0;
-                self.p[(i, YAW)] = 0.0;
-            }
-            self.p[(YAW, YAW)] = sigma * sigma;
-            self.fit.clear();
+            self.reset_heading(yaw, sigma);
             self.stats.headings += 1;
             return true;
         }
@@ -763,6 +836,17 @@ impl MapFilter {
         }
         self.stats.headings += 1;
         self.apply(y, &h, &r, &[])
+    }
+
+    /// Replaces the heading (a run of rejected headings showed it wrong), ENU rad with 1σ.
+    pub fn reset_heading(&mut self, yaw: f64, sigma: f64) {
+        self.x[YAW] = wrap(yaw);
+        for i in 0..N {
+            self.p[(YAW, i)] = 0.0;
+            self.p[(i, YAW)] = 0.0;
+        }
+        self.p[(YAW, YAW)] = sigma * sigma;
+        self.fit.clear();
     }
 
     /// A course over ground (the direction the antenna moves, ENU rad) as the vehicle's
@@ -784,7 +868,7 @@ impl MapFilter {
         self.x[X] = pose.0;
         self.x[Y] = pose.1;
         self.x[YAW] = wrap(pose.2);
-        self.p = Cov::zeros();
+        self.p = self.fresh_covariance();
         self.p[(X, X)] = sigma.0 * sigma.0;
         self.p[(Y, Y)] = sigma.0 * sigma.0;
         self.p[(YAW, YAW)] = sigma.1 * sigma.1;

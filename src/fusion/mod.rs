@@ -1,7 +1,10 @@
-//! Localisation: geodesy, the `odom` frame's dead reckoning and the fusion filter.
+//! Localisation: geodesy, the `odom` frame's dead reckoning, the map filter over it and its
+//! estimators.
 
-pub mod ekf;
 pub mod geodesy;
+pub mod gyro_drift;
 pub mod localizer;
 pub mod map_filter;
 pub mod odometry;
+pub mod planar;
+pub mod wheel_scale;

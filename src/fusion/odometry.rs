@@ -4,9 +4,10 @@
 //! learnt whenever the wheels stand still (a zero-velocity update), or from the wheels when
 //! no gyro is live.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
-use super::ekf::wrap;
+use super::planar::wrap;
 use crate::time::Timestamp;
 
 /// Wheels slower than this stand still, m/s.
@@ -16,6 +17,13 @@ pub const STILL_MPS: f64 = 0.002;
 const QUIET_RPS: f64 = 0.02;
 /// Readings a standstill needs before its mean counts as the bias.
 const MIN_STILL_SAMPLES: u64 = 10;
+/// A standstill's gyro readings count for the bias only from this long after the wheels
+/// stopped to this long before they move again: the wheels report their motion late (feedback
+/// latency, the motors' lag), and a turn's first or last rates would bias the mean.
+const STILL_GUARD: Duration = Duration::from_millis(200);
+/// Gyro readings held while their standstill is not yet confirmed, at most (1 kHz over the
+/// guard).
+const MAX_PENDING: usize = 256;
 /// A gyro counts as live while its last sample is younger than this many of its periods.
 const LIVE_PERIODS: f64 = 5.0;
 /// ... and never less than this.
@@ -79,6 +87,9 @@ pub struct Odometry {
     /// Yaw turned by the gyro since the last wheel reading, rad.
     gyro_turn: f64,
     last_gyro: Option<Timestamp>,
+    /// The last gyro rate (bias included), rad/s: the turn between two samples is their mean
+    /// times the interval, so a turn's start and end are not counted a sample early.
+    last_rate: Option<f64>,
     /// Smoothed gyro sample interval, s.
     gyro_period: Option<f64>,
     /// The gyro bias, rad/s, once a standstill has shown it.
@@ -87,6 +98,10 @@ pub struct Odometry {
     /// the gyro's mean over it, else the reading's time.
     yaw_rate_at: Option<Timestamp>,
     standstill: Spread,
+    /// When the current standstill began (its first still wheel reading).
+    still_since: Option<Timestamp>,
+    /// Gyro readings of the standstill not yet confirmed by [`STILL_GUARD`] of still wheels.
+    pending_still: VecDeque<(Timestamp, f64)>,
 }
 
 impl Odometry {
@@ -119,6 +134,14 @@ impl Odometry {
         self.bias
     }
 
+    /// Corrects the gyro bias by `delta` rad/s: a drift GNSS proved while moving
+    /// ([`super::gyro_drift`]). The next standstill measures the bias afresh.
+    pub fn correct_bias(&mut self, delta: f64) {
+        if delta.is_finite() {
+            self.bias = Some(self.bias.unwrap_or(0.0) + delta);
+        }
+    }
+
     /// Whether the wheels stood still at the last reading.
     pub fn is_still(&self) -> bool {
         self.still
@@ -143,20 +166,47 @@ impl Odometry {
         };
         let dt = t.saturating_since(last).as_secs_f64();
         self.last_gyro = Some(t);
+        let previous = self.last_rate.replace(wz);
         // Gaps (a lost link) do not enter the rate estimate beyond a few periods.
         self.gyro_period = Some(match self.gyro_period {
             Some(p) => p + (dt.min(p * LIVE_PERIODS) - p) * 0.05,
             None => dt,
         });
         if self.still {
-            self.standstill.add(wz);
-            if self.standstill.n >= MIN_STILL_SAMPLES && self.standstill.sigma() <= QUIET_RPS {
-                self.bias = Some(self.standstill.mean);
+            if self.pending_still.len() >= MAX_PENDING {
+                self.pending_still.pop_front();
             }
+            self.pending_still.push_back((t, wz));
             return;
         }
         if self.pose.is_some() {
-            self.gyro_turn += (wz - self.bias.unwrap_or(0.0)) * dt;
+            // Across a gap (a lost link) only the newest sample stands for the interval.
+            let gap = self.gyro_period.is_some_and(|p| dt > p * LIVE_PERIODS);
+            let rate = match previous {
+                Some(before) if !gap => (before + wz) / 2.0,
+                _ => wz,
+            };
+            self.gyro_turn += (rate - self.bias.unwrap_or(0.0)) * dt;
+        }
+    }
+
+    /// The wheels still stand at `t`: the gyro readings of the standstill older than the
+    /// guard are its bias's.
+    fn confirm_still(&mut self, t: Timestamp) {
+        let Some(since) = self.still_since else {
+            return;
+        };
+        while let Some(&(at, wz)) = self.pending_still.front() {
+            if t.saturating_since(at) < STILL_GUARD {
+                break;
+            }
+            self.pending_still.pop_front();
+            if at.saturating_since(since) >= STILL_GUARD {
+                self.standstill.add(wz);
+            }
+        }
+        if self.standstill.n >= MIN_STILL_SAMPLES && self.standstill.sigma() <= QUIET_RPS {
+            self.bias = Some(self.standstill.mean);
         }
     }
 
@@ -166,6 +216,13 @@ impl Odometry {
         let still = vl.abs() < STILL_MPS && vr.abs() < STILL_MPS;
         if still && !self.still {
             self.standstill = Spread::default();
+            self.still_since = Some(t);
+            self.pending_still.clear();
+        } else if still {
+            self.confirm_still(t);
+        } else {
+            // Moving again: the last readings of the standstill may hold the start of a turn.
+            self.pending_still.clear();
         }
         let gyro_live = self.gyro_live(t);
         let Some((t0, before)) = self.last_wheels.replace((t, reading)) else {

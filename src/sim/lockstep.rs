@@ -70,6 +70,42 @@ impl<S: Sink> Sink for ScriptSink<'_, S> {
     }
 }
 
+/// The odom frame's error of a plant as the map filter models it (random walks), which an
+/// integrator fits on their vehicle's data as the README shows for a real robot.
+struct OdomError {
+    along: f64,
+    across: f64,
+    yaw: f64,
+    heading_walk: f64,
+}
+
+impl OdomError {
+    /// The speed and the span the random walks are matched at: the scenarios' laps, and an
+    /// outage of 30 s.
+    const SPEED_MPS: f64 = 1.0;
+    const SPAN_S: f64 = 30.0;
+
+    fn of(plant: &PlantConfig) -> Self {
+        let slip = &plant.slip;
+        // Random slip, redrawn every 100 ms on each wheel: a random walk in distance.
+        let random = slip.sigma.powi(2) / 2.0 * 0.1 * Self::SPEED_MPS;
+        // Systematic slip grows with the distance, not its root: matched over the span.
+        let systematic =
+            ((slip.bias[0] + slip.bias[1]) / 2.0).powi(2) * Self::SPEED_MPS * Self::SPAN_S;
+        // The gyro's white noise is its angle random walk; its bias's walk is configured as
+        // such (`gyro_bias_walk`).
+        let imu = &plant.imu;
+        let walk = imu.gyro_noise_rps.powi(2) / imu.rate_hz.max(1.0);
+        Self {
+            along: random + systematic,
+            across: random,
+            // The gyro turns the odom frame; the simulated one has no scale error.
+            yaw: 5e-6,
+            heading_walk: walk.sqrt(),
+        }
+    }
+}
+
 /// The chassisd configuration of a simulated vehicle: its GNSS receiver and IMU, and one
 /// generic CiA 402 drive per wheel (nodes 1 and 2) on the simulated bus. The receiver's and
 /// gyro's noise figures go into `[localization]` as an integrator copies a datasheet's.
@@ -81,6 +117,7 @@ pub fn vehicle_config(plant: &PlantConfig) -> Result<VehicleConfig, ConfigError>
     let radius = believed.wheel_radius_m.unwrap_or(g.wheel_radius_m);
     let antenna = believed.antenna.unwrap_or(g.antenna);
     let [lat, lon, h] = plant.datum;
+    let odom = OdomError::of(plant);
     let text = format!(
         r#"
 [vehicle]
@@ -103,7 +140,11 @@ gnss_correlated_fraction = {correlated}
 gnss_correlation_time_s = {correlation_time}
 gnss_velocity_sigma_mps = {velocity_sigma}
 gyro_noise_rps = {gyro_noise}
-gyro_bias_walk = {gyro_walk}
+heading_walk = {heading_walk}
+gyro_bias_walk = {gyro_bias_walk}
+odom_along_m2_per_m = {odom_along}
+odom_across_m2_per_m = {odom_across}
+odom_yaw_rad2_per_rad = {odom_yaw}
 
 [imu]
 port = "sim:imu"
@@ -153,7 +194,14 @@ wheels = ["right"]
         correlation_time = plant.gnss.correlation_time_s.clamp(1.0, 3600.0),
         velocity_sigma = plant.gnss.velocity_sigma_mps.clamp(0.001, 1.0),
         gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),
-        gyro_walk = plant.imu.gyro_bias_walk.clamp(1e-7, 1e-2),
+        heading_walk = odom.heading_walk.clamp(1e-5, 0.1),
+        gyro_bias_walk = believed
+            .gyro_bias_walk
+            .unwrap_or(plant.imu.gyro_bias_walk)
+            .clamp(0.0, 1e-2),
+        odom_along = odom.along.clamp(1e-7, 1.0),
+        odom_across = odom.across.clamp(1e-7, 1.0),
+        odom_yaw = odom.yaw.clamp(1e-7, 1.0),
         imu = plant.imu.protocol.name(),
         radius = format_args!("[{}, {}]", radius.left, radius.right),
         track = believed.track_m.unwrap_or(g.track_m),

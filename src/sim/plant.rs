@@ -27,8 +27,8 @@ use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
 use crate::devices::gnss::FixQuality;
 use crate::devices::imu::{G, hipnuc, witmotion};
-use crate::fusion::ekf::wrap;
 use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::fusion::planar::wrap;
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
 
@@ -94,6 +94,10 @@ pub struct Configured {
     /// Gyro bias the configuration subtracts (sensor frame), rad/s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gyro_bias_rps: Option<[f64; 3]>,
+    /// The gyro bias's random walk the configuration states (`localization.gyro_bias_walk`),
+    /// rad/s per √s; else the plant's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gyro_bias_walk: Option<f64>,
 }
 
 impl Configured {
