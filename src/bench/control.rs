@@ -29,8 +29,9 @@ use crate::time::Timestamp;
 const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
 /// Standing still at the start, s.
 const STILL_S: f64 = 5.0;
-/// Then straight at this speed (m/s) for this long (s), so the heading is known.
-const WARMUP: (f64, f64) = (0.8, 10.0);
+/// Then straight at this speed (m/s) for this long (s), so the heading is known and 20 m of
+/// RTK prove the wheels' scale (random slip takes more than 10 m: `fusion::wheel_scale`).
+const WARMUP: (f64, f64) = (0.8, 25.0);
 /// Rest after each move before the truth is read (a move that ends still moving shows it).
 const SETTLE_S: f64 = 1.0;
 /// Watchdog trials, each with its last command at another phase of the control period.

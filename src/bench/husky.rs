@@ -173,7 +173,7 @@ fn at(t: f64) -> Timestamp {
 
 /// Runs the data through chassisd's odom frame and the map filter.
 pub fn run(data: &HuskyData, config: MapFilterConfig, variant: Variant) -> Run {
-    let mut odometry = Odometry::new(TRACK_M);
+    let mut odometry = Odometry::new(TRACK_M, config.bias_walk);
     let mut filter = MapFilter::new(config);
     let mut samples = Vec::new();
     let mut to_fixes = Vec::new();

@@ -58,6 +58,11 @@ pub struct LocalizationConfig {
     /// (the wheels' random and systematic slip): 1e-2 is 0.1 m after 1 m, 0.55 m after 30 m.
     #[serde(default = "default_odom_along")]
     pub odom_along_m2_per_m: f64,
+    /// The wheels' random slip alone, a variance per metre driven, m²/m: what scatters the
+    /// wheels' distance about their scale (the scale itself is learnt from RTK). It decides
+    /// how many metres of RTK prove the scale.
+    #[serde(default = "default_wheel_slip")]
+    pub wheel_slip_m2_per_m: f64,
     /// The same across the heading (sideways slip), m²/m.
     #[serde(default = "default_odom_across")]
     pub odom_across_m2_per_m: f64,
@@ -100,6 +105,10 @@ fn default_heading_walk() -> f64 {
 fn default_odom_along() -> f64 {
     1e-2
 }
+fn default_wheel_slip() -> f64 {
+    // 1 cm per metre: a tyre on grass or gravel.
+    1e-4
+}
 fn default_odom_across() -> f64 {
     4e-3
 }
@@ -125,6 +134,7 @@ impl Default for LocalizationConfig {
             heading_walk: default_heading_walk(),
             gyro_bias_walk: default_gyro_bias_walk(),
             odom_along_m2_per_m: default_odom_along(),
+            wheel_slip_m2_per_m: default_wheel_slip(),
             odom_across_m2_per_m: default_odom_across(),
             odom_yaw_rad2_per_rad: default_odom_yaw(),
             max_position_radius_m: default_max_position_radius_m(),
@@ -231,6 +241,11 @@ impl LocalizationConfig {
                 "m²/m",
             ),
             (
+                "localization.wheel_slip_m2_per_m",
+                self.wheel_slip_m2_per_m,
+                "m²/m",
+            ),
+            (
                 "localization.odom_across_m2_per_m",
                 self.odom_across_m2_per_m,
                 "m²/m",
@@ -274,6 +289,7 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
     c.gnss_correlation = Duration::from_secs_f64(l.gnss_correlation_time_s);
     c.heading_walk = l.heading_walk;
     c.gyro_bias_walk = l.gyro_bias_walk;
+    c.wheel_slip = l.wheel_slip_m2_per_m;
     c.odom_error = (
         l.odom_along_m2_per_m,
         l.odom_across_m2_per_m,

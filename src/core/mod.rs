@@ -431,7 +431,9 @@ impl Vehicle {
             imu: None,
             imu_link_down: false,
             localizer: Localizer::new(config.localizer),
-            odometry: config.chassis.map(|c| Odometry::new(c.track_m)),
+            odometry: config
+                .chassis
+                .map(|c| Odometry::new(c.track_m, config.localizer.gyro_bias_walk)),
             fed_gnss: (None, None, None),
             host: None,
             motion: config.motion.map(Motion::new),
@@ -461,7 +463,7 @@ impl Vehicle {
                 if let Some(drift) = self.localizer.take_bias_correction()
                     && let Some(odometry) = self.odometry.as_mut()
                 {
-                    odometry.correct_bias(drift.rate);
+                    odometry.correct_bias(t, drift.rate, drift.sigma);
                 }
                 self.localizer
                     .take_events()

@@ -11,6 +11,7 @@ use std::time::Duration;
 use nalgebra::Vector3;
 
 use super::geodesy::{Enu, Geodetic};
+use super::gnss_only::GnssOnly;
 use super::gyro_drift::{Drift, GyroDrift};
 use super::map_filter::{Fix, FixOutcome, MapFilter, MapFilterConfig, Trust};
 use super::odometry::OdomPose;
@@ -65,6 +66,8 @@ pub struct LocalizerConfig {
     pub odom_error: (f64, f64, f64),
     /// The receiver's velocity accuracy, 1σ per axis, m/s; `None`: typical by fix quality.
     pub gnss_velocity_sigma_mps: Option<f64>,
+    /// The wheels' random slip, a variance per metre driven, m²/m ([`WheelScale`]).
+    pub wheel_slip: f64,
 }
 
 impl Default for LocalizerConfig {
@@ -88,6 +91,7 @@ impl Default for LocalizerConfig {
             gyro_bias_walk: map.bias_walk,
             odom_error: (map.along_per_m, map.across_per_m, map.yaw_per_rad),
             gnss_velocity_sigma_mps: None,
+            wheel_slip: 1e-4,
         }
     }
 }
@@ -200,6 +204,8 @@ pub struct Localizer {
     rtk_from: Option<RtkAnchor>,
     /// The frame poses are published in.
     map: MapFrame,
+    /// The pose while no odom pose ever came (a vehicle without wheels).
+    gnss_only: GnssOnly,
     /// What happened that an operator should read in the log, until taken.
     events: Vec<String>,
 }
@@ -240,12 +246,13 @@ impl Localizer {
             odom: None,
             last_heading: None,
             heading_rejections: None,
-            scale: WheelScale::default(),
+            scale: WheelScale::new(config.wheel_slip),
             drift: GyroDrift::default(),
             bias_since: None,
             bias_correction: None,
             rtk_from: None,
             map: MapFrame::default(),
+            gnss_only: GnssOnly::default(),
             events: Vec::new(),
         }
     }
@@ -296,9 +303,34 @@ impl Localizer {
         &self.filter
     }
 
-    /// Pose of the vehicle reference point in the ENU frame at the latest odom pose.
+    /// Pose of the vehicle reference point in the ENU frame at the latest odom pose (at
+    /// the latest fix without odometry).
     pub fn pose(&self) -> Option<(f64, f64, f64)> {
+        if self.odom.is_none() {
+            return self
+                .gnss_only
+                .pose_at(Timestamp::from_micros(0), self.config.antenna)
+                .map(|(pose, _, _)| pose);
+        }
         self.filter.pose()
+    }
+
+    /// [`Localizer::published`] without odometry.
+    fn published_without_odometry(&self, t: Timestamp) -> Option<Published> {
+        let ((x, y, yaw), sigma, yaw_sigma) = self.gnss_only.pose_at(t, self.config.antenna)?;
+        let locate =
+            if sigma <= self.config.locate_bound_m && yaw_sigma <= self.config.converged_yaw_rad {
+                LocateState::Good
+            } else {
+                LocateState::Lost
+            };
+        Some(Published {
+            map_pose: self.map.pose_of(x, y, yaw),
+            map_covariance: [sigma * sigma, 0.0, sigma * sigma, yaw_sigma * yaw_sigma],
+            locate,
+            wheel_scale: 1.0,
+            map_to_odom: self.map.pose_of(0.0, 0.0, 0.0),
+        })
     }
 
     /// What the vehicle publishes about its place at `t`: the map pose (INIT_POSITION's
@@ -306,6 +338,9 @@ impl Localizer {
     /// its speed and yaw rate, its covariance, `nav.locate`, the wheels' scale and the
     /// map→odom correction; `None` before the filter starts.
     pub fn published(&self, t: Timestamp) -> Option<Published> {
+        if self.odom.is_none() {
+            return self.published_without_odometry(t);
+        }
         let (x, y, yaw) = self.filter.pose()?;
         let (ex, ey, eyaw) = match self.odom {
             Some((to, o)) if t > to => {
@@ -364,6 +399,7 @@ impl Localizer {
                 }
             }
             Measurement::Position { en, sigma, trust } => {
+                self.gnss_only.fix(t, en, sigma);
                 let started = self.filter.is_started();
                 let outcome = self.filter.fix(Fix {
                     t,
@@ -390,9 +426,15 @@ impl Localizer {
                     self.filter.heading(yaw, hs);
                 }
             }
-            Measurement::Heading { yaw, sigma } => self.heading(t, yaw, sigma),
+            Measurement::Heading { yaw, sigma } => {
+                self.gnss_only.heading(yaw, sigma);
+                self.heading(t, yaw, sigma);
+            }
             Measurement::Course { yaw, sigma } => {
                 let Some((_, o)) = self.odom else {
+                    // Without wheels, forward or back is unknown: the course is taken as
+                    // the heading.
+                    self.gnss_only.heading(yaw, sigma);
                     return;
                 };
                 if let Some(heading) = self.filter.heading_of_course(yaw, o.v, o.w) {
@@ -538,7 +580,7 @@ impl Localizer {
     /// there and the map frame becomes its ENU frame. Returns false when there is no
     /// position yet.
     pub fn zero_here(&mut self, _t: Timestamp) -> bool {
-        let (Some(frame), Some((x, y, _))) = (self.frame, self.filter.pose()) else {
+        let (Some(frame), Some((x, y, _))) = (self.frame, self.pose()) else {
             return false;
         };
         let here = frame.to_geodetic(&Vector3::new(x, y, 0.0));
@@ -551,12 +593,13 @@ impl Localizer {
     pub fn set_datum(&mut self, datum: Geodetic) {
         self.map = MapFrame::default();
         let old = self.frame.replace(Enu::new(datum));
-        let (Some(old), Some(new), Some((x, y, _))) = (old, self.frame, self.filter.pose()) else {
+        let (Some(old), Some(new), Some((x, y, _))) = (old, self.frame, self.pose()) else {
             return;
         };
         let g = old.to_geodetic(&Vector3::new(x, y, 0.0));
         let enu = new.to_enu(&g);
         self.filter.shift(enu.x - x, enu.y - y);
+        self.gnss_only.shift(enu.x - x, enu.y - y);
         self.scale.forget_fixes();
     }
 
@@ -567,7 +610,7 @@ impl Localizer {
         if self.frame.is_some()
             && let Some(p) = self.published(t)
         {
-            let (ex, ey, eyaw) = self.filter.pose().unwrap_or(p.map_pose);
+            let (ex, ey, eyaw) = self.pose().unwrap_or(p.map_pose);
             self.map = MapFrame::placing(ex, ey, eyaw, x, y, yaw);
             return;
         }

@@ -2,6 +2,7 @@
 //! estimators.
 
 pub mod geodesy;
+pub mod gnss_only;
 pub mod gyro_drift;
 pub mod localizer;
 pub mod map_filter;

@@ -77,6 +77,39 @@ impl Spread {
     }
 }
 
+/// The gyro bias as the standstills so far showed it: a random walk's estimate, each
+/// standstill's mean an update of it (a short standstill's few readings would otherwise
+/// replace a long one's good mean).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct BiasBelief {
+    mean: f64,
+    /// rad²/s².
+    variance: f64,
+    at: Timestamp,
+}
+
+impl BiasBelief {
+    /// The belief at `t`, the bias having walked since.
+    fn at(self, t: Timestamp, walk: f64) -> Self {
+        let dt = t.saturating_since(self.at).as_secs_f64();
+        Self {
+            variance: self.variance + walk * walk * dt,
+            at: t.max(self.at),
+            ..self
+        }
+    }
+
+    /// Combined with a measurement of the bias.
+    fn with(self, mean: f64, variance: f64) -> Self {
+        let gain = self.variance / (self.variance + variance);
+        Self {
+            mean: self.mean + gain * (mean - self.mean),
+            variance: self.variance * (1.0 - gain),
+            at: self.at,
+        }
+    }
+}
+
 /// The `odom` frame's dead reckoning.
 #[derive(Debug, Clone, Default)]
 pub struct Odometry {
@@ -94,6 +127,10 @@ pub struct Odometry {
     gyro_period: Option<f64>,
     /// The gyro bias, rad/s, once a standstill has shown it.
     bias: Option<f64>,
+    /// What the standstills before the current one showed of the bias.
+    bias_belief: Option<BiasBelief>,
+    /// How fast the bias walks, rad/s/√s: how much an older standstill's bias still counts.
+    bias_walk: f64,
     /// When the pose's yaw rate applies: the middle of the last wheel interval when it is
     /// the gyro's mean over it, else the reading's time.
     yaw_rate_at: Option<Timestamp>,
@@ -105,10 +142,16 @@ pub struct Odometry {
 }
 
 impl Odometry {
-    /// Dead reckoning for wheels `track_m` apart.
-    pub fn new(track_m: f64) -> Self {
+    /// Dead reckoning for wheels `track_m` apart, on a gyro whose bias walks at `bias_walk`
+    /// rad/s/√s.
+    pub fn new(track_m: f64, bias_walk: f64) -> Self {
         Self {
             track_m,
+            bias_walk: if bias_walk.is_finite() {
+                bias_walk.abs()
+            } else {
+                0.0
+            },
             ..Self::default()
         }
     }
@@ -134,12 +177,20 @@ impl Odometry {
         self.bias
     }
 
-    /// Corrects the gyro bias by `delta` rad/s: a drift GNSS proved while moving
-    /// ([`super::gyro_drift`]). The next standstill measures the bias afresh.
-    pub fn correct_bias(&mut self, delta: f64) {
-        if delta.is_finite() {
-            self.bias = Some(self.bias.unwrap_or(0.0) + delta);
+    /// Corrects the gyro bias by `delta` rad/s, known to 1σ `sigma`, at `t`: a drift GNSS
+    /// proved while moving ([`super::gyro_drift`]). The next standstill weighs its own
+    /// mean against it.
+    pub fn correct_bias(&mut self, t: Timestamp, delta: f64, sigma: f64) {
+        if !(delta.is_finite() && sigma.is_finite()) {
+            return;
         }
+        let bias = self.bias.unwrap_or(0.0) + delta;
+        self.bias = Some(bias);
+        self.bias_belief = Some(BiasBelief {
+            mean: bias,
+            variance: sigma * sigma,
+            at: t,
+        });
     }
 
     /// Whether the wheels stood still at the last reading.
@@ -205,9 +256,26 @@ impl Odometry {
                 self.standstill.add(wz);
             }
         }
-        if self.standstill.n >= MIN_STILL_SAMPLES && self.standstill.sigma() <= QUIET_RPS {
-            self.bias = Some(self.standstill.mean);
+        if let Some(belief) = self.standstill_belief(t) {
+            self.bias = Some(belief.mean);
         }
+    }
+
+    /// The bias with this standstill's readings, once they are enough and quiet.
+    fn standstill_belief(&self, t: Timestamp) -> Option<BiasBelief> {
+        let s = &self.standstill;
+        if s.n < MIN_STILL_SAMPLES || s.sigma() > QUIET_RPS {
+            return None;
+        }
+        let variance = s.sigma().powi(2) / s.n as f64;
+        Some(match self.bias_belief {
+            Some(b) => b.at(t, self.bias_walk).with(s.mean, variance),
+            None => BiasBelief {
+                mean: s.mean,
+                variance,
+                at: t,
+            },
+        })
     }
 
     /// A wheel reading at `t`: moves the pose.
@@ -223,6 +291,11 @@ impl Odometry {
         } else {
             // Moving again: the last readings of the standstill may hold the start of a turn.
             self.pending_still.clear();
+            if self.still
+                && let Some(belief) = self.standstill_belief(t)
+            {
+                self.bias_belief = Some(belief);
+            }
         }
         let gyro_live = self.gyro_live(t);
         let Some((t0, before)) = self.last_wheels.replace((t, reading)) else {
@@ -293,7 +366,7 @@ mod tests {
 
     #[test]
     fn starts_at_zero_and_drives_straight_on_the_encoders() {
-        let mut o = Odometry::new(0.5);
+        let mut o = Odometry::new(0.5, 2e-5);
         assert_eq!(o.pose(), None);
         for k in 0..=100u64 {
             let s = k as f64 * 0.01;
@@ -305,7 +378,7 @@ mod tests {
 
     #[test]
     fn a_still_vehicle_stays_put_and_learns_the_gyro_bias() {
-        let mut o = Odometry::new(0.5);
+        let mut o = Odometry::new(0.5, 2e-5);
         // 60 s still at 100 Hz with a biased, noisy gyro.
         for k in 0..6000u64 {
             let noise = if k % 2 == 0 { 0.003 } else { -0.003 };
@@ -326,7 +399,7 @@ mod tests {
 
     #[test]
     fn without_a_live_gyro_the_wheels_turn_it() {
-        let mut o = Odometry::new(0.5);
+        let mut o = Odometry::new(0.5, 2e-5);
         o.gyro(at(0), 0.0);
         o.gyro(at(10), 0.0);
         // The gyro falls silent; the wheels turn the vehicle by (0.25 - (-0.25)) / 0.5 = 1 rad.
@@ -339,7 +412,7 @@ mod tests {
 
     #[test]
     fn a_noisy_standstill_does_not_set_the_bias() {
-        let mut o = Odometry::new(0.5);
+        let mut o = Odometry::new(0.5, 2e-5);
         for k in 0..200u64 {
             o.gyro(at(10 * k + 5), if k % 2 == 0 { 0.2 } else { -0.1 });
             o.wheels(at(10 * k), wheels((0.0, 0.0), (0.0, 0.0)));

@@ -74,6 +74,8 @@ impl<S: Sink> Sink for ScriptSink<'_, S> {
 /// integrator fits on their vehicle's data as the README shows for a real robot.
 struct OdomError {
     along: f64,
+    /// The random slip's part of `along`, m²/m.
+    random_along: f64,
     across: f64,
     yaw: f64,
     heading_walk: f64,
@@ -98,6 +100,7 @@ impl OdomError {
         let walk = imu.gyro_noise_rps.powi(2) / imu.rate_hz.max(1.0);
         Self {
             along: random + systematic,
+            random_along: random,
             across: random,
             // The gyro turns the odom frame; the simulated one has no scale error.
             yaw: 5e-6,
@@ -143,6 +146,7 @@ gyro_noise_rps = {gyro_noise}
 heading_walk = {heading_walk}
 gyro_bias_walk = {gyro_bias_walk}
 odom_along_m2_per_m = {odom_along}
+wheel_slip_m2_per_m = {wheel_slip}
 odom_across_m2_per_m = {odom_across}
 odom_yaw_rad2_per_rad = {odom_yaw}
 
@@ -200,6 +204,7 @@ wheels = ["right"]
             .unwrap_or(plant.imu.gyro_bias_walk)
             .clamp(0.0, 1e-2),
         odom_along = odom.along.clamp(1e-7, 1.0),
+        wheel_slip = odom.random_along.clamp(1e-7, 1.0),
         odom_across = odom.across.clamp(1e-7, 1.0),
         odom_yaw = odom.yaw.clamp(1e-7, 1.0),
         imu = plant.imu.protocol.name(),
