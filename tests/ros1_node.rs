@@ -250,6 +250,24 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
     ));
     let rate = average_rate(&tracked);
     assert!((14.0..=16.0).contains(&rate), "/tracked_pose at {rate} Hz");
+    // The frame tree (REP-105): map→odom and odom→base_link in one message, at 15 Hz.
+    let tf = echo_until(&master, "/tf", Duration::from_secs(5), |o| {
+        o.contains("child_frame_id: \"odom\"")
+    });
+    assert!(
+        tf.contains("frame_id: \"map\"")
+            && tf.contains("frame_id: \"odom\"")
+            && tf.contains("child_frame_id: \"base_link\"")
+            && tf.contains("translation:")
+            && tf.contains("rotation:"),
+        "{tf}"
+    );
+    let rate = average_rate(&text(&ros(
+        &master,
+        &["rostopic", "hz", "-w", "50", "/tf"],
+        Duration::from_secs(5),
+    )));
+    assert!((14.0..=16.0).contains(&rate), "/tf at {rate} Hz");
     let imu = echo_until(&master, "/imu/data", Duration::from_secs(5), |o| {
         o.contains("angular_velocity_covariance")
     });
@@ -574,7 +592,7 @@ fn run_joins_the_graph_from_its_configuration() {
 #[test]
 fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
     use chassisd::runtime::ros1::messages::{
-        geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs,
+        geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs, tf2_msgs,
     };
     use roslibrust::{RosMessageType, RosServiceType};
     fn message<T: RosMessageType>() -> (String, &'static str) {
@@ -589,6 +607,9 @@ fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
         message::<std_msgs::Int16>(),
         message::<geometry_msgs::Twist>(),
         message::<geometry_msgs::PoseStamped>(),
+        message::<geometry_msgs::Transform>(),
+        message::<geometry_msgs::TransformStamped>(),
+        message::<tf2_msgs::TFMessage>(),
         message::<nav_msgs::Odometry>(),
         message::<sensor_msgs::Imu>(),
         message::<map_msgs::TargetGoal>(),

@@ -76,6 +76,15 @@ fn pose_odom_battery_and_diagnostics_arrive_at_their_rates() {
         seen["stamp"]["sec"].as_u64().unwrap() > 1_700_000_000,
         "{seen}"
     );
+    // The frame tree: both transforms at the status rate, and composed they are the pose.
+    assert!((9.0..=11.0).contains(&number(&seen, "/tf_hz")), "{seen}");
+    assert_eq!(
+        seen["tf_frames"],
+        serde_json::json!(["map>odom", "odom>base_link"]),
+        "{seen}"
+    );
+    assert!(number(&seen, "/tf_compared") >= 20.0, "{seen}");
+    assert!(number(&seen, "/tf_vs_pose") < 1e-6, "{seen}");
     drop(sim);
 }
 

@@ -32,8 +32,8 @@ pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
 use safety::{Cause, ControlLinkConfig, SafetyConfig};
 pub use status::{
-    BatteryStatus, GnssStatus, HostUsage, Localization, Navigation, Pose2D, PoseCovariance,
-    PoseReport, VehicleStatus,
+    BatteryStatus, FrameTree, GnssStatus, HostUsage, Localization, Navigation, Pose2D,
+    PoseCovariance, PoseReport, VehicleStatus,
 };
 
 /// A course over ground is never trusted beyond this, degrees ...
@@ -1078,6 +1078,7 @@ impl Vehicle {
         let PoseReport {
             odom,
             map,
+            frames,
             localization,
         } = self.pose_report(t);
         // The map pose once GNSS (or INIT_POSITION) has placed the vehicle; before that the
@@ -1100,6 +1101,7 @@ impl Vehicle {
             pose,
             pose_covariance: map.map(|(_, covariance)| covariance),
             odom,
+            frames,
             localization,
             navigation: self
                 .motion
@@ -1115,8 +1117,21 @@ impl Vehicle {
     /// The `odom` pose and the map pose at `t`, without the rest of a status.
     pub fn pose_report(&self, t: Timestamp) -> PoseReport {
         let published = self.localizer.published(t);
+        let odom = self.odometry.as_ref().and_then(Odometry::pose);
         PoseReport {
-            odom: self.odometry.as_ref().and_then(Odometry::pose),
+            odom,
+            frames: published.and_then(|p| {
+                let (x, y, yaw) = p.map_to_odom;
+                let (ox, oy, oyaw) = p.odom_pose?;
+                Some(FrameTree {
+                    map_to_odom: Pose2D { x, y, yaw },
+                    odom_to_base: Pose2D {
+                        x: ox,
+                        y: oy,
+                        yaw: oyaw,
+                    },
+                })
+            }),
             map: published.map(|p| {
                 let (x, y, yaw) = p.map_pose;
                 let [xx, xy, yy, yaw_var] = p.map_covariance;

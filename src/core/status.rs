@@ -26,6 +26,8 @@ pub struct VehicleStatus {
     pub pose_covariance: Option<PoseCovariance>,
     /// The `odom` frame's pose (wheels and gyro only, continuous), once the drives report.
     pub odom: Option<crate::fusion::odometry::OdomPose>,
+    /// The frame tree at `time`, once both the map and the odom frame exist.
+    pub frames: Option<FrameTree>,
     /// Localisation state.
     pub localization: Localization,
     /// Navigation task state.
@@ -40,6 +42,17 @@ pub struct VehicleStatus {
     pub mode: Option<DriveMode>,
 }
 
+/// The frame tree of REP-105 at one time: the map pose is `map_to_odom` composed with
+/// `odom_to_base`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameTree {
+    /// Where the `odom` frame's origin lies in the map frame and how it is turned: the
+    /// correction GNSS estimates.
+    pub map_to_odom: Pose2D,
+    /// The odom pose carried to that time as the map pose is (by the last speeds).
+    pub odom_to_base: Pose2D,
+}
+
 /// The vehicle's poses at one control tick: what a 100 Hz odometry topic needs, without
 /// the rest of a status.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -48,6 +61,8 @@ pub struct PoseReport {
     pub odom: Option<crate::fusion::odometry::OdomPose>,
     /// The map pose and its covariance, once GNSS or INIT_POSITION has placed the vehicle.
     pub map: Option<(Pose2D, PoseCovariance)>,
+    /// The frame tree, once both frames exist.
+    pub frames: Option<FrameTree>,
     /// Localisation state.
     pub localization: Localization,
 }

@@ -168,6 +168,9 @@ pub struct Published {
     /// The map→odom correction in the map frame: the odom frame's origin (x, y, m) and
     /// rotation (rad), so that map pose = correction ∘ odom pose.
     pub map_to_odom: (f64, f64, f64),
+    /// The odom pose carried to the same time as the map pose (x, y, yaw); `None` without
+    /// odometry.
+    pub odom_pose: Option<(f64, f64, f64)>,
 }
 
 /// Counters.
@@ -330,6 +333,7 @@ impl Localizer {
             locate,
             wheel_scale: 1.0,
             map_to_odom: self.map.pose_of(0.0, 0.0, 0.0),
+            odom_pose: None,
         })
     }
 
@@ -342,18 +346,26 @@ impl Localizer {
             return self.published_without_odometry(t);
         }
         let (x, y, yaw) = self.filter.pose()?;
-        let (ex, ey, eyaw) = match self.odom {
-            Some((to, o)) if t > to => {
-                let dt = t.saturating_since(to).min(MAX_EXTRAPOLATION).as_secs_f64();
-                let mid = yaw + o.w * dt / 2.0;
-                (
-                    x + o.v * dt * mid.cos(),
-                    y + o.v * dt * mid.sin(),
-                    wrap(yaw + o.w * dt),
-                )
-            }
-            _ => (x, y, yaw),
+        // Both the map pose and the odom pose are carried to `t` by the last speeds, so the
+        // correction composed with the one is the other.
+        let (dt, v, w, odom) = match self.odom {
+            Some((to, o)) => (
+                t.saturating_since(to).min(MAX_EXTRAPOLATION).as_secs_f64(),
+                o.v,
+                o.w,
+                (o.x, o.y, o.yaw),
+            ),
+            None => (0.0, 0.0, 0.0, (0.0, 0.0, 0.0)),
         };
+        let carried = |(x, y, yaw): (f64, f64, f64)| {
+            let mid = yaw + w * dt / 2.0;
+            (
+                x + v * dt * mid.cos(),
+                y + v * dt * mid.sin(),
+                wrap(yaw + w * dt),
+            )
+        };
+        let (ex, ey, eyaw) = carried((x, y, yaw));
         let locate = if self.filter.position_sigma() <= self.config.locate_bound_m
             && self.filter.yaw_sigma() <= self.config.converged_yaw_rad
         {
@@ -374,6 +386,7 @@ impl Localizer {
             locate,
             wheel_scale: self.scale.proven().unwrap_or(1.0),
             map_to_odom: self.map.pose_of(correction.0, correction.1, correction.2),
+            odom_pose: Some(carried(odom)),
         })
     }
 

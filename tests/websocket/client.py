@@ -34,9 +34,10 @@ def connect(port, token=None):
 
 def rates(ros, _statuses, seconds="4"):
     seconds = float(seconds)
-    seen = {"/pose": [], "/odom": [], "/battery_state": [], "/diagnostics": []}
+    seen = {"/pose": [], "/odom": [], "/battery_state": [], "/diagnostics": [], "/tf": []}
     subs = []
     for topic, kind in [("/pose", "geometry_msgs/PoseWithCovarianceStamped"), ("/odom", "nav_msgs/Odometry"),
+                        ("/tf", "tf2_msgs/TFMessage"),
                         ("/battery_state", "sensor_msgs/BatteryState"), ("/diagnostics", "diagnostic_msgs/DiagnosticArray")]:
         t = roslibpy.Topic(ros, topic, kind)
         t.subscribe(lambda m, topic=topic: seen[topic].append((time.monotonic(), m)))
@@ -50,7 +51,30 @@ def rates(ros, _statuses, seconds="4"):
     pose, odom = seen["/pose"][-1][1], seen["/odom"][-1][1]
     battery = seen["/battery_state"][-1][1] if seen["/battery_state"] else {}
     diagnostics = seen["/diagnostics"][-1][1] if seen["/diagnostics"] else {"status": []}
+    # The frame tree: map→odom composed with odom→base_link is the /pose of the same stamp.
+    poses = {json.dumps(m["header"]["stamp"], sort_keys=True): m["pose"]["pose"] for _, m in seen["/pose"]}
+    tf_frames, tf_vs_pose = set(), []
+    for _, m in seen["/tf"]:
+        by_child = {}
+        for tr in m["transforms"]:
+            tf_frames.add(tr["header"]["frame_id"] + ">" + tr["child_frame_id"])
+            by_child[tr["child_frame_id"]] = tr
+        same = poses.get(json.dumps(m["transforms"][0]["header"]["stamp"], sort_keys=True))
+        if same is None or "odom" not in by_child or "base_link" not in by_child:
+            continue
+        c, o = by_child["odom"]["transform"], by_child["base_link"]["transform"]
+        cyaw = yaw_of(c["rotation"])
+        ox, oy = o["translation"]["x"], o["translation"]["y"]
+        x = c["translation"]["x"] + math.cos(cyaw) * ox - math.sin(cyaw) * oy
+        y = c["translation"]["y"] + math.sin(cyaw) * ox + math.cos(cyaw) * oy
+        yaw = cyaw + yaw_of(o["rotation"])
+        dyaw = (yaw - yaw_of(same["orientation"]) + math.pi) % (2 * math.pi) - math.pi
+        tf_vs_pose.append(max(math.hypot(x - same["position"]["x"], y - same["position"]["y"]), abs(dyaw)))
     return {
+        "tf_hz": len(seen["/tf"]) / seconds,
+        "tf_frames": sorted(tf_frames),
+        "tf_compared": len(tf_vs_pose),
+        "tf_vs_pose": max(tf_vs_pose) if tf_vs_pose else None,
         "battery_hz": len(seen["/battery_state"]) / seconds,
         "voltage": battery.get("voltage"),
         "percentage": battery.get("percentage"),

@@ -346,6 +346,7 @@ mod tests {
             pose: Default::default(),
             pose_covariance: None,
             odom: None,
+            frames: None,
             localization: Localization::Good,
             navigation: Navigation::Idle,
             plan: None,

@@ -60,6 +60,35 @@ pub fn pose(status: &VehicleStatus) -> Option<Value> {
     }))
 }
 
+/// One geometry_msgs/TransformStamped: `child` placed at `pose` (x, y, yaw) in `parent`.
+fn transform(t: Timestamp, parent: &str, child: &str, pose: (f64, f64, f64)) -> Value {
+    let [qx, qy, qz, qw] = yaw_quaternion(pose.2);
+    json!({
+        "header": header(t, parent),
+        "child_frame_id": child,
+        "transform": {
+            "translation": {"x": pose.0, "y": pose.1, "z": 0.0},
+            "rotation": {"x": qx, "y": qy, "z": qz, "w": qw},
+        },
+    })
+}
+
+/// `/tf` (tf2_msgs/TFMessage): map→odom, the correction GNSS estimates, once the vehicle is
+/// placed, and odom→base_link, the dead reckoning, once the drives report (REP-105: the map
+/// pose is the two composed). `None` while neither frame exists.
+pub fn tf(status: &VehicleStatus) -> Option<Value> {
+    let t = status.time;
+    let mut transforms = Vec::new();
+    if let Some(f) = status.frames {
+        let (c, o) = (f.map_to_odom, f.odom_to_base);
+        transforms.push(transform(t, MAP_FRAME, ODOM_FRAME, (c.x, c.y, c.yaw)));
+        transforms.push(transform(t, ODOM_FRAME, BASE_FRAME, (o.x, o.y, o.yaw)));
+    } else if let Some(o) = status.odom {
+        transforms.push(transform(t, ODOM_FRAME, BASE_FRAME, (o.x, o.y, o.yaw)));
+    }
+    (!transforms.is_empty()).then(|| json!({ "transforms": transforms }))
+}
+
 /// `/odom` (nav_msgs/Odometry): the wheels-and-gyro pose in `odom`, speeds in `base_link`.
 pub fn odometry(t: Timestamp, pose: &OdomPose, covariance: &OdometryCovariance) -> Value {
     json!({

@@ -25,6 +25,8 @@ pub struct Topic {
 pub const POSE: &str = "/pose";
 /// The wheel odometry.
 pub const ODOM: &str = "/odom";
+/// The frame tree: map→odom (the GNSS correction) and odom→base_link (the dead reckoning).
+pub const TF: &str = "/tf";
 /// The battery.
 pub const BATTERY_STATE: &str = "/battery_state";
 /// The health of each part.
@@ -39,7 +41,7 @@ pub const GOAL_POSE: &str = "/goal_pose";
 pub const CMD_VEL: &str = "/cmd_vel";
 
 /// Every topic the server has.
-pub const TOPICS: [Topic; 8] = [
+pub const TOPICS: [Topic; 9] = [
     Topic {
         name: POSE,
         msg_type: "geometry_msgs/msg/PoseWithCovarianceStamped",
@@ -49,6 +51,11 @@ pub const TOPICS: [Topic; 8] = [
         name: ODOM,
         msg_type: "nav_msgs/msg/Odometry",
         flow: Flow::Published(50.0),
+    },
+    Topic {
+        name: TF,
+        msg_type: "tf2_msgs/msg/TFMessage",
+        flow: Flow::Published(10.0),
     },
     Topic {
         name: BATTERY_STATE,

@@ -5,7 +5,7 @@ include!(concat!(env!("OUT_DIR"), "/ros1_interfaces.rs"));
 
 use crate::api::ros1::odometry::OdometryCovariance;
 use crate::api::ros1::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
-use crate::core::Pose2D;
+use crate::core::{Pose2D, PoseReport};
 use crate::devices::imu::ImuSample;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
@@ -108,6 +108,51 @@ pub fn pose_stamped(t: Timestamp, seq: u32, pose: &Pose2D) -> geometry_msgs::Pos
             orientation: quaternion(yaw_quaternion(pose.yaw)),
         },
     }
+}
+
+/// One transform: `child` placed at `pose` in `parent`.
+fn transform(
+    t: Timestamp,
+    parent: &str,
+    child: &str,
+    pose: &Pose2D,
+) -> geometry_msgs::TransformStamped {
+    geometry_msgs::TransformStamped {
+        // tf ignores seq; each transform's is 0, as tf's own broadcasters leave it.
+        header: header(t, 0, parent),
+        child_frame_id: child.to_owned(),
+        transform: geometry_msgs::Transform {
+            translation: geometry_msgs::Vector3 {
+                x: pose.x,
+                y: pose.y,
+                z: 0.0,
+            },
+            rotation: quaternion(yaw_quaternion(pose.yaw)),
+        },
+    }
+}
+
+/// `/tf`: map→odom (the correction GNSS estimates) and odom→base_link (the dead reckoning)
+/// once the vehicle is placed, odom→base_link alone before; `None` without odometry.
+pub fn tf(t: Timestamp, report: &PoseReport) -> Option<tf2_msgs::TFMessage> {
+    let transforms = match (report.frames, report.odom) {
+        (Some(f), _) => vec![
+            transform(t, MAP_FRAME, ODOM_FRAME, &f.map_to_odom),
+            transform(t, ODOM_FRAME, BASE_FRAME, &f.odom_to_base),
+        ],
+        (None, Some(o)) => vec![transform(
+            t,
+            ODOM_FRAME,
+            BASE_FRAME,
+            &Pose2D {
+                x: o.x,
+                y: o.y,
+                yaw: o.yaw,
+            },
+        )],
+        (None, None) => return None,
+    };
+    Some(tf2_msgs::TFMessage { transforms })
 }
 
 /// `/imu/data`: a sample in the vehicle frame (the mounting applied), stamped when it was

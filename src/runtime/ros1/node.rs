@@ -12,7 +12,7 @@ use roslibrust::ros1::{MasterClient, NodeHandle, Publisher, ServiceServer};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
-use super::messages::{self, geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs};
+use super::messages::{self, geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs, tf2_msgs};
 use super::{Feed, Ros1Queues};
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::ros1::status::{StatusTopics, Topic};
@@ -28,7 +28,7 @@ use crate::runtime::outage_log::{OutageLog, Say};
 const WATCH_EVERY: Duration = Duration::from_secs(1);
 /// The longest wait between connection attempts.
 const RETRY_MAX: Duration = Duration::from_secs(5);
-/// `/tracked_pose`'s period (15 Hz).
+/// `/tracked_pose`'s and `/tf`'s period (15 Hz).
 const TRACKED_POSE_PERIOD: Duration = Duration::from_nanos(1_000_000_000 / 15);
 /// Requests that may wait for the engine's answer at once; more are refused as busy.
 const MAX_PENDING: usize = 64;
@@ -138,6 +138,7 @@ struct Graph {
     raw_odom: Publisher<nav_msgs::Odometry>,
     imu: Publisher<sensor_msgs::Imu>,
     tracked_pose: Publisher<geometry_msgs::PoseStamped>,
+    tf: Publisher<tf2_msgs::TFMessage>,
     codes: Vec<(Topic, Publisher<std_msgs::Int16>)>,
     _services: Vec<ServiceServer>,
     _subscribers: JoinSet<()>,
@@ -390,8 +391,9 @@ impl Publishing {
                         tracing::debug!(error = %e, "/raw_odom publish failed");
                     }
                 }
+                // `/tracked_pose` and `/tf` at 15 Hz.
                 let due = self.next_tracked_pose.is_none_or(|next| t >= next);
-                if let (true, Some((pose, _))) = (due, report.map) {
+                if due && (report.map.is_some() || report.odom.is_some()) {
                     let next = self
                         .next_tracked_pose
                         .map_or(t, |n| n.saturating_add(TRACKED_POSE_PERIOD));
@@ -401,9 +403,16 @@ impl Publishing {
                     } else {
                         next
                     });
-                    let message = messages::pose_stamped(t, self.seq, &pose);
-                    if let Err(e) = graph.tracked_pose.publish(&message).await {
-                        tracing::debug!(error = %e, "/tracked_pose publish failed");
+                    if let Some((pose, _)) = report.map {
+                        let message = messages::pose_stamped(t, self.seq, &pose);
+                        if let Err(e) = graph.tracked_pose.publish(&message).await {
+                            tracing::debug!(error = %e, "/tracked_pose publish failed");
+                        }
+                    }
+                    if let Some(message) = messages::tf(t, &report)
+                        && let Err(e) = graph.tf.publish(&message).await
+                    {
+                        tracing::debug!(error = %e, "/tf publish failed");
                     }
                 }
             }
@@ -442,6 +451,7 @@ async fn build(
     let raw_odom = node.advertise("/raw_odom", 10, false).await?;
     let imu = node.advertise("/imu/data", 10, false).await?;
     let tracked_pose = node.advertise("/tracked_pose", 10, false).await?;
+    let tf = node.advertise("/tf", 10, false).await?;
     let mut codes = Vec::new();
     for topic in Topic::ALL {
         codes.push((topic, node.advertise(topic.name(), 1, true).await?));
@@ -557,6 +567,7 @@ async fn build(
         raw_odom,
         imu,
         tracked_pose,
+        tf,
         codes,
         _services: services,
         _subscribers: subscribers,

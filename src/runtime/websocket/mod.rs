@@ -426,6 +426,7 @@ impl Server {
             Feed::Status(status) => {
                 self.status_ticks += 1;
                 self.publish(topics::POSE, || messages::pose(&status));
+                self.publish(topics::TF, || messages::tf(&status));
                 let plan = status.plan.as_ref().map(|p| p.id);
                 if self.plan != Some(plan) {
                     self.plan = Some(plan);
