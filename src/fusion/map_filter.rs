@@ -11,9 +11,9 @@
 //!   A fix that disagrees with the run before it is held; it is taken once enough later fixes
 //!   agree with it (a relocation starts from them all), and dropped otherwise. A lone wild fix
 //!   is never taken, at any time.
-//! - Fixes of a trusted quality (RTK) that agree with each other are believed over the wheels:
-//!   when they fail the filter's gate the wheels slipped, and the position's uncertainty is
-//!   widened until they pass. Fixes of a lesser quality (DGPS, SBAS, single) that step away
+//! - RTK fixed fixes that agree with each other are believed over the wheels: when they fail
+//!   the filter's gate the wheels slipped, and the position's uncertainty is widened until
+//!   they pass. Fixes of a lesser quality (RTK float, DGPS, SBAS, single) that step away
 //!   together are a new realisation of their slow error, which the GNSS-error state absorbs,
 //!   so a step turns neither the heading nor anything the dead reckoning uses.
 //! - With one antenna and no course the heading comes from the motion between fixes: the odom
@@ -79,10 +79,11 @@ const AGREE_YAW_RATE: f64 = 0.01;
 /// How far a fix of one quality is trusted over the wheels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Trust {
-    /// RTK fixed or float: when such fixes agree with each other and not with the filter, the
-    /// wheels slipped.
+    /// RTK fixed: when such fixes agree with each other and not with the filter, the wheels
+    /// slipped.
     OverWheels,
-    /// DGPS, SBAS or single point: fixes that step away together stepped in their slow error.
+    /// RTK float, DGPS, SBAS or single point: fixes that step away together stepped in their
+    /// slow error (a float solution's ambiguities move it by decimetres at a time).
     UnderWheels,
 }
 

@@ -268,13 +268,18 @@ impl Odometry {
             return None;
         }
         let variance = s.sigma().powi(2) / s.n as f64;
-        Some(match self.bias_belief {
-            Some(b) => b.at(t, self.bias_walk).with(s.mean, variance),
-            None => BiasBelief {
-                mean: s.mean,
-                variance,
-                at: t,
-            },
+        let own = BiasBelief {
+            mean: s.mean,
+            variance,
+            at: t,
+        };
+        Some(match self.bias_belief.map(|b| b.at(t, self.bias_walk)) {
+            // A standstill more than 3σ from the belief shows the bias moved faster than its
+            // walk (a power cycle, a warming sensor): it starts afresh.
+            Some(b) if (s.mean - b.mean).powi(2) <= 9.0 * (b.variance + variance) => {
+                b.with(s.mean, variance)
+            }
+            _ => own,
         })
     }
 
@@ -395,6 +400,37 @@ mod tests {
         }
         let yaw = o.pose().unwrap().yaw;
         assert!((yaw - 0.5).abs() < 0.01, "{yaw}");
+    }
+
+    /// Stands `ms` at `from` (ms) with a gyro reading `bias` ± `noise`, then drives 1 s.
+    fn stop_and_go(o: &mut Odometry, from: u64, ms: u64, bias: f64, noise: f64) -> u64 {
+        for k in 0..ms / 10 {
+            let n = if k % 2 == 0 { noise } else { -noise };
+            o.gyro(at(from + 10 * k + 5), bias + n);
+            o.wheels(at(from + 10 * k), wheels((0.0, 0.0), (0.0, 0.0)));
+        }
+        let moving = from + ms;
+        for k in 0..100 {
+            o.gyro(at(moving + 10 * k + 5), bias);
+            o.wheels(at(moving + 10 * k), wheels((0.5, 0.5), (0.0, 0.0)));
+        }
+        moving + 1000
+    }
+
+    #[test]
+    fn a_short_stop_refines_the_bias_and_a_far_one_replaces_it() {
+        let mut o = Odometry::new(0.5, 2e-5);
+        // 30 s still: the bias to 0.003 / √2600 ≈ 6e-5.
+        let t = stop_and_go(&mut o, 0, 30_000, 0.01, 0.003);
+        assert!((o.gyro_bias().unwrap() - 0.01).abs() < 1e-5);
+        // A 0.6 s stop whose few readings average 0.0101 (the first and last 200 ms are left
+        // out): the bias stays near the long stop's.
+        let t = stop_and_go(&mut o, t, 600, 0.0101, 0.003);
+        let refined = o.gyro_bias().unwrap();
+        assert!(refined > 0.01 && refined < 0.01005, "{refined}");
+        // A stop far from it (the sensor was power-cycled): its own mean.
+        stop_and_go(&mut o, t, 3000, 0.02, 0.003);
+        assert!((o.gyro_bias().unwrap() - 0.02).abs() < 1e-4);
     }
 
     #[test]

@@ -168,3 +168,30 @@ pub fn rss_with_children_kb(pid: u32) -> u64 {
             .map(rss)
             .sum::<u64>()
 }
+
+/// Columns `names` of a CSV file with a header row (the shared data's robot recordings).
+pub fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(path).expect("shared data file");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let index: Vec<usize> = names
+        .iter()
+        .map(|n| header.iter().position(|h| h == n).expect("column"))
+        .collect();
+    lines
+        .filter(|l| !l.is_empty())
+        .map(|l| {
+            let fields: Vec<&str> = l.split(',').collect();
+            index
+                .iter()
+                .map(|&i| fields[i].parse().expect("number"))
+                .collect()
+        })
+        .collect()
+}
+
+/// The last sample at or before `t` (samples sorted by their first column).
+pub fn sample_at(samples: &[Vec<f64>], t: f64) -> &[f64] {
+    let i = samples.partition_point(|s| s[0] <= t);
+    &samples[i.saturating_sub(1)]
+}
