@@ -30,11 +30,12 @@ use chassisd::config::VehicleConfig;
 use chassisd::engine::{Decoder, Engine, EngineOutput};
 use chassisd::fusion::geodesy::{Enu, Geodetic};
 use chassisd::record::{Payload, Record, RecordingReader, RecordingWriter, SourceKind};
-use chassisd::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
+use chassisd::sim::lockstep::{self, Lockstep, PLANT_STEP};
 use chassisd::sim::nmea_out;
 use chassisd::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
-use common::{csv_columns, sample_at};
+use common::lockstep::Recorder;
+use common::{csv_columns, sample_at, wheel_to_gyro_ratio};
 
 /// The Husky's track, m (the data's README): the controller's separation.
 const TRACK_M: f64 = 0.555;
@@ -112,23 +113,10 @@ impl Data {
             })
             .collect()
     }
-
-    /// The wheels' yaw rate over the gyro's, least squares over turns faster than 0.2 rad/s.
-    fn wheel_to_gyro_ratio(&self) -> f64 {
-        let (mut num, mut den) = (0.0, 0.0);
-        for o in &self.odom {
-            let g = sample_at(&self.imu, o[0])[1];
-            if g.abs() > 0.2 {
-                num += o[2] * g;
-                den += g * g;
-            }
-        }
-        num / den
-    }
 }
 
-/// A GGA sentence of quality 2 at `utc_s` (seconds of the day) for a fix `moved` by (east,
-/// north) m.
+/// The GGA sentence (quality 2) of fix `index`, `moved` by (east, north) m, stamped with its
+/// recording time.
 fn gga(data: &Data, index: usize, moved: (f64, f64)) -> Bytes {
     let g = &data.gps[index];
     let frame = data.frame();
@@ -185,21 +173,9 @@ fn gnss_records(data: &Data, wild: Option<(usize, (f64, f64))>) -> Vec<Record> {
         .collect()
 }
 
-struct Recorder {
-    writer: RecordingWriter,
-}
-
-impl Sink for Recorder {
-    fn record(&mut self, record: &Record) {
-        self.writer.write(record).expect("recording written");
-    }
-
-    fn output(&mut self, _: EngineOutput) {}
-}
-
 /// Writes the recording folder at `dir`; the effective track, m.
 fn record(data: &Data, dir: &Path) -> f64 {
-    let ratio = data.wheel_to_gyro_ratio();
+    let ratio = wheel_to_gyro_ratio(&data.odom, &data.imu);
     let track = TRACK_M * ratio;
     let g = &data.gps[0];
     let plant_text = std::fs::read_to_string(common::repo().join("devices/plant.mower.toml"))

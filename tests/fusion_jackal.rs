@@ -18,12 +18,12 @@ mod common;
 
 use std::path::Path;
 
-use chassisd::engine::EngineOutput;
-use chassisd::record::{Record, RecordingWriter};
-use chassisd::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
+use chassisd::record::RecordingWriter;
+use chassisd::sim::lockstep::{self, Lockstep, PLANT_STEP};
 use chassisd::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
-use common::{csv_columns, sample_at};
+use common::lockstep::Recorder;
+use common::{csv_columns, sample_at, wheel_to_gyro_ratio};
 
 /// The controller's wheel separation: the Jackal's 0.37559 m times its multiplier 1.5.
 const CONTROLLER_SEPARATION_M: f64 = 0.37559 * 1.5;
@@ -38,31 +38,6 @@ const REFERENCE_START_YAW: f64 = 0.362;
 const TARGET_M: f64 = 0.3;
 /// The drives boot before the data starts, s.
 const BOOT_S: f64 = 3.0;
-
-/// The wheels' yaw rate over the gyro's, least squares over turns faster than 0.2 rad/s.
-fn wheel_to_gyro_ratio(odom: &[Vec<f64>], imu: &[Vec<f64>]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for o in odom {
-        let g = sample_at(imu, o[0])[1];
-        if g.abs() > 0.2 {
-            num += o[2] * g;
-            den += g * g;
-        }
-    }
-    num / den
-}
-
-struct Recorder {
-    writer: RecordingWriter,
-}
-
-impl Sink for Recorder {
-    fn record(&mut self, record: &Record) {
-        self.writer.write(record).expect("recording written");
-    }
-
-    fn output(&mut self, _: EngineOutput) {}
-}
 
 #[test]
 fn the_odom_frame_ends_where_the_reference_filter_does() {

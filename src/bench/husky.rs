@@ -46,8 +46,9 @@ pub struct HuskyData {
     inputs: Vec<(f64, Input)>,
 }
 
-/// Reads one CSV: its rows as maps of column to value, for the named columns.
-fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
+/// Reads one CSV with a header row: the named columns of every row (the shared data's robot
+/// recordings).
+pub fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut lines = text.lines();

@@ -40,11 +40,6 @@ impl GnssOnly {
         }
     }
 
-    /// Whether a fix placed the vehicle.
-    pub fn is_placed(&self) -> bool {
-        self.fix.is_some()
-    }
-
     /// The reference point's pose at `t` for an antenna at `antenna` (x forward, y left, m):
     /// x, y, yaw, and the position's and the yaw's 1σ.
     pub fn pose_at(
@@ -52,16 +47,26 @@ impl GnssOnly {
         t: Timestamp,
         antenna: (f64, f64),
     ) -> Option<((f64, f64, f64), f64, f64)> {
-        let (at, (e, n), sigma) = self.fix?;
-        let (yaw, yaw_sigma) = self.heading.unwrap_or((0.0, UNKNOWN_YAW_SIGMA));
-        let (s, c) = yaw.sin_cos();
-        let x = e - (c * antenna.0 - s * antenna.1);
-        let y = n - (s * antenna.0 + c * antenna.1);
+        let (at, _, sigma) = self.fix?;
+        let pose = self.pose(antenna)?;
+        let yaw_sigma = self.heading.map_or(UNKNOWN_YAW_SIGMA, |(_, s)| s);
         let age = t.saturating_since(at).as_secs_f64();
         // The lever arm's direction is as uncertain as the heading.
         let lever = antenna.0.hypot(antenna.1) * yaw_sigma.min(1.0);
         let position_sigma = sigma.hypot(lever).hypot(AGE_GROWTH_MPS * age);
-        Some(((x, y, yaw), position_sigma, yaw_sigma))
+        Some((pose, position_sigma, yaw_sigma))
+    }
+
+    /// The reference point's pose at the latest fix: x, y, yaw.
+    pub fn pose(&self, antenna: (f64, f64)) -> Option<(f64, f64, f64)> {
+        let (_, (e, n), _) = self.fix?;
+        let (yaw, _) = self.heading.unwrap_or((0.0, UNKNOWN_YAW_SIGMA));
+        let (s, c) = yaw.sin_cos();
+        Some((
+            e - (c * antenna.0 - s * antenna.1),
+            n - (s * antenna.0 + c * antenna.1),
+            yaw,
+        ))
     }
 
     /// The map frame moved by (dx, dy).
@@ -103,6 +108,6 @@ mod tests {
         let mut g = GnssOnly::default();
         g.fix(at(1.0), (f64::NAN, 0.0), (0.02, 0.02));
         g.heading(f64::INFINITY, 0.1);
-        assert!(!g.is_placed());
+        assert_eq!(g.pose((0.0, 0.0)), None);
     }
 }

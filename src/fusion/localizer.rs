@@ -237,7 +237,7 @@ const RTK_DIRECTION_SIGMA_RAD: f64 = 0.01;
 const DRIFT_CONFIDENCE: f64 = 2.0;
 
 /// Headings rejected this many times (over `relocate_after`) replace the heading.
-pub const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
+const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
 
 impl Localizer {
     /// A localiser with nothing known.
@@ -310,10 +310,7 @@ impl Localizer {
     /// the latest fix without odometry).
     pub fn pose(&self) -> Option<(f64, f64, f64)> {
         if self.odom.is_none() {
-            return self
-                .gnss_only
-                .pose_at(Timestamp::from_micros(0), self.config.antenna)
-                .map(|(pose, _, _)| pose);
+            return self.gnss_only.pose(self.config.antenna);
         }
         self.filter.pose()
     }

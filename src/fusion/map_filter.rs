@@ -346,15 +346,16 @@ impl MapFilter {
     /// The gyro's bias was just learnt (a standstill) or corrected: the odom heading's drift
     /// rate is known to 1σ `sigma` rad/s, and uncorrelated with the rest.
     pub fn reset_drift(&mut self, sigma: f64) {
-        for i in 0..N {
-            self.p[(DRIFT, i)] = 0.0;
-            self.p[(i, DRIFT)] = 0.0;
+        self.reset_state(DRIFT, if sigma.is_finite() { sigma } else { 0.0 });
+    }
+
+    /// State `i` known afresh to 1σ `sigma`, uncorrelated with the rest.
+    fn reset_state(&mut self, i: usize, sigma: f64) {
+        for j in 0..N {
+            self.p[(i, j)] = 0.0;
+            self.p[(j, i)] = 0.0;
         }
-        self.p[(DRIFT, DRIFT)] = if sigma.is_finite() {
-            sigma * sigma
-        } else {
-            0.0
-        };
+        self.p[(i, i)] = sigma * sigma;
     }
 
     /// The odom frame's pose at `t`: the state moves by its increment.
@@ -439,7 +440,7 @@ impl MapFilter {
     }
 
     /// The odom pose at `t`, interpolated from the history (the latest when `t` is newer).
-    fn odom_at(&self, t: Timestamp) -> Option<OdomPose> {
+    pub fn odom_pose_at(&self, t: Timestamp) -> Option<OdomPose> {
         let at = self.history.partition_point(|(ht, _)| *ht <= t);
         if at == 0 {
             return self.history.front().map(|(_, o)| *o);
@@ -460,11 +461,6 @@ impl MapFilter {
             v: o0.v + (o1.v - o0.v) * k,
             w: o0.w + (o1.w - o0.w) * k,
         })
-    }
-
-    /// The odom frame's pose at `t`, from the poses kept.
-    pub fn odom_pose_at(&self, t: Timestamp) -> Option<OdomPose> {
-        self.odom_at(t)
     }
 
     /// The antenna's position in the odom frame at odom pose `o`.
@@ -519,7 +515,7 @@ impl MapFilter {
             self.stats.dropped += 1;
             return FixOutcome::Dropped;
         }
-        let Some(odom) = self.odom_at(fix.t) else {
+        let Some(odom) = self.odom_pose_at(fix.t) else {
             return FixOutcome::NoOdom;
         };
         let placed = Placed { fix, odom };
@@ -842,11 +838,7 @@ impl MapFilter {
     /// Replaces the heading (a run of rejected headings showed it wrong), ENU rad with 1σ.
     pub fn reset_heading(&mut self, yaw: f64, sigma: f64) {
         self.x[YAW] = wrap(yaw);
-        for i in 0..N {
-            self.p[(YAW, i)] = 0.0;
-            self.p[(i, YAW)] = 0.0;
-        }
-        self.p[(YAW, YAW)] = sigma * sigma;
+        self.reset_state(YAW, sigma);
         self.fit.clear();
     }
 

@@ -193,11 +193,6 @@ impl Odometry {
         });
     }
 
-    /// Whether the wheels stood still at the last reading.
-    pub fn is_still(&self) -> bool {
-        self.still
-    }
-
     fn gyro_live(&self, t: Timestamp) -> bool {
         let Some(last) = self.last_gyro else {
             return false;

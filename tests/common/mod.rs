@@ -171,23 +171,21 @@ pub fn rss_with_children_kb(pid: u32) -> u64 {
 
 /// Columns `names` of a CSV file with a header row (the shared data's robot recordings).
 pub fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
-    let text = std::fs::read_to_string(path).expect("shared data file");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let index: Vec<usize> = names
-        .iter()
-        .map(|n| header.iter().position(|h| h == n).expect("column"))
-        .collect();
-    lines
-        .filter(|l| !l.is_empty())
-        .map(|l| {
-            let fields: Vec<&str> = l.split(',').collect();
-            index
-                .iter()
-                .map(|&i| fields[i].parse().expect("number"))
-                .collect()
-        })
-        .collect()
+    chassisd::bench::husky::columns(path, names).expect("shared data file")
+}
+
+/// A robot's wheel odometry yaw rate over its gyro's: least squares over the samples turning
+/// faster than 0.2 rad/s (`odom` rows t, vx, wz; `gyro` rows t, yaw rate).
+pub fn wheel_to_gyro_ratio(odom: &[Vec<f64>], gyro: &[Vec<f64>]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for o in odom {
+        let g = sample_at(gyro, o[0])[1];
+        if g.abs() > 0.2 {
+            num += o[2] * g;
+            den += g * g;
+        }
+    }
+    num / den
 }
 
 /// The last sample at or before `t` (samples sorted by their first column).
