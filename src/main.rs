@@ -240,6 +240,10 @@ enum BenchCommand {
         /// The recording's folder (gps.csv, odom.csv, imu.csv).
         #[arg(long, default_value = "../shared/data/ekf/husky-test1")]
         data: PathBuf,
+        /// The plant whose simulated GNSS errors are compared with the data's (default: the
+        /// built-in mower).
+        #[arg(long)]
+        plant: Option<PathBuf>,
     },
     /// Score the fusion filter on scripted drives of the simulated vehicle against its
     /// truth; the last line is a JSON object with every figure and "pass". Exits with
@@ -406,13 +410,19 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<bool> {
     match cli.command {
         Command::Bench {
-            which: BenchCommand::Husky { data },
+            which: BenchCommand::Husky { data, plant },
         } => {
-            use chassisd::bench::husky;
+            use chassisd::bench::{gnss_fit, husky};
             let data = husky::HuskyData::load(&data)?;
+            let plant = load_plant(plant)?;
+            let fit = gnss_fit::fit(&data, &plant, 1);
             let report = husky::report(&data, Default::default());
             print!("{report}");
-            println!("{}", serde_json::to_string(&report)?);
+            print!("{fit}");
+            println!(
+                "{}",
+                serde_json::json!({ "filter": report, "gnss_errors": fit })
+            );
             Ok(true)
         }
         Command::Bench {

@@ -41,3 +41,25 @@ fn the_map_filter_holds_on_the_husky_recording() {
     // No course in the data: the heading comes from the motion between fixes.
     assert!(r.heading_known_s.is_some_and(|t| t < 30.0), "{r}");
 }
+
+/// Issue 33 item 4: the shipped plants' GNSS errors are the Husky's, measured the same way
+/// (the RMS change of the error over 0.4 to 40 s, and the rate of steps).
+#[test]
+fn the_plants_gnss_errors_are_fitted_to_the_husky() {
+    use chassisd::bench::gnss_fit::fit;
+    use chassisd::sim::plant::PlantConfig;
+    let data = HuskyData::load(&common::shared_data("ekf/husky-test1")).expect("husky data");
+    for plant in ["plant.mower.toml", "plant.delivery.toml"] {
+        let p = PlantConfig::load(&common::repo().join("devices").join(plant)).expect("plant");
+        let f = fit(&data, &p, 1);
+        println!("{plant}\n{f}");
+        for ((lag, d), s) in f.lags_s.iter().zip(&f.data_m).zip(&f.plant_m) {
+            assert!(
+                (s / d - 1.0).abs() <= 0.25,
+                "{plant}: over {lag:.1} s the plant's error moves {s:.2} m, the Husky's {d:.2} m"
+            );
+        }
+        let ratio = f.plant_steps_per_hour / f.data_steps_per_hour;
+        assert!((0.5..=2.0).contains(&ratio), "{plant}: steps {f}");
+    }
+}

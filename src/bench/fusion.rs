@@ -31,6 +31,10 @@ const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
 const JUMP_SETTLE_S: f64 = 5.0;
 /// An estimate that stays this close to the truth through a jump has rejected it, m.
 const JUMP_REJECTED_M: f64 = 0.3;
+/// A fix this far from the antenna is a wild one, m.
+const WILD_M: f64 = 50.0;
+/// The window after a wild fix in which the pose must not follow it, s.
+const WILD_WINDOW_S: f64 = 3.0;
 /// Speed above which a single-antenna receiver's course stands in for its heading, m/s.
 const COURSE_MIN_SPEED: f64 = 0.3;
 
@@ -49,6 +53,8 @@ pub mod target {
     pub const NEES_POSITION: std::ops::RangeInclusive<f64> = 0.3..=3.0;
     /// The same for heading (1 DOF).
     pub const NEES_HEADING: std::ops::RangeInclusive<f64> = 0.2..=2.0;
+    /// The most a wild fix may move the fused pose away from the truth, m.
+    pub const WILD_MOVE_M: f64 = 0.5;
 }
 
 /// Sums of squared errors.
@@ -150,6 +156,10 @@ pub struct ScenarioFigures {
     pub jump_max_error_m: Option<f64>,
     /// Largest GNSS-only position error in the jump, m.
     pub jump_gnss_max_error_m: Option<f64>,
+    /// Wild fixes the receiver sent (more than [`WILD_M`] off).
+    pub wild_fixes: usize,
+    /// The most the fused error grew within [`WILD_WINDOW_S`] of a wild fix, m.
+    pub wild_move_m: Option<f64>,
     /// Status lines scored.
     #[serde(skip)]
     errors: [ByRegime; 3],
@@ -181,6 +191,8 @@ impl ScenarioFigures {
         self.outage_drift_worst_m = self.drifts.iter().map(|d| d.0).reduce(f64::max);
         self.jump_max_error_m = worst(self.jump_max_error_m, other.jump_max_error_m);
         self.jump_gnss_max_error_m = worst(self.jump_gnss_max_error_m, other.jump_gnss_max_error_m);
+        self.wild_fixes += other.wild_fixes;
+        self.wild_move_m = worst(self.wild_move_m, other.wild_move_m);
         let [fused, gnss, odometry] = &self.errors;
         self.fused = by_regime_name(fused);
         self.gnss_only = by_regime_name(gnss);
@@ -217,6 +229,10 @@ pub struct FusionReport {
     pub outage_drift_m: Option<f64>,
     /// Whether every jump was rejected.
     pub jump_rejected: bool,
+    /// Wild fixes over every run.
+    pub wild_fixes: usize,
+    /// The most any of them moved the fused pose, m.
+    pub wild_move_m: Option<f64>,
     /// Scenario and regime pairs whose mean NEES misses its target.
     pub nees_misses: Vec<String>,
     /// Every target met.
@@ -397,55 +413,9 @@ fn score(
     };
     let outage_end = scenario.outage_end_s();
 
-    // Fused pose and dead reckoning, at every status.
-    let track = plant.geometry.track_m;
-    let mut dead_reckoning = (0.0, 0.0, 0.0);
-    let mut last_wheels: Option<(f64, f64)> = None;
-    for status in &sink.statuses {
-        let s = seconds(status.time);
-        let Some(tr) = truth.at(status.time) else {
-            continue;
-        };
-        if let Some(chassis) = &status.chassis {
-            let (l, r) = (chassis.odometry.left_m, chassis.odometry.right_m);
-            if let Some((l0, r0)) = last_wheels {
-                let (dl, dr) = (l - l0, r - r0);
-                let (x, y, yaw) = &mut dead_reckoning;
-                let mid = *yaw + (dr - dl) / track / 2.0;
-                *x += (dl + dr) / 2.0 * mid.cos();
-                *y += (dl + dr) / 2.0 * mid.sin();
-                *yaw = wrap(*yaw + (dr - dl) / track);
-            }
-            last_wheels = Some((l, r));
-        }
-        if s < WARMUP_S {
-            continue;
-        }
-        let pose = status.pose;
-        let error = (pose.x - tr.x).hypot(pose.y - tr.y);
-        let (dx, dy, dyaw) = dead_reckoning;
-        let odometry_error = (dx - tr.x).hypot(dy - tr.y);
-        if outage_end.is_some_and(|end| (s - end).abs() < 0.05) {
-            outage_drift = Some(error);
-            outage_drift_odometry = Some(odometry_error);
-        }
-        if in_jump(s) {
-            jump_max = Some(jump_max.map_or(error, |m| m.max(error)));
-            continue;
-        }
-        let regime = scenario.regime_at(s);
-        let f = fused.entry(regime).or_default();
-        f.position(error);
-        f.heading(wrap(pose.yaw - tr.yaw));
-        if let Some(cov) = &status.pose_covariance {
-            f.nees((pose.x - tr.x, pose.y - tr.y), wrap(pose.yaw - tr.yaw), cov);
-        }
-        let o = odometry.entry(regime).or_default();
-        o.position(odometry_error);
-        o.heading(wrap(dyaw - tr.yaw));
-    }
-
-    // GNSS alone: each decoded epoch against the antenna's true position at the epoch.
+    // GNSS alone: each decoded epoch against the antenna's true position at the epoch. Wild
+    // fixes are counted apart: one would swamp the RMSE and flatter the fused ratio.
+    let mut wild_fixes = Vec::new();
     let frame = Enu::new(plant.datum());
     let utc_zero = sim.vehicle().utc_at(START);
     let [ax, ay] = plant.geometry.antenna;
@@ -475,6 +445,10 @@ fn score(
         let (sn, c) = tr.yaw.sin_cos();
         let antenna = (tr.x + c * ax - sn * ay, tr.y + sn * ax + c * ay);
         let error = (enu.x - antenna.0).hypot(enu.y - antenna.1);
+        if error > WILD_M {
+            wild_fixes.push(*t);
+            continue;
+        }
         if s < WARMUP_S {
             continue;
         }
@@ -496,6 +470,65 @@ fn score(
         }
     }
 
+    // Fused pose and dead reckoning, at every status.
+    let mut wild_before: Vec<Option<f64>> = vec![None; wild_fixes.len()];
+    let mut wild_move = None;
+    let track = plant.geometry.track_m;
+    let mut dead_reckoning = (0.0, 0.0, 0.0);
+    let mut last_wheels: Option<(f64, f64)> = None;
+    for status in &sink.statuses {
+        let s = seconds(status.time);
+        let Some(tr) = truth.at(status.time) else {
+            continue;
+        };
+        if let Some(chassis) = &status.chassis {
+            let (l, r) = (chassis.odometry.left_m, chassis.odometry.right_m);
+            if let Some((l0, r0)) = last_wheels {
+                let (dl, dr) = (l - l0, r - r0);
+                let (x, y, yaw) = &mut dead_reckoning;
+                let mid = *yaw + (dr - dl) / track / 2.0;
+                *x += (dl + dr) / 2.0 * mid.cos();
+                *y += (dl + dr) / 2.0 * mid.sin();
+                *yaw = wrap(*yaw + (dr - dl) / track);
+            }
+            last_wheels = Some((l, r));
+        }
+        if s < WARMUP_S {
+            continue;
+        }
+        let pose = status.pose;
+        let error = (pose.x - tr.x).hypot(pose.y - tr.y);
+        // How far the pose moves away from the truth after a wild fix, against just before.
+        for (&wild, before) in wild_fixes.iter().zip(&mut wild_before) {
+            if status.time < wild {
+                *before = Some(error);
+            } else if seconds(status.time) - seconds(wild) <= WILD_WINDOW_S {
+                let moved = error - before.unwrap_or(error);
+                wild_move = Some(wild_move.map_or(moved, |m: f64| m.max(moved)));
+            }
+        }
+        let (dx, dy, dyaw) = dead_reckoning;
+        let odometry_error = (dx - tr.x).hypot(dy - tr.y);
+        if outage_end.is_some_and(|end| (s - end).abs() < 0.05) {
+            outage_drift = Some(error);
+            outage_drift_odometry = Some(odometry_error);
+        }
+        if in_jump(s) {
+            jump_max = Some(jump_max.map_or(error, |m| m.max(error)));
+            continue;
+        }
+        let regime = scenario.regime_at(s);
+        let f = fused.entry(regime).or_default();
+        f.position(error);
+        f.heading(wrap(pose.yaw - tr.yaw));
+        if let Some(cov) = &status.pose_covariance {
+            f.nees((pose.x - tr.x, pose.y - tr.y), wrap(pose.yaw - tr.yaw), cov);
+        }
+        let o = odometry.entry(regime).or_default();
+        o.position(odometry_error);
+        o.heading(wrap(dyaw - tr.yaw));
+    }
+
     ScenarioFigures {
         name: scenario.name.to_owned(),
         fused: by_regime_name(&fused),
@@ -506,6 +539,8 @@ fn score(
         outage_drift_odometry_m: outage_drift_odometry,
         jump_max_error_m: jump_max,
         jump_gnss_max_error_m: jump_gnss_max,
+        wild_fixes: wild_fixes.len(),
+        wild_move_m: wild_move,
         errors: [fused, gnss, odometry],
         drifts: outage_drift
             .zip(outage_drift_odometry)
@@ -551,6 +586,11 @@ fn report(
         .filter_map(|s| s.jump_max_error_m)
         .collect();
     let jump_rejected = !jumps.is_empty() && jumps.iter().all(|e| *e < JUMP_REJECTED_M);
+    let wild_fixes = scenarios.iter().map(|s| s.wild_fixes).sum();
+    let wild_move_m = scenarios
+        .iter()
+        .filter_map(|s| s.wild_move_m)
+        .reduce(f64::max);
     let mut nees_misses = Vec::new();
     for s in &scenarios {
         for (regime, f) in &s.fused {
@@ -573,7 +613,8 @@ fn report(
         && fixed_ratio.is_some_and(|r| r <= target::FIXED_RATIO)
         && heading_rmse_deg.is_some_and(|h| h < target::HEADING_RMSE_DEG)
         && outage_drift_m.is_some_and(|d| d < target::OUTAGE_DRIFT_M)
-        && jump_rejected;
+        && jump_rejected
+        && wild_move_m.is_none_or(|m| m <= target::WILD_MOVE_M);
     FusionReport {
         plant: plant.name.clone(),
         seed,
@@ -584,6 +625,8 @@ fn report(
         heading_rmse_deg,
         outage_drift_m,
         jump_rejected,
+        wild_fixes,
+        wild_move_m,
         nees_misses,
         pass,
     }
@@ -699,6 +742,14 @@ impl FusionReport {
             out,
             "target: 5 m jump rejected (error stays under {JUMP_REJECTED_M} m): {}",
             verdict(self.jump_rejected),
+        );
+        let _ = writeln!(
+            out,
+            "target: {} wild fixes move the pose at most {} m <= {} m: {}",
+            self.wild_fixes,
+            num(self.wild_move_m, 3),
+            target::WILD_MOVE_M,
+            verdict(self.wild_move_m.is_none_or(|m| m <= target::WILD_MOVE_M)),
         );
         let _ = writeln!(
             out,

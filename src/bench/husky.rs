@@ -123,6 +123,47 @@ impl HuskyData {
         Ok(Self { inputs })
     }
 
+    /// The wheels' speed along the gyro's heading, the gyro's bias taken from the parked
+    /// standstill, from the origin facing east: time, x, y at every wheel sample. A reference
+    /// track for the fixes' errors (see `gnss_fit`).
+    pub fn dead_reckoning(&self) -> Vec<(f64, f64, f64)> {
+        let parked: Vec<f64> = self
+            .inputs
+            .iter()
+            .filter(|(t, _)| (PARKED_S.0..=PARKED_S.1).contains(t))
+            .filter_map(|(_, i)| match i {
+                Input::Gyro { wz } => Some(*wz),
+                _ => None,
+            })
+            .collect();
+        let bias = parked.iter().sum::<f64>() / parked.len().max(1) as f64;
+        let (mut x, mut y, mut yaw) = (0.0, 0.0, 0.0);
+        let mut last_gyro: Option<(f64, f64)> = None;
+        let mut last_wheels: Option<(f64, f64)> = None;
+        let mut track = Vec::new();
+        for &(t, input) in &self.inputs {
+            match input {
+                Input::Gyro { wz } => {
+                    if let Some((t0, w0)) = last_gyro {
+                        yaw += ((w0 + wz) / 2.0 - bias) * (t - t0);
+                    }
+                    last_gyro = Some((t, wz));
+                }
+                Input::Wheels { v, .. } => {
+                    if let Some((t0, v0)) = last_wheels {
+                        let d = (v0 + v) / 2.0 * (t - t0);
+                        x += d * yaw.cos();
+                        y += d * yaw.sin();
+                    }
+                    last_wheels = Some((t, v));
+                    track.push((t, x, y));
+                }
+                Input::Fix { .. } => {}
+            }
+        }
+        track
+    }
+
     /// The fixes: time after the first, east, north.
     pub fn fixes(&self) -> Vec<(f64, f64, f64)> {
         self.inputs

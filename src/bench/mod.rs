@@ -3,6 +3,7 @@
 
 pub mod control;
 pub mod fusion;
+pub mod gnss_fit;
 pub mod husky;
 pub mod mosquitto;
 pub mod mqtt;

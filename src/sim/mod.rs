@@ -4,6 +4,7 @@
 pub mod bms;
 pub mod cia402_drive;
 pub mod estop;
+pub mod gnss_error;
 pub mod lockstep;
 pub mod nmea_out;
 pub mod plant;

@@ -14,7 +14,6 @@ use chrono::NaiveDateTime;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use super::cia402_drive::{MotorModel, SimDrive};
@@ -26,6 +25,7 @@ use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
 use crate::devices::gnss::FixQuality;
+use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use crate::devices::imu::{G, hipnuc, witmotion};
 use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::planar::wrap;
@@ -223,6 +223,9 @@ pub struct GnssModel {
     pub correlated_fraction: f64,
     /// Correlation time of that part, s.
     pub correlation_time_s: f64,
+    /// Steps, RTK-float episodes, wild fixes and the receiver's smoothing.
+    #[serde(default)]
+    pub faults: GnssFaults,
 }
 
 /// The plant `chassisd sim` and `chassisd bench fusion` use without `--plant`.
@@ -307,6 +310,19 @@ impl PlantConfig {
             0.1..=600.0,
             "s",
         )?;
+        let f = &p.gnss.faults;
+        for (key, value, range, unit) in [
+            ("gnss.faults.smoothing_s", f.smoothing_s, 0.0..=60.0, "s"),
+            ("gnss.faults.steps_per_hour", f.steps_per_hour, 0.0..=3600.0, "/h"),
+            ("gnss.faults.step_m", f.step_m, 0.0..=100.0, "m"),
+            ("gnss.faults.float_per_hour", f.float_per_hour, 0.0..=3600.0, "/h"),
+            ("gnss.faults.float_s", f.float_s, 0.0..=3600.0, "s"),
+            ("gnss.faults.wild_per_hour", f.wild_per_hour, 0.0..=3600.0, "/h"),
+            ("gnss.faults.wild_m", f.wild_m[0], 0.0..=f.wild_m[1].max(0.0), "m"),
+            ("gnss.faults.wild_m", f.wild_m[1], 0.0..=100_000.0, "m"),
+        ] {
+            check_range(file, key, value, range, unit)?;
+        }
         if let Some(y) = p.yard {
             match (y.cutter_can_id, y.blade_node) {
                 (Some(id), None) if id <= 0x7FF => {}
@@ -391,7 +407,7 @@ pub struct SimVehicle {
     gyro_bias: f64,
     next_imu: Timestamp,
     next_gnss: Timestamp,
-    gnss_error: (f64, f64),
+    gnss_error: GnssErrorProcess,
     pending_gnss: VecDeque<(Timestamp, Bytes)>,
     imu_count: u32,
     /// The IMU is stalled: it sends nothing (a hung sensor or a cut cable).
@@ -427,6 +443,13 @@ impl SimVehicle {
         };
         let yard = plant.yard;
         let blade_profile = profile.clone();
+        let gnss_error = GnssErrorProcess::new(
+            1.0 / plant.gnss.rate_hz,
+            plant.gnss.correlated_fraction,
+            plant.gnss.correlation_time_s,
+            plant.gnss.faults,
+            seed,
+        );
         let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
             .map(|d| d.naive_utc())
             .unwrap_or_default();
@@ -445,7 +468,7 @@ impl SimVehicle {
             next_slip: start,
             next_imu: start,
             next_gnss: start,
-            gnss_error: (0.0, 0.0),
+            gnss_error,
             pending_gnss: VecDeque::new(),
             imu_count: 0,
             imu_stalled: false,
@@ -599,10 +622,7 @@ impl SimVehicle {
     }
 
     fn normal(&mut self, sigma: f64) -> f64 {
-        if sigma <= 0.0 {
-            return 0.0;
-        }
-        Normal::new(0.0, sigma).map_or(0.0, |n| n.sample(&mut self.rng))
+        super::gnss_error::normal(&mut self.rng, sigma)
     }
 
     /// Wheel surface speeds from the motors, before any slip, m/s.
@@ -778,25 +798,20 @@ impl SimVehicle {
     }
 
     fn gnss_epoch(&mut self, t: Timestamp, c: GnssCondition) -> Option<Bytes> {
-        let quality = c.quality?;
+        let plant = &self.plant;
+        let rng = &mut self.rng;
+        let error = self.gnss_error.epoch(
+            c.quality?,
+            |q| plant.sigma(q),
+            |s| super::gnss_error::normal(rng, s),
+        );
+        let quality = error.quality;
         let g = self.plant.gnss;
         let sigma = self.plant.sigma(quality);
-        // A first-order Gauss-Markov error (multipath) plus white noise. The slow part is kept
-        // at unit variance and scaled by the current quality's σ, so a change of fix quality
-        // changes the error at once, as it does on a receiver.
-        let dt = 1.0 / g.rate_hz;
-        let phi = (-dt / g.correlation_time_s).exp();
-        let drive = (1.0 - phi * phi).sqrt();
-        self.gnss_error = (
-            phi * self.gnss_error.0 + self.normal(drive),
-            phi * self.gnss_error.1 + self.normal(drive),
-        );
-        let sc = sigma * g.correlated_fraction;
-        let white = sigma * (1.0 - g.correlated_fraction * g.correlated_fraction).sqrt();
         let tr = self.truth;
         let (antenna_e, antenna_n) = self.true_antenna();
-        let e = antenna_e + sc * self.gnss_error.0 + self.normal(white) + c.offset.0;
-        let n = antenna_n + sc * self.gnss_error.1 + self.normal(white) + c.offset.1;
+        let e = antenna_e + error.offset.0 + c.offset.0;
+        let n = antenna_n + error.offset.1 + c.offset.1;
         let p = self.frame.to_geodetic(&Vector3::new(e, n, 0.0));
         let heading = 90.0 - tr.yaw.to_degrees() + g.heading_offset_deg;
         let heading_noise = self.normal(g.heading_sigma_deg);
