@@ -42,10 +42,7 @@ pub struct ErrorFit {
 /// The fit of `plant`'s DGPS error process to `data`.
 pub fn fit(data: &HuskyData, plant: &PlantConfig, seed: u64) -> ErrorFit {
     let measured = data_errors(data);
-    let dt = measured
-        .windows(2)
-        .map(|w| w[1].0 - w[0].0)
-        .sum::<f64>()
+    let dt = measured.windows(2).map(|w| w[1].0 - w[0].0).sum::<f64>()
         / measured.len().saturating_sub(1).max(1) as f64;
     let simulated = plant_errors(plant, dt, seed);
     let hours = |e: &[(f64, f64, f64)]| e.len() as f64 * dt / 3600.0;
@@ -82,12 +79,12 @@ pub fn data_errors(data: &HuskyData) -> Vec<(f64, f64, f64)> {
     }
     // Least squares similarity: fix = s·R·track + c, as complex numbers w = a·z + c.
     let n = pairs.len().max(1) as f64;
-    let mean = |f: &dyn Fn(&(f64, (f64, f64), (f64, f64))) -> (f64, f64)| {
-        let (x, y) = pairs.iter().map(f).fold((0.0, 0.0), |s, v| (s.0 + v.0, s.1 + v.1));
+    let mean = |points: &mut dyn Iterator<Item = (f64, f64)>| {
+        let (x, y) = points.fold((0.0, 0.0), |s, v| (s.0 + v.0, s.1 + v.1));
         (x / n, y / n)
     };
-    let zm = mean(&|p| p.1);
-    let wm = mean(&|p| p.2);
+    let zm = mean(&mut pairs.iter().map(|p| p.1));
+    let wm = mean(&mut pairs.iter().map(|p| p.2));
     let (mut num_re, mut num_im, mut den) = (0.0, 0.0, 0.0);
     for (_, z, w) in &pairs {
         let (zx, zy) = (z.0 - zm.0, z.1 - zm.1);
@@ -106,10 +103,7 @@ pub fn data_errors(data: &HuskyData) -> Vec<(f64, f64, f64)> {
         .iter()
         .map(|(t, z, w)| {
             let (zx, zy) = (z.0 - zm.0, z.1 - zm.1);
-            let fitted = (
-                a_re * zx - a_im * zy + wm.0,
-                a_im * zx + a_re * zy + wm.1,
-            );
+            let fitted = (a_re * zx - a_im * zy + wm.0, a_im * zx + a_re * zy + wm.1);
             (*t, w.0 - fitted.0, w.1 - fitted.1)
         })
         .collect()
@@ -123,13 +117,22 @@ fn plant_errors(plant: &PlantConfig, dt: f64, seed: u64) -> Vec<(f64, f64, f64)>
         wild_per_hour: 0.0,
         ..g.faults
     };
-    let mut process =
-        GnssErrorProcess::new(dt, g.correlated_fraction, g.correlation_time_s, faults, seed);
+    let mut process = GnssErrorProcess::new(
+        dt,
+        g.correlated_fraction,
+        g.correlation_time_s,
+        faults,
+        seed,
+    );
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(seed);
     let epochs = (PLANT_HOURS * 3600.0 / dt) as usize;
     (0..epochs)
         .map(|i| {
-            let e = process.epoch(FixQuality::Dgps, |q| plant.sigma(q), |s| normal(&mut rng, s));
+            let e = process.epoch(
+                FixQuality::Dgps,
+                |q| plant.sigma(q),
+                |s| normal(&mut rng, s),
+            );
             (i as f64 * dt, e.offset.0, e.offset.1)
         })
         .collect()

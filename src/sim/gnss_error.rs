@@ -170,7 +170,10 @@ impl GnssErrorProcess {
 
     /// Whether an event of `per_hour` happens in this epoch.
     fn happens(&mut self, per_hour: f64) -> bool {
-        per_hour > 0.0 && self.events.random_bool((per_hour * self.dt / 3600.0).min(1.0))
+        per_hour > 0.0
+            && self
+                .events
+                .random_bool((per_hour * self.dt / 3600.0).min(1.0))
     }
 
     fn direction(&mut self) -> (f64, f64) {
@@ -225,7 +228,10 @@ mod tests {
         };
         // 100 hours at 2.5 Hz: 600 episodes of 20 s on average, 3.3 % of the time.
         let e = run(faults, FixQuality::RtkFixed, 900_000);
-        let float = e.iter().filter(|e| e.quality == FixQuality::RtkFloat).count();
+        let float = e
+            .iter()
+            .filter(|e| e.quality == FixQuality::RtkFloat)
+            .count();
         let share = float as f64 / e.len() as f64;
         assert!((0.025..0.045).contains(&share), "float share {share}");
         // Below RTK fixed, no episodes.

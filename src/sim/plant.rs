@@ -17,6 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::cia402_drive::{MotorModel, SimDrive};
+use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use super::nmea_out::{self, Epoch};
 use crate::config::ConfigError;
 use crate::config::chassis::WheelRadius;
@@ -25,7 +26,6 @@ use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
 use crate::devices::gnss::FixQuality;
-use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use crate::devices::imu::{G, hipnuc, witmotion};
 use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::planar::wrap;
@@ -313,12 +313,32 @@ impl PlantConfig {
         let f = &p.gnss.faults;
         for (key, value, range, unit) in [
             ("gnss.faults.smoothing_s", f.smoothing_s, 0.0..=60.0, "s"),
-            ("gnss.faults.steps_per_hour", f.steps_per_hour, 0.0..=3600.0, "/h"),
+            (
+                "gnss.faults.steps_per_hour",
+                f.steps_per_hour,
+                0.0..=3600.0,
+                "/h",
+            ),
             ("gnss.faults.step_m", f.step_m, 0.0..=100.0, "m"),
-            ("gnss.faults.float_per_hour", f.float_per_hour, 0.0..=3600.0, "/h"),
+            (
+                "gnss.faults.float_per_hour",
+                f.float_per_hour,
+                0.0..=3600.0,
+                "/h",
+            ),
             ("gnss.faults.float_s", f.float_s, 0.0..=3600.0, "s"),
-            ("gnss.faults.wild_per_hour", f.wild_per_hour, 0.0..=3600.0, "/h"),
-            ("gnss.faults.wild_m", f.wild_m[0], 0.0..=f.wild_m[1].max(0.0), "m"),
+            (
+                "gnss.faults.wild_per_hour",
+                f.wild_per_hour,
+                0.0..=3600.0,
+                "/h",
+            ),
+            (
+                "gnss.faults.wild_m",
+                f.wild_m[0],
+                0.0..=f.wild_m[1].max(0.0),
+                "m",
+            ),
             ("gnss.faults.wild_m", f.wild_m[1], 0.0..=100_000.0, "m"),
         ] {
             check_range(file, key, value, range, unit)?;
