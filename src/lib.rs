@@ -14,6 +14,7 @@ pub mod core;
 pub mod devices;
 pub mod engine;
 pub mod fusion;
+pub mod ntrip;
 pub mod record;
 pub mod replay;
 pub mod runtime;

@@ -31,6 +31,11 @@ use crate::devices::gnss::FixQuality;
 const WINDOW_S: f64 = 15.0;
 /// A gap between fixes longer than this ends a window, s.
 const MAX_FIX_GAP_S: f64 = 2.0;
+/// A fix further than this from both its neighbours, beyond what the vehicle can drive in
+/// between, disagrees with them (a wild fix a receiver still calls RTK fixed), m ...
+const WILD_TOLERANCE_M: f64 = 0.5;
+/// ... at this speed at most, m/s.
+const WILD_MAX_SPEED: f64 = 5.0;
 /// A window needs this many fixes ...
 const MIN_WINDOW_FIXES: usize = 5;
 /// ... and this much wheel travel, m, or this much turning, rad.
@@ -192,14 +197,40 @@ fn rotation(a: f64) -> Matrix2<f64> {
     Matrix2::new(c, -s, s, c)
 }
 
-/// RTK-fixed fixes in runs without gaps, cut at [`WINDOW_S`].
+/// The RTK-fixed fixes, without those that disagree with both neighbours.
+fn agreeing_fixes(fixes: &[FixPoint]) -> Vec<FixPoint> {
+    let fixed: Vec<FixPoint> = fixes
+        .iter()
+        .filter(|f| f.quality == FixQuality::RtkFixed)
+        .copied()
+        .collect();
+    let disagree = |a: &FixPoint, b: &FixPoint| {
+        let reach = WILD_TOLERANCE_M + WILD_MAX_SPEED * (b.t - a.t).abs();
+        (b.east - a.east).hypot(b.north - a.north) > reach
+    };
+    (0..fixed.len())
+        .filter(|&i| {
+            let f = &fixed[i];
+            let before = i.checked_sub(1).and_then(|j| fixed.get(j));
+            let after = fixed.get(i + 1);
+            // Alone on a side, one disagreeing neighbour is enough.
+            let wild = match (before, after) {
+                (Some(b), Some(a)) => disagree(b, f) && disagree(f, a),
+                (Some(n), None) | (None, Some(n)) => disagree(n, f),
+                (None, None) => false,
+            };
+            !wild
+        })
+        .map(|i| fixed[i])
+        .collect()
+}
+
+/// RTK-fixed fixes that agree with their neighbours, in runs without gaps, cut at
+/// [`WINDOW_S`].
 fn window_fixes(fixes: &[FixPoint], tracks: &Tracks) -> Vec<Vec<FixPoint>> {
     let mut windows: Vec<Vec<FixPoint>> = Vec::new();
     let mut current: Vec<FixPoint> = Vec::new();
-    for f in fixes
-        .iter()
-        .filter(|f| f.quality == FixQuality::RtkFixed && tracks.covers(f.t))
-    {
+    for f in agreeing_fixes(fixes).iter().filter(|f| tracks.covers(f.t)) {
         let breaks = current.last().is_some_and(|l| f.t - l.t > MAX_FIX_GAP_S)
             || current.first().is_some_and(|s| f.t - s.t > WINDOW_S);
         if breaks {
@@ -678,6 +709,24 @@ mod tests {
             .map(|p| rotation(0.3) * p + Vector2::new(5.0, -2.0))
             .collect();
         assert!((best_rotation(&model, &measured) - 0.3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_wild_fix_is_dropped_and_its_neighbours_kept() {
+        let fix = |t: f64, east: f64| FixPoint {
+            t,
+            east,
+            north: 0.0,
+            quality: FixQuality::RtkFixed,
+        };
+        let mut fixes: Vec<FixPoint> = (0..20)
+            .map(|i| fix(f64::from(i) * 0.1, f64::from(i) * 0.1))
+            .collect();
+        fixes[7].east += 420.0;
+        fixes[0].east -= 300.0;
+        let kept = agreeing_fixes(&fixes);
+        assert_eq!(kept.len(), 18);
+        assert!(kept.iter().all(|f| f.east.abs() < 2.0));
     }
 
     #[test]

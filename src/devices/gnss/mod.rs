@@ -3,6 +3,7 @@
 pub mod decode;
 pub mod fix;
 pub mod framer;
+pub mod rtcm;
 pub mod sentence;
 pub mod utc;
 

@@ -1,0 +1,18 @@
+//! NTRIP: RTK corrections from a caster on the internet (a base station's RTCM 3 stream),
+//! sans-IO. The connection itself lives in `runtime::ntrip`.
+//!
+//! - [`url`]: the caster's address, with a password that never prints;
+//! - [`request`]: the GET a client sends (NTRIP 1.0 or 2.0, Basic authentication);
+//! - [`response`]: the caster's head, read tolerantly;
+//! - [`chunked`]: NTRIP 2.0's chunked bodies;
+//! - [`sourcetable`]: the mountpoints a caster has, and which want GGA;
+//! - [`backoff`]: when to connect again.
+//!
+//! The frames themselves are found and checked by [`crate::devices::gnss::rtcm`].
+
+pub mod backoff;
+pub mod chunked;
+pub mod request;
+pub mod response;
+pub mod sourcetable;
+pub mod url;
