@@ -3,7 +3,8 @@
 //! *Simulator* section gives the fit):
 //!
 //! - a slow first-order Gauss-Markov wander, kept at unit variance and scaled by the current
-//!   quality's σ, so a change of fix quality changes the error at once, as on a receiver;
+//!   quality's σ and correlated fraction, so a change of fix quality changes the error at
+//!   once, as on a receiver;
 //! - the receiver's own smoothing of that wander, which makes it smooth over a few fixes;
 //! - white noise on top;
 //! - steps of the DGPS and single-point solution (a change of satellites or corrections),
@@ -19,6 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
+use super::plant::PerQuality;
 use crate::devices::gnss::FixQuality;
 
 /// `[gnss.faults]`: the receiver's error events. Every rate defaults to zero (none).
@@ -57,7 +59,7 @@ pub struct EpochError {
 pub struct GnssErrorProcess {
     /// Epoch interval, s.
     dt: f64,
-    correlated_fraction: f64,
+    correlated_fraction: PerQuality,
     correlation_time_s: f64,
     faults: GnssFaults,
     /// The slow part, unit variance per axis.
@@ -73,7 +75,7 @@ impl GnssErrorProcess {
     /// A process for epochs every `dt` seconds; `seed` drives the events.
     pub fn new(
         dt: f64,
-        correlated_fraction: f64,
+        correlated_fraction: PerQuality,
         correlation_time_s: f64,
         faults: GnssFaults,
         seed: u64,
@@ -125,8 +127,9 @@ impl GnssErrorProcess {
             a * self.smoothed.0 + (1.0 - a) * self.slow.0,
             a * self.smoothed.1 + (1.0 - a) * self.slow.1,
         );
-        let sc = sigma * self.correlated_fraction;
-        let white = sigma * (1.0 - self.correlated_fraction.powi(2)).max(0.0).sqrt();
+        let fraction = self.correlated_fraction.at(quality);
+        let sc = sigma * fraction;
+        let white = sigma * (1.0 - fraction.powi(2)).max(0.0).sqrt();
         let mut offset = (
             sc * self.smoothed.0 + noise(white),
             sc * self.smoothed.1 + noise(white),
@@ -204,7 +207,7 @@ mod tests {
     }
 
     fn run(faults: GnssFaults, quality: FixQuality, epochs: usize) -> Vec<EpochError> {
-        let mut p = GnssErrorProcess::new(0.4, 0.99, 20.0, faults, 7);
+        let mut p = GnssErrorProcess::new(0.4, PerQuality::All(0.99), 20.0, faults, 7);
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         (0..epochs)
             .map(|_| p.epoch(quality, sigma_of, |s| normal(&mut rng, s)))

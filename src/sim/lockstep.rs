@@ -21,6 +21,7 @@ use crate::core::LinkState;
 use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
 use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
+use crate::devices::gnss::FixQuality;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
 use crate::record::{Payload, Record, SourceMeta};
 use crate::time::Timestamp;
@@ -194,7 +195,12 @@ wheels = ["right"]
         ay = antenna[1],
         latency = plant.gnss.latency_s,
         heading_sigma = plant.gnss.heading_sigma_deg.max(0.01),
-        correlated = plant.gnss.correlated_fraction.min(0.95),
+        // The filter's model of RTK fixed, where the vehicle works.
+        correlated = plant
+            .gnss
+            .correlated_fraction
+            .at(FixQuality::RtkFixed)
+            .min(0.95),
         correlation_time = plant.gnss.correlation_time_s.clamp(1.0, 3600.0),
         velocity_sigma = plant.gnss.velocity_sigma_mps.clamp(0.001, 1.0),
         gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),

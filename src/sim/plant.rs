@@ -219,13 +219,52 @@ pub struct GnssModel {
     pub velocity_sigma_mps: f64,
     /// Horizontal position noise per axis, 1σ m: RTK fixed, float, DGPS, single.
     pub sigma_m: [f64; 4],
-    /// Part of the position noise that is correlated in time (multipath), fraction of σ.
-    pub correlated_fraction: f64,
+    /// Part of the position noise that is correlated in time (multipath, SBAS wander),
+    /// fraction of σ: one number, or one per quality like `sigma_m`.
+    pub correlated_fraction: PerQuality,
     /// Correlation time of that part, s.
     pub correlation_time_s: f64,
     /// Steps, RTK-float episodes, wild fixes and the receiver's smoothing.
     #[serde(default)]
     pub faults: GnssFaults,
+}
+
+/// A value per fix quality (RTK fixed, float, DGPS, single), or one for all.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum PerQuality {
+    /// The same for every quality.
+    All(f64),
+    /// RTK fixed, float, DGPS, single.
+    Each([f64; 4]),
+}
+
+impl PerQuality {
+    /// The value at `q`.
+    pub fn at(&self, q: FixQuality) -> f64 {
+        match self {
+            Self::All(v) => *v,
+            Self::Each(v) => v[quality_index(q)],
+        }
+    }
+
+    /// Every value.
+    pub fn values(&self) -> [f64; 4] {
+        match self {
+            Self::All(v) => [*v; 4],
+            Self::Each(v) => *v,
+        }
+    }
+}
+
+/// The index of `q` in per-quality arrays: RTK fixed, float, DGPS, anything else (single).
+fn quality_index(q: FixQuality) -> usize {
+    match q {
+        FixQuality::RtkFixed => 0,
+        FixQuality::RtkFloat => 1,
+        FixQuality::Dgps => 2,
+        _ => 3,
+    }
 }
 
 /// The plant `chassisd sim` and `chassisd bench fusion` use without `--plant`.
@@ -296,13 +335,9 @@ impl PlantConfig {
         check_range(file, "imu.rate_hz", p.imu.rate_hz, 1.0..=1000.0, "Hz")?;
         check_range(file, "gnss.rate_hz", p.gnss.rate_hz, 0.2..=50.0, "Hz")?;
         check_range(file, "gnss.latency_s", p.gnss.latency_s, 0.0..=1.0, "s")?;
-        check_range(
-            file,
-            "gnss.correlated_fraction",
-            p.gnss.correlated_fraction,
-            0.0..=1.0,
-            "",
-        )?;
+        for f in p.gnss.correlated_fraction.values() {
+            check_range(file, "gnss.correlated_fraction", f, 0.0..=1.0, "")?;
+        }
         check_range(
             file,
             "gnss.correlation_time_s",
@@ -374,13 +409,7 @@ impl PlantConfig {
 
     /// The 1σ position noise of a fix quality, m.
     pub fn sigma(&self, q: FixQuality) -> f64 {
-        let s = self.gnss.sigma_m;
-        match q {
-            FixQuality::RtkFixed => s[0],
-            FixQuality::RtkFloat => s[1],
-            FixQuality::Dgps => s[2],
-            _ => s[3],
-        }
+        self.gnss.sigma_m[quality_index(q)]
     }
 }
 
