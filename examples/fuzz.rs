@@ -206,7 +206,172 @@ fn targets() -> Vec<Target> {
             structured: None,
             runner: ros1::runner,
         },
+        Target {
+            name: "rtcm",
+            about: "RTCM 3 framer (CRC-24Q, resynchronisation), every byte accounted for",
+            seeds: rtcm_seeds,
+            tokens: &[
+                b"\xd3",
+                b"\xd3\x00",
+                b"\xd3\x03\xff",
+                b"\xd3\x00\x00",
+                b"\x3e\xd0",
+            ],
+            structured: None,
+            runner: rtcm_runner,
+        },
+        Target {
+            name: "ntrip",
+            about: "NTRIP caster answers: status line and head, chunked body, sourcetable",
+            seeds: ntrip_seeds,
+            tokens: &[
+                b"ICY 200 OK\r\n",
+                b"HTTP/1.1 200 OK",
+                b"SOURCETABLE 200 OK\r\n",
+                b"Transfer-Encoding: chunked\r\n",
+                b"\r\n\r\n",
+                b"\r\n",
+                b"0\r\n\r\n",
+                b"ffffffff\r\n",
+                b"STR;",
+                b";1;",
+                b"ENDSOURCETABLE",
+            ],
+            structured: None,
+            runner: ntrip_runner,
+        },
     ]
+}
+
+/// Slices of the shared RTCM 3 streams.
+fn rtcm_seeds() -> Vec<Vec<u8>> {
+    let mut seeds = Vec::new();
+    for file in files_in(&shared().join("rtcm"), "rtcm3")
+        .into_iter()
+        .chain(files_in(&shared().join("rtcm"), "log"))
+    {
+        if let Ok(bytes) = std::fs::read(&file) {
+            seeds.extend(pieces(&bytes, 2048, 20));
+        }
+    }
+    seeds
+}
+
+fn rtcm_runner() -> Runner {
+    use chassisd::devices::gnss::rtcm::{RtcmFramer, message_number};
+    Box::new(|input| {
+        let mut framer = RtcmFramer::new();
+        let mut frames: Vec<Vec<u8>> = Vec::new();
+        for piece in input.chunks(input.len() / 3 + 1) {
+            framer.push(piece, |f, n| {
+                assert_eq!(n, message_number(f));
+                frames.push(f.to_vec());
+            });
+        }
+        let s = framer.stats().clone();
+        // Every byte is a frame's, dropped, or waiting: nothing lost, nothing invented.
+        assert_eq!(
+            s.frame_bytes + s.invalid_bytes + framer.pending() as u64,
+            input.len() as u64
+        );
+        // A frame passed on is one: framed again alone, it comes out whole.
+        for f in &frames {
+            let mut again = RtcmFramer::new();
+            let mut whole = false;
+            again.push(f, |g, _| whole = g == f.as_slice());
+            assert!(whole);
+        }
+        signature(&[
+            s.frames.min(16),
+            s.crc_errors.min(8),
+            (s.by_type.len() as u64).min(8),
+            u64::from(framer.pending() > 0),
+            u64::from(s.invalid_bytes > 0),
+        ])
+    })
+}
+
+/// Caster answers: gpsd's NTRIP 1.0 exchange and sourcetable, and pygnssutils' chunked
+/// body behind a 2.0 head (also with its malformed status line).
+fn ntrip_seeds() -> Vec<Vec<u8>> {
+    let dir = shared().join("rtcm");
+    let from = |name: &str, marker: &[u8]| -> Vec<u8> {
+        let bytes = std::fs::read(dir.join(name)).unwrap_or_default();
+        let at = bytes
+            .windows(marker.len())
+            .position(|w| w == marker)
+            .unwrap_or(0);
+        bytes[at..bytes.len().min(at + 4096)].to_vec()
+    };
+    let chunked = std::fs::read(dir.join("pygnssutils-ntrip_chunked.bin")).unwrap_or_default();
+    let body = &chunked[..chunked.len().min(4000)];
+    let mut seeds = vec![
+        from("gpsd-naujoks-ntrip.log", b"ICY"),
+        from("gpsd-ntrip_sourcetable.log", b"SOURCETABLE"),
+    ];
+    for head in [
+        b"HTTP/1.1 200 OK\r\nNtrip-Version: Ntrip/2.0\r\nTransfer-Encoding: chunked\r\n\r\n"
+            .as_slice(),
+        b"HTTP/1.1 200 OKNtrip-Version: Ntrip/2.0\r\nTransfer-Encoding: chunked\r\n\r\n",
+        b"HTTP/1.1 401 Unauthorized\r\n\r\n",
+    ] {
+        seeds.push([head, body].concat());
+    }
+    seeds
+}
+
+fn ntrip_runner() -> Runner {
+    use chassisd::devices::gnss::rtcm::RtcmFramer;
+    use chassisd::ntrip::chunked::Dechunker;
+    use chassisd::ntrip::response::{Status, parse_head};
+    use chassisd::ntrip::sourcetable;
+    Box::new(|input| {
+        let head = match parse_head(input) {
+            Ok(Some(h)) => h,
+            Ok(None) => return signature(&[1]),
+            Err(_) => return signature(&[2]),
+        };
+        assert!(head.length <= input.len());
+        let body = &input[head.length..];
+        let mut decoded = Vec::new();
+        let mut broken = false;
+        if head.chunked {
+            let mut d = Dechunker::new();
+            for piece in body.chunks(body.len() / 2 + 1) {
+                if d.push(piece, &mut decoded).is_err() {
+                    broken = true;
+                    break;
+                }
+            }
+            // The body never grows in decoding.
+            assert!(decoded.len() <= body.len());
+        } else {
+            decoded.extend_from_slice(body);
+        }
+        let (mut frames, mut streams) = (0u64, 0u64);
+        match head.status {
+            Status::Sourcetable => {
+                streams = sourcetable::parse(&String::from_utf8_lossy(&decoded)).len() as u64;
+            }
+            Status::Icy | Status::Http => {
+                RtcmFramer::new().push(&decoded, |_, _| frames += 1);
+            }
+            Status::Error(..) => {}
+        }
+        let status = match head.status {
+            Status::Icy => 3,
+            Status::Http => 4,
+            Status::Sourcetable => 5,
+            Status::Error(code, _) => 6 + u64::from(code / 100),
+        };
+        signature(&[
+            status,
+            u64::from(head.chunked),
+            u64::from(broken),
+            frames.min(8),
+            streams.min(4),
+        ])
+    })
 }
 
 /// The embedded broker's input: the bytes one client sends after its TCP handshake.

@@ -31,7 +31,6 @@ use chassisd::engine::{Decoder, Engine, EngineOutput};
 use chassisd::fusion::geodesy::{Enu, Geodetic};
 use chassisd::record::{Payload, Record, RecordingReader, RecordingWriter, SourceKind};
 use chassisd::sim::lockstep::{self, Lockstep, PLANT_STEP};
-use chassisd::sim::nmea_out;
 use chassisd::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
 use common::lockstep::Recorder;
@@ -154,7 +153,7 @@ fn gga(data: &Data, index: usize, moved: (f64, f64)) -> Bytes {
         p.h_m
     );
     let mut out = String::new();
-    nmea_out::sentence(&mut out, &body);
+    chassisd::devices::gnss::encode::sentence(&mut out, &body);
     Bytes::from(out)
 }
 

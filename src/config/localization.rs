@@ -30,10 +30,14 @@ pub struct LocalizationConfig {
     /// position (the vehicle really is elsewhere), s.
     #[serde(default = "default_relocate_after_s")]
     pub relocate_after_s: f64,
-    /// The slowly wandering part of a fix's error (multipath, atmosphere), as a fraction of
-    /// its 1σ: what averaging fixes cannot remove.
+    /// The slowly wandering part of a fix's error (multipath, atmosphere, SBAS corrections),
+    /// as a fraction of its 1σ: what averaging fixes cannot remove. For RTK float, DGPS, SBAS
+    /// and single fixes.
     #[serde(default = "default_correlated_fraction")]
     pub gnss_correlated_fraction: f64,
+    /// The same for RTK-fixed fixes (multipath).
+    #[serde(default = "default_correlated_fraction")]
+    pub rtk_correlated_fraction: f64,
     /// That part's correlation time, s.
     #[serde(default = "default_correlation_time_s")]
     pub gnss_correlation_time_s: f64,
@@ -128,6 +132,7 @@ impl Default for LocalizationConfig {
             heading_sigma_deg: default_heading_sigma(),
             relocate_after_s: default_relocate_after_s(),
             gnss_correlated_fraction: default_correlated_fraction(),
+            rtk_correlated_fraction: default_correlated_fraction(),
             gnss_correlation_time_s: default_correlation_time_s(),
             gnss_velocity_sigma_mps: None,
             gyro_noise_rps: default_gyro_noise(),
@@ -194,6 +199,13 @@ impl LocalizationConfig {
             file,
             "localization.gnss_correlated_fraction",
             self.gnss_correlated_fraction,
+            0.0..=0.95,
+            "",
+        )?;
+        check_range(
+            file,
+            "localization.rtk_correlated_fraction",
+            self.rtk_correlated_fraction,
             0.0..=0.95,
             "",
         )?;
@@ -282,6 +294,7 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
         relocate_after: Duration::from_secs_f64(l.relocate_after_s),
         gnss_correlated_fraction: l.gnss_correlated_fraction,
+        rtk_correlated_fraction: l.rtk_correlated_fraction,
         gnss_velocity_sigma_mps: l.gnss_velocity_sigma_mps,
         gyro_sigma: l.gyro_noise_rps,
         ..LocalizerConfig::default()

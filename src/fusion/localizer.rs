@@ -52,8 +52,11 @@ pub struct LocalizerConfig {
     pub odometry_yaw_rate_sigma: f64,
     /// Gyro noise, 1σ rad/s.
     pub gyro_sigma: f64,
-    /// The slowly wandering part of a fix's error, as a fraction of its 1σ.
+    /// The slowly wandering part of a fix's error, as a fraction of its 1σ (all but RTK
+    /// fixed).
     pub gnss_correlated_fraction: f64,
+    /// The same for RTK-fixed fixes.
+    pub rtk_correlated_fraction: f64,
     /// Its correlation time.
     pub gnss_correlation: Duration,
     /// The odom heading's random walk while moving, rad/√s (the gyro's angle random walk).
@@ -86,6 +89,7 @@ impl Default for LocalizerConfig {
             odometry_yaw_rate_sigma: 0.05,
             gyro_sigma: 0.003,
             gnss_correlated_fraction: map.gnss_correlated_fraction,
+            rtk_correlated_fraction: map.rtk_correlated_fraction,
             gnss_correlation: Duration::from_secs_f64(map.gnss_correlation_s),
             heading_walk: map.yaw_per_s.sqrt(),
             gyro_bias_walk: map.bias_walk,
@@ -101,6 +105,7 @@ impl LocalizerConfig {
         MapFilterConfig {
             antenna: self.antenna,
             gnss_correlated_fraction: self.gnss_correlated_fraction,
+            rtk_correlated_fraction: self.rtk_correlated_fraction,
             gnss_correlation_s: self.gnss_correlation.as_secs_f64(),
             relocate_after: self.relocate_after,
             yaw_per_s: self.heading_walk * self.heading_walk,

@@ -104,13 +104,26 @@ pub struct MapFilterConfig {
     /// The gyro bias's random walk, rad/s per √s: how fast the bias leaves what the last
     /// standstill taught.
     pub bias_walk: f64,
-    /// The slowly wandering part of a fix's error, as a fraction of its 1σ.
+    /// The slowly wandering part of a fix's error, as a fraction of its 1σ (RTK float, DGPS,
+    /// SBAS, single: SBAS wanders almost wholly, the Husky shows).
     pub gnss_correlated_fraction: f64,
+    /// The same for RTK-fixed fixes (multipath).
+    pub rtk_correlated_fraction: f64,
     /// That part's correlation time, s.
     pub gnss_correlation_s: f64,
     /// Fixes disagreeing with the filter for this long (and at least [`MIN_RUN`] of them,
     /// agreeing with each other) mean the vehicle is elsewhere, whatever their quality.
     pub relocate_after: Duration,
+}
+
+impl MapFilterConfig {
+    /// The slow fraction of a fix's error, by how far it is trusted (RTK fixed or not).
+    pub fn slow_fraction(&self, trust: Trust) -> f64 {
+        match trust {
+            Trust::OverWheels => self.rtk_correlated_fraction,
+            Trust::UnderWheels => self.gnss_correlated_fraction,
+        }
+    }
 }
 
 impl Default for MapFilterConfig {
@@ -123,6 +136,7 @@ impl Default for MapFilterConfig {
             yaw_per_s: 2e-5,
             bias_walk: 2e-5,
             gnss_correlated_fraction: 0.95,
+            rtk_correlated_fraction: 0.95,
             gnss_correlation_s: 60.0,
             relocate_after: Duration::from_secs(3),
         }
@@ -478,9 +492,9 @@ impl MapFilter {
         let (fx, fy) = (b.fix.en.0 - a.fix.en.0, b.fix.en.1 - a.fix.en.1);
         let dist = ox.hypot(oy);
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
-        let white = (1.0 - self.config.gnss_correlated_fraction.powi(2)).max(0.0);
-        let fix_var = white * (a.fix.sigma.0.max(a.fix.sigma.1).powi(2)
-            + b.fix.sigma.0.max(b.fix.sigma.1).powi(2))
+        let white = |p: &Placed| (1.0 - self.config.slow_fraction(p.fix.trust).powi(2)).max(0.0);
+        let fix_var = white(a) * a.fix.sigma.0.max(a.fix.sigma.1).powi(2)
+            + white(b) * b.fix.sigma.0.max(b.fix.sigma.1).powi(2)
             // The slow part moves little between neighbours, but it moves.
             + self.slow_change_var(a, b);
         let slip_var = (SLIP_FRACTION * dist).powi(2);
@@ -503,9 +517,8 @@ impl MapFilter {
     fn slow_change_var(&self, a: &Placed, b: &Placed) -> f64 {
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
         let phi = (-dt / self.config.gnss_correlation_s.max(1e-3)).exp();
-        let slow = self.config.gnss_correlated_fraction;
-        let sa = slow * a.fix.sigma.0.max(a.fix.sigma.1);
-        let sb = slow * b.fix.sigma.0.max(b.fix.sigma.1);
+        let sa = self.config.slow_fraction(a.fix.trust) * a.fix.sigma.0.max(a.fix.sigma.1);
+        let sb = self.config.slow_fraction(b.fix.trust) * b.fix.sigma.0.max(b.fix.sigma.1);
         sa * sa + sb * sb - 2.0 * phi * sa * sb
     }
 
@@ -588,7 +601,7 @@ impl MapFilter {
             return;
         }
         let sigma_now = p.fix.sigma.0.max(p.fix.sigma.1);
-        let slow = self.config.gnss_correlated_fraction;
+        let slow = self.config.slow_fraction(p.fix.trust);
         let slow_sigma = (p.fix.sigma.0 * slow, p.fix.sigma.1 * slow);
         let new_quality = self
             .last_sigma
@@ -638,7 +651,7 @@ impl MapFilter {
         self.p[(X, X)] = p.fix.sigma.0.powi(2) + lever + distance * distance;
         self.p[(Y, Y)] = p.fix.sigma.1.powi(2) + lever + distance * distance;
         self.p[(YAW, YAW)] = UNKNOWN_YAW_SIGMA.powi(2);
-        let slow = self.config.gnss_correlated_fraction;
+        let slow = self.config.slow_fraction(p.fix.trust);
         for (i, g, sd) in [(X, GE, p.fix.sigma.0), (Y, GN, p.fix.sigma.1)] {
             self.p[(g, g)] = (slow * sd).powi(2);
             self.p[(i, g)] = -(slow * sd).powi(2);
@@ -692,7 +705,12 @@ impl MapFilter {
         self.x[YAW] = wrap(fit.rotation + now.yaw);
         self.x[GE] = 0.0;
         self.x[GN] = 0.0;
-        let slow = self.config.gnss_correlated_fraction * sigma;
+        let fraction = self
+            .fit
+            .iter()
+            .map(|p| self.config.slow_fraction(p.fix.trust))
+            .fold(0.0, f64::max);
+        let slow = fraction * sigma;
         let from_centroid = (now.x - fit.centroid.0).hypot(now.y - fit.centroid.1);
         let pos_var = sigma * sigma / n as f64 + slow * slow + (yaw_sigma * from_centroid).powi(2);
         self.p = self.fresh_covariance();

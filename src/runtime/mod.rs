@@ -17,6 +17,7 @@ pub mod lossy;
 pub mod mqtt;
 pub mod mqtt_observe;
 pub mod notify;
+pub mod ntrip;
 pub mod outage_log;
 pub mod panics;
 pub mod recorder;

@@ -141,6 +141,7 @@ datum = [{lat}, {lon}, {h}]
 gnss_latency_s = {latency}
 heading_sigma_deg = {heading_sigma}
 gnss_correlated_fraction = {correlated}
+rtk_correlated_fraction = {rtk_correlated}
 gnss_correlation_time_s = {correlation_time}
 gnss_velocity_sigma_mps = {velocity_sigma}
 gyro_noise_rps = {gyro_noise}
@@ -195,8 +196,12 @@ wheels = ["right"]
         ay = antenna[1],
         latency = plant.gnss.latency_s,
         heading_sigma = plant.gnss.heading_sigma_deg.max(0.01),
-        // The filter's model of RTK fixed, where the vehicle works.
         correlated = plant
+            .gnss
+            .correlated_fraction
+            .at(FixQuality::Dgps)
+            .min(0.95),
+        rtk_correlated = plant
             .gnss
             .correlated_fraction
             .at(FixQuality::RtkFixed)

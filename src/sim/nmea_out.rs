@@ -1,58 +1,9 @@
 //! NMEA 0183 sentences as a receiver writes them, for the simulated GNSS receiver.
 
-use std::fmt::Write;
-
-use chrono::{NaiveDateTime, Timelike};
+use chrono::NaiveDateTime;
 
 use crate::devices::gnss::FixQuality;
-use crate::devices::gnss::framer::checksum;
-
-/// Appends `$body*HH\r\n` to `out`.
-pub fn sentence(out: &mut String, body: &str) {
-    let _ = write!(out, "${body}*{:02X}\r\n", checksum(body.as_bytes()));
-}
-
-fn hms(t: NaiveDateTime) -> String {
-    format!(
-        "{:02}{:02}{:02}.{:02}",
-        t.hour(),
-        t.minute(),
-        t.second(),
-        t.nanosecond() / 10_000_000
-    )
-}
-
-fn angle(value: f64, lat: bool) -> String {
-    let hemisphere = match (lat, value >= 0.0) {
-        (true, true) => 'N',
-        (true, false) => 'S',
-        (false, true) => 'E',
-        (false, false) => 'W',
-    };
-    let v = value.abs();
-    let deg = v.trunc();
-    let min = (v - deg) * 60.0;
-    if lat {
-        format!("{deg:02.0}{min:011.8},{hemisphere}")
-    } else {
-        format!("{deg:03.0}{min:011.8},{hemisphere}")
-    }
-}
-
-/// The GGA quality digit.
-pub fn quality_digit(q: FixQuality) -> u8 {
-    match q {
-        FixQuality::Invalid => 0,
-        FixQuality::Single => 1,
-        FixQuality::Dgps => 2,
-        FixQuality::Pps => 3,
-        FixQuality::RtkFixed => 4,
-        FixQuality::RtkFloat => 5,
-        FixQuality::DeadReckoning => 6,
-        FixQuality::Manual => 7,
-        FixQuality::Simulation => 8,
-    }
-}
+use crate::devices::gnss::encode::{angle, hms, quality_digit, sentence};
 
 /// One epoch of a receiver's output.
 #[derive(Debug, Clone, Copy)]

@@ -1,6 +1,7 @@
 //! GNSS receivers speaking NMEA 0183: bytes in, [`GnssFix`] updates out.
 
 pub mod decode;
+pub mod encode;
 pub mod fix;
 pub mod framer;
 pub mod rtcm;

@@ -1,0 +1,489 @@
+//! The NTRIP client: one task that keeps a connection to a caster, sends the rover's position
+//! as GGA, and hands the correction stream on as `rtcm` records (the bytes as the caster sent
+//! them, de-chunked), with link-state records when a stream starts and ends. It never gives
+//! up and never storms the caster: [`crate::ntrip::backoff`] decides when to connect.
+//!
+//! The task frames the stream itself only to know that it is alive: a connection that
+//! delivers no valid RTCM 3 frame for `timeout` is dropped, and only a connection that
+//! delivered frames resets the back-off. What reaches a receiver is framed again downstream.
+
+use std::time::Duration;
+
+use bytes::Bytes;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio::sync::{mpsc, watch};
+use tokio::time::{Instant, sleep_until, timeout};
+
+use super::clock::RecordClock;
+use crate::core::LinkState;
+use crate::devices::gnss::encode::GgaFix;
+use crate::devices::gnss::rtcm::RtcmFramer;
+use crate::ntrip::backoff::Backoff;
+use crate::ntrip::chunked::Dechunker;
+use crate::ntrip::request::{Version, request};
+use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
+use crate::ntrip::sourcetable::{self, MAX_TABLE};
+use crate::ntrip::url::NtripUrl;
+use crate::record::{Payload, Record};
+
+/// Source name of the corrections in records.
+pub const SOURCE: &str = "rtcm";
+/// Read buffer, bytes.
+const READ_BUFFER: usize = 4096;
+/// Mountpoints named in a "not found" report, at most.
+const LISTED: usize = 12;
+
+/// What to connect to and how.
+#[derive(Debug, Clone)]
+pub struct NtripSpec {
+    /// The caster and mountpoint.
+    pub url: NtripUrl,
+    /// NTRIP 2.0 or 1.0 (a 1.0 answer to a 2.0 request is taken as it comes).
+    pub version: Version,
+    /// GGA every this long (`None`: never).
+    pub gga_interval: Option<Duration>,
+    /// A connection without a valid frame for this long is dropped; also the connect and
+    /// head timeout.
+    pub timeout: Duration,
+}
+
+/// What the task reports to whoever watches (`check`, diagnostics).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClientState {
+    /// Connected and streaming.
+    pub streaming: bool,
+    /// Connects so far.
+    pub attempts: u64,
+    /// Why the last connection ended or failed, with the fix.
+    pub last_error: Option<String>,
+    /// Valid frames over every connection.
+    pub frames: u64,
+    /// Bytes dropped by the liveness framer.
+    pub invalid_bytes: u64,
+    /// GGA sentences sent.
+    pub ggas_sent: u64,
+}
+
+/// The engine is gone: the task ends.
+struct Closed;
+
+/// What a connection works with.
+struct Link<'a> {
+    spec: &'a NtripSpec,
+    clock: &'a RecordClock,
+    tx: &'a mpsc::Sender<Record>,
+    position: &'a watch::Receiver<Option<GgaFix>>,
+    state: &'a watch::Sender<ClientState>,
+}
+
+/// How a connection ended.
+struct Ended {
+    reason: String,
+    delivered: bool,
+}
+
+impl Ended {
+    fn failed(reason: impl Into<String>) -> Self {
+        Self {
+            reason: reason.into(),
+            delivered: false,
+        }
+    }
+}
+
+/// Runs until the receiving side of `tx` closes. `position` holds the rover's latest fix for
+/// the GGA (or the fallback position before the first).
+pub async fn run(
+    spec: NtripSpec,
+    clock: RecordClock,
+    tx: mpsc::Sender<Record>,
+    position: watch::Receiver<Option<GgaFix>>,
+    state: watch::Sender<ClientState>,
+) {
+    let start = Instant::now();
+    let mut backoff = Backoff::new();
+    loop {
+        let at = backoff.next_connect(start.elapsed());
+        sleep_until(start + at).await;
+        backoff.connecting(start.elapsed());
+        state.send_modify(|s| s.attempts += 1);
+        let link = Link {
+            spec: &spec,
+            clock: &clock,
+            tx: &tx,
+            position: &position,
+            state: &state,
+        };
+        let ended = match session(&link).await {
+            Ok(e) => e,
+            Err(Closed) => return,
+        };
+        state.send_modify(|s| {
+            s.streaming = false;
+            s.last_error = Some(ended.reason.clone());
+        });
+        let wait = backoff.ended(start.elapsed(), ended.delivered);
+        if ended.delivered || Backoff::worth_logging(backoff.failures()) {
+            tracing::warn!(caster = %spec.url, reason = %ended.reason,
+                failures = backoff.failures(), retry_in_s = wait.as_secs(),
+                "NTRIP connection ended; reconnecting");
+        } else {
+            tracing::debug!(caster = %spec.url, reason = %ended.reason, "NTRIP connect failed");
+        }
+        if tx.is_closed() {
+            return;
+        }
+    }
+}
+
+async fn send(
+    tx: &mpsc::Sender<Record>,
+    clock: &RecordClock,
+    payload: Payload,
+) -> Result<(), Closed> {
+    let record = Record {
+        t: clock.now(),
+        source: SOURCE.into(),
+        payload,
+    };
+    tx.send(record).await.map_err(|_| Closed)
+}
+
+/// Connects and writes the request for the mountpoint (or the table).
+async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<TcpStream, String> {
+    if spec.url.tls {
+        return Err(
+            "ntrips:// (TLS) is not supported yet: use the caster's plain port with ntrip://"
+                .into(),
+        );
+    }
+    let address = spec.url.address();
+    let mut stream = match timeout(spec.timeout, TcpStream::connect(&address)).await {
+        Ok(Ok(s)) => s,
+        Ok(Err(e)) => return Err(format!("cannot connect to {address}: {e}")),
+        Err(_) => {
+            return Err(format!(
+                "no answer from {address} within {} s",
+                spec.timeout.as_secs()
+            ));
+        }
+    };
+    let _ = stream.set_nodelay(true);
+    let text = request(&spec.url, spec.version, sourcetable);
+    stream
+        .write_all(text.as_bytes())
+        .await
+        .map_err(|e| format!("cannot send the request to {address}: {e}"))?;
+    Ok(stream)
+}
+
+/// Reads the head; the bytes after it stay in `buf`.
+async fn read_head(
+    stream: &mut TcpStream,
+    buf: &mut Vec<u8>,
+    limit: Duration,
+) -> Result<Head, String> {
+    let deadline = Instant::now() + limit;
+    loop {
+        match parse_head(buf) {
+            Ok(Some(head)) => {
+                buf.drain(..head.length);
+                return Ok(head);
+            }
+            Ok(None) => {}
+            Err(HeadError::NotAStatus(line)) => {
+                return Err(format!(
+                    "the server is no NTRIP caster (it answered {line:?}): check the host and port"
+                ));
+            }
+            Err(e @ HeadError::TooLong) => return Err(e.to_string()),
+        }
+        let mut chunk = [0u8; READ_BUFFER];
+        let n = match tokio::time::timeout_at(deadline, stream.read(&mut chunk)).await {
+            Ok(Ok(0)) => return Err("the caster closed the connection before answering".into()),
+            Ok(Ok(n)) => n,
+            Ok(Err(e)) => return Err(format!("reading the caster's answer: {e}")),
+            Err(_) => {
+                return Err(format!(
+                    "the caster did not answer within {} s",
+                    limit.as_secs()
+                ));
+            }
+        };
+        buf.extend_from_slice(&chunk[..n]);
+        if buf.len() > MAX_HEAD + READ_BUFFER {
+            return Err(HeadError::TooLong.to_string());
+        }
+    }
+}
+
+/// The caster's mountpoints (for a report), or why they cannot be had.
+async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, String> {
+    let mut stream = open(spec, true).await?;
+    let mut buf = Vec::new();
+    let head = read_head(&mut stream, &mut buf, spec.timeout).await?;
+    if !matches!(
+        head.status,
+        Status::Sourcetable | Status::Icy | Status::Http
+    ) {
+        return Err("the caster does not give its table".into());
+    }
+    let deadline = Instant::now() + spec.timeout;
+    let mut body = Vec::new();
+    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut pending = std::mem::take(&mut buf);
+    loop {
+        match dechunk.as_mut() {
+            Some(d) => d
+                .push(&pending, &mut body)
+                .map_err(|e| format!("the table's body: {e}"))?,
+            None => body.extend_from_slice(&pending),
+        }
+        let text = String::from_utf8_lossy(&body);
+        if sourcetable::is_complete(&text) || body.len() > MAX_TABLE {
+            return Ok(sourcetable::parse(&text));
+        }
+        let mut chunk = [0u8; READ_BUFFER];
+        match tokio::time::timeout_at(deadline, stream.read(&mut chunk)).await {
+            Ok(Ok(0)) | Err(_) => return Ok(sourcetable::parse(&text)),
+            Ok(Ok(n)) => pending = chunk[..n].to_vec(),
+            Ok(Err(e)) => return Err(format!("reading the table: {e}")),
+        }
+    }
+}
+
+/// Why the mountpoint was refused, with the caster's list.
+async fn not_found(spec: &NtripSpec) -> String {
+    let mount = &spec.url.mountpoint;
+    match mountpoints(spec).await {
+        Ok(list) if list.is_empty() => {
+            format!("the caster has no mountpoint {mount:?}, and its table lists none")
+        }
+        Ok(list) => {
+            let names: Vec<&str> = list
+                .iter()
+                .take(LISTED)
+                .map(|s| s.mountpoint.as_str())
+                .collect();
+            let more = list.len().saturating_sub(LISTED);
+            format!(
+                "the caster has no mountpoint {mount:?}; it has {}{}: fix the URL's mountpoint",
+                names.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            )
+        }
+        Err(e) => format!("the caster has no mountpoint {mount:?} (its table: {e})"),
+    }
+}
+
+/// One connection, from connect to its end.
+async fn session(link: &Link<'_>) -> Result<Ended, Closed> {
+    let Link {
+        spec,
+        clock,
+        tx,
+        state,
+        ..
+    } = *link;
+    let mut stream = match open(spec, false).await {
+        Ok(s) => s,
+        Err(e) => return Ok(Ended::failed(e)),
+    };
+    let mut buf = Vec::new();
+    let head = match read_head(&mut stream, &mut buf, spec.timeout).await {
+        Ok(h) => h,
+        Err(e) => return Ok(Ended::failed(e)),
+    };
+    match &head.status {
+        Status::Icy | Status::Http => {}
+        Status::Error(code @ (401 | 403), reason) => {
+            return Ok(Ended::failed(format!(
+                "the caster refused the credentials ({code} {reason}): check the user and the \
+                 password (or password_file)"
+            )));
+        }
+        // NTRIP 1.0 casters answer an unknown mountpoint with their table.
+        Status::Error(404, _) | Status::Sourcetable => {
+            return Ok(Ended::failed(not_found(spec).await));
+        }
+        Status::Error(code, reason) => {
+            return Ok(Ended::failed(format!(
+                "the caster answered {code} {reason}"
+            )));
+        }
+    }
+    if let Some(encoding) = &head.content_encoding {
+        return Ok(Ended::failed(format!(
+            "the caster sends its stream in {encoding} content encoding, which chassisd does \
+             not decode: use the mountpoint without compression"
+        )));
+    }
+    send(tx, clock, Payload::Link(LinkState::Up)).await?;
+    state.send_modify(|s| s.streaming = true);
+    let ended = stream_corrections(link, &mut stream, head, buf).await;
+    send(tx, clock, Payload::Link(LinkState::Down)).await?;
+    ended
+}
+
+async fn stream_corrections(
+    link: &Link<'_>,
+    stream: &mut TcpStream,
+    head: Head,
+    first: Vec<u8>,
+) -> Result<Ended, Closed> {
+    let Link {
+        spec,
+        clock,
+        tx,
+        position,
+        state,
+    } = *link;
+    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut framer = RtcmFramer::new();
+    let mut delivered = false;
+    let mut last_valid = Instant::now();
+    // The first GGA at once: a virtual reference station sends nothing before it.
+    let mut next_gga = spec.gga_interval.map(|_| Instant::now());
+    let mut pending = first;
+    let mut chunk = vec![0u8; READ_BUFFER];
+    loop {
+        if !pending.is_empty() {
+            let mut body = Vec::with_capacity(pending.len());
+            match dechunk.as_mut() {
+                Some(d) => {
+                    if let Err(e) = d.push(&pending, &mut body) {
+                        return Ok(Ended {
+                            reason: format!("the caster's chunked stream broke: {e}"),
+                            delivered,
+                        });
+                    }
+                }
+                None => body = std::mem::take(&mut pending),
+            }
+            pending.clear();
+            let before = framer.stats().frames;
+            framer.push(&body, |_, _| {});
+            let stats = framer.stats();
+            if stats.frames > before {
+                delivered = true;
+                last_valid = Instant::now();
+            }
+            let (frames, invalid) = (stats.frames - before, stats.invalid_bytes);
+            state.send_modify(|s| {
+                s.frames += frames;
+                s.invalid_bytes = invalid;
+            });
+            if !body.is_empty() {
+                send(tx, clock, Payload::Serial(Bytes::from(body))).await?;
+            }
+            if dechunk.as_ref().is_some_and(Dechunker::is_done) {
+                return Ok(Ended {
+                    reason: "the caster ended its stream".into(),
+                    delivered,
+                });
+            }
+        }
+        let silent_until = last_valid + spec.timeout;
+        let gga_at = next_gga.unwrap_or(silent_until + Duration::from_secs(3600));
+        tokio::select! {
+            read = stream.read(&mut chunk) => match read {
+                Ok(0) => return Ok(Ended { reason: "the caster closed the connection".into(), delivered }),
+                Ok(n) => pending.extend_from_slice(&chunk[..n]),
+                Err(e) => return Ok(Ended { reason: format!("reading the stream: {e}"), delivered }),
+            },
+            () = sleep_until(gga_at), if next_gga.is_some() => {
+                let fix = *position.borrow();
+                if let Some(fix) = fix {
+                    let sentence = fix.gga();
+                    if let Err(e) = stream.write_all(sentence.as_bytes()).await {
+                        return Ok(Ended { reason: format!("sending the GGA: {e}"), delivered });
+                    }
+                    state.send_modify(|s| s.ggas_sent += 1);
+                }
+                next_gga = spec.gga_interval.map(|i| gga_at + i);
+            }
+            () = sleep_until(silent_until) => {
+                return Ok(Ended {
+                    reason: format!("no valid RTCM 3 frame for {} s", spec.timeout.as_secs()),
+                    delivered,
+                });
+            }
+        }
+    }
+}
+
+/// What `chassisd ntrip` did.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FetchReport {
+    /// Valid frames written.
+    pub frames: u64,
+    /// Their bytes.
+    pub bytes: u64,
+    /// Frames per message number.
+    pub by_type: std::collections::BTreeMap<u16, u64>,
+    /// Bytes dropped (outside frames, or in frames whose CRC failed).
+    pub invalid_bytes: u64,
+    /// Connects.
+    pub attempts: u64,
+    /// GGA sentences sent.
+    pub ggas_sent: u64,
+    /// Why the last connection ended, if one did.
+    pub last_error: Option<String>,
+}
+
+/// Runs the client for `duration` (or until interrupted) and writes every valid frame, whole
+/// and in order, to `out`: `chassisd ntrip`, a str2str of chassisd's own client.
+pub async fn fetch(
+    spec: NtripSpec,
+    position: Option<GgaFix>,
+    mut out: Box<dyn tokio::io::AsyncWrite + Unpin + Send>,
+    duration: Option<Duration>,
+) -> std::io::Result<FetchReport> {
+    let (tx, mut rx) = mpsc::channel::<Record>(64);
+    let (_position_tx, position_rx) = watch::channel(position);
+    let (state_tx, state_rx) = watch::channel(ClientState::default());
+    let clock = RecordClock::start();
+    let client = tokio::spawn(run(spec, clock, tx, position_rx, state_tx));
+    let mut framer = RtcmFramer::new();
+    let end = duration.map(|d| Instant::now() + d);
+    let stopped = async {
+        match end {
+            Some(end) => sleep_until(end).await,
+            None => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    };
+    tokio::pin!(stopped);
+    loop {
+        tokio::select! {
+            record = rx.recv() => {
+                let Some(record) = record else { break };
+                if let Payload::Serial(bytes) = record.payload {
+                    let mut whole = Vec::with_capacity(bytes.len());
+                    framer.push(&bytes, |frame, _| whole.extend_from_slice(frame));
+                    out.write_all(&whole).await?;
+                    out.flush().await?;
+                }
+            }
+            () = &mut stopped => break,
+        }
+    }
+    client.abort();
+    let s = framer.stats();
+    let state = state_rx.borrow().clone();
+    Ok(FetchReport {
+        frames: s.frames,
+        bytes: s.frame_bytes,
+        by_type: s.by_type.clone(),
+        invalid_bytes: s.invalid_bytes,
+        attempts: state.attempts,
+        ggas_sent: state.ggas_sent,
+        last_error: state.last_error,
+    })
+}
