@@ -240,7 +240,7 @@ enum Command {
         #[arg(long, default_value = "10")]
         gga_interval: f64,
         /// The position for the GGA: latitude, longitude (degrees), height (m).
-        #[arg(long, value_delimiter = ',', num_args = 3, allow_hyphen_values = true)]
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
         position: Option<Vec<f64>>,
         /// Drop a connection with no valid frame for this long, s.
         #[arg(long, default_value = "10", value_parser = seconds_arg)]
