@@ -35,9 +35,10 @@ pub struct LocalizationConfig {
     /// and single fixes.
     #[serde(default = "default_correlated_fraction")]
     pub gnss_correlated_fraction: f64,
-    /// The same for RTK-fixed fixes (multipath).
-    #[serde(default = "default_correlated_fraction")]
-    pub rtk_correlated_fraction: f64,
+    /// The same for RTK-fixed fixes (multipath); `gnss_correlated_fraction` when not given,
+    /// so a configuration from before the key behaves as it did.
+    #[serde(default)]
+    pub rtk_correlated_fraction: Option<f64>,
     /// That part's correlation time, s.
     #[serde(default = "default_correlation_time_s")]
     pub gnss_correlation_time_s: f64,
@@ -132,7 +133,7 @@ impl Default for LocalizationConfig {
             heading_sigma_deg: default_heading_sigma(),
             relocate_after_s: default_relocate_after_s(),
             gnss_correlated_fraction: default_correlated_fraction(),
-            rtk_correlated_fraction: default_correlated_fraction(),
+            rtk_correlated_fraction: None,
             gnss_correlation_time_s: default_correlation_time_s(),
             gnss_velocity_sigma_mps: None,
             gyro_noise_rps: default_gyro_noise(),
@@ -202,13 +203,15 @@ impl LocalizationConfig {
             0.0..=0.95,
             "",
         )?;
-        check_range(
-            file,
-            "localization.rtk_correlated_fraction",
-            self.rtk_correlated_fraction,
-            0.0..=0.95,
-            "",
-        )?;
+        if let Some(f) = self.rtk_correlated_fraction {
+            check_range(
+                file,
+                "localization.rtk_correlated_fraction",
+                f,
+                0.0..=0.95,
+                "",
+            )?;
+        }
         check_range(
             file,
             "localization.gnss_correlation_time_s",
@@ -294,7 +297,9 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
         relocate_after: Duration::from_secs_f64(l.relocate_after_s),
         gnss_correlated_fraction: l.gnss_correlated_fraction,
-        rtk_correlated_fraction: l.rtk_correlated_fraction,
+        rtk_correlated_fraction: l
+            .rtk_correlated_fraction
+            .unwrap_or(l.gnss_correlated_fraction),
         gnss_velocity_sigma_mps: l.gnss_velocity_sigma_mps,
         gyro_sigma: l.gyro_noise_rps,
         ..LocalizerConfig::default()
