@@ -227,37 +227,7 @@ enum Command {
     /// Fetch RTK corrections from an NTRIP caster with chassisd's client and write the valid
     /// RTCM 3 frames, whole and in order, to a file or a serial port (a receiver); prints the
     /// frames per message number at the end as JSON. For trying a caster and a mountpoint.
-    Ntrip {
-        /// The caster: ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT.
-        url: String,
-        /// A file with the password (its first line), instead of one in the URL.
-        #[arg(long)]
-        password_file: Option<PathBuf>,
-        /// NTRIP version to ask for (a 1.0 answer is taken either way).
-        #[arg(long, default_value = "2", value_parser = ["1", "2"])]
-        version: String,
-        /// Send the position as GGA every this many seconds (0: never).
-        #[arg(long, default_value = "10")]
-        gga_interval: f64,
-        /// The position for the GGA: latitude, longitude (degrees), height (m).
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
-        position: Option<Vec<f64>>,
-        /// Drop a connection with no valid frame for this long, s.
-        #[arg(long, default_value = "10", value_parser = seconds_arg)]
-        timeout: Duration,
-        /// Write the frames to this file ...
-        #[arg(long, conflicts_with = "port")]
-        out: Option<PathBuf>,
-        /// ... or to this serial port.
-        #[arg(long)]
-        port: Option<String>,
-        /// The port's baud rate.
-        #[arg(long, default_value = "115200")]
-        baud: u32,
-        /// Stop after this long, s (default: at Ctrl-C).
-        #[arg(long, value_parser = seconds_arg)]
-        duration: Option<Duration>,
-    },
+    Ntrip(NtripArgs),
     /// The embedded broker's own process, started and watched by chassisd (settings on
     /// standard input); not for use by hand.
     #[command(name = "broker-child", hide = true)]
@@ -783,29 +753,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             result.map(|()| true)
         }
         Command::BrokerChild => chassisd::runtime::broker::child::main().map(|()| true),
-        Command::Ntrip {
-            url,
-            password_file,
-            version,
-            gga_interval,
-            position,
-            timeout,
-            out,
-            port,
-            baud,
-            duration,
-        } => ntrip_fetch(NtripArgs {
-            url,
-            password_file,
-            version,
-            gga_interval,
-            position,
-            timeout,
-            out,
-            port,
-            baud,
-            duration,
-        }),
+        Command::Ntrip(args) => ntrip_fetch(args),
     }
 }
 
@@ -1214,16 +1162,36 @@ fn minutes_arg(s: &str) -> Result<Duration, String> {
 }
 
 /// `chassisd ntrip`'s arguments.
+#[derive(clap::Args)]
 struct NtripArgs {
+    /// The caster: ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT.
     url: String,
+    /// A file with the password (its first line), instead of one in the URL.
+    #[arg(long)]
     password_file: Option<PathBuf>,
+    /// NTRIP version to ask for (a 1.0 answer is taken either way).
+    #[arg(long, default_value = "2", value_parser = ["1", "2"])]
     version: String,
+    /// Send the position as GGA every this many seconds (0: never).
+    #[arg(long, default_value = "10")]
     gga_interval: f64,
+    /// The position for the GGA: latitude, longitude (degrees), height (m).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     position: Option<Vec<f64>>,
+    /// Drop a connection with no valid frame for this long, s.
+    #[arg(long, default_value = "10", value_parser = seconds_arg)]
     timeout: Duration,
+    /// Write the frames to this file ...
+    #[arg(long, conflicts_with = "port")]
     out: Option<PathBuf>,
+    /// ... or to this serial port.
+    #[arg(long)]
     port: Option<String>,
+    /// The port's baud rate.
+    #[arg(long, default_value = "115200")]
     baud: u32,
+    /// Stop after this long, s (default: at Ctrl-C).
+    #[arg(long, value_parser = seconds_arg)]
     duration: Option<Duration>,
 }
 

@@ -14,6 +14,14 @@ fn read(name: &str) -> Vec<u8> {
     std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
+/// Where `marker` first occurs in a capture (the caster's answer after gpsd's comments).
+fn position_of(bytes: &[u8], marker: &[u8]) -> usize {
+    bytes
+        .windows(marker.len())
+        .position(|w| w == marker)
+        .unwrap_or_else(|| panic!("no {:?} in the capture", String::from_utf8_lossy(marker)))
+}
+
 /// Frames `bytes` in slices of `step`: the frames, and the stats.
 fn frame(bytes: &[u8], step: usize) -> (Vec<Vec<u8>>, RtcmStats, usize) {
     let mut framer = RtcmFramer::new();
@@ -117,20 +125,14 @@ fn the_chunked_ntrip_2_body_decodes_to_valid_frames() {
 #[test]
 fn gpsd_s_ntrip_1_exchange_and_sourcetable() {
     let log = read("gpsd-naujoks-ntrip.log");
-    let at = log
-        .windows(3)
-        .position(|w| w == b"ICY")
-        .expect("the caster's answer");
+    let at = position_of(&log, b"ICY");
     let head = parse_head(&log[at..]).unwrap().unwrap();
     assert_eq!(head.status, Status::Icy);
     // RTCM 2 follows at once: the head ends at the blank line.
     assert_eq!(&log[at + head.length..at + head.length + 3], b"YFh");
 
     let table = read("gpsd-ntrip_sourcetable.log");
-    let at = table
-        .windows(11)
-        .position(|w| w == b"SOURCETABLE")
-        .expect("the table");
+    let at = position_of(&table, b"SOURCETABLE");
     let head = parse_head(&table[at..]).unwrap().unwrap();
     assert_eq!(head.status, Status::Sourcetable);
     let text = String::from_utf8_lossy(&table[at + head.length..]);
