@@ -54,6 +54,10 @@ enum Command {
         /// the replay exits 1).
         #[arg(long)]
         lenient: bool,
+        /// Write the RTCM corrections the replayed run relays to the receiver (whole valid
+        /// frames, in order: what live mode wrote to the receiver's port) to FILE.
+        #[arg(long, value_name = "FILE")]
+        corrections_out: Option<PathBuf>,
     },
     /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
     Run {
@@ -75,6 +79,11 @@ enum Command {
         /// configuration's `[websocket]` bind.
         #[arg(long, value_name = "ADDR")]
         websocket: Option<String>,
+        /// Fetch RTK corrections from this NTRIP caster
+        /// (ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT), over the configuration's `[ntrip]`
+        /// url.
+        #[arg(long, value_name = "URL")]
+        ntrip: Option<String>,
     },
     /// Record every raw frame of every device, and every command sent to the vehicle over
     /// MQTT, without driving anything (listen-only: no engine, nothing transmitted). Writes
@@ -150,6 +159,11 @@ enum Command {
         /// calibration` names one on a real vehicle).
         #[arg(long, value_name = "FILE")]
         calibration: Option<PathBuf>,
+        /// Fetch RTK corrections from this NTRIP caster
+        /// (ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT): the simulated receiver then holds
+        /// RTK fixed only while they arrive.
+        #[arg(long, value_name = "URL", conflicts_with = "fast")]
+        ntrip: Option<String>,
     },
     /// Calibrate: `imu` (standing still: gyro bias, mounting roll and pitch), `odometry`
     /// (wheel radii, track) or `gnss` (antenna position, dual-antenna heading offset), from a
@@ -508,11 +522,13 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             stamped,
             max_gap,
             lenient,
+            corrections_out,
         } => {
             let options = replay::ReplayOptions {
                 config: config.map(|p| VehicleConfig::load(&p)).transpose()?,
                 stamped,
                 import: ImportOptions { max_gap },
+                corrections_out,
             };
             let stdout = std::io::stdout();
             let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());
@@ -565,9 +581,13 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             commands_stdin,
             ros_master,
             websocket,
+            ntrip,
         } => {
             let mut vehicle = VehicleConfig::load(&config)?;
             vehicle.require_devices(&config)?;
+            if let Some(url) = ntrip {
+                vehicle.ntrip = Some(ntrip_override(vehicle.ntrip.take(), &url)?);
+            }
             if let Some(bind) = websocket {
                 let mut w = vehicle.websocket.take().unwrap_or_default();
                 w.bind = bind;
@@ -639,6 +659,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
             websocket,
             fast,
             calibration,
+            ntrip,
         } => {
             let mut plant = load_plant(plant)?;
             plant.calibration = load_calibration(calibration.as_deref())?;
@@ -687,6 +708,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
                     ros1,
                     websocket,
                     handle: None,
+                    ntrip: ntrip.map(|url| ntrip_override(None, &url)).transpose()?,
                 },
                 std::io::stdout(),
             ));
@@ -1161,6 +1183,24 @@ fn minutes_arg(s: &str) -> Result<Duration, String> {
     }
 }
 
+/// `[ntrip]` with `--ntrip URL`'s caster (the rest of the section kept); a password in the
+/// URL replaces a password file.
+fn ntrip_override(
+    configured: Option<chassisd::config::ntrip::NtripConfig>,
+    url: &str,
+) -> anyhow::Result<chassisd::config::ntrip::NtripConfig> {
+    use chassisd::config::ntrip::NtripConfig;
+    let mut n = configured.unwrap_or_else(|| NtripConfig::with_url(url));
+    n.url = url.to_owned();
+    if n.parsed_url()
+        .is_ok_and(|u| !u.password.expose().is_empty())
+    {
+        n.password_file = None;
+    }
+    n.validate(Path::new("--ntrip"))?;
+    Ok(n)
+}
+
 /// `chassisd ntrip`'s arguments.
 #[derive(clap::Args)]
 struct NtripArgs {
@@ -1196,7 +1236,6 @@ struct NtripArgs {
 }
 
 fn ntrip_fetch(a: NtripArgs) -> anyhow::Result<bool> {
-    use chassisd::devices::gnss::FixQuality;
     use chassisd::devices::gnss::encode::GgaFix;
     use chassisd::ntrip::request::Version;
     use chassisd::ntrip::url::{NtripUrl, Password};
@@ -1217,16 +1256,7 @@ fn ntrip_fetch(a: NtripArgs) -> anyhow::Result<bool> {
                 (-90.0..=90.0).contains(&lat) && (-180.0..=180.0).contains(&lon) && h.is_finite(),
                 "--position: latitude -90 to 90, longitude -180 to 180, a finite height"
             );
-            Some(GgaFix {
-                utc: None,
-                quality: FixQuality::Single,
-                lat_deg: lat,
-                lon_deg: lon,
-                altitude_msl_m: h,
-                geoid_separation_m: 0.0,
-                satellites: 12,
-                hdop: 1.0,
-            })
+            Some(GgaFix::fallback(lat, lon, h))
         }
         Some(_) => anyhow::bail!("--position takes latitude,longitude,height"),
         None => None,

@@ -9,9 +9,10 @@ use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::{MemoryStore, Trajectory};
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::GnssStats;
+use crate::devices::gnss::rtcm::RtcmStats;
 use crate::engine::EngineOutput;
 use crate::engine::drivetrain::BusStats;
-use crate::engine::{Decoder, Engine, EngineStats, STATUS_PERIOD};
+use crate::engine::{Decoder, Engine, EngineStats, RTCM_PROTOCOL, STATUS_PERIOD};
 use crate::record::nmea_import::{IMPORT_SOURCE, ImportOptions, ImportReport, NmeaLogReader};
 use crate::record::{Record, RecordError, RecordingReader, SkippedLine, SourceKind};
 use crate::time::Timestamp;
@@ -39,6 +40,8 @@ pub struct ReplaySummary {
     pub gnss: Vec<(String, GnssStats)>,
     /// Counters per CAN interface.
     pub buses: Vec<(String, BusStats)>,
+    /// The corrections relayed to the receiver, with `[ntrip]`.
+    pub corrections: Option<RtcmStats>,
     /// Malformed recording lines that were skipped (the first hundred) and their count.
     pub skipped_lines: (Vec<SkippedLine>, u64),
     /// Records earlier than the one before them in their file (the first hundred; played
@@ -72,6 +75,8 @@ pub struct ReplayOptions {
     pub stamped: bool,
     /// How a plain NMEA log is imported (its largest gap within a segment).
     pub import: ImportOptions,
+    /// Where the corrections relayed to the receiver go (what live mode wrote to its port).
+    pub corrections_out: Option<std::path::PathBuf>,
 }
 
 /// What takes a replay's engine outputs as they come.
@@ -87,14 +92,22 @@ pub fn replay(
     options: &ReplayOptions,
     out: &mut impl Write,
 ) -> Result<ReplaySummary, ReplayError> {
+    let corrections = match &options.corrections_out {
+        Some(file) => Some(std::io::BufWriter::new(std::fs::File::create(file)?)),
+        None => None,
+    };
     let mut output = Output {
         out,
         stamped: options.stamped,
         line: Vec::with_capacity(1024),
         json: Vec::with_capacity(1024),
+        corrections,
     };
     let summary = replay_into(path, options, |_| {}, &mut output)?;
     output.out.flush()?;
+    if let Some(c) = &mut output.corrections {
+        c.flush()?;
+    }
     Ok(summary)
 }
 
@@ -127,6 +140,9 @@ pub fn replay_into(
         let mut sources = Vec::new();
         for s in &meta.sources {
             match s.kind {
+                // The engine relays corrections itself, when the configuration has [ntrip].
+                SourceKind::Serial
+                    if s.protocol.as_deref() == Some(RTCM_PROTOCOL) && vehicle.ntrip.is_some() => {}
                 SourceKind::Serial => {
                     let protocol = s.protocol.clone().unwrap_or_default();
                     match Decoder::for_protocol(&protocol) {
@@ -210,14 +226,23 @@ struct Output<'a, W: Write> {
     line: Vec<u8>,
     /// The status object before its stamp goes in front.
     json: Vec<u8>,
+    /// The corrections written to the receiver's port.
+    corrections: Option<std::io::BufWriter<std::fs::File>>,
 }
 
 impl<W: Write> Consumer for Output<'_, W> {
     /// Writes the statuses among `outputs`, stamped with their time plus `offset_ns`.
     fn take(&mut self, outputs: &mut Vec<EngineOutput>, offset_ns: i128) -> std::io::Result<()> {
         for output in outputs.drain(..) {
-            let EngineOutput::Status(status) = output else {
-                continue;
+            let status = match output {
+                EngineOutput::Status(status) => status,
+                EngineOutput::SerialTx { bytes, .. } => {
+                    if let Some(c) = &mut self.corrections {
+                        c.write_all(&bytes)?;
+                    }
+                    continue;
+                }
+                _ => continue,
             };
             self.line.clear();
             if self.stamped {
@@ -361,6 +386,7 @@ fn run(
         .bus_stats()
         .map(|(name, stats)| (name.to_owned(), stats.clone()))
         .collect();
+    summary.corrections = engine.corrections_stats().cloned();
     match &input {
         Input::Recording(reader) => {
             let (skipped, count) = reader.skipped();
@@ -412,6 +438,14 @@ impl ReplaySummary {
             if let Some(e) = &g.last_decode_error {
                 let _ = write!(s, " (last: {e})");
             }
+        }
+        if let Some(c) = &self.corrections {
+            let _ = write!(
+                s,
+                "; corrections: {} RTCM frames ({} bytes) to the receiver, {} invalid bytes \
+                 dropped",
+                c.frames, c.frame_bytes, c.invalid_bytes
+            );
         }
         if self.engine.undecoded > 0 {
             let _ = write!(s, "; {} frames without a decoder", self.engine.undecoded);

@@ -70,7 +70,7 @@ const fn log(
 }
 
 /// Every `/log` code, with the numbers the spec left out or repeated resolved.
-pub const LOG_CODES: [LogCode; 16] = [
+pub const LOG_CODES: [LogCode; 18] = [
     log(
         "LOCALIZATION_ERROR",
         100,
@@ -79,6 +79,20 @@ pub const LOG_CODES: [LogCode; 16] = [
         "localization lost",
     ),
     log("GPS_ERROR", 101, "ERROR", "localization", "GNSS fix lost"),
+    log(
+        "RTK_CORRECTIONS_LOST",
+        102,
+        "ERROR",
+        "localization",
+        "RTK corrections stopped",
+    ),
+    log(
+        "RTK_CORRECTIONS_RESTORED",
+        103,
+        "NOTIFY",
+        "localization",
+        "RTK corrections arriving again",
+    ),
     log("LOW_BATTERY", 200, "WARNING", "battery", "battery low"),
     log("FULL_BATTERY", 201, "NOTIFY", "battery", "battery full"),
     log(
@@ -210,6 +224,8 @@ pub struct RootDialect {
     malformed_heartbeats: u64,
     ticks: u64,
     previous: Option<VehicleStatus>,
+    /// RTK_CORRECTIONS_LOST went out, and no RESTORED since.
+    corrections_lost: bool,
     /// Missions under way or recently ended: their tag id and `messageId`, for notifies.
     missions: std::collections::VecDeque<(u64, Value)>,
     last_mission: u64,
@@ -229,6 +245,7 @@ impl RootDialect {
             malformed_heartbeats: 0,
             ticks: 0,
             previous: None,
+            corrections_lost: false,
             missions: std::collections::VecDeque::new(),
             last_mission: 0,
         }
@@ -547,6 +564,17 @@ impl RootDialect {
         }
         if p.gnss.ok && !s.gnss.ok {
             self.event(t, "GPS_ERROR", "", out);
+        }
+        if let (Some(before), Some(now)) = (&p.corrections, &s.corrections) {
+            if before.fresh && !now.fresh {
+                let detail = format!("no valid frame for {:.0} s", now.stale_after_s);
+                self.event(t, "RTK_CORRECTIONS_LOST", &detail, out);
+                self.corrections_lost = true;
+            }
+            if !before.fresh && now.fresh && self.corrections_lost {
+                self.event(t, "RTK_CORRECTIONS_RESTORED", "", out);
+                self.corrections_lost = false;
+            }
         }
         let soc = |st: &VehicleStatus| {
             st.battery

@@ -180,6 +180,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
             ros1: None,
             websocket: None,
             handle: None,
+            ntrip: None,
         },
         std::io::sink(),
     ));

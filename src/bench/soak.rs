@@ -316,6 +316,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
             ros1: None,
             websocket: None,
             handle: Some(handle),
+            ntrip: None,
         },
         std::io::sink(),
     ));

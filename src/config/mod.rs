@@ -12,6 +12,7 @@ pub mod localization;
 pub mod mission;
 pub mod motion;
 pub mod mqtt;
+pub mod ntrip;
 pub mod ros1;
 pub mod websocket;
 
@@ -176,6 +177,9 @@ pub struct VehicleConfig {
     /// The MQTT broker and the protocol dialects.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mqtt: Option<mqtt::MqttConfig>,
+    /// RTK corrections from an NTRIP caster.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ntrip: Option<ntrip::NtripConfig>,
     /// The native ROS1 node.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros1: Option<ros1::Ros1Config>,
@@ -186,6 +190,9 @@ pub struct VehicleConfig {
     #[serde(skip)]
     pub calibration_in_force: Option<(PathBuf, Vec<String>)>,
 }
+
+/// What a secret reads in a recorded configuration.
+pub const REDACTED: &str = "***redacted***";
 
 /// `[vehicle]`
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -369,6 +376,9 @@ impl VehicleConfig {
             bms.profile.resolve(base, file, "bms.profile")?;
         }
         config.load_calibration(base, file)?;
+        if let Some(ntrip) = &mut config.ntrip {
+            ntrip.resolve(base);
+        }
         if let Some(mqtt) = &mut config.mqtt {
             mqtt.resolve(base);
             // Found now, not after the devices are opened and the broker is dialled.
@@ -462,9 +472,26 @@ impl VehicleConfig {
 
     /// This configuration as self-contained TOML, with every device profile written inline,
     /// as recordings store it.
+    /// Secrets are left out: the MQTT password and the WebSocket token read [`REDACTED`], the
+    /// NTRIP URL keeps its user without the password, and no password file is named (a
+    /// replay connects to nothing that needs them).
     pub fn to_effective_toml(&self) -> String {
+        let mut recorded = self.clone();
+        if let Some(m) = &mut recorded.mqtt
+            && m.password.is_some()
+        {
+            m.password = Some(REDACTED.into());
+        }
+        if let Some(w) = &mut recorded.websocket
+            && w.token.is_some()
+        {
+            w.token = Some(REDACTED.into());
+        }
+        if let Some(n) = &mut recorded.ntrip {
+            *n = n.redacted();
+        }
         // Plain data structures always serialise.
-        toml::to_string(self).unwrap_or_default()
+        toml::to_string(&recorded).unwrap_or_default()
     }
 
     /// Checks ranges and consistency.
@@ -502,6 +529,18 @@ impl VehicleConfig {
         }
         if let Some(w) = &self.websocket {
             w.validate(file)?;
+        }
+        if let Some(n) = &self.ntrip {
+            n.validate(file)?;
+            if n.port.is_none() && self.gnss.is_none() {
+                return Err(invalid(
+                    "ntrip",
+                    "the corrections have nowhere to go: no [gnss] receiver and no ntrip.port"
+                        .into(),
+                    "configure the receiver ([gnss] port), or name its correction port as \
+                     ntrip.port",
+                ));
+            }
         }
         let Some(gnss) = &self.gnss else {
             return Ok(());

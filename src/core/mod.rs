@@ -2,6 +2,7 @@
 //! [`Vehicle::handle`], which takes the time as an argument and never reads a clock.
 
 pub mod chassis;
+pub mod corrections;
 pub mod safety;
 pub mod status;
 
@@ -79,6 +80,8 @@ pub struct CoreConfig {
     pub has_cutter: bool,
     /// A position set by hand may lie at most this far from the datum, m.
     pub max_position_radius_m: f64,
+    /// RTK corrections older than this are stale; `None` without a correction source.
+    pub corrections_stale_after: Option<Duration>,
 }
 
 impl Default for CoreConfig {
@@ -95,6 +98,7 @@ impl Default for CoreConfig {
             motion: None,
             mission: MissionConfig::default().settings(),
             has_cutter: false,
+            corrections_stale_after: None,
             max_position_radius_m: LocalizationConfig::default().max_position_radius_m,
         }
     }
@@ -135,6 +139,7 @@ impl CoreConfig {
         core.localizer = localizer_config(config);
         core.mission = config.mission.unwrap_or_default().settings();
         core.has_cutter = config.cutter.is_some();
+        core.corrections_stale_after = config.ntrip.as_ref().map(|n| n.timeout());
         core.max_position_radius_m = config
             .localization
             .unwrap_or_default()
@@ -224,6 +229,8 @@ pub enum Device {
     Gnss,
     /// The IMU.
     Imu,
+    /// The NTRIP caster's correction stream.
+    Corrections,
 }
 
 /// Whether a device's port or bus is usable.
@@ -344,6 +351,13 @@ pub enum Input<'a> {
     Imu(&'a ImuSample),
     /// The host computer's load.
     Host(HostUsage),
+    /// Valid RTCM frames went to the receiver.
+    Corrections {
+        /// How many.
+        frames: u64,
+        /// Their bytes.
+        bytes: u64,
+    },
     /// A command.
     Command(Command),
     /// The control period elapsed: produce the wheel command.
@@ -405,6 +419,8 @@ pub struct Vehicle {
     /// Whether the blade was last told to run: only while the cutter is on and nothing is
     /// latched, so a stop or a pause stops the blade and only a deliberate act restarts it.
     blade_running: bool,
+    /// RTK corrections, when a correction source is configured.
+    corrections: Option<corrections::Corrections>,
 }
 
 impl Vehicle {
@@ -440,6 +456,9 @@ impl Vehicle {
             mission: None,
             cutter_on: false,
             blade_running: false,
+            corrections: config
+                .corrections_stale_after
+                .map(corrections::Corrections::new),
         }
     }
 
@@ -479,6 +498,19 @@ impl Vehicle {
                 self.imu_link_down = state == LinkState::Down;
                 Vec::new()
             }
+            Input::Link(Device::Corrections, state) => {
+                if let Some(c) = &mut self.corrections {
+                    c.link(t, state == LinkState::Up);
+                }
+                Vec::new()
+            }
+            Input::Corrections { frames, bytes } => self
+                .corrections
+                .as_mut()
+                .and_then(|c| c.frames(t, frames, bytes))
+                .map(Output::Event)
+                .into_iter()
+                .collect(),
             Input::Imu(sample) => {
                 if sample.is_plausible() {
                     self.imu = Some(*sample);
@@ -676,7 +708,16 @@ impl Vehicle {
                 self.host = Some(usage);
                 Vec::new()
             }
-            Input::Tick => vec![Output::Status(Box::new(self.status(t)))],
+            Input::Tick => {
+                let mut outputs = Vec::with_capacity(1);
+                let corrections = self.corrections.as_mut().map(|c| c.tick(t));
+                let event = corrections.as_ref().and_then(|(_, e)| e.clone());
+                let mut status = self.status(t);
+                status.corrections = corrections.map(|(s, _)| s);
+                outputs.push(Output::Status(Box::new(status)));
+                outputs.extend(event.map(Output::Event));
+                outputs
+            }
         }
     }
 
@@ -1111,7 +1152,19 @@ impl Vehicle {
             obstacle_stop: false,
             host: self.host,
             mode: self.chassis.as_ref().map(Chassis::mode),
+            corrections: None,
         }
+    }
+
+    /// The receiver's latest fix, as the core holds it.
+    pub fn gnss_fix(&self) -> Option<&GnssFix> {
+        self.gnss_fix.as_ref()
+    }
+
+    /// The age of the last valid correction frame at `t`, when a source is configured and
+    /// one has arrived.
+    pub fn correction_age(&self, t: Timestamp) -> Option<Duration> {
+        self.corrections.as_ref().and_then(|c| c.age(t))
     }
 
     /// The `odom` pose and the map pose at `t`, without the rest of a status.

@@ -40,6 +40,8 @@ pub struct VehicleStatus {
     pub host: Option<HostUsage>,
     /// Who may drive; `None` without drives.
     pub mode: Option<DriveMode>,
+    /// RTK corrections; `None` without a correction source.
+    pub corrections: Option<super::corrections::CorrectionsStatus>,
 }
 
 /// The frame tree of REP-105 at one time: the map pose is `map_to_odom` composed with

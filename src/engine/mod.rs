@@ -27,6 +27,7 @@ use crate::core::{
     CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
 };
 use crate::devices::can::{Frame, Received};
+use crate::devices::gnss::rtcm::{RtcmFramer, RtcmStats};
 use crate::devices::gnss::{GnssStats, NmeaReceiver};
 use crate::devices::imu::hipnuc::HiPnuc;
 use crate::devices::imu::witmotion::WitMotion;
@@ -47,6 +48,18 @@ pub const LOCAL_COMMANDS: &str = "stdin";
 /// Source name of process events: a `shutdown` record (topic `shutdown`, payload the signal's
 /// name) marks where live mode stopped the drives on exit, so a replay stops them too.
 pub const PROCESS_SOURCE: &str = "process";
+
+/// Source name of the GNSS receiver (its NMEA bytes in, its corrections out).
+pub const GNSS_SOURCE: &str = "gnss";
+
+/// Source name of the RTCM 3 corrections from an NTRIP caster (the bytes as it sent them).
+pub const CORRECTIONS_SOURCE: &str = "rtcm";
+
+/// The protocol name recordings give the corrections' source.
+pub const RTCM_PROTOCOL: &str = "rtcm3";
+
+/// The port name of `[ntrip] port`, where corrections go when not to the receiver's own.
+pub const CORRECTIONS_PORT: &str = "rtcm_out";
 
 /// Transmissions kept waiting for their pair in a replay, each side: beyond it the oldest
 /// count as differences (a replay's memory must not grow with a gap in the recording).
@@ -88,6 +101,13 @@ impl Decoder {
 pub enum EngineOutput {
     /// A status snapshot (every 100 ms).
     Status(Box<VehicleStatus>),
+    /// Bytes to write to a serial port: whole, valid RTCM frames for the receiver.
+    SerialTx {
+        /// The port: a serial source's name (`gnss`), or [`CORRECTIONS_PORT`].
+        port: String,
+        /// The bytes.
+        bytes: bytes::Bytes,
+    },
     /// A frame to transmit on a CAN interface.
     CanTx {
         /// The interface.
@@ -193,7 +213,17 @@ pub struct Engine {
     emit_poses: bool,
     /// Emit every raw measurement.
     emit_measurements: bool,
+    /// The corrections relay, with `[ntrip]`.
+    corrections: Option<CorrectionsRelay>,
     stats: EngineStats,
+}
+
+/// Frames the caster's bytes and passes the valid frames, whole and in order, to the port
+/// the receiver takes corrections on.
+#[derive(Debug)]
+struct CorrectionsRelay {
+    framer: RtcmFramer,
+    port: String,
 }
 
 /// The core as the dialects reach it, at one time.
@@ -274,6 +304,13 @@ impl Engine {
             dialects: dialects(config, trajectories),
             emit_poses: false,
             emit_measurements: false,
+            corrections: config.ntrip.as_ref().map(|n| CorrectionsRelay {
+                framer: RtcmFramer::new(),
+                port: match n.port {
+                    Some(_) => CORRECTIONS_PORT.to_owned(),
+                    None => GNSS_SOURCE.to_owned(),
+                },
+            }),
             stats: EngineStats::default(),
         }
     }
@@ -337,6 +374,19 @@ impl Engine {
         self.count_record(&record.source);
         let mut tx = Vec::new();
         match &record.payload {
+            Payload::Serial(bytes) if record.source == CORRECTIONS_SOURCE => {
+                self.relay_corrections(t, bytes, out);
+            }
+            Payload::Link(state) if record.source == CORRECTIONS_SOURCE => {
+                if let Some(relay) = &mut self.corrections
+                    && *state == LinkState::Down
+                {
+                    // A new connection starts a new stream: no frame spans two.
+                    relay.framer.reset();
+                }
+                self.vehicle
+                    .handle(t, Input::Link(Device::Corrections, *state));
+            }
             Payload::Serial(bytes) => {
                 let vehicle = &mut self.vehicle;
                 let measure = self.emit_measurements;
@@ -465,6 +515,47 @@ impl Engine {
         t
     }
 
+    /// The valid frames among a caster's `bytes` go to the receiver's port as one write;
+    /// the core learns their time.
+    fn relay_corrections(&mut self, t: Timestamp, bytes: &[u8], out: &mut Vec<EngineOutput>) {
+        let Some(relay) = &mut self.corrections else {
+            self.stats.undecoded += 1;
+            return;
+        };
+        let mut whole = Vec::new();
+        let mut frames = 0u64;
+        relay.framer.push(bytes, |frame, _| {
+            whole.extend_from_slice(frame);
+            frames += 1;
+        });
+        if frames == 0 {
+            return;
+        }
+        let input = Input::Corrections {
+            frames,
+            bytes: whole.len() as u64,
+        };
+        for output in self.vehicle.handle(t, input) {
+            if let Output::Event(event) = output {
+                out.push(EngineOutput::Event(event));
+            }
+        }
+        out.push(EngineOutput::SerialTx {
+            port: relay.port.clone(),
+            bytes: bytes::Bytes::from(whole),
+        });
+    }
+
+    /// The receiver's latest fix (what a GGA to the caster reports).
+    pub fn gnss_fix(&self) -> Option<&crate::devices::gnss::GnssFix> {
+        self.vehicle.gnss_fix()
+    }
+
+    /// The corrections relay's framing counters, with `[ntrip]`.
+    pub fn corrections_stats(&self) -> Option<&RtcmStats> {
+        self.corrections.as_ref().map(|r| r.framer.stats())
+    }
+
     fn can_frame(
         &mut self,
         t: Timestamp,
@@ -550,6 +641,9 @@ impl Engine {
             }
             if tick.as_nanos() % STATUS_PERIOD.as_nanos() as u64 == 0 {
                 for output in self.vehicle.handle(tick, Input::Tick) {
+                    if let Output::Event(event) = &output {
+                        out.push(EngineOutput::Event(event.clone()));
+                    }
                     if let Output::Status(s) = output {
                         self.announce_stop_reason(&s, out);
                         let mut reports = Vec::new();
@@ -748,6 +842,68 @@ mod tests {
                 _ => None,
             })
             .collect()
+    }
+
+    fn serial(us: u64, source: &str, bytes: &[u8]) -> Record {
+        Record {
+            t: Timestamp::from_micros(us),
+            source: source.into(),
+            payload: Payload::Serial(bytes::Bytes::copy_from_slice(bytes)),
+        }
+    }
+
+    #[test]
+    fn only_whole_valid_frames_reach_the_receiver_and_the_core_learns_their_age() {
+        use crate::devices::gnss::rtcm::encode;
+        let mut config = VehicleConfig::default();
+        config.ntrip = Some(crate::config::ntrip::NtripConfig::with_url(
+            "ntrip://u:p@127.0.0.1:2101/M",
+        ));
+        let mut e = Engine::new(&config, &[(GNSS_SOURCE.into(), Decoder::Nmea)]);
+        let (a, b) = (encode(&[0x3E, 0xD0, 1, 2]), encode(&[0x43, 0x50, 3]));
+        let mut bad = encode(&[0x3E, 0xD0, 9]);
+        bad[4] ^= 0xFF;
+        // Garbage, a frame split over two records, a corrupted frame, then a whole one.
+        let mut stream = b"junk".to_vec();
+        stream.extend_from_slice(&a);
+        stream.extend_from_slice(&bad);
+        stream.extend_from_slice(&b);
+        let mut out = Vec::new();
+        e.handle(&serial(0, CORRECTIONS_SOURCE, &stream[..7]), &mut out);
+        e.handle(&serial(50_000, CORRECTIONS_SOURCE, &stream[7..]), &mut out);
+        let written: Vec<u8> = out
+            .iter()
+            .filter_map(|o| match o {
+                EngineOutput::SerialTx { port, bytes } if port == GNSS_SOURCE => {
+                    Some(bytes.to_vec())
+                }
+                _ => None,
+            })
+            .flatten()
+            .collect();
+        assert_eq!(written, [a, b].concat());
+        let stats = e.corrections_stats().unwrap();
+        assert_eq!(
+            (stats.frames, stats.invalid_bytes),
+            (2, 4 + bad.len() as u64)
+        );
+        e.advance_to(Timestamp::from_micros(1_000_000), &mut out);
+        let age = out.iter().rev().find_map(|o| match o {
+            EngineOutput::Status(s) => s.corrections.and_then(|c| c.age_s),
+            _ => None,
+        });
+        assert_eq!(age, Some(0.95));
+        // Ten seconds on, and no frame: stale, and said once.
+        out.clear();
+        e.advance_to(Timestamp::from_micros(11_200_000), &mut out);
+        let said: Vec<&String> = out
+            .iter()
+            .filter_map(|o| match o {
+                EngineOutput::Event(e) if e.contains("RTK corrections stopped") => Some(e),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(said.len(), 1, "{out:?}");
     }
 
     #[test]

@@ -16,3 +16,20 @@ pub mod request;
 pub mod response;
 pub mod sourcetable;
 pub mod url;
+
+use std::time::Duration;
+
+/// What the client connects to and how (from `[ntrip]`, or `chassisd ntrip`'s arguments).
+#[derive(Debug, Clone)]
+pub struct NtripSpec {
+    /// The caster and mountpoint.
+    pub url: url::NtripUrl,
+    /// NTRIP 2.0 or 1.0 (a 1.0 answer to a 2.0 request is taken as it comes).
+    pub version: request::Version,
+    /// GGA every this long (`None`: never, unless the caster's table says the mountpoint
+    /// needs it).
+    pub gga_interval: Option<Duration>,
+    /// A connection without a valid frame for this long is dropped; also the connect and
+    /// head timeout.
+    pub timeout: Duration,
+}

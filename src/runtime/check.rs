@@ -8,6 +8,8 @@
 //! - Each drive answers an SDO read of its device type (0x1000).
 //! - The BMS answers its poll (Daly) or its messages arrive (DBC).
 //! - The broker accepts a connection.
+//! - The NTRIP caster answers, lists the mountpoint, accepts the credentials, and sends
+//!   valid RTCM 3 frames.
 
 use std::fmt::Write as _;
 use std::time::{Duration, Instant};
@@ -24,6 +26,7 @@ use crate::devices::can::Received;
 use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
 use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::NmeaReceiver;
+use crate::devices::gnss::encode::GgaFix;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
 use crate::time::Timestamp;
 
@@ -153,6 +156,24 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
         if let Some(bms) = config.bms.as_ref().filter(|b| b.bus == name) {
             let result = probe_bms(&socket, bms, bus.listen_only).await;
             probes.push(Probe::new("bms", &format!("answers on {name}"), result));
+        }
+    }
+    if let Some(n) = &config.ntrip {
+        match n.spec() {
+            Ok(spec) => {
+                let fallback = n
+                    .fallback_position
+                    .map(|p| GgaFix::fallback(p.lat, p.lon, p.height));
+                let caster = spec.url.to_string();
+                for (what, result) in super::ntrip::probe(&spec, fallback).await {
+                    probes.push(Probe::new("ntrip", &format!("{what} ({caster})"), result));
+                }
+            }
+            Err(e) => probes.push(Probe::new(
+                "ntrip",
+                "password file",
+                fail(e, "put the password on the file's first line"),
+            )),
         }
     }
     if let Some(m) = &config.mqtt {

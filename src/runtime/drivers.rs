@@ -9,12 +9,13 @@ use tokio::sync::mpsc;
 use super::can::{self, CanSpec, CanTx};
 use super::clock::RecordClock;
 use super::serial::{self, SerialSpec};
+use super::serial_tx::SerialTx;
 use crate::config::VehicleConfig;
-use crate::engine::Decoder;
+use crate::engine::{CORRECTIONS_PORT, Decoder};
 use crate::record::{Record, SourceMeta};
 
 /// Source name of the GNSS receiver.
-pub const GNSS_SOURCE: &str = "gnss";
+pub use crate::engine::GNSS_SOURCE;
 /// Source name of the IMU.
 pub const IMU_SOURCE: &str = "imu";
 
@@ -28,16 +29,67 @@ pub struct Devices {
     pub can_tx: BTreeMap<String, CanTx>,
     /// The name of every device, which reports its link state under that name.
     pub names: Vec<String>,
+    /// The write queue of each serial port written to (the receiver's corrections).
+    pub serial_tx: BTreeMap<String, SerialTx>,
+}
+
+/// What the drivers are for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Driving the vehicle: ports may be written (corrections to the receiver).
+    Drive,
+    /// Listening only: nothing is written anywhere.
+    Listen,
 }
 
 /// Spawns one driver per device of `config`; records (and link events) go to `tx`.
-pub fn start(config: &VehicleConfig, clock: RecordClock, tx: &mpsc::Sender<Record>) -> Devices {
+pub fn start(
+    config: &VehicleConfig,
+    clock: RecordClock,
+    tx: &mpsc::Sender<Record>,
+    mode: Mode,
+) -> Devices {
     let mut devices = Devices {
         decoders: Vec::new(),
         sources: Vec::new(),
         can_tx: BTreeMap::new(),
         names: Vec::new(),
+        serial_tx: BTreeMap::new(),
     };
+    // Corrections go to the receiver's port, or to a port of their own.
+    let corrections = config
+        .ntrip
+        .as_ref()
+        .filter(|_| mode == Mode::Drive)
+        .map(|n| {
+            let port = if n.port.is_some() {
+                CORRECTIONS_PORT
+            } else {
+                GNSS_SOURCE
+            };
+            let queue = SerialTx::new(
+                n.queue_frames,
+                "RTCM corrections dropped: the receiver's port is not taking them",
+            );
+            devices.serial_tx.insert(port.to_owned(), queue.clone());
+            (n, queue)
+        });
+    if let Some((n, queue)) = &corrections
+        && let Some(port) = &n.port
+    {
+        let spec = SerialSpec {
+            source: CORRECTIONS_PORT.into(),
+            port: port.clone(),
+            baud: n.baud,
+            reconnect_max: Duration::from_secs(30),
+            writes: Some(queue.clone()),
+            forward_reads: false,
+        };
+        let tx = tx.clone();
+        tokio::spawn(super::panics::restarting("corrections port", move || {
+            serial::run(spec.clone(), clock, tx.clone())
+        }));
+    }
     let serial_ports = [
         config.gnss.as_ref().map(|g| {
             let spec = SerialSpec {
@@ -45,6 +97,8 @@ pub fn start(config: &VehicleConfig, clock: RecordClock, tx: &mpsc::Sender<Recor
                 port: g.port.clone(),
                 baud: g.baud,
                 reconnect_max: g.reconnect_max(),
+                writes: devices.serial_tx.get(GNSS_SOURCE).cloned(),
+                forward_reads: true,
             };
             (spec, Decoder::Nmea)
         }),
@@ -54,6 +108,8 @@ pub fn start(config: &VehicleConfig, clock: RecordClock, tx: &mpsc::Sender<Recor
                 port: i.port.clone(),
                 baud: i.baud,
                 reconnect_max: Duration::from_secs_f64(i.reconnect_max_s),
+                writes: None,
+                forward_reads: true,
             };
             (spec, Decoder::Imu(i.protocol))
         }),

@@ -90,7 +90,7 @@ pub async fn run(options: ListenOptions) -> anyhow::Result<ListenSummary> {
     let clock = RecordClock::start();
     let start = clock.now();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
-    let devices = drivers::start(config, clock, &tx);
+    let devices = drivers::start(config, clock, &tx, drivers::Mode::Listen);
     // Held for the session: a CAN driver ends when its transmit queue closes. Nothing is
     // ever queued.
     let _can_tx = devices.can_tx;

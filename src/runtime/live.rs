@@ -22,6 +22,7 @@ use super::notify::{InjectedStall, ServiceManager};
 use super::panics;
 use super::recorder::Recorder;
 use super::ros1::Ros1Link;
+use super::serial_tx::SerialTx;
 use super::status_out::StatusOut;
 use super::trajectory_writer;
 use crate::api::local;
@@ -32,7 +33,9 @@ use crate::config::VehicleConfig;
 use crate::core::LinkState;
 use crate::core::chassis::status_bits;
 use crate::devices::gnss::GnssStats;
-use crate::engine::{Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE};
+use crate::engine::{
+    CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE, RTCM_PROTOCOL,
+};
 use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
@@ -114,10 +117,18 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     heap::spawn();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
     let config = &options.config;
-    let devices = drivers::start(config, clock, &tx);
+    let devices = drivers::start(config, clock, &tx, drivers::Mode::Drive);
     let sources = devices.decoders;
     let mut source_meta = devices.sources;
     let can_tx = devices.can_tx;
+    let serial_tx = devices.serial_tx;
+    let corrections = match &config.ntrip {
+        Some(n) => {
+            source_meta.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
+            Some(super::ntrip::spawn(n, clock, tx.clone())?)
+        }
+        None => None,
+    };
     if !config.drive.is_empty() {
         source_meta.push(SourceMeta::commands(
             PROCESS_SOURCE,
@@ -290,10 +301,13 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
             _ = finished(&mut pattern) => break Ok("pattern complete"),
         }
         let t = now.unwrap_or_else(|| clock.now());
+        if let Some(c) = &corrections {
+            c.update_position(engine.gnss_fix());
+        }
         let bits = dispatch(
             &mut outputs,
             t,
-            &can_tx,
+            (&can_tx, &serial_tx),
             (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
             recorder.as_mut(),
             &mut out,
@@ -344,7 +358,7 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     dispatch(
         &mut outputs,
         end,
-        &can_tx,
+        (&can_tx, &serial_tx),
         (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
         recorder.as_mut(),
         &mut out,
@@ -385,7 +399,7 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
 fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
-    can_tx: &BTreeMap<String, CanTx>,
+    (can_tx, serial_tx): (&BTreeMap<String, CanTx>, &BTreeMap<String, SerialTx>),
     (mqtt, mut ros1, mut websocket): (
         Option<&MqttSender>,
         Option<&mut Ros1Link>,
@@ -418,6 +432,12 @@ fn dispatch(
                 }
                 if let Some(q) = can_tx.get(&bus) {
                     q.send(frame);
+                }
+            }
+            // Not recorded: a replay writes the same bytes from the recorded stream.
+            EngineOutput::SerialTx { port, bytes } => {
+                if let Some(q) = serial_tx.get(&port) {
+                    q.send(bytes);
                 }
             }
             _ => {}

@@ -23,6 +23,7 @@ pub mod panics;
 pub mod recorder;
 pub mod ros1;
 pub mod serial;
+pub mod serial_tx;
 pub mod sim;
 pub mod sim_fast;
 pub mod status_out;

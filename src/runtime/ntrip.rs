@@ -19,34 +19,23 @@ use super::clock::RecordClock;
 use crate::core::LinkState;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::rtcm::RtcmFramer;
+pub use crate::ntrip::NtripSpec;
 use crate::ntrip::backoff::Backoff;
 use crate::ntrip::chunked::Dechunker;
-use crate::ntrip::request::{Version, request};
+use crate::ntrip::request::request;
 use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
 use crate::ntrip::sourcetable::{self, MAX_TABLE};
-use crate::ntrip::url::NtripUrl;
 use crate::record::{Payload, Record};
 
 /// Source name of the corrections in records.
-pub const SOURCE: &str = "rtcm";
+pub const SOURCE: &str = crate::engine::CORRECTIONS_SOURCE;
+/// The GGA interval used when the configuration sends none and the caster's table says the
+/// mountpoint needs one.
+const GGA_WHEN_WANTED: Duration = Duration::from_secs(10);
 /// Read buffer, bytes.
 const READ_BUFFER: usize = 4096;
 /// Mountpoints named in a "not found" report, at most.
 const LISTED: usize = 12;
-
-/// What to connect to and how.
-#[derive(Debug, Clone)]
-pub struct NtripSpec {
-    /// The caster and mountpoint.
-    pub url: NtripUrl,
-    /// NTRIP 2.0 or 1.0 (a 1.0 answer to a 2.0 request is taken as it comes).
-    pub version: Version,
-    /// GGA every this long (`None`: never).
-    pub gga_interval: Option<Duration>,
-    /// A connection without a valid frame for this long is dropped; also the connect and
-    /// head timeout.
-    pub timeout: Duration,
-}
 
 /// What the task reports to whoever watches (`check`, diagnostics).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -103,6 +92,22 @@ pub async fn run(
 ) {
     let start = Instant::now();
     let mut backoff = Backoff::new();
+    let mut spec = spec;
+    if spec.gga_interval.is_none() {
+        // The table says whether the mountpoint needs the rover's position (a virtual
+        // reference station sends nothing without it).
+        backoff.connecting(start.elapsed());
+        if let Ok(table) = mountpoints(&spec).await
+            && table
+                .iter()
+                .any(|s| s.mountpoint == spec.url.mountpoint && s.wants_gga)
+        {
+            tracing::warn!(caster = %spec.url, interval_s = GGA_WHEN_WANTED.as_secs(),
+                "the caster's table says this mountpoint needs the rover's position (nmea=1): \
+                 sending GGA although gga_interval_s = 0");
+            spec.gga_interval = Some(GGA_WHEN_WANTED);
+        }
+    }
     loop {
         let at = backoff.next_connect(start.elapsed());
         sleep_until(start + at).await;
@@ -415,6 +420,226 @@ async fn stream_corrections(
             }
         }
     }
+}
+
+/// The running client of `[ntrip]`, as the engine's loop holds it.
+pub struct CorrectionsClient {
+    position: watch::Sender<Option<GgaFix>>,
+    state: watch::Receiver<ClientState>,
+    /// The fallback position, sent until the receiver has a fix.
+    fallback: Option<GgaFix>,
+}
+
+impl CorrectionsClient {
+    /// Hands the receiver's latest fix to the GGA (the fallback stays until there is one).
+    pub fn update_position(&self, fix: Option<&crate::devices::gnss::GnssFix>) {
+        let Some(gga) = fix.and_then(GgaFix::from_fix) else {
+            return;
+        };
+        self.position.send_if_modified(|p| {
+            let changed = *p != Some(gga);
+            *p = Some(gga);
+            changed
+        });
+    }
+
+    /// What the client reports.
+    pub fn state(&self) -> ClientState {
+        self.state.borrow().clone()
+    }
+
+    /// The position sent before the first fix.
+    pub fn fallback(&self) -> Option<GgaFix> {
+        self.fallback
+    }
+}
+
+/// Starts the client of `[ntrip]` (the password file is read now). Its records go to `tx`.
+pub fn spawn(
+    config: &crate::config::ntrip::NtripConfig,
+    clock: RecordClock,
+    tx: mpsc::Sender<Record>,
+) -> anyhow::Result<CorrectionsClient> {
+    let spec = config.spec().map_err(anyhow::Error::msg)?;
+    let fallback = config
+        .fallback_position
+        .map(|p| GgaFix::fallback(p.lat, p.lon, p.height));
+    let (position, position_rx) = watch::channel(fallback);
+    let (state_tx, state) = watch::channel(ClientState::default());
+    tracing::info!(caster = %spec.url, version = ?spec.version,
+        gga_interval_s = spec.gga_interval.map(|d| d.as_secs_f64()),
+        "NTRIP client starting");
+    tokio::spawn(super::panics::restarting("NTRIP client", move || {
+        run(
+            spec.clone(),
+            clock,
+            tx.clone(),
+            position_rx.clone(),
+            state_tx.clone(),
+        )
+    }));
+    Ok(CorrectionsClient {
+        position,
+        state,
+        fallback,
+    })
+}
+
+/// One step of `chassisd check`'s probe of the caster: what was probed, and ok with what
+/// was seen, or the reason and the fix.
+pub type ProbeStep = (&'static str, Result<String, (String, String)>);
+
+/// `chassisd check`'s probe: the caster reachable, the mountpoint in its table, the
+/// credentials accepted, valid frames arriving (within `spec.timeout`, GGA sent first).
+pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep> {
+    const REACHABLE: &str = "caster reachable";
+    const LISTED_STEP: &str = "mountpoint in the table";
+    const AUTH: &str = "credentials accepted";
+    const FRAMES: &str = "frames arriving";
+    let not_probed = |why: &str| Err((format!("not probed: {why}"), "fix the step above".into()));
+    let mut steps = Vec::new();
+    let table = match mountpoints(spec).await {
+        Ok(t) => t,
+        Err(e) => {
+            steps.push((
+                REACHABLE,
+                Err((
+                    e,
+                    format!(
+                        "check the host and port ({}) and this computer's network",
+                        spec.url.address()
+                    ),
+                )),
+            ));
+            for what in [LISTED_STEP, AUTH, FRAMES] {
+                steps.push((what, not_probed("the caster is not reachable")));
+            }
+            return steps;
+        }
+    };
+    steps.push((
+        REACHABLE,
+        Ok(format!(
+            "{} answers, {} mountpoints listed",
+            spec.url.address(),
+            table.len()
+        )),
+    ));
+    let mount = &spec.url.mountpoint;
+    let listed = table.iter().find(|s| &s.mountpoint == mount);
+    let wants_gga = listed.is_some_and(|s| s.wants_gga);
+    steps.push((
+        LISTED_STEP,
+        match listed {
+            Some(s) => Ok(format!(
+                "{mount}{}",
+                if s.wants_gga { " (wants GGA)" } else { "" }
+            )),
+            None => Err((
+                not_found(spec).await,
+                "fix the URL's mountpoint (some casters list only a few: then this may be right)"
+                    .into(),
+            )),
+        },
+    ));
+    let mut stream = match open(spec, false).await {
+        Ok(s) => s,
+        Err(e) => {
+            steps.push((AUTH, Err((e, "check the caster's address".into()))));
+            steps.push((FRAMES, not_probed("no connection")));
+            return steps;
+        }
+    };
+    let mut buf = Vec::new();
+    let head = match read_head(&mut stream, &mut buf, spec.timeout).await {
+        Ok(h) => h,
+        Err(e) => {
+            steps.push((AUTH, Err((e, "check the host and port".into()))));
+            steps.push((FRAMES, not_probed("no answer")));
+            return steps;
+        }
+    };
+    match &head.status {
+        Status::Icy | Status::Http => steps.push((AUTH, Ok(format!("{:?} 200", head.status)))),
+        Status::Error(code @ (401 | 403), reason) => {
+            steps.push((
+                AUTH,
+                Err((
+                    format!("the caster refused the credentials ({code} {reason})"),
+                    "check the user and the password (or ntrip.password_file)".into(),
+                )),
+            ));
+            steps.push((FRAMES, not_probed("not authenticated")));
+            return steps;
+        }
+        other => {
+            steps.push((
+                AUTH,
+                Err((
+                    format!("the caster did not serve the mountpoint ({other:?})"),
+                    "fix the URL's mountpoint".into(),
+                )),
+            ));
+            steps.push((FRAMES, not_probed("no stream")));
+            return steps;
+        }
+    }
+    if let Some(fix) = position.filter(|_| wants_gga || spec.gga_interval.is_some()) {
+        let _ = stream.write_all(fix.gga().as_bytes()).await;
+    }
+    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut framer = RtcmFramer::new();
+    let deadline = Instant::now() + spec.timeout;
+    let mut pending = buf;
+    let mut chunk = vec![0u8; READ_BUFFER];
+    loop {
+        let mut body = Vec::new();
+        match dechunk.as_mut() {
+            Some(d) => {
+                if d.push(&pending, &mut body).is_err() {
+                    break;
+                }
+            }
+            None => body = std::mem::take(&mut pending),
+        }
+        pending.clear();
+        framer.push(&body, |_, _| {});
+        if framer.stats().frames >= 3 {
+            break;
+        }
+        match tokio::time::timeout_at(deadline, stream.read(&mut chunk)).await {
+            Ok(Ok(n)) if n > 0 => pending.extend_from_slice(&chunk[..n]),
+            _ => break,
+        }
+    }
+    let stats = framer.stats();
+    steps.push((
+        FRAMES,
+        if stats.frames > 0 {
+            let types: Vec<String> = stats.by_type.keys().map(u16::to_string).collect();
+            Ok(format!(
+                "{} valid RTCM 3 frames (messages {})",
+                stats.frames,
+                types.join(", ")
+            ))
+        } else {
+            Err((
+                format!(
+                    "no valid RTCM 3 frame within {} s ({} bytes dropped)",
+                    spec.timeout.as_secs(),
+                    stats.invalid_bytes
+                ),
+                if position.is_none() {
+                    "a virtual reference station sends nothing before a GGA: set \
+                     ntrip.fallback_position"
+                        .into()
+                } else {
+                    "check that the base station is up, and the mountpoint's format (RTCM 3)".into()
+                },
+            ))
+        },
+    ));
+    steps
 }
 
 /// What `chassisd ntrip` did.

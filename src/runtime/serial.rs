@@ -1,15 +1,18 @@
-//! Serial driver: one task per port. Reads, timestamps and forwards raw chunks; reports the
-//! link state; reconnects with back-off when the port disappears or fails.
+//! Serial driver: one task per port. Reads, timestamps and forwards raw chunks; writes what
+//! the engine queues for the port (a receiver's corrections) without ever holding up the
+//! reading; reports the link state; reconnects with back-off when the port disappears or
+//! fails.
 
 use std::time::{Duration, Instant};
 
 use bytes::{Bytes, BytesMut};
-use tokio::io::AsyncReadExt;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::mpsc;
 use tokio_serial::SerialPortBuilderExt;
 
 use super::clock::RecordClock;
 use super::outage_log::{OutageLog, Say};
+use super::serial_tx::SerialTx;
 use crate::core::LinkState;
 use crate::record::{Payload, Record};
 
@@ -29,6 +32,11 @@ pub struct SerialSpec {
     pub baud: u32,
     /// Longest reconnect delay.
     pub reconnect_max: Duration,
+    /// What to write to the port, when anything is.
+    pub writes: Option<SerialTx>,
+    /// Whether what the port sends becomes records (a port only written to, `[ntrip]
+    /// port`, reads and drops it).
+    pub forward_reads: bool,
 }
 
 /// Runs until the receiving side of `tx` closes.
@@ -39,7 +47,7 @@ pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>)
     let mut outage_since: Option<Instant> = None;
     loop {
         match tokio_serial::new(&spec.port, spec.baud).open_native_async() {
-            Ok(mut port) => {
+            Ok(port) => {
                 tracing::info!(device = %spec.source, port = %spec.port, baud = spec.baud,
                     after_failed_attempts = failed_attempts, "link up");
                 failed_attempts = 0;
@@ -51,11 +59,13 @@ pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>)
                 {
                     return;
                 }
-                let (reason, got_data) =
-                    match read_until_failure(&mut port, &spec, &clock, &tx).await {
-                        Ok(outcome) => outcome,
-                        Err(Closed) => return,
-                    };
+                if let Some(w) = &spec.writes {
+                    w.clear();
+                }
+                let (reason, got_data) = match serve(port, &spec, &clock, &tx).await {
+                    Ok(outcome) => outcome,
+                    Err(Closed) => return,
+                };
                 tracing::warn!(device = %spec.source, port = %spec.port, %reason, "link down; reconnecting");
                 if send(&tx, &spec, &clock, Payload::Link(LinkState::Down))
                     .await
@@ -95,9 +105,43 @@ pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>)
 /// The engine is gone; the driver stops.
 struct Closed;
 
+/// Reads and writes until the port fails. Returns why, and whether any data arrived.
+async fn serve(
+    port: tokio_serial::SerialStream,
+    spec: &SerialSpec,
+    clock: &RecordClock,
+    tx: &mpsc::Sender<Record>,
+) -> Result<(String, bool), Closed> {
+    let (mut reader, writer) = tokio::io::split(port);
+    let Some(writes) = &spec.writes else {
+        return read_until_failure(&mut reader, spec, clock, tx).await;
+    };
+    tokio::select! {
+        read = read_until_failure(&mut reader, spec, clock, tx) => read,
+        reason = write_until_failure(writer, writes) => Ok((reason, false)),
+    }
+}
+
+/// Writes what is queued, each write whole, until a write fails; returns why.
+async fn write_until_failure(
+    mut writer: tokio::io::WriteHalf<tokio_serial::SerialStream>,
+    writes: &SerialTx,
+) -> String {
+    loop {
+        let bytes = writes.next().await;
+        match writer.write_all(&bytes).await {
+            Ok(()) => writes.written(bytes.len()),
+            Err(e) => {
+                writes.failed();
+                return format!("write failed: {e}");
+            }
+        }
+    }
+}
+
 /// Reads until the port fails. Returns why, and whether any data arrived.
 async fn read_until_failure(
-    port: &mut tokio_serial::SerialStream,
+    port: &mut tokio::io::ReadHalf<tokio_serial::SerialStream>,
     spec: &SerialSpec,
     clock: &RecordClock,
     tx: &mpsc::Sender<Record>,
@@ -111,7 +155,9 @@ async fn read_until_failure(
             Ok(_) => {
                 got_data = true;
                 let chunk: Bytes = buf.split().freeze();
-                send(tx, spec, clock, Payload::Serial(chunk)).await?;
+                if spec.forward_reads {
+                    send(tx, spec, clock, Payload::Serial(chunk)).await?;
+                }
             }
             Err(e) => return Ok((e.to_string(), got_data)),
         }
@@ -124,6 +170,10 @@ async fn send(
     clock: &RecordClock,
     payload: Payload,
 ) -> Result<(), Closed> {
+    if !spec.forward_reads {
+        // A write-only port has no records; its link shows in the log.
+        return if tx.is_closed() { Err(Closed) } else { Ok(()) };
+    }
     let record = Record {
         t: clock.now(),
         source: spec.source.clone(),

@@ -24,8 +24,8 @@ use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
-use crate::engine::{EngineOutput, EngineStats};
-use crate::record::{Payload, Record, RecordingWriter};
+use crate::engine::{CORRECTIONS_SOURCE, EngineOutput, EngineStats, RTCM_PROTOCOL};
+use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
@@ -69,6 +69,9 @@ pub struct SimOptions {
     pub websocket: Option<crate::config::websocket::WebsocketConfig>,
     /// A benchmark's hold on the run: faults to inject, truth to read back.
     pub handle: Option<SimHandle>,
+    /// RTK corrections from a caster (`--ntrip URL`): the simulated receiver then holds
+    /// RTK fixed only while they arrive.
+    pub ntrip: Option<crate::config::ntrip::NtripConfig>,
 }
 
 /// Faults a benchmark injects into a running simulation; each holds while set.
@@ -178,14 +181,18 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         snapshot,
         writer,
     } = trajectory_writer::open(&config, Box::new(MemoryStore::default()))?;
-    let mut sim = Lockstep::with_mqtt(
+    let mut sim = Lockstep::with_links(
         options.plant.clone(),
         options.seed,
         start,
         options.mqtt.clone(),
+        options.ntrip.clone(),
         store,
     )?;
     let mut sources = lockstep::sources(&options.plant);
+    if options.ntrip.is_some() {
+        sources.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
+    }
     if options.ros1.is_some() {
         sources.push(super::ros1::source_meta());
     }
@@ -271,12 +278,17 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         ros1,
         websocket,
     };
+    let corrections = match &options.ntrip {
+        Some(n) => Some(super::ntrip::spawn(n, clock, tx.clone())?),
+        None => None,
+    };
     if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
     } else {
         drop(tx);
     }
     let mut commands_open = options.commands_stdin
+        || options.ntrip.is_some()
         || options.mqtt.is_some()
         || options.ros1.is_some()
         || options.websocket.is_some();
@@ -316,6 +328,9 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
                         None => sim.step(gnss, &mut sink),
                     }
                     summary.track(sim.vehicle().truth());
+                }
+                if let Some(c) = &corrections {
+                    c.update_position(sim.engine().gnss_fix());
                 }
                 if let Some(h) = &options.handle {
                     h.probe.send_replace(SimProbe {

@@ -16,6 +16,7 @@ use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::chassis::ProfileRef;
 use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
+use crate::config::ntrip::NtripConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::core::LinkState;
 use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
@@ -32,8 +33,8 @@ pub const PLANT_STEP: Duration = Duration::from_millis(1);
 const SCRIPT_COMMAND_EVERY: u64 = 100;
 /// ... from this time on, s.
 const SCRIPT_COMMANDS_FROM_S: f64 = 1.0;
-/// Source name of the simulated GNSS receiver.
-pub const GNSS_SOURCE: &str = "gnss";
+/// Source name of the GNSS receiver.
+pub use crate::engine::GNSS_SOURCE;
 /// Source name of the simulated IMU.
 pub const IMU_SOURCE: &str = "imu";
 
@@ -333,10 +334,27 @@ impl Lockstep {
         mqtt: Option<MqttConfig>,
         trajectories: Box<dyn TrajectoryStore>,
     ) -> Result<Self, ConfigError> {
+        Self::with_links(plant, seed, start, mqtt, None, trajectories)
+    }
+
+    /// [`Lockstep::with_mqtt`], with RTK corrections from the caster of `ntrip`: the
+    /// simulated receiver then holds RTK only while they arrive.
+    pub fn with_links(
+        plant: PlantConfig,
+        seed: u64,
+        start: Timestamp,
+        mqtt: Option<MqttConfig>,
+        ntrip: Option<NtripConfig>,
+        trajectories: Box<dyn TrajectoryStore>,
+    ) -> Result<Self, ConfigError> {
         let mut config = vehicle_config(&plant)?;
         if let Some(m) = mqtt {
             m.validate(Path::new(SIM_CONFIG_NAME))?;
             config.mqtt = Some(m);
+        }
+        if let Some(n) = ntrip {
+            n.validate(Path::new(SIM_CONFIG_NAME))?;
+            config.ntrip = Some(n);
         }
         let decoders = [
             (GNSS_SOURCE.to_owned(), Decoder::Nmea),
@@ -353,8 +371,12 @@ impl Lockstep {
                 payload: Payload::Link(LinkState::Up),
             })
             .collect();
+        let mut vehicle = SimVehicle::new(plant, drive_profile()?, seed, start);
+        if let Some(n) = &config.ntrip {
+            vehicle.expect_corrections(n.timeout());
+        }
         Ok(Self {
-            vehicle: SimVehicle::new(plant, drive_profile()?, seed, start),
+            vehicle,
             engine,
             config,
             t: start,
@@ -503,6 +525,10 @@ impl Lockstep {
                     });
                     self.vehicle.on_can(t, &frame, &mut self.replies);
                     self.queue.extend(self.replies.drain(..));
+                }
+                // The receiver's port: the simulated receiver takes the corrections.
+                EngineOutput::SerialTx { port, bytes } if port == GNSS_SOURCE => {
+                    self.vehicle.on_corrections(t, &bytes);
                 }
                 other => sink.output(other),
             }

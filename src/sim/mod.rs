@@ -8,4 +8,5 @@ pub mod gnss_error;
 pub mod lockstep;
 pub mod nmea_out;
 pub mod plant;
+pub mod receiver_corrections;
 pub mod scenario;

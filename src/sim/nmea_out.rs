@@ -22,6 +22,8 @@ pub struct Epoch {
     pub sigma_m: f64,
     /// Dual-antenna heading, degrees true.
     pub heading_deg: Option<f64>,
+    /// The age of the corrections, s (GGA's differential age); `None`: a steady 1 s.
+    pub correction_age_s: Option<f64>,
 }
 
 /// GGA, RMC, VTG, GST and (with a heading) HDT for `e`, as one chunk.
@@ -40,9 +42,12 @@ pub fn epoch(e: &Epoch) -> String {
         e.quality,
         FixQuality::RtkFixed | FixQuality::RtkFloat | FixQuality::Dgps
     ) {
-        "1.0,0001"
+        match e.correction_age_s {
+            Some(age) => format!("{:.1},0001", age.min(999.9)),
+            None => "1.0,0001".to_owned(),
+        }
     } else {
-        ","
+        ",".to_owned()
     };
     sentence(
         &mut out,

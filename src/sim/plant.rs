@@ -469,6 +469,8 @@ pub struct SimVehicle {
     cutter_on: bool,
     /// The blade's drive, when the yard has one.
     blade: Option<SimDrive>,
+    /// RTK corrections, when the simulation has a caster (without, RTK is always possible).
+    corrections: Option<super::receiver_corrections::ReceiverCorrections>,
 }
 
 /// A motion imposed on the simulated vehicle (a real robot's recorded wheel odometry and
@@ -538,7 +540,28 @@ impl SimVehicle {
                 .and_then(|y| y.blade_node)
                 .and_then(NodeId::new)
                 .map(|node| SimDrive::new(node, blade_profile, model)),
+            corrections: None,
         }
+    }
+
+    /// From now on the receiver holds RTK fixed only while corrections reach it (within
+    /// `fixed_for` of the last valid frame), as a receiver fed by a caster does.
+    pub fn expect_corrections(&mut self, fixed_for: Duration) {
+        self.corrections = Some(super::receiver_corrections::ReceiverCorrections::new(
+            fixed_for,
+        ));
+    }
+
+    /// Bytes written to the receiver's port at `t` (corrections).
+    pub fn on_corrections(&mut self, t: Timestamp, bytes: &[u8]) {
+        if let Some(c) = &mut self.corrections {
+            c.receive(t, bytes);
+        }
+    }
+
+    /// Valid correction frames the receiver has taken.
+    pub fn corrections_received(&self) -> u64 {
+        self.corrections.as_ref().map_or(0, |c| c.frames())
     }
 
     /// Whether the blade runs: the last switch frame said so, or its drive turns it at more
@@ -849,8 +872,13 @@ impl SimVehicle {
     fn gnss_epoch(&mut self, t: Timestamp, c: GnssCondition) -> Option<Bytes> {
         let plant = &self.plant;
         let rng = &mut self.rng;
+        let possible = c.quality?;
+        let (possible, correction_age) = match &self.corrections {
+            Some(rc) => (rc.quality(t, possible), rc.age(t)),
+            None => (possible, None),
+        };
         let error = self.gnss_error.epoch(
-            c.quality?,
+            possible,
             |q| plant.sigma(q),
             |s| super::gnss_error::normal(rng, s),
         );
@@ -881,6 +909,7 @@ impl SimVehicle {
             heading_deg: g
                 .dual_antenna
                 .then(|| (heading + heading_noise).rem_euclid(360.0)),
+            correction_age_s: correction_age.map(|a| a.as_secs_f64()),
         };
         Some(Bytes::from(nmea_out::epoch(&epoch)))
     }

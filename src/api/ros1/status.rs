@@ -353,6 +353,7 @@ mod tests {
             obstacle_stop: false,
             host: None,
             mode: None,
+            corrections: None,
         }
     }
 

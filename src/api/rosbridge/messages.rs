@@ -10,6 +10,7 @@ use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
 use crate::api::ros1::{ros_time, yaw_quaternion};
 use crate::api::rtk::status::{locate_name, navigation_name};
 use crate::core::chassis::status_bits;
+use crate::core::corrections::CorrectionsStatus;
 use crate::core::{Localization, Navigation, VehicleStatus};
 use crate::devices::gnss::FixQuality;
 use crate::fusion::odometry::OdomPose;
@@ -171,8 +172,37 @@ fn diagnostic(level: u8, name: &str, message: &str, values: &[(&str, String)]) -
     })
 }
 
+/// The RTK corrections' status: their age is what the safety envelope gates on.
+fn corrections_diagnostic(c: &CorrectionsStatus) -> Value {
+    let (level, message) = match (c.fresh, c.connected) {
+        (true, _) => (OK, "arriving"),
+        (false, true) => (
+            ERROR,
+            "stale: the caster is connected and sends no valid frame",
+        ),
+        (false, false) => (ERROR, "stale: not connected to the caster"),
+    };
+    diagnostic(
+        level,
+        "rtk corrections",
+        message,
+        &[
+            (
+                "age_s",
+                c.age_s
+                    .map_or_else(|| "never".into(), |a| format!("{a:.1}")),
+            ),
+            ("stale_after_s", format!("{:.0}", c.stale_after_s)),
+            ("connected", c.connected.to_string()),
+            ("frames", c.frames.to_string()),
+            ("bytes", c.bytes.to_string()),
+        ],
+    )
+}
+
 /// `/diagnostics` (diagnostic_msgs/DiagnosticArray): one status each for the receiver, the
-/// IMU, the drive train, the battery and the localisation.
+/// IMU, the drive train, the RTK corrections (with `[ntrip]`), the battery and the
+/// localisation.
 pub fn diagnostics(status: &VehicleStatus) -> Value {
     let g = &status.gnss;
     let mut all = vec![diagnostic(
@@ -224,6 +254,9 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
                 ("wz", format!("{:.3}", c.wz)),
             ],
         ));
+    }
+    if let Some(c) = &status.corrections {
+        all.push(corrections_diagnostic(c));
     }
     if let Some(b) = &status.battery {
         let level = if b.stale || b.reading.alarms != 0 {

@@ -80,6 +80,41 @@ pub struct GgaFix {
 }
 
 impl GgaFix {
+    /// A configured position (before the receiver's first fix): a single-point fix,
+    /// stamped when sent, with plausible satellites and HDOP (a virtual reference station
+    /// ignores a GGA that claims none).
+    pub fn fallback(lat_deg: f64, lon_deg: f64, altitude_msl_m: f64) -> Self {
+        Self {
+            utc: None,
+            quality: FixQuality::Single,
+            lat_deg,
+            lon_deg,
+            altitude_msl_m,
+            geoid_separation_m: 0.0,
+            satellites: 12,
+            hdop: 1.0,
+        }
+    }
+
+    /// The receiver's latest valid fix, stamped when sent (a caster checks that a GGA is
+    /// current); `None` without a valid position.
+    pub fn from_fix(fix: &super::GnssFix) -> Option<Self> {
+        let position = fix.position?.value;
+        if fix.quality == FixQuality::Invalid {
+            return None;
+        }
+        Some(Self {
+            utc: None,
+            quality: fix.quality,
+            lat_deg: position.latitude_deg,
+            lon_deg: position.longitude_deg,
+            altitude_msl_m: position.altitude_msl_m.unwrap_or(0.0),
+            geoid_separation_m: position.geoid_separation_m.unwrap_or(0.0),
+            satellites: fix.satellites.map_or(12, |n| n.min(99) as u8),
+            hdop: fix.hdop.unwrap_or(1.0),
+        })
+    }
+
     /// The GGA sentence, `now` standing in for a missing time.
     pub fn gga_at(&self, now: NaiveTime) -> String {
         let mut out = String::with_capacity(96);
