@@ -2,6 +2,7 @@
 #![allow(dead_code)] // each test binary uses a different subset
 
 pub mod canbus;
+pub mod caster;
 pub mod lockstep;
 pub mod mqtt;
 pub mod netcut;

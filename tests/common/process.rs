@@ -182,6 +182,16 @@ impl Proc {
         out.extend(self.stdout.iter());
         out
     }
+
+    /// [`Proc::stop`], returning every stderr (log) line instead.
+    pub fn stop_log(mut self) -> Vec<String> {
+        kill(Pid::from_raw(self.child.id() as i32), Signal::SIGTERM).expect("signal");
+        let exit = self.wait_exit(Duration::from_secs(10), "no exit within 10 s of SIGTERM");
+        assert!(exit.success(), "exit status {exit}");
+        let mut log = std::mem::take(&mut self.log);
+        log.extend(self.stderr.iter());
+        log
+    }
 }
 
 impl Drop for Proc {

@@ -39,12 +39,15 @@ impl Port {
     }
 
     pub fn send(&mut self, sentence_body: &str) {
-        let checksum = sentence_body.bytes().fold(0u8, |a, b| a ^ b);
-        let line = format!("${sentence_body}*{checksum:02X}\r\n");
-        self.master
-            .write_all(line.as_bytes())
-            .expect("write to pty");
+        send_on(&mut self.master, sentence_body);
     }
+}
+
+/// Writes `sentence_body` as a whole NMEA sentence (checksum and line end) to a pty master.
+pub fn send_on(master: &mut File, sentence_body: &str) {
+    let checksum = sentence_body.bytes().fold(0u8, |a, b| a ^ b);
+    let line = format!("${sentence_body}*{checksum:02X}\r\n");
+    master.write_all(line.as_bytes()).expect("write to pty");
 }
 
 /// A receiver on a pty: GGA (RTK fixed) and RMC at 10 Hz until dropped.
