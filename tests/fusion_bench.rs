@@ -1,5 +1,6 @@
 //! The fusion benchmark through the real binary, across the sweep the README reports: both
-//! plant files, one and two antennas, receivers at 1, 2, 5, 10 and 20 Hz. Every configuration
+//! plant files, one and two antennas, receivers at 1, 5 and 20 Hz on CI (and 2 and 10 Hz
+//! too with `CHASSISD_FULL_SWEEP=1`, as the README's table was measured). Every configuration
 //! meets every target (accuracy, outage drift, jump rejection and the NEES consistency of the
 //! published covariance, pooled over the bench's Monte Carlo runs), and its last line is the
 //! JSON summary. The bench is slow unoptimised (some 140 times slower than in release), so
@@ -9,7 +10,11 @@ mod common;
 
 use std::process::Command;
 
+/// Every receiver rate the README's sweep reports ...
 const RATES_HZ: [&str; 5] = ["1", "2", "5", "10", "20"];
+/// ... and the ones CI runs (the ends and the middle), to keep the suite inside its time
+/// budget; `CHASSISD_FULL_SWEEP=1` runs them all.
+const CI_RATES_HZ: [&str; 3] = ["1", "5", "20"];
 const ANTENNAS: [&str; 2] = ["1", "2"];
 
 fn bench(plant: &str, rate: &str, antennas: &str) -> serde_json::Value {
@@ -60,8 +65,13 @@ fn nees_range(summary: &serde_json::Value, key: &str) -> (f64, f64) {
 }
 
 fn sweep(plant: &str) {
+    let rates: &[&str] = if std::env::var_os("CHASSISD_FULL_SWEEP").is_some() {
+        &RATES_HZ
+    } else {
+        &CI_RATES_HZ
+    };
     for antennas in ANTENNAS {
-        for rate in RATES_HZ {
+        for &rate in rates {
             check(&bench(plant, rate, antennas));
         }
     }
