@@ -1204,11 +1204,15 @@ fn ntrip_override(
 /// `chassisd ntrip`'s arguments.
 #[derive(clap::Args)]
 struct NtripArgs {
-    /// The caster: ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT.
+    /// The caster: ntrip://USER:PASSWORD@HOST:PORT/MOUNTPOINT (ntrips:// for TLS).
     url: String,
     /// A file with the password (its first line), instead of one in the URL.
     #[arg(long)]
     password_file: Option<PathBuf>,
+    /// With ntrips://: the caster's certificate authority (PEM), trusted besides the
+    /// system's roots.
+    #[arg(long, value_name = "FILE")]
+    ca_file: Option<PathBuf>,
     /// NTRIP version to ask for (a 1.0 answer is taken either way).
     #[arg(long, default_value = "2", value_parser = ["1", "2"])]
     version: String,
@@ -1261,6 +1265,7 @@ fn ntrip_fetch(a: NtripArgs) -> anyhow::Result<bool> {
         Some(_) => anyhow::bail!("--position takes latitude,longitude,height"),
         None => None,
     };
+    let url_tls = url.tls;
     let spec = NtripSpec {
         url,
         version: if a.version == "1" {
@@ -1270,6 +1275,14 @@ fn ntrip_fetch(a: NtripArgs) -> anyhow::Result<bool> {
         },
         gga_interval: (a.gga_interval > 0.0).then(|| Duration::from_secs_f64(a.gga_interval)),
         timeout: a.timeout,
+        tls: if url_tls {
+            Some(
+                chassisd::ntrip::tls::client_config(a.ca_file.as_deref())
+                    .map_err(anyhow::Error::msg)?,
+            )
+        } else {
+            None
+        },
     };
     let runtime = async_runtime(1)?;
     let report = runtime.block_on(async {

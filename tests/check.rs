@@ -109,3 +109,62 @@ fn a_configuration_error_is_reported_before_any_probe() {
     assert_eq!(code, Some(78), "{out}");
     assert!(out.contains("gnss.baud") && out.contains("fix:"), "{out}");
 }
+
+#[test]
+fn the_ntrip_caster_is_probed_step_by_step() {
+    use common::caster::{Behaviour, Caster};
+    let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = common::tempdir("check-ntrip");
+    let link = dir.join("gnss-port");
+    let _receiver = Talker::start(Port::open_at(&link));
+    let frames = std::fs::read(common::shared_data("rtcm").join("rtklib-testglo.rtcm3"))
+        .expect("the stream");
+    let streaming = Caster::start(Behaviour::Stream {
+        head: "ICY 200 OK\r\n\r\n".into(),
+        body: frames,
+        chunks: vec![500],
+        every: std::time::Duration::from_millis(10),
+        repeat: true,
+    });
+    let config = |url: &str| {
+        format!(
+            "[gnss]\nport = \"{}\"\n\n[ntrip]\nurl = \"{url}\"\n\
+             fallback_position = {{ lat = 48.1, lon = 11.5, height = 520 }}\n",
+            link.display()
+        )
+    };
+    let (code, table) = check(&config(&streaming.url()), &dir);
+    assert_eq!(code, Some(0), "{table}");
+    assert!(table.contains("5 of 5 probes ok"), "{table}");
+    for step in [
+        "caster reachable",
+        "mountpoint in the table",
+        "credentials accepted",
+        "frames arriving",
+    ] {
+        let line = table
+            .lines()
+            .find(|l| l.starts_with("ntrip") && l.contains(step))
+            .unwrap_or_else(|| panic!("{step} in\n{table}"));
+        assert!(line.contains("ok:"), "{table}");
+    }
+    assert!(table.contains("MOUNT (wants GGA)"), "{table}");
+    assert!(
+        !table.contains("s3cret"),
+        "the password in the table:\n{table}"
+    );
+    // A caster that refuses the credentials: said with the fix, and the frames not probed.
+    let refusing = Caster::start(Behaviour::Unauthorized);
+    let (code, table) = check(&config(&refusing.url()), &dir);
+    assert_eq!(code, Some(1), "{table}");
+    let (auth, fix) = line_of(
+        &table
+            .lines()
+            .skip_while(|l| !l.contains("credentials accepted"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+        "ntrip",
+    );
+    assert!(auth.contains("FAILED") && auth.contains("401"), "{table}");
+    assert!(fix.contains("password"), "{table}");
+}

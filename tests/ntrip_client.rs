@@ -481,3 +481,48 @@ fn pygnssutils_gnssserver_an_ntrip_2_caster_feeds_the_receiver_its_frames_in_ord
         "not a run of the served stream"
     );
 }
+
+#[test]
+fn an_ntrips_caster_is_checked_against_its_authority_and_streams_over_tls() {
+    let dir = common::tempdir("ntrip-tls");
+    let pki = common::mqtt::TestPki::create(&dir, "caster");
+    let (served, expected) = corrupted_stream();
+    let caster = Caster::start_tls(
+        Behaviour::Stream {
+            head: "HTTP/1.1 200 OK\r\n\r\n".into(),
+            body: served,
+            chunks: vec![900, 7, 333],
+            every: Duration::from_millis(5),
+            repeat: true,
+        },
+        &pki.cert,
+        &pki.key,
+    );
+    let url = caster.url().replace("ntrip://", "ntrips://");
+    // Without the caster's authority the handshake fails, and says what to do.
+    let untrusted = common::tempdir("ntrip-tls-untrusted");
+    let (mut refused, port, _receiver) =
+        run_with_caster(&untrusted, &format!("url = \"{url}\""), &[]);
+    refused.wait_log(
+        WAIT,
+        "is its certificate's authority trusted, or named as ntrip.ca_file?",
+    );
+    refused.stop_log();
+    assert!(port.bytes().is_empty());
+    // With it, the stream's valid frames arrive over TLS.
+    let (daemon, port, _receiver) = run_with_caster(
+        &dir,
+        &format!("url = \"{url}\"\nca_file = \"{}\"", pki.ca.display()),
+        &[],
+    );
+    port.wait_len(expected.len(), WAIT);
+    std::thread::sleep(Duration::from_millis(500));
+    let log = daemon.stop_log();
+    assert!(
+        port.bytes() == expected,
+        "{} of {} bytes\n{}",
+        port.bytes().len(),
+        expected.len(),
+        log.join("\n")
+    );
+}

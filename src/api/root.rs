@@ -980,6 +980,47 @@ mod tests {
     }
 
     #[test]
+    fn rtk_corrections_going_stale_and_back_are_logged_with_their_codes() {
+        use crate::core::corrections::CorrectionsStatus;
+        let (mut d, mut core) = (dialect(), FakeCore::default());
+        let status = |fresh: bool| VehicleStatus {
+            time: T,
+            corrections: Some(CorrectionsStatus {
+                connected: true,
+                age_s: Some(if fresh { 1.0 } else { 11.0 }),
+                fresh,
+                frames: 10,
+                bytes: 1000,
+                stale_after_s: 10.0,
+            }),
+            ..Default::default()
+        };
+        let mut logs = Vec::new();
+        // Never fresh yet: nothing; fresh; stale (102); still stale; fresh again (103).
+        for fresh in [false, true, false, false, true, true] {
+            let mut out = Vec::new();
+            d.on_status(&status(fresh), &mut core, &mut out);
+            logs.extend(
+                out.into_iter()
+                    .filter(|p| p.topic.ends_with("/log/notify"))
+                    .map(|p| serde_json::from_slice::<Value>(&p.payload).expect("JSON")),
+            );
+        }
+        let codes: Vec<i64> = logs
+            .iter()
+            .filter_map(|l| l["data"]["code"].as_i64())
+            .collect();
+        assert_eq!(codes, [102, 103], "{logs:?}");
+        assert_eq!(logs[0]["data"]["key"], "RTK_CORRECTIONS_LOST");
+        assert!(
+            logs[0]["data"]["message"]
+                .as_str()
+                .unwrap_or_default()
+                .contains("10 s")
+        );
+    }
+
+    #[test]
     fn drive_becomes_a_velocity_command_and_is_acknowledged() {
         let (mut d, mut core) = (dialect(), FakeCore::default());
         let out = send(

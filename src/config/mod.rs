@@ -436,6 +436,9 @@ impl VehicleConfig {
                 }
             }
         }
+        if let Some(ca) = self.ntrip.as_ref().and_then(|n| n.ca_file.as_ref()) {
+            named.push(("ntrip.ca_file".into(), ca.to_string_lossy().into_owned()));
+        }
         for (key, name) in named {
             if !lies_within(&base.join(&name), root) {
                 return Err(ConfigError::invalid(

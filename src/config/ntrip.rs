@@ -1,5 +1,5 @@
-//! `[ntrip]`: RTK corrections from an NTRIP caster, written to the GNSS receiver's port (or
-//! to `port`). The password is a secret: it never reaches a log, a status or a recording
+//! `[ntrip]`: RTK corrections from an NTRIP caster (`ntrips://` over TLS), written to the
+//! GNSS receiver's port (or to `port`). The password is a secret: it never reaches a log, a status or a recording
 //! (recordings keep the URL with `***`, and no `password_file`).
 
 use std::path::{Path, PathBuf};
@@ -47,6 +47,10 @@ pub struct NtripConfig {
     /// Frames waiting for the port before the oldest are dropped (and counted).
     #[serde(default = "default_queue_frames")]
     pub queue_frames: usize,
+    /// With `ntrips://`: the caster's certificate authority (PEM, relative to the
+    /// configuration), trusted besides this computer's own roots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ca_file: Option<PathBuf>,
 }
 
 /// `[ntrip] fallback_position`: latitude and longitude in degrees, height in metres (above
@@ -96,15 +100,19 @@ impl NtripConfig {
             port: None,
             baud: default_baud(),
             queue_frames: default_queue_frames(),
+            ca_file: None,
         }
     }
 
-    /// Makes `password_file` relative to the configuration's folder `base`.
+    /// Makes `password_file` and `ca_file` relative to the configuration's folder `base`.
     pub fn resolve(&mut self, base: &Path) {
-        if let Some(file) = &mut self.password_file
-            && file.is_relative()
+        for file in [&mut self.password_file, &mut self.ca_file]
+            .into_iter()
+            .flatten()
         {
-            *file = base.join(&*file);
+            if file.is_relative() {
+                *file = base.join(&*file);
+            }
         }
     }
 
@@ -124,11 +132,14 @@ impl NtripConfig {
             .map_or_else(|_| "(invalid URL)".to_owned(), |u| u.to_string())
     }
 
-    /// This section as a recording keeps it: the password out of the URL, no password file.
+    /// This section as a recording keeps it: the password out of the URL, no password file and
+    /// no certificate file.
     pub fn redacted(&self) -> Self {
         Self {
             url: self.display_url(),
             password_file: None,
+            // A replay connects to nothing: no file outside the recording is named.
+            ca_file: None,
             ..self.clone()
         }
     }
@@ -146,7 +157,13 @@ impl NtripConfig {
             })?;
             url.password = Password::new(text.lines().next().unwrap_or("").trim_end());
         }
+        let tls = if url.tls {
+            Some(crate::ntrip::tls::client_config(self.ca_file.as_deref())?)
+        } else {
+            None
+        };
         Ok(NtripSpec {
+            tls,
             url,
             version: if self.version == 1 {
                 Version::V1
@@ -170,11 +187,11 @@ impl NtripConfig {
                 "e.g. url = \"ntrip://user:password@caster.example.org:2101/MOUNT\"",
             )
         })?;
-        if url.tls {
+        if self.ca_file.is_some() && !url.tls {
             return Err(invalid(
-                "ntrip.url",
-                "ntrips:// (TLS) is not supported yet".into(),
-                "use the caster's plain port with ntrip://",
+                "ntrip.ca_file",
+                "is set, and the URL is ntrip:// (no TLS)".into(),
+                "write the URL as ntrips://, or remove ca_file",
             ));
         }
         if self.password_file.is_some() && !url.password.expose().is_empty() {
@@ -281,7 +298,10 @@ mod tests {
     fn bad_values_are_refused_with_their_key() {
         for (text, key) in [
             ("url = \"http://x/M\"", "ntrip.url"),
-            ("url = \"ntrips://x/M\"", "ntrip.url"),
+            (
+                "url = \"ntrip://x/M\"\nca_file = \"ca.pem\"",
+                "ntrip.ca_file",
+            ),
             ("url = \"ntrip://x/M\"\nversion = 3", "ntrip.version"),
             (
                 "url = \"ntrip://x/M\"\ngga_interval_s = 0.5",

@@ -6,7 +6,7 @@ use crate::devices::gnss::FixQuality;
 use crate::time::Timestamp;
 
 /// Everything a status report needs, taken at one tick.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct VehicleStatus {
     /// Tick time.
     pub time: Timestamp,

@@ -6,7 +6,8 @@
 //! - [`response`]: the caster's head, read tolerantly;
 //! - [`chunked`]: NTRIP 2.0's chunked bodies;
 //! - [`sourcetable`]: the mountpoints a caster has, and which want GGA;
-//! - [`backoff`]: when to connect again.
+//! - [`backoff`]: when to connect again;
+//! - [`tls`]: the certificates an `ntrips://` caster is checked against.
 //!
 //! The frames themselves are found and checked by [`crate::devices::gnss::rtcm`].
 
@@ -15,6 +16,7 @@ pub mod chunked;
 pub mod request;
 pub mod response;
 pub mod sourcetable;
+pub mod tls;
 pub mod url;
 
 use std::time::Duration;
@@ -32,4 +34,6 @@ pub struct NtripSpec {
     /// A connection without a valid frame for this long is dropped; also the connect and
     /// head timeout.
     pub timeout: Duration,
+    /// TLS, for `ntrips://`.
+    pub tls: Option<std::sync::Arc<rustls::ClientConfig>>,
 }

@@ -155,16 +155,18 @@ async fn send(
     tx.send(record).await.map_err(|_| Closed)
 }
 
-/// Connects and writes the request for the mountpoint (or the table).
-async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<TcpStream, String> {
-    if spec.url.tls {
-        return Err(
-            "ntrips:// (TLS) is not supported yet: use the caster's plain port with ntrip://"
-                .into(),
-        );
-    }
+/// A connection to a caster: TCP, or TLS over it.
+trait CasterStream: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send {}
+
+impl<T: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send> CasterStream for T {}
+
+type Conn = Box<dyn CasterStream>;
+
+/// Connects (with TLS for `ntrips://`) and writes the request for the mountpoint (or the
+/// table).
+async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<Conn, String> {
     let address = spec.url.address();
-    let mut stream = match timeout(spec.timeout, TcpStream::connect(&address)).await {
+    let tcp = match timeout(spec.timeout, TcpStream::connect(&address)).await {
         Ok(Ok(s)) => s,
         Ok(Err(e)) => return Err(format!("cannot connect to {address}: {e}")),
         Err(_) => {
@@ -174,7 +176,31 @@ async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<TcpStream, String> 
             ));
         }
     };
-    let _ = stream.set_nodelay(true);
+    let _ = tcp.set_nodelay(true);
+    let mut stream: Conn = match (spec.url.tls, &spec.tls) {
+        (false, _) => Box::new(tcp),
+        (true, None) => return Err("ntrips:// without a TLS configuration".into()),
+        (true, Some(config)) => {
+            let name = rustls::pki_types::ServerName::try_from(spec.url.host.clone())
+                .map_err(|e| format!("{:?} is no name for TLS: {e}", spec.url.host))?;
+            let connector = tokio_rustls::TlsConnector::from(config.clone());
+            match timeout(spec.timeout, connector.connect(name, tcp)).await {
+                Ok(Ok(tls)) => Box::new(tls),
+                Ok(Err(e)) => {
+                    return Err(format!(
+                        "TLS with {address} failed: {e} (is it a TLS port? is its \
+                         certificate's authority trusted, or named as ntrip.ca_file?)"
+                    ));
+                }
+                Err(_) => {
+                    return Err(format!(
+                        "no TLS handshake with {address} within {} s",
+                        spec.timeout.as_secs()
+                    ));
+                }
+            }
+        }
+    };
     let text = request(&spec.url, spec.version, sourcetable);
     stream
         .write_all(text.as_bytes())
@@ -184,11 +210,7 @@ async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<TcpStream, String> 
 }
 
 /// Reads the head; the bytes after it stay in `buf`.
-async fn read_head(
-    stream: &mut TcpStream,
-    buf: &mut Vec<u8>,
-    limit: Duration,
-) -> Result<Head, String> {
+async fn read_head(stream: &mut Conn, buf: &mut Vec<u8>, limit: Duration) -> Result<Head, String> {
     let deadline = Instant::now() + limit;
     loop {
         match parse_head(buf) {
@@ -337,7 +359,7 @@ async fn session(link: &Link<'_>) -> Result<Ended, Closed> {
 
 async fn stream_corrections(
     link: &Link<'_>,
-    stream: &mut TcpStream,
+    stream: &mut Conn,
     head: Head,
     first: Vec<u8>,
 ) -> Result<Ended, Closed> {

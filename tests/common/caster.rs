@@ -1,6 +1,6 @@
 //! A small NTRIP caster for the client's tests: it serves one behaviour on 127.0.0.1 (a
 //! stream paced in chunks of odd sizes, a head and then silence, a refusal, a close at
-//! once), and keeps when each client connected and what each sent after its request (the
+//! once) to every mountpoint, a sourcetable naming MOUNT to `GET /`, and keeps when each client connected and what each sent after its request (the
 //! GGA sentences). The real casters' tests are `tests/ntrip_casters.rs`.
 
 use std::io::{Read, Write};
@@ -48,6 +48,31 @@ pub struct Caster {
 
 impl Caster {
     pub fn start(behaviour: Behaviour) -> Caster {
+        Self::listen(behaviour, None)
+    }
+
+    /// [`Caster::start`] behind TLS, with the certificate `cert` and its key `key` (PEM).
+    pub fn start_tls(
+        behaviour: Behaviour,
+        cert: &std::path::Path,
+        key: &std::path::Path,
+    ) -> Caster {
+        use rustls::pki_types::pem::PemObject;
+        use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+        let _ = rustls::crypto::ring::default_provider().install_default();
+        let certs = CertificateDer::pem_file_iter(cert)
+            .expect("certificate file")
+            .collect::<Result<Vec<_>, _>>()
+            .expect("certificates");
+        let key = PrivateKeyDer::from_pem_file(key).expect("key");
+        let config = rustls::ServerConfig::builder()
+            .with_no_client_auth()
+            .with_single_cert(certs, key)
+            .expect("server configuration");
+        Self::listen(behaviour, Some(Arc::new(config)))
+    }
+
+    fn listen(behaviour: Behaviour, tls: Option<Arc<rustls::ServerConfig>>) -> Caster {
         let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
         let port = listener.local_addr().expect("address").port();
         let connections = Arc::new(Mutex::new(Vec::new()));
@@ -57,7 +82,26 @@ impl Caster {
                 let Ok(stream) = stream else { continue };
                 let behaviour = behaviour.clone();
                 let seen = seen.clone();
-                std::thread::spawn(move || serve(stream, behaviour, seen));
+                let tls = tls.clone();
+                std::thread::spawn(move || match tls {
+                    None => {
+                        let lines = stream.try_clone().ok();
+                        serve(stream, lines, behaviour, seen);
+                    }
+                    Some(config) => {
+                        // What a TLS client sends after its request is not read (GGAs wait
+                        // in the socket's buffer).
+                        let Ok(server) = rustls::ServerConnection::new(config) else {
+                            return;
+                        };
+                        serve(
+                            rustls::StreamOwned::new(server, stream),
+                            None,
+                            behaviour,
+                            seen,
+                        );
+                    }
+                });
             }
         });
         Caster { port, connections }
@@ -86,9 +130,15 @@ impl Caster {
     }
 }
 
-fn serve(mut stream: TcpStream, behaviour: Behaviour, seen: Arc<Mutex<Vec<Connection>>>) {
+/// Serves one client on `stream`; `lines`, a second handle on a plain connection, reads
+/// what the client sends after its request.
+fn serve(
+    mut stream: impl Read + Write,
+    lines: Option<TcpStream>,
+    behaviour: Behaviour,
+    seen: Arc<Mutex<Vec<Connection>>>,
+) {
     let at = Instant::now();
-    let _ = stream.set_nodelay(true);
     let index = {
         let mut s = seen.lock().unwrap();
         s.push(Connection {
@@ -110,9 +160,20 @@ fn serve(mut stream: TcpStream, behaviour: Behaviour, seen: Arc<Mutex<Vec<Connec
             _ => return,
         }
     }
-    seen.lock().unwrap()[index].request = String::from_utf8_lossy(&head).into_owned();
+    let request = String::from_utf8_lossy(&head).into_owned();
+    seen.lock().unwrap()[index].request = request.clone();
+    // The sourcetable: one mountpoint, MOUNT, which wants GGA.
+    if request.starts_with("GET / ") {
+        let _ = stream.write_all(
+            b"SOURCETABLE 200 OK\r\nContent-Type: text/plain\r\n\r\n\
+              STR;MOUNT;Test;RTCM 3.3;1004(1),1005(10);2;GPS;TEST;DEU;48.10;11.50;1;0;chassisd test caster;none;B;N;9600;\r\n\
+              ENDSOURCETABLE\r\n",
+        );
+        let _ = stream.flush();
+        return;
+    }
     // What the client sends from now on, line by line.
-    if let Ok(mut reader) = stream.try_clone() {
+    if let Some(mut reader) = lines {
         let seen = seen.clone();
         std::thread::spawn(move || {
             let mut line = Vec::new();
@@ -142,14 +203,14 @@ fn serve(mut stream: TcpStream, behaviour: Behaviour, seen: Arc<Mutex<Vec<Connec
             every,
             repeat,
         } => {
-            if stream.write_all(head.as_bytes()).is_err() {
+            if stream.write_all(head.as_bytes()).is_err() || stream.flush().is_err() {
                 return;
             }
             let mut at = if repeat || index == 0 { 0 } else { body.len() };
             let mut sizes = chunks.iter().cycle();
             while at < body.len() {
                 let n = (*sizes.next().unwrap_or(&512)).min(body.len() - at);
-                if stream.write_all(&body[at..at + n]).is_err() {
+                if stream.write_all(&body[at..at + n]).is_err() || stream.flush().is_err() {
                     return;
                 }
                 at += n;

@@ -398,6 +398,50 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_corrections_age_is_a_diagnostic_of_its_own() {
+        let mut status = VehicleStatus::default();
+        let statuses = |s: &VehicleStatus| {
+            diagnostics(s)["status"]
+                .as_array()
+                .cloned()
+                .unwrap_or_default()
+        };
+        let named = |s: &VehicleStatus| {
+            statuses(s)
+                .into_iter()
+                .find(|d| d["name"] == "chassisd: rtk corrections")
+        };
+        assert!(named(&status).is_none(), "none without [ntrip]");
+        let mut c = CorrectionsStatus {
+            connected: true,
+            age_s: Some(2.5),
+            fresh: true,
+            frames: 40,
+            bytes: 9000,
+            stale_after_s: 10.0,
+        };
+        status.corrections = Some(c);
+        let d = named(&status).expect("the corrections' status");
+        assert_eq!(d["level"], OK);
+        let age = d["values"]
+            .as_array()
+            .and_then(|v| v.iter().find(|kv| kv["key"] == "age_s"))
+            .map(|kv| kv["value"].clone());
+        assert_eq!(age, Some(json!("2.5")));
+        c.fresh = false;
+        c.connected = false;
+        status.corrections = Some(c);
+        let d = named(&status).expect("the corrections' status");
+        assert_eq!(d["level"], ERROR);
+        assert!(
+            d["message"]
+                .as_str()
+                .unwrap_or_default()
+                .contains("not connected")
+        );
+    }
+
+    #[test]
     fn a_goal_pose_becomes_a_local_goal() {
         let msg = json!({
             "header": {"frame_id": "map", "stamp": {"sec": 0, "nanosec": 0}},
