@@ -157,14 +157,12 @@ fn the_ntrip_caster_is_probed_step_by_step() {
     let refusing = Caster::start(Behaviour::Unauthorized);
     let (code, table) = check(&config(&refusing.url()), &dir);
     assert_eq!(code, Some(1), "{table}");
-    let (auth, fix) = line_of(
-        &table
-            .lines()
-            .skip_while(|l| !l.contains("credentials accepted"))
-            .collect::<Vec<_>>()
-            .join("\n"),
-        "ntrip",
-    );
+    let from_auth = table
+        .lines()
+        .skip_while(|l| !l.contains("credentials accepted"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let (auth, fix) = line_of(&from_auth, "ntrip");
     assert!(auth.contains("FAILED") && auth.contains("401"), "{table}");
     assert!(fix.contains("password"), "{table}");
 }

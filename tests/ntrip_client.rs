@@ -41,6 +41,13 @@ fn run_with_caster(
     ntrip: &str,
     extra: &[&std::ffi::OsStr],
 ) -> (Proc, PortReader, std::fs::File) {
+    let (daemon, master) = run_with_receiver(dir, ntrip, extra);
+    let writer = master.try_clone().expect("the pty's writer");
+    (daemon, PortReader::start(master), writer)
+}
+
+/// [`run_with_caster`], the pty's master handed back unread.
+fn run_with_receiver(dir: &Path, ntrip: &str, extra: &[&std::ffi::OsStr]) -> (Proc, std::fs::File) {
     let link = dir.join("gnss");
     let config = dir.join("vehicle.toml");
     std::fs::write(
@@ -53,12 +60,10 @@ fn run_with_caster(
     .expect("config");
     let _turn = one_at_a_time();
     let port = Port::open_at(&link);
-    let writer = port.master.try_clone().expect("the pty's writer");
-    let reader = PortReader::start(port.master);
     let mut args: Vec<&std::ffi::OsStr> =
         vec!["run".as_ref(), "--config".as_ref(), config.as_os_str()];
     args.extend_from_slice(extra);
-    (Proc::start(&args), reader, writer)
+    (Proc::start(&args), port.master)
 }
 
 /// A real reference station's stream with every seventh frame corrupted (one payload byte
@@ -525,4 +530,49 @@ fn an_ntrips_caster_is_checked_against_its_authority_and_streams_over_tls() {
         expected.len(),
         log.join("\n")
     );
+}
+
+#[test]
+fn a_receiver_that_takes_no_corrections_never_holds_up_its_fixes() {
+    let dir = common::tempdir("ntrip-stalled");
+    let (served, _) = corrupted_stream();
+    // Far more than the pty's buffer, fast.
+    let caster = Caster::start(Behaviour::Stream {
+        head: "ICY 200 OK\r\n\r\n".into(),
+        body: served.repeat(20),
+        chunks: vec![4096],
+        every: Duration::from_millis(2),
+        repeat: true,
+    });
+    // The pty's master is never read: the receiver's port takes nothing once its buffer is
+    // full, and the corrections' writes wait there.
+    let (mut daemon, mut receiver) = run_with_receiver(
+        &dir,
+        &format!("url = \"{}\"\nqueue_frames = 16", caster.url()),
+        &[],
+    );
+    daemon.wait_log(WAIT, "RTCM corrections dropped");
+    // Fixes still arrive and are decoded: each new latitude shows in the status.
+    for minutes in ["08.10000000", "08.20000000", "08.30000000"] {
+        let lat = 23.0 + minutes.parse::<f64>().expect("minutes") / 60.0;
+        let until = Instant::now() + Duration::from_secs(5);
+        let mut seen = false;
+        while !seen && Instant::now() < until {
+            common::pty::send_on(
+                &mut receiver,
+                &format!(
+                    "GNGGA,120000.00,23{minutes},N,11301.17918515,E,4,20,0.6,12.3,M,-6.1,M,1.0,0123"
+                ),
+            );
+            std::thread::sleep(Duration::from_millis(100));
+            seen = daemon.drain_out().iter().any(|l| {
+                serde_json::from_str::<serde_json::Value>(l)
+                    .ok()
+                    .and_then(|s| s["rtk"]["latitude"].as_f64())
+                    .is_some_and(|v| (v - lat).abs() < 1e-7)
+            });
+        }
+        assert!(seen, "the fix at 23°{minutes}' never showed");
+    }
+    daemon.stop_log();
 }
