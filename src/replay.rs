@@ -442,10 +442,14 @@ impl ReplaySummary {
         if let Some(c) = &self.corrections {
             let _ = write!(
                 s,
-                "; corrections: {} RTCM frames ({} bytes) to the receiver, {} invalid bytes \
-                 dropped",
-                c.frames, c.frame_bytes, c.invalid_bytes
+                "; corrections: {} RTCM frames ({} bytes) to the receiver (",
+                c.frames, c.frame_bytes
             );
+            join(
+                &mut s,
+                c.by_type.iter().map(|(number, n)| format!("{number} {n}")),
+            );
+            let _ = write!(s, "), {} invalid bytes dropped", c.invalid_bytes);
         }
         if self.engine.undecoded > 0 {
             let _ = write!(s, "; {} frames without a decoder", self.engine.undecoded);

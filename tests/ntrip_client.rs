@@ -236,7 +236,10 @@ fn a_chunked_ntrip_2_stream_arrives_de_chunked_and_whole() {
     });
     let (daemon, port, _receiver) = run_with_caster(
         &dir,
-        &format!("url = \"{}\"\ngga_interval_s = 0", caster.url()),
+        &format!(
+            "url = \"{}\"\ngga_interval_s = 0\nfallback_position = {{ lat = 48.1, lon = 11.5, height = 520 }}",
+            caster.url()
+        ),
         &[],
     );
     let written = port.wait_len(expected.len(), WAIT);
@@ -250,16 +253,34 @@ fn a_chunked_ntrip_2_stream_arrives_de_chunked_and_whole() {
         log.join("\n")
     );
     assert!(written.len() >= expected.len());
-    let c = &caster.connections()[0];
+    // With gga_interval_s = 0 the client read the table first; it says MOUNT wants GGA
+    // (nmea=1), so the GGA goes up all the same, the fallback position at once.
+    let connections = caster.connections();
+    assert!(
+        connections[0].request.starts_with("GET / HTTP/1.1\r\n"),
+        "{connections:?}"
+    );
+    let c = connections
+        .iter()
+        .find(|c| c.request.starts_with("GET /MOUNT HTTP/1.1\r\n"))
+        .expect("the stream's request");
     assert!(
         c.request.contains("Ntrip-Version: Ntrip/2.0"),
         "{}",
         c.request
     );
     assert!(
-        c.lines.is_empty(),
-        "no GGA with gga_interval_s = 0: {:?}",
         c.lines
+            .first()
+            .is_some_and(|(at, l)| l.contains("4806.000")
+                && at.duration_since(c.at) < Duration::from_secs(1)),
+        "the table's GGA flag honoured: {:?}",
+        c.lines
+    );
+    assert!(
+        log.iter()
+            .any(|l| l.contains("needs the rover's position (nmea=1)")),
+        "{log:#?}"
     );
 }
 
@@ -575,4 +596,42 @@ fn a_receiver_that_takes_no_corrections_never_holds_up_its_fixes() {
         assert!(seen, "the fix at 23°{minutes}' never showed");
     }
     daemon.stop_log();
+}
+
+#[test]
+fn with_ntrip_port_the_corrections_go_to_a_port_of_their_own() {
+    let dir = common::tempdir("ntrip-port");
+    let (served, expected) = corrupted_stream();
+    let caster = Caster::start(Behaviour::Stream {
+        head: "ICY 200 OK\r\n\r\n".into(),
+        body: served,
+        chunks: vec![256, 31],
+        every: Duration::from_millis(5),
+        repeat: true,
+    });
+    let second = dir.join("corrections");
+    let corrections = {
+        let _turn = one_at_a_time();
+        PortReader::start(Port::open_at(&second).master)
+    };
+    let (daemon, receiver, _writer) = run_with_caster(
+        &dir,
+        &format!(
+            "url = \"{}\"\nport = \"{}\"",
+            caster.url(),
+            second.display()
+        ),
+        &[],
+    );
+    corrections.wait_len(expected.len(), WAIT);
+    std::thread::sleep(Duration::from_millis(500));
+    let log = daemon.stop_log();
+    assert!(
+        corrections.bytes() == expected,
+        "{} of {} bytes\n{}",
+        corrections.bytes().len(),
+        expected.len(),
+        log.join("\n")
+    );
+    assert!(receiver.bytes().is_empty(), "nothing to the NMEA port");
 }
