@@ -29,8 +29,10 @@ fn stream() -> Vec<u8> {
 
 /// Relays `bytes` in `chunk`-byte records, one per millisecond; returns the bytes written.
 fn relay(bytes: &[u8], chunk: usize) -> usize {
-    let mut config = VehicleConfig::default();
-    config.ntrip = Some(NtripConfig::with_url("ntrip://u:p@127.0.0.1:2101/M"));
+    let config = VehicleConfig {
+        ntrip: Some(NtripConfig::with_url("ntrip://u:p@127.0.0.1:2101/M")),
+        ..VehicleConfig::default()
+    };
     let mut engine = Engine::new(&config, &[(GNSS_SOURCE.into(), Decoder::Nmea)]);
     let mut out = Vec::new();
     let mut written = 0;
