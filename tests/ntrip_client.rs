@@ -635,3 +635,70 @@ fn with_ntrip_port_the_corrections_go_to_a_port_of_their_own() {
     );
     assert!(receiver.bytes().is_empty(), "nothing to the NMEA port");
 }
+
+#[test]
+fn rtklib_str2str_an_ntrip_1_caster_feeds_the_receiver_its_frames_in_order() {
+    let dir = common::tempdir("ntrip-str2str-run");
+    let source = common::shared_data("rtcm").join("rtklib-GMSD7_20121014.rtcm3");
+    let stream = std::fs::read(&source).expect("the stream");
+    // str2str's caster listens on every interface: it and chassisd share a network
+    // namespace of their own. Its input is paced (a file would go out whole before any
+    // client connects): 1,500 bytes every 100 ms. (Its output goes nowhere: chassisd's pipes
+    // must close when chassisd ends.)
+    let pacer = dir.join("pacer.py");
+    std::fs::write(
+        &pacer,
+        "import sys,time\nd=open(sys.argv[1],'rb').read()\n\
+         for i in range(0,len(d),1500):\n sys.stdout.buffer.write(d[i:i+1500]);sys.stdout.buffer.flush();time.sleep(0.1)\n\
+         time.sleep(60)\n",
+    )
+    .expect("pacer");
+    let script = format!(
+        "ip link set lo up || exit 90\n\
+         (timeout 90 python3 '{}' '{}' | timeout 90 str2str -out ntripc://rover:s3cret@:2101/MOUNT) \
+         </dev/null >/dev/null 2>&1 &\n\
+         sleep 1\n\
+         exec \"$@\"\n",
+        pacer.display(),
+        source.display()
+    );
+    let link = dir.join("gnss");
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[gnss]\nport = \"{}\"\n\n[ntrip]\nurl = \"ntrip://rover:s3cret@127.0.0.1:2101/MOUNT\"\n\
+             version = 1\ngga_interval_s = 1\nfallback_position = {{ lat = 48.1, lon = 11.5, height = 520 }}\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let (daemon, port) = {
+        let _turn = one_at_a_time();
+        let port = Port::open_at(&link);
+        let daemon = Proc::start_under(
+            &["unshare", "-rn", "sh", "-c", &script, "sh"],
+            &["run".as_ref(), "--config".as_ref(), config.as_os_str()],
+        );
+        (daemon, PortReader::start(port.master))
+    };
+    let written = port.wait_len(30_000, Duration::from_secs(30));
+    let log = daemon.stop_log();
+    assert!(
+        written.len() >= 30_000,
+        "{} bytes at the receiver\n{}",
+        written.len(),
+        log.join("\n")
+    );
+    assert_eq!(
+        valid_frames(&written),
+        written,
+        "bytes outside valid frames"
+    );
+    assert!(
+        stream
+            .windows(written.len())
+            .any(|w| w == written.as_slice()),
+        "not a run of the served stream"
+    );
+}
