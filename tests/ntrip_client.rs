@@ -329,8 +329,13 @@ fn a_caster_that_goes_silent_after_its_200_is_dropped_after_timeout_s() {
 fn refused_credentials_are_reported_with_the_fix_and_retried_slowly() {
     let dir = common::tempdir("ntrip-401");
     let caster = Caster::start(Behaviour::Unauthorized);
-    let (mut daemon, port, _receiver) =
-        run_with_caster(&dir, &format!("url = \"{}\"", caster.url()), &[]);
+    // `--ntrip URL` overrides the configuration's caster (an address nobody answers on).
+    let url = caster.url();
+    let (mut daemon, port, _receiver) = run_with_caster(
+        &dir,
+        "url = \"ntrip://nobody@192.0.2.1:2101/ELSEWHERE\"",
+        &["--ntrip".as_ref(), url.as_ref()],
+    );
     daemon.wait_log(
         WAIT,
         "the caster refused the credentials (401 Unauthorized): check the user and the password",
