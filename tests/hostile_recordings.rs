@@ -125,6 +125,31 @@ fn a_long_quiet_lead_within_the_limit_is_ticked_through_in_bounded_memory() {
 }
 
 #[test]
+fn an_ntrip_secret_file_named_outside_the_recording_is_refused_unread() {
+    for key in ["password_file", "ca_file"] {
+        let dir = copy_of("rtk-drive", &format!("hostile-ntrip-{key}"));
+        let config = dir.join("vehicle.toml");
+        let text = std::fs::read_to_string(&config).expect("vehicle.toml");
+        std::fs::write(
+            &config,
+            format!(
+                "{text}\n[ntrip]\nurl = \"ntrips://rover@127.0.0.1:2101/M\"\n{key} = \"/etc/passwd\"\n"
+            ),
+        )
+        .expect("write");
+        let out = replay(&dir, &[], Duration::from_secs(30));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{key}: {stderr}");
+        assert!(
+            stderr.contains("lies outside the recording's folder")
+                && stderr.contains(&format!("ntrip.{key}")),
+            "{key}: {stderr}"
+        );
+        assert!(!stderr.contains("root:x:0:0"), "{key}: {stderr}");
+    }
+}
+
+#[test]
 fn files_named_outside_the_recording_are_refused_unread() {
     for (name, target) in [
         ("absolute", "/etc/passwd"),

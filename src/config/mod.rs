@@ -436,8 +436,15 @@ impl VehicleConfig {
                 }
             }
         }
-        if let Some(ca) = self.ntrip.as_ref().and_then(|n| n.ca_file.as_ref()) {
-            named.push(("ntrip.ca_file".into(), ca.to_string_lossy().into_owned()));
+        if let Some(n) = &self.ntrip {
+            for (key, path) in [
+                ("ntrip.password_file", &n.password_file),
+                ("ntrip.ca_file", &n.ca_file),
+            ] {
+                if let Some(path) = path {
+                    named.push((key.into(), path.to_string_lossy().into_owned()));
+                }
+            }
         }
         for (key, name) in named {
             if !lies_within(&base.join(&name), root) {
