@@ -88,6 +88,47 @@ fn corrupted_stream() -> (Vec<u8>, Vec<u8>) {
     (served, expected)
 }
 
+/// Waits for `expected.len()` bytes at `port` (and a moment more, for any extra), stops the
+/// daemon, checks the port got exactly `expected`, and returns the daemon's log.
+fn stop_once_received(daemon: Proc, port: &PortReader, expected: &[u8]) -> Vec<String> {
+    port.wait_len(expected.len(), WAIT);
+    std::thread::sleep(Duration::from_millis(500));
+    let log = daemon.stop_log();
+    let got = port.bytes();
+    assert!(
+        got == expected,
+        "{} of {} bytes\n{}",
+        got.len(),
+        expected.len(),
+        log.join("\n")
+    );
+    log
+}
+
+/// Waits up to `wait` for 30 kB at `port`, stops the daemon, and checks they are whole valid
+/// frames only, and one unbroken run of `stream` (the client joined it under way).
+fn stop_with_a_run_of(daemon: Proc, port: &PortReader, stream: &[u8], wait: Duration) {
+    let written = port.wait_len(30_000, wait);
+    let log = daemon.stop_log();
+    assert!(
+        written.len() >= 30_000,
+        "{} bytes at the receiver\n{}",
+        written.len(),
+        log.join("\n")
+    );
+    assert_eq!(
+        valid_frames(&written),
+        written,
+        "bytes outside valid frames"
+    );
+    assert!(
+        stream
+            .windows(written.len())
+            .any(|w| w == written.as_slice()),
+        "not a run of the served stream"
+    );
+}
+
 /// Checks an NMEA sentence's checksum.
 fn valid_nmea(line: &str) -> bool {
     let Some(body) = line.strip_prefix('$') else {
@@ -242,17 +283,7 @@ fn a_chunked_ntrip_2_stream_arrives_de_chunked_and_whole() {
         ),
         &[],
     );
-    let written = port.wait_len(expected.len(), WAIT);
-    std::thread::sleep(Duration::from_millis(500));
-    let log = daemon.stop_log();
-    assert!(
-        port.bytes() == expected,
-        "{} of {} bytes\n{}",
-        port.bytes().len(),
-        expected.len(),
-        log.join("\n")
-    );
-    assert!(written.len() >= expected.len());
+    let log = stop_once_received(daemon, &port, &expected);
     // With gga_interval_s = 0 the client read the table first; it says MOUNT wants GGA
     // (nmea=1), so the GGA goes up all the same, the fallback position at once.
     let connections = caster.connections();
@@ -411,14 +442,6 @@ fn the_simulated_receiver_holds_rtk_fixed_only_while_corrections_arrive() {
     );
 }
 
-/// A free TCP port on 127.0.0.1.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port()
-}
-
 /// A child process killed when the test ends.
 struct Child(std::process::Child);
 
@@ -450,7 +473,7 @@ fn pygnssutils_gnssserver_an_ntrip_2_caster_feeds_the_receiver_its_frames_in_ord
             std::thread::sleep(Duration::from_secs(120));
         }
     });
-    let caster_port = free_port();
+    let caster_port = common::mqtt::free_port();
     let gnssserver = common::repo().join("target/test-venv/bin/gnssserver");
     let _caster = Child(
         std::process::Command::new(&gnssserver)
@@ -490,27 +513,7 @@ fn pygnssutils_gnssserver_an_ntrip_2_caster_feeds_the_receiver_its_frames_in_ord
         ),
         &[],
     );
-    let written = port.wait_len(30_000, Duration::from_secs(40));
-    let log = daemon.stop_log();
-    assert!(
-        written.len() >= 30_000,
-        "{} bytes at the receiver\n{}",
-        written.len(),
-        log.join("\n")
-    );
-    // The receiver got whole frames only, and one unbroken run of the station's stream
-    // (the client joined it under way).
-    assert_eq!(
-        valid_frames(&written),
-        written,
-        "bytes outside valid frames"
-    );
-    assert!(
-        source
-            .windows(written.len())
-            .any(|w| w == written.as_slice()),
-        "not a run of the served stream"
-    );
+    stop_with_a_run_of(daemon, &port, &source, Duration::from_secs(40));
 }
 
 #[test]
@@ -546,16 +549,7 @@ fn an_ntrips_caster_is_checked_against_its_authority_and_streams_over_tls() {
         &format!("url = \"{url}\"\nca_file = \"{}\"", pki.ca.display()),
         &[],
     );
-    port.wait_len(expected.len(), WAIT);
-    std::thread::sleep(Duration::from_millis(500));
-    let log = daemon.stop_log();
-    assert!(
-        port.bytes() == expected,
-        "{} of {} bytes\n{}",
-        port.bytes().len(),
-        expected.len(),
-        log.join("\n")
-    );
+    stop_once_received(daemon, &port, &expected);
 }
 
 #[test]
@@ -628,16 +622,7 @@ fn with_ntrip_port_the_corrections_go_to_a_port_of_their_own() {
         ),
         &[],
     );
-    corrections.wait_len(expected.len(), WAIT);
-    std::thread::sleep(Duration::from_millis(500));
-    let log = daemon.stop_log();
-    assert!(
-        corrections.bytes() == expected,
-        "{} of {} bytes\n{}",
-        corrections.bytes().len(),
-        expected.len(),
-        log.join("\n")
-    );
+    stop_once_received(daemon, &corrections, &expected);
     assert!(receiver.bytes().is_empty(), "nothing to the NMEA port");
 }
 
@@ -687,23 +672,5 @@ fn rtklib_str2str_an_ntrip_1_caster_feeds_the_receiver_its_frames_in_order() {
         );
         (daemon, PortReader::start(port.master))
     };
-    let written = port.wait_len(30_000, Duration::from_secs(30));
-    let log = daemon.stop_log();
-    assert!(
-        written.len() >= 30_000,
-        "{} bytes at the receiver\n{}",
-        written.len(),
-        log.join("\n")
-    );
-    assert_eq!(
-        valid_frames(&written),
-        written,
-        "bytes outside valid frames"
-    );
-    assert!(
-        stream
-            .windows(written.len())
-            .any(|w| w == written.as_slice()),
-        "not a run of the served stream"
-    );
+    stop_with_a_run_of(daemon, &port, &stream, Duration::from_secs(30));
 }

@@ -21,7 +21,7 @@ use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::rtcm::RtcmFramer;
 pub use crate::ntrip::NtripSpec;
 use crate::ntrip::backoff::Backoff;
-use crate::ntrip::chunked::Dechunker;
+use crate::ntrip::chunked::{ChunkError, Dechunker};
 use crate::ntrip::request::request;
 use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
 use crate::ntrip::sourcetable::{self, MAX_TABLE};
@@ -34,6 +34,8 @@ pub const SOURCE: &str = crate::engine::CORRECTIONS_SOURCE;
 const GGA_WHEN_WANTED: Duration = Duration::from_secs(10);
 /// Read buffer, bytes.
 const READ_BUFFER: usize = 4096;
+/// What to do about refused credentials (the client's log and `check` say it alike).
+const CREDENTIALS_FIX: &str = "check the user and the password (or password_file)";
 /// Mountpoints named in a "not found" report, at most.
 const LISTED: usize = 12;
 
@@ -245,6 +247,30 @@ async fn read_head(stream: &mut Conn, buf: &mut Vec<u8>, limit: Duration) -> Res
     }
 }
 
+/// A response's body as it arrives: de-chunked when the caster chunks it (NTRIP 2.0).
+struct Body(Option<Dechunker>);
+
+impl Body {
+    fn of(head: &Head) -> Self {
+        Self(head.chunked.then(Dechunker::new))
+    }
+
+    /// Moves the body's bytes among `raw` (emptied) to the end of `body`.
+    fn take(&mut self, raw: &mut Vec<u8>, body: &mut Vec<u8>) -> Result<(), ChunkError> {
+        match &mut self.0 {
+            Some(d) => d.push(raw, body)?,
+            None => body.append(raw),
+        }
+        raw.clear();
+        Ok(())
+    }
+
+    /// The caster ended a chunked body.
+    fn is_done(&self) -> bool {
+        self.0.as_ref().is_some_and(Dechunker::is_done)
+    }
+}
+
 /// The caster's mountpoints (for a report), or why they cannot be had.
 async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, String> {
     let mut stream = open(spec, true).await?;
@@ -258,15 +284,12 @@ async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, Strin
     }
     let deadline = Instant::now() + spec.timeout;
     let mut body = Vec::new();
-    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut decoder = Body::of(&head);
     let mut pending = std::mem::take(&mut buf);
     loop {
-        match dechunk.as_mut() {
-            Some(d) => d
-                .push(&pending, &mut body)
-                .map_err(|e| format!("the table's body: {e}"))?,
-            None => body.extend_from_slice(&pending),
-        }
+        decoder
+            .take(&mut pending, &mut body)
+            .map_err(|e| format!("the table's body: {e}"))?;
         let text = String::from_utf8_lossy(&body);
         if sourcetable::is_complete(&text) || body.len() > MAX_TABLE {
             return Ok(sourcetable::parse(&text));
@@ -330,8 +353,7 @@ async fn session(link: &Link<'_>) -> Result<Ended, Closed> {
         Status::Icy | Status::Http => {}
         Status::Error(code @ (401 | 403), reason) => {
             return Ok(Ended::failed(format!(
-                "the caster refused the credentials ({code} {reason}): check the user and the \
-                 password (or password_file)"
+                "the caster refused the credentials ({code} {reason}): {CREDENTIALS_FIX}"
             )));
         }
         // NTRIP 1.0 casters answer an unknown mountpoint with their table.
@@ -370,7 +392,7 @@ async fn stream_corrections(
         position,
         state,
     } = *link;
-    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut decoder = Body::of(&head);
     let mut framer = RtcmFramer::new();
     let mut delivered = false;
     let mut last_valid = Instant::now();
@@ -381,18 +403,12 @@ async fn stream_corrections(
     loop {
         if !pending.is_empty() {
             let mut body = Vec::with_capacity(pending.len());
-            match dechunk.as_mut() {
-                Some(d) => {
-                    if let Err(e) = d.push(&pending, &mut body) {
-                        return Ok(Ended {
-                            reason: format!("the caster's chunked stream broke: {e}"),
-                            delivered,
-                        });
-                    }
-                }
-                None => body = std::mem::take(&mut pending),
+            if let Err(e) = decoder.take(&mut pending, &mut body) {
+                return Ok(Ended {
+                    reason: format!("the caster's chunked stream broke: {e}"),
+                    delivered,
+                });
             }
-            pending.clear();
             let before = framer.stats().frames;
             framer.push(&body, |_, _| {});
             let stats = framer.stats();
@@ -408,7 +424,7 @@ async fn stream_corrections(
             if !body.is_empty() {
                 send(tx, clock, Payload::Serial(Bytes::from(body))).await?;
             }
-            if dechunk.as_ref().is_some_and(Dechunker::is_done) {
+            if decoder.is_done() {
                 return Ok(Ended {
                     reason: "the caster ended its stream".into(),
                     delivered,
@@ -588,7 +604,7 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
                 AUTH,
                 Err((
                     format!("the caster refused the credentials ({code} {reason})"),
-                    "check the user and the password (or ntrip.password_file)".into(),
+                    CREDENTIALS_FIX.into(),
                 )),
             ));
             steps.push((FRAMES, not_probed("not authenticated")));
@@ -609,23 +625,18 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
     if let Some(fix) = position.filter(|_| wants_gga || spec.gga_interval.is_some()) {
         let _ = stream.write_all(fix.gga().as_bytes()).await;
     }
-    let mut dechunk = head.chunked.then(Dechunker::new);
+    let mut decoder = Body::of(&head);
     let mut framer = RtcmFramer::new();
     let deadline = Instant::now() + spec.timeout;
     let mut pending = buf;
     let mut chunk = vec![0u8; READ_BUFFER];
+    let mut body = Vec::new();
     loop {
-        let mut body = Vec::new();
-        match dechunk.as_mut() {
-            Some(d) => {
-                if d.push(&pending, &mut body).is_err() {
-                    break;
-                }
-            }
-            None => body = std::mem::take(&mut pending),
+        if decoder.take(&mut pending, &mut body).is_err() {
+            break;
         }
-        pending.clear();
         framer.push(&body, |_, _| {});
+        body.clear();
         if framer.stats().frames >= 3 {
             break;
         }
