@@ -1,6 +1,6 @@
 //! chassisd: the chassis daemon of an RTK ground robot.
 //!
-//! The logic is a sans-IO core ([`core::Vehicle`]) fed through device decoders by the
+//! The logic is a sans-IO core ([`vehicle::Vehicle`]) fed through device decoders by the
 //! [`engine::Engine`]; live mode ([`runtime`]) and replay ([`replay`]) are thin edges around
 //! that one engine. See DESIGN.md in the shared folder for the architecture.
 
@@ -10,7 +10,6 @@ pub mod broker;
 pub mod calib;
 pub mod config;
 pub mod control;
-pub mod core;
 pub mod devices;
 pub mod engine;
 pub mod fusion;
@@ -21,3 +20,4 @@ pub mod runtime;
 pub mod secret;
 pub mod sim;
 pub mod time;
+pub mod vehicle;

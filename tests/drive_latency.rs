@@ -4,7 +4,6 @@
 
 use std::time::Duration;
 
-use chassisd::core::chassis::CONTROL_PERIOD;
 use chassisd::devices::can::Received;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
@@ -12,6 +11,7 @@ use chassisd::record::{Payload, Record};
 use chassisd::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
 use chassisd::sim::plant::{GnssCondition, LEFT_NODE, PlantConfig, SIM_BUS};
 use chassisd::time::Timestamp;
+use chassisd::vehicle::chassis::CONTROL_PERIOD;
 
 const FIXED: GnssCondition = GnssCondition {
     quality: Some(FixQuality::RtkFixed),

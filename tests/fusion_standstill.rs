@@ -5,13 +5,13 @@
 
 mod common;
 
-use chassisd::core::VehicleStatus;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
 use chassisd::record::Record;
 use chassisd::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
 use chassisd::sim::plant::{GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
+use chassisd::vehicle::VehicleStatus;
 
 #[derive(Default)]
 struct Statuses(Vec<VehicleStatus>);

@@ -115,7 +115,7 @@ fn a_switch_frame_cutter_follows_the_same_rules() {
         yard.cutter_can_id = Some(0x6A0);
     });
     for _ in 0..30 {
-        if v.status().localization == chassisd::core::Localization::Good {
+        if v.status().localization == chassisd::vehicle::Localization::Good {
             break;
         }
         v.run(1.0);

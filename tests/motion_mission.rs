@@ -5,8 +5,8 @@
 
 mod common;
 
-use chassisd::core::status::Navigation;
 use chassisd::sim::plant::PlantConfig;
+use chassisd::vehicle::status::Navigation;
 use common::lockstep::SimRun as Vehicle;
 
 #[test]

@@ -6,9 +6,9 @@ mod common;
 use std::path::Path;
 
 use bytes::Bytes;
-use chassisd::core::LinkState;
 use chassisd::record::{Payload, Record, RecordingReader, RecordingWriter, SourceKind, SourceMeta};
 use chassisd::time::Timestamp;
+use chassisd::vehicle::LinkState;
 use socketcan::{CanAnyFrame, CanDataFrame, CanRemoteFrame, EmbeddedFrame, ExtendedId, StandardId};
 
 fn sources() -> Vec<SourceMeta> {

@@ -1,16 +1,16 @@
 //! The safety rules of DESIGN.md §5, as properties of the drive-train arbiter and its
-//! supervisor (`core::chassis`, `core::safety`) over random sequences of commands, faults,
+//! supervisor (`vehicle::chassis`, `vehicle::safety`) over random sequences of commands, faults,
 //! e-stops, resets and silences. Proptest keeps failing cases in
 //! `tests/safety_properties.proptest-regressions` (persistence on) and replays them first.
 
 use std::time::Duration;
 
 use chassisd::config::chassis::{ChassisConfig, WheelRadius};
-use chassisd::core::chassis::{
+use chassisd::time::Timestamp;
+use chassisd::vehicle::chassis::{
     Chassis, ChassisFeedback, DriveSummary, MAX_LEAD_S, WheelCommand, status_bits,
 };
-use chassisd::core::safety::{ControlLinkConfig, EStopInput, Power, SafetyConfig, State};
-use chassisd::time::Timestamp;
+use chassisd::vehicle::safety::{ControlLinkConfig, EStopInput, Power, SafetyConfig, State};
 use proptest::prelude::*;
 
 /// The engine's control period.
@@ -151,13 +151,13 @@ impl Plant {
         }
         let speed = wheels.map(|w| (w.left_rad_s, w.right_rad_s));
         ChassisFeedback {
-            left: chassisd::core::chassis::WheelFeedback {
+            left: chassisd::vehicle::chassis::WheelFeedback {
                 velocity_rad_s: speed.map(|s| s.0),
                 angle_rad: None,
                 received: None,
                 velocity_received: None,
             },
-            right: chassisd::core::chassis::WheelFeedback {
+            right: chassisd::vehicle::chassis::WheelFeedback {
                 velocity_rad_s: speed.map(|s| s.1),
                 angle_rad: None,
                 received: None,

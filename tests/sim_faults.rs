@@ -6,9 +6,9 @@
 
 mod common;
 
-use chassisd::core::chassis::{CONTROL_PERIOD, status_bits};
 use chassisd::sim::lockstep::{Lockstep, PLANT_STEP};
 use chassisd::sim::plant::PlantConfig;
+use chassisd::vehicle::chassis::{CONTROL_PERIOD, status_bits};
 use common::lockstep::{FIXED, START, SimRun as Vehicle};
 
 /// The speed the vehicle runs at when a fault strikes, m/s.

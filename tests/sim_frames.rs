@@ -2,7 +2,6 @@
 //! at the vehicle (init_rtk_data), setting the pose (INIT_POSITION) and moving the datum
 //! (SET_LNG_LAT), with the simulator's truth as the reference.
 
-use chassisd::core::VehicleStatus;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
 use chassisd::fusion::geodesy::Enu;
@@ -11,6 +10,7 @@ use chassisd::record::Record;
 use chassisd::sim::lockstep::{Lockstep, Sink};
 use chassisd::sim::plant::{GnssCondition, PlantConfig, Truth};
 use chassisd::time::Timestamp;
+use chassisd::vehicle::VehicleStatus;
 use nalgebra::Vector3;
 
 #[derive(Default)]
@@ -140,7 +140,7 @@ fn init_position_sets_the_pose_and_gnss_keeps_it() {
     d.run(10.0, 1.0, 0.05);
     let (after, now) = d.status();
     assert_pose(&after, in_frame(at_command, pose, now), 0.1);
-    assert_eq!(after.localization, chassisd::core::Localization::Good);
+    assert_eq!(after.localization, chassisd::vehicle::Localization::Good);
     assert_eq!(
         d.command("init_position", r#"{"x":1.0,"y":"north","yaw":0}"#)
             .map_err(|e| e.contains("init_position")),

@@ -28,9 +28,9 @@ use serde_json::Value;
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::goal::GoalPose;
 use crate::control::{MotionResult, MotionTag, Outcome};
-use crate::core::{Command, VehicleStatus};
 use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
+use crate::vehicle::{Command, VehicleStatus};
 
 /// Goal cancelled (or: already mapping).
 pub const CANCELLED: u32 = 3001;
@@ -377,7 +377,7 @@ impl DeviceDialect {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::chassis::CommandRejected;
+    use crate::vehicle::chassis::CommandRejected;
 
     struct NoCore;
     impl CoreAccess for NoCore {

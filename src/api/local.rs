@@ -46,9 +46,9 @@ use serde::Deserialize;
 
 use crate::control::MoveKind;
 use crate::control::goal::GoalPose;
-use crate::core::{Command, PathPoints, PathRequest};
 use crate::fusion::geodesy::Geodetic;
 use crate::fusion::planar::wrap;
+use crate::vehicle::{Command, PathPoints, PathRequest};
 
 /// Topic of velocity commands.
 pub const CMD_VEL: &str = "cmd_vel";

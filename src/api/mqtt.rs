@@ -8,8 +8,8 @@ use crate::api::rtk::trajectory::TrajectoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};
-use crate::core::{Command, VehicleStatus, chassis::CommandRejected};
 use crate::time::Timestamp;
+use crate::vehicle::{Command, VehicleStatus, chassis::CommandRejected};
 
 /// Source name of MQTT messages in recordings and the engine.
 pub const MQTT_SOURCE: &str = "mqtt";

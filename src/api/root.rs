@@ -22,10 +22,10 @@ use serde_json::{Value, json};
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::mission::{MissionEvent, MissionStep};
 use crate::control::{MotionTag, Outcome};
-use crate::core::{Command, DriveMode, Localization, VehicleStatus, chassis::status_bits};
 use crate::devices::bms::ChargeState;
 use crate::fusion::geodesy::Geodetic;
 use crate::time::Timestamp;
+use crate::vehicle::{Command, DriveMode, Localization, VehicleStatus, chassis::status_bits};
 
 /// Done.
 pub const OK: u32 = 0;
@@ -734,7 +734,7 @@ fn heartbeat_object(payload: &[u8]) -> Option<serde_json::Map<String, Value>> {
 
 /// The reply code of a command the core refused: a wrong value is the request's fault
 /// (INVALID), anything else the vehicle's state (REFUSED).
-fn refusal(e: &crate::core::chassis::CommandRejected) -> (u32, String) {
+fn refusal(e: &crate::vehicle::chassis::CommandRejected) -> (u32, String) {
     let code = if e.is_bad_value() { INVALID } else { REFUSED };
     (code, e.to_string())
 }
@@ -933,7 +933,7 @@ impl Dialect for RootDialect {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::chassis::CommandRejected;
+    use crate::vehicle::chassis::CommandRejected;
 
     /// The core as a recorder of commands, answering each with a chosen result.
     #[derive(Default)]
@@ -981,7 +981,7 @@ mod tests {
 
     #[test]
     fn rtk_corrections_going_stale_and_back_are_logged_with_their_codes() {
-        use crate::core::corrections::CorrectionsStatus;
+        use crate::vehicle::corrections::CorrectionsStatus;
         let (mut d, mut core) = (dialect(), FakeCore::default());
         let status = |fresh: bool| VehicleStatus {
             time: T,

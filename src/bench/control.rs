@@ -16,7 +16,6 @@ use crate::config::motion::MotionSettings;
 use crate::control::moves::HeadingSource;
 use crate::control::profile::Profile;
 use crate::control::{MotionResult, MoveKind, Outcome};
-use crate::core::status::VehicleStatus;
 use crate::devices::gnss::FixQuality;
 use crate::engine::EngineOutput;
 use crate::fusion::planar::wrap;
@@ -24,6 +23,7 @@ use crate::record::Record;
 use crate::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::time::Timestamp;
+use crate::vehicle::status::VehicleStatus;
 
 /// Sessions start here (2026-01-01T00:00:00Z).
 const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
@@ -602,7 +602,7 @@ fn closed_path(bench: &mut Bench) -> PathFigures {
 /// falls at another millisecond of the control period.
 fn watchdog(bench: &mut Bench, chassis: &crate::config::chassis::ChassisConfig) -> WatchdogFigures {
     let bound_s = chassis.cmd_timeout_s
-        + crate::core::chassis::CONTROL_PERIOD.as_secs_f64()
+        + crate::vehicle::chassis::CONTROL_PERIOD.as_secs_f64()
         + WATCHDOG_SPEED / chassis.max_decel_mps2;
     let mut worst: f64 = 0.0;
     for trial in 0..WATCHDOG_TRIALS {

@@ -13,7 +13,6 @@ use bytes::Bytes;
 use serde::Serialize;
 
 use crate::config::ConfigError;
-use crate::core::status::{PoseCovariance, VehicleStatus};
 use crate::devices::gnss::NmeaReceiver;
 use crate::engine::EngineOutput;
 use crate::fusion::geodesy::{Enu, Geodetic};
@@ -24,6 +23,7 @@ use crate::sim::lockstep::{GNSS_SOURCE, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{PlantConfig, Truth};
 use crate::sim::scenario::{Regime, Scenario, WARMUP_S};
 use crate::time::Timestamp;
+use crate::vehicle::status::{PoseCovariance, VehicleStatus};
 
 /// Simulated sessions start here (2026-01-01T00:00:00Z), so receiver times are fixed too.
 const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);

@@ -16,11 +16,11 @@ use serde_json::Value;
 
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::mqtt::MqttConfig;
-use crate::core::chassis::status_bits;
 use crate::record::{Payload, RecordingReader};
 use crate::runtime::sim::{self, SimOptions};
 use crate::sim::plant::{LEFT_NODE, PlantConfig, SIM_BUS};
 use crate::time::Timestamp;
+use crate::vehicle::chassis::status_bits;
 
 /// The base_status period the protocol asks for.
 const STATUS_PERIOD_MS: f64 = 100.0;

@@ -28,12 +28,12 @@ use tokio::sync::watch;
 use super::Broker;
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
-use crate::core::chassis::{CONTROL_PERIOD, status_bits};
 use crate::runtime::broker::CHILD_COMMAND;
 use crate::runtime::host::{children_running, resident_memory_bytes};
 use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
 use crate::sim::lockstep;
 use crate::sim::plant::PlantConfig;
+use crate::vehicle::chassis::{CONTROL_PERIOD, status_bits};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// No base_status gap may be longer, outside a broker restart.

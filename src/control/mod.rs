@@ -1,6 +1,6 @@
 //! Closed-loop motion: the moves the vehicle makes by itself, one at a time, and their
 //! results. It proposes a velocity at each control tick; the drive train's arbiter, limits,
-//! ramps and safety supervisor decide what reaches the wheels ([`crate::core::chassis`]).
+//! ramps and safety supervisor decide what reaches the wheels ([`crate::vehicle::chassis`]).
 
 pub mod goal;
 pub mod mission;
@@ -13,9 +13,9 @@ pub mod track;
 use std::fmt;
 
 use crate::config::motion::{MinGnss, MotionSettings};
-use crate::core::status::Navigation;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::status::Navigation;
 use goal::{GoalMove, GoalPose};
 use moves::{RelativeMove, Step};
 use path::{CrossTrack, PathFollow, StartRefusal};

@@ -9,9 +9,9 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use crate::config::ConfigError;
-use crate::core::safety::EStopInput;
 use crate::devices::can::Frame;
 use crate::time::Timestamp;
+use crate::vehicle::safety::EStopInput;
 
 /// The level of the bit while the e-stop is pressed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]

@@ -6,8 +6,6 @@ use std::f64::consts::TAU;
 use crate::config::VehicleConfig;
 use crate::config::chassis::{Wheel, WheelConfig};
 use crate::config::mission::Cutter;
-use crate::core::chassis::{ChassisFeedback, DriveSummary, WheelCommand, WheelFeedback};
-use crate::core::safety::Power;
 use crate::devices::bms::daly::DalyBms;
 use crate::devices::bms::dbc::DbcBms;
 use crate::devices::bms::profile::CurrentAboveOffset;
@@ -20,6 +18,8 @@ use crate::devices::cia402::profile::MasterLoss;
 use crate::devices::cia402::state::Goal;
 use crate::devices::estop::EStopSignal;
 use crate::time::Timestamp;
+use crate::vehicle::chassis::{ChassisFeedback, DriveSummary, WheelCommand, WheelFeedback};
+use crate::vehicle::safety::Power;
 use std::time::Duration;
 
 /// Whether an interface is usable, as its driver last said.

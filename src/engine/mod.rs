@@ -22,10 +22,6 @@ use crate::api::ros1;
 use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
-use crate::core::chassis::{CONTROL_PERIOD, CommandRejected};
-use crate::core::{
-    CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
-};
 use crate::devices::can::{Frame, Received};
 use crate::devices::gnss::rtcm::{RtcmFramer, RtcmStats};
 use crate::devices::gnss::{GnssStats, NmeaReceiver};
@@ -34,6 +30,10 @@ use crate::devices::imu::witmotion::WitMotion;
 use crate::devices::imu::{ImuDecoder, ImuStats, Mounting};
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
+use crate::vehicle::chassis::{CONTROL_PERIOD, CommandRejected};
+use crate::vehicle::{
+    CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
+};
 use drivetrain::{BusStats, Drivetrain};
 
 /// The status period of base_status (10 Hz).
@@ -123,7 +123,7 @@ pub enum EngineOutput {
     MotionEnded(crate::control::MotionResult),
     /// The poses at a control tick (only with [`Engine::emit_poses`]: the 100 Hz feed of a
     /// ROS node's odometry).
-    Poses(Timestamp, crate::core::PoseReport),
+    Poses(Timestamp, crate::vehicle::PoseReport),
     /// An IMU sample as the core got it, in the vehicle frame (only with
     /// [`Engine::emit_poses`]).
     Imu(crate::devices::imu::ImuSample),
@@ -158,9 +158,9 @@ pub enum Measured {
     /// The wheels' feedback at a control tick.
     Wheels {
         /// Left wheel.
-        left: crate::core::chassis::WheelFeedback,
+        left: crate::vehicle::chassis::WheelFeedback,
         /// Right wheel.
-        right: crate::core::chassis::WheelFeedback,
+        right: crate::vehicle::chassis::WheelFeedback,
     },
 }
 
@@ -233,7 +233,7 @@ struct CoreAt<'a> {
 }
 
 impl CoreAccess for CoreAt<'_> {
-    fn command(&mut self, command: crate::core::Command) -> Result<(), CommandRejected> {
+    fn command(&mut self, command: crate::vehicle::Command) -> Result<(), CommandRejected> {
         self.vehicle
             .handle(self.t, Input::Command(command))
             .into_iter()
@@ -455,7 +455,7 @@ impl Engine {
                 if record.source == PROCESS_SOURCE && topic == "shutdown" =>
             {
                 self.vehicle
-                    .handle(t, Input::Command(crate::core::Command::Stop));
+                    .handle(t, Input::Command(crate::vehicle::Command::Stop));
                 self.drivetrain.shut_down(&mut tx);
             }
             Payload::Command { payload, .. } if record.source == HOST_SOURCE => {
@@ -716,7 +716,7 @@ impl Engine {
     /// Logs each new reason for a latched stop, and the re-arm that ends it.
     fn announce_stop_reason(
         &mut self,
-        status: &crate::core::status::VehicleStatus,
+        status: &crate::vehicle::status::VehicleStatus,
         out: &mut Vec<EngineOutput>,
     ) {
         let reason = status.chassis.as_ref().and_then(|c| c.stop_reason.clone());
@@ -731,7 +731,7 @@ impl Engine {
 
     fn announce_drive_changes(
         &mut self,
-        drives: &[crate::core::chassis::DriveSummary],
+        drives: &[crate::vehicle::chassis::DriveSummary],
         out: &mut Vec<EngineOutput>,
     ) {
         let now: Vec<(bool, Option<String>)> = drives

@@ -11,8 +11,8 @@ pub mod writer;
 use bytes::Bytes;
 use socketcan::CanAnyFrame;
 
-use crate::core::LinkState;
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
 
 pub use meta::{Meta, SourceKind, SourceMeta};
 pub use reader::{RecordingReader, SkippedLine};

@@ -18,8 +18,8 @@ use super::envelope::{self, EnvelopeError};
 use super::meta::{Meta, SourceKind};
 use super::writer::COVERED_FILE;
 use super::{Payload, Record, RecordError};
-use crate::core::LinkState;
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
 
 /// How many skipped lines are kept for the report; the rest are only counted.
 const KEEP_SKIPPED: usize = 100;

@@ -11,8 +11,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 use super::{Payload, Record, RecordError, RecordingWriter, SourceMeta};
-use crate::core::LinkState;
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
 
 /// When a segment ends, and how many are kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -11,8 +11,8 @@ use socketcan::dump::{CanDumpRecord, Direction};
 use super::envelope;
 use super::meta::{FORMAT_VERSION, META_FILE, Meta, SourceKind, SourceMeta};
 use super::{Payload, Record, RecordError};
-use crate::core::LinkState;
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
 
 /// File name of the vehicle configuration copy.
 pub const VEHICLE_CONFIG_FILE: &str = "vehicle.toml";

@@ -14,9 +14,9 @@ use tokio::sync::mpsc;
 
 use super::clock::RecordClock;
 use super::outage_log::{OutageLog, Say};
-use crate::core::LinkState;
 use crate::devices::can::Frame;
 use crate::record::{Payload, Record};
+use crate::vehicle::LinkState;
 
 /// First reconnect delay; it doubles up to the configured maximum.
 const BACKOFF_START: Duration = Duration::from_millis(100);

@@ -8,9 +8,9 @@ use bytes::Bytes;
 use tokio::sync::mpsc;
 
 use super::clock::RecordClock;
-use crate::core::HostUsage;
 use crate::engine::HOST_SOURCE;
 use crate::record::{Payload, Record};
+use crate::vehicle::HostUsage;
 
 /// How often the load is sampled.
 const PERIOD: Duration = Duration::from_secs(1);

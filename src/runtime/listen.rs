@@ -17,10 +17,10 @@ use super::mqtt_observe;
 use super::recorder::Recorder;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::VehicleConfig;
-use crate::core::LinkState;
 use crate::engine::Engine;
 use crate::record::segments::{Progress, Rotation, SegmentedWriter};
 use crate::record::{Payload, SourceMeta};
+use crate::vehicle::LinkState;
 
 /// Records waiting for the recorder loop before drivers wait.
 const CHANNEL: usize = 4096;

@@ -30,8 +30,6 @@ use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
 use crate::api::rtk::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
-use crate::core::LinkState;
-use crate::core::chassis::status_bits;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{
     CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE, RTCM_PROTOCOL,
@@ -39,6 +37,8 @@ use crate::engine::{
 use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
+use crate::vehicle::chassis::status_bits;
 
 /// Records waiting for the engine before drivers wait.
 const CHANNEL: usize = 4096;

@@ -25,8 +25,8 @@ use super::clock::RecordClock;
 use super::command_rate::{CommandRate, RateReport};
 use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
 use crate::config::mqtt::MqttConfig;
-use crate::core::LinkState;
 use crate::record::{Payload, Record};
+use crate::vehicle::LinkState;
 
 /// Messages from the engine waiting for the link task.
 const HANDOFF: usize = 4096;

@@ -11,8 +11,8 @@ use super::clock::RecordClock;
 use super::mqtt::{client_options, low_latency};
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::mqtt::MqttConfig;
-use crate::core::LinkState;
 use crate::record::{Payload, Record};
+use crate::vehicle::LinkState;
 
 /// Requests rumqttc queues between the client handle and its event loop.
 const CLIENT_QUEUE: usize = 16;

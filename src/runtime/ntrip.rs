@@ -16,7 +16,6 @@ use tokio::sync::{mpsc, watch};
 use tokio::time::{Instant, sleep_until, timeout};
 
 use super::clock::RecordClock;
-use crate::core::LinkState;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::rtcm::RtcmFramer;
 pub use crate::ntrip::NtripSpec;
@@ -26,6 +25,7 @@ use crate::ntrip::request::request;
 use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
 use crate::ntrip::sourcetable::{self, MAX_TABLE};
 use crate::record::{Payload, Record};
+use crate::vehicle::LinkState;
 
 /// Source name of the corrections in records.
 pub const SOURCE: &str = crate::engine::CORRECTIONS_SOURCE;

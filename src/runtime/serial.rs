@@ -13,8 +13,8 @@ use tokio_serial::SerialPortBuilderExt;
 use super::clock::RecordClock;
 use super::outage_log::{OutageLog, Say};
 use super::serial_tx::SerialTx;
-use crate::core::LinkState;
 use crate::record::{Payload, Record};
+use crate::vehicle::LinkState;
 
 /// First reconnect delay; it doubles up to the configured maximum.
 const BACKOFF_START: Duration = Duration::from_millis(100);

@@ -18,7 +18,6 @@ use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
 use crate::config::ntrip::NtripConfig;
 use crate::config::{ConfigError, VehicleConfig};
-use crate::core::LinkState;
 use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
 use crate::devices::canopen::NodeId;
 use crate::devices::cia402::DriveProfile;
@@ -26,6 +25,7 @@ use crate::devices::gnss::FixQuality;
 use crate::engine::{Decoder, Engine, EngineOutput, HOST_SOURCE, LOCAL_COMMANDS};
 use crate::record::{Payload, Record, SourceMeta};
 use crate::time::Timestamp;
+use crate::vehicle::LinkState;
 
 /// The plant's time step.
 pub const PLANT_STEP: Duration = Duration::from_millis(1);

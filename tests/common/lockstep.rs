@@ -2,13 +2,13 @@
 //! command channel, with what it outputs collected: the harness of the motion tests.
 
 use chassisd::control::MotionResult;
-use chassisd::core::{Localization, VehicleStatus};
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
 use chassisd::record::Record;
 use chassisd::sim::lockstep::{Lockstep, PLANT_STEP, Sink};
 use chassisd::sim::plant::{GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
+use chassisd::vehicle::{Localization, VehicleStatus};
 
 /// RTK fixed, no offset.
 pub const FIXED: GnssCondition = GnssCondition {

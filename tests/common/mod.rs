@@ -98,7 +98,7 @@ pub fn tempdir(name: &str) -> PathBuf {
 
 /// Replays a recording through the library's engine and returns the drive train's wheel
 /// odometry at its end.
-pub fn replay_odometry(dir: &std::path::Path) -> chassisd::core::chassis::WheelOdometry {
+pub fn replay_odometry(dir: &std::path::Path) -> chassisd::vehicle::chassis::WheelOdometry {
     use chassisd::config::VehicleConfig;
     use chassisd::engine::{Engine, EngineOutput};
     use chassisd::record::RecordingReader;

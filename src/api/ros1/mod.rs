@@ -22,7 +22,7 @@ pub mod status;
 use serde_json::json;
 
 use crate::control::MotionTag;
-use crate::core::Command;
+use crate::vehicle::Command;
 
 /// Source name of the node's commands in recordings and the engine.
 pub const SOURCE: &str = "ros1";

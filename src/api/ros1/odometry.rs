@@ -10,9 +10,9 @@
 
 use nalgebra::{Matrix2, Matrix3, Matrix3x2};
 
-use crate::core::chassis::CONTROL_PERIOD;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::chassis::CONTROL_PERIOD;
 
 /// The variance of what the odometry does not measure (z, roll, pitch and their rates).
 pub const UNMEASURED: f64 = 1e6;

@@ -15,9 +15,9 @@
 
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag, Outcome, STOP_REQUESTED, STOPPED_BY_OPERATOR};
-use crate::core::chassis::status_bits;
-use crate::core::{Localization, Navigation, VehicleStatus};
 use crate::devices::bms::ChargeState;
+use crate::vehicle::chassis::status_bits;
+use crate::vehicle::{Localization, Navigation, VehicleStatus};
 
 /// `/androidmsg_initstatus`: initialisation failed.
 pub const INIT_FAILED: i16 = 11;
@@ -321,9 +321,9 @@ impl StatusTopics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::{BatteryStatus, chassis::ChassisStatus};
     use crate::devices::bms::BmsReading;
     use crate::time::Timestamp;
+    use crate::vehicle::{BatteryStatus, chassis::ChassisStatus};
 
     fn status(bits: u32, battery: Option<(ChargeState, f64)>) -> VehicleStatus {
         VehicleStatus {

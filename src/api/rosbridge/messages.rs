@@ -9,12 +9,12 @@ use serde_json::{Value, json};
 use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
 use crate::api::ros1::{ros_time, yaw_quaternion};
 use crate::api::rtk::status::{locate_name, navigation_name};
-use crate::core::chassis::status_bits;
-use crate::core::corrections::CorrectionsStatus;
-use crate::core::{Localization, Navigation, VehicleStatus};
 use crate::devices::gnss::FixQuality;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::chassis::status_bits;
+use crate::vehicle::corrections::CorrectionsStatus;
+use crate::vehicle::{Localization, Navigation, VehicleStatus};
 
 /// The fused pose's frame.
 pub const MAP_FRAME: &str = "map";

@@ -27,9 +27,9 @@ use trajectory::{Trajectory, TrajectoryError, TrajectoryStore};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::MotionTag;
-use crate::core::chassis::CommandRejected;
-use crate::core::{Command, PathPoints, PathRequest, VehicleStatus};
 use crate::time::Timestamp;
+use crate::vehicle::chassis::CommandRejected;
+use crate::vehicle::{Command, PathPoints, PathRequest, VehicleStatus};
 
 /// Status topic.
 pub const BASE_STATUS: &str = "base_status";

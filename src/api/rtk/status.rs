@@ -10,7 +10,7 @@
 
 use serde::Serialize;
 
-use crate::core::{Localization, Navigation, VehicleStatus};
+use crate::vehicle::{Localization, Navigation, VehicleStatus};
 
 /// The `base_status` object.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -208,8 +208,8 @@ fn num(v: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::{CoreConfig, Input, Output, Vehicle};
     use crate::time::Timestamp;
+    use crate::vehicle::{CoreConfig, Input, Output, Vehicle};
 
     /// The key tree of the protocol's example, plus `sensor.gnss`.
     const SPEC_KEYS: &[&str] = &[

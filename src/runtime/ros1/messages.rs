@@ -5,10 +5,10 @@ include!(concat!(env!("OUT_DIR"), "/ros1_interfaces.rs"));
 
 use crate::api::ros1::odometry::OdometryCovariance;
 use crate::api::ros1::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
-use crate::core::{Pose2D, PoseReport};
 use crate::devices::imu::ImuSample;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::{Pose2D, PoseReport};
 
 /// The IMU's noise, 1σ, for `/imu/data`'s covariances.
 #[derive(Debug, Clone, Copy, PartialEq)]

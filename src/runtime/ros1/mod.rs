@@ -32,11 +32,11 @@ const ANSWER_QUEUE: usize = 256;
 #[derive(Debug, Clone)]
 pub enum Feed {
     /// The poses at a control tick.
-    Poses(crate::time::Timestamp, crate::core::PoseReport),
+    Poses(crate::time::Timestamp, crate::vehicle::PoseReport),
     /// An IMU sample, in the vehicle frame.
     Imu(crate::devices::imu::ImuSample),
     /// A status tick.
-    Status(Box<crate::core::VehicleStatus>),
+    Status(Box<crate::vehicle::VehicleStatus>),
     /// A motion ended.
     MotionEnded(crate::control::MotionResult),
     /// A mission made progress.

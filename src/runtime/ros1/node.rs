@@ -18,11 +18,11 @@ use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::ros1::status::{StatusTopics, Topic};
 use crate::api::ros1::{self, Request};
 use crate::config::ros1::Ros1Config;
-use crate::core::{Localization, Pose2D};
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::command_rate::{CommandRate, RateReport};
 use crate::runtime::outage_log::{OutageLog, Say};
+use crate::vehicle::{Localization, Pose2D};
 
 /// How often the master is asked whether it still knows the node.
 const WATCH_EVERY: Duration = Duration::from_secs(1);
@@ -434,7 +434,7 @@ impl Publishing {
 }
 
 /// `/get_position`'s answer: the map pose when located, else none.
-fn position(report: &crate::core::PoseReport) -> Option<Pose2D> {
+fn position(report: &crate::vehicle::PoseReport) -> Option<Pose2D> {
     match (report.localization, report.map) {
         (Localization::Good | Localization::Lost, Some((pose, _))) => Some(pose),
         _ => None,

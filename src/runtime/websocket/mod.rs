@@ -35,11 +35,11 @@ use crate::api::rosbridge::ops::{self, ClientOp, Level};
 use crate::api::rosbridge::topics::{self, Flow};
 use crate::api::rosbridge::{SOURCE, messages};
 use crate::config::websocket::WebsocketConfig;
-use crate::core::VehicleStatus;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
 use crate::record::{Payload, Record, SourceMeta};
 use crate::time::Timestamp;
+use crate::vehicle::VehicleStatus;
 
 /// Feed items waiting for the server task before the newest are dropped (some 2 s).
 const FEED_QUEUE: usize = 256;

@@ -654,7 +654,7 @@ fn approach(from: f64, to: f64, step: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::safety::DEFAULT_QUICK_STOP;
+    use crate::vehicle::safety::DEFAULT_QUICK_STOP;
 
     fn config() -> ChassisConfig {
         ChassisConfig {

@@ -554,7 +554,7 @@ impl Safety {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::core::chassis::DriveSummary;
+    use crate::vehicle::chassis::DriveSummary;
 
     fn config() -> SafetyConfig {
         SafetyConfig {
