@@ -25,7 +25,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use chassisd::api::mqtt::MQTT_SOURCE;
-use chassisd::api::rtk::trajectory::MemoryStore;
+use chassisd::api::trajectory::MemoryStore;
 use chassisd::config::VehicleConfig;
 use chassisd::config::calibration::CalibrationFile;
 use chassisd::config::imu::ImuProtocol;

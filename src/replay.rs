@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::api::rtk::BaseStatus;
-use crate::api::rtk::trajectory::{MemoryStore, Trajectory};
+use crate::api::trajectory::{MemoryStore, Trajectory};
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::GnssStats;
 use crate::devices::gnss::rtcm::RtcmStats;

@@ -255,7 +255,7 @@ fn a_task_is_aborted_when_the_localisation_is_lost() {
 #[test]
 fn a_lost_control_link_aborts_the_move_and_needs_a_re_arm() {
     use chassisd::api::mqtt::MQTT_SOURCE;
-    use chassisd::api::rtk::trajectory::MemoryStore;
+    use chassisd::api::trajectory::MemoryStore;
     use chassisd::config::mqtt::{MqttConfig, RootDialectConfig};
     use chassisd::record::Payload;
 

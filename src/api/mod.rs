@@ -7,6 +7,7 @@ pub mod root;
 pub mod ros1;
 pub mod rosbridge;
 pub mod rtk;
+pub mod trajectory;
 
 /// Every MQTT dialect's entry point, in the order incoming topics are offered to them.
 /// A new dialect adds its module and its entry here; the engine lists none of them.
@@ -14,7 +15,7 @@ pub const DIALECTS: &[mqtt::DialectFactory] =
     &[rtk::from_setup, root::from_setup, device::from_setup];
 
 /// Most points in one path.
-pub const MAX_PATH_POINTS: usize = rtk::trajectory::MAX_POINTS;
+pub const MAX_PATH_POINTS: usize = trajectory::MAX_POINTS;
 
 /// The points of a flat `[x0, y0, x1, y1, ...]` list (root MISSION paths, the local
 /// channel's `follow_path`): an even number of finite values, at least one point.

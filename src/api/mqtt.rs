@@ -4,7 +4,7 @@
 
 use bytes::Bytes;
 
-use crate::api::rtk::trajectory::TrajectoryStore;
+use crate::api::trajectory::TrajectoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};

@@ -1,7 +1,55 @@
 //! A cursor over an MQTT packet's body: each field read by its type, and never past the
 //! body's end (every length in a packet is the sender's claim).
 
-use super::wire::WireError;
+use std::fmt;
+
+/// Why bytes are not an acceptable MQTT packet. Each one ends the connection.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WireError {
+    /// The remaining length runs over four bytes.
+    BadRemainingLength,
+    /// The packet is larger than the gate lets through, bytes.
+    TooLarge { size: usize, limit: usize },
+    /// The first packet is not CONNECT.
+    NotConnect(u8),
+    /// A packet a client may not send (a second CONNECT, a server's packet, type 0).
+    Forbidden(u8),
+    /// Fixed-header flags the packet type does not allow.
+    BadFlags { kind: u8, flags: u8 },
+    /// The protocol name is neither `MQTT` nor `MQIsdp`.
+    UnknownProtocol,
+    /// A field runs past the packet's end, or bytes are left over after the last one.
+    Truncated(&'static str),
+    /// Trailing bytes after CONNECT's last field.
+    TrailingBytes(usize),
+    /// A string is not UTF-8, or holds U+0000.
+    BadString(&'static str),
+    /// The connect flags contradict each other or set the reserved bit.
+    BadConnectFlags(u8),
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BadRemainingLength => write!(f, "remaining length longer than 4 bytes"),
+            Self::TooLarge { size, limit } => {
+                write!(f, "packet of {size} bytes over the limit of {limit}")
+            }
+            Self::NotConnect(k) => write!(f, "first packet is type {k}, not CONNECT"),
+            Self::Forbidden(k) => write!(f, "packet type {k} is not a client's to send here"),
+            Self::BadFlags { kind, flags } => {
+                write!(f, "packet type {kind} with header flags {flags:#06b}")
+            }
+            Self::UnknownProtocol => write!(f, "protocol name is not MQTT"),
+            Self::Truncated(field) => write!(f, "{field} runs past the packet's end"),
+            Self::TrailingBytes(n) => write!(f, "{n} bytes after CONNECT's last field"),
+            Self::BadString(field) => write!(f, "{field} is not valid UTF-8 text"),
+            Self::BadConnectFlags(b) => write!(f, "connect flags {b:#010b} are contradictory"),
+        }
+    }
+}
+
+impl std::error::Error for WireError {}
 
 /// Reads a packet's body without reading past it.
 pub(crate) struct Cursor<'a> {

@@ -244,7 +244,7 @@ pub trait LoadProfile: Sized {
 impl LoadProfile for DriveProfile {
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
         let text = super::read_text(path)?;
-        DriveProfile::from_toml(&text, path)
+        Ok(DriveProfile::from_toml(&text, path)?)
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {
@@ -265,17 +265,17 @@ impl LoadProfile for BmsProfile {
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {
-        self.validate(file)
+        Ok(self.validate(file)?)
     }
 }
 
 impl LoadProfile for EStopProfile {
     fn load_file(path: &Path) -> Result<Self, ConfigError> {
-        EStopProfile::from_toml(&super::read_text(path)?, path)
+        Ok(EStopProfile::from_toml(&super::read_text(path)?, path)?)
     }
 
     fn check(&self, file: &Path) -> Result<(), ConfigError> {
-        self.validate(file, "estop.profile.")
+        Ok(self.validate(file, "estop.profile.")?)
     }
 }
 

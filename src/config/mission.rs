@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{ConfigError, VehicleConfig, check_range};
 use crate::control::goal::GoalPose;
+pub use crate::control::mission::MissionSettings;
 
 /// `[mission]`
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize, Default)]
@@ -25,17 +26,6 @@ pub struct MissionConfig {
     /// since it last did), s (default 60).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub charge_timeout_s: Option<f64>,
-}
-
-/// The settings missions run with.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MissionSettings {
-    /// Path speed, m/s.
-    pub speed_mps: f64,
-    /// The dock pose (map frame).
-    pub dock: Option<GoalPose>,
-    /// How long to wait for charging at the dock, s.
-    pub charge_timeout_s: f64,
 }
 
 impl MissionConfig {

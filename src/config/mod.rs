@@ -5,6 +5,8 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+use crate::devices::profile::{ProfileError, toml_fix};
+
 pub mod calibration;
 pub mod chassis;
 pub mod imu;
@@ -30,7 +32,7 @@ pub enum ConfigError {
         named_by: Option<(PathBuf, String)>,
     },
     /// The file is not valid TOML or does not match the schema.
-    #[error("{file}: {message}\nfix: {}", parse_fix(.message))]
+    #[error("{file}: {message}\nfix: {}", toml_fix(.message))]
     Parse {
         /// The file.
         file: PathBuf,
@@ -49,6 +51,9 @@ pub enum ConfigError {
         /// How to fix it.
         fix: String,
     },
+    /// A device profile it names does not parse or hold together.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
 }
 
 /// Reads a configuration-type file (vehicle, profile, plant, calibration, DBC) as text.
@@ -80,20 +85,6 @@ pub fn lies_within(path: &Path, root: &Path) -> bool {
         })
     };
     real(path).starts_with(real(root))
-}
-
-/// How to mend what the TOML parser found, from its message.
-fn parse_fix(message: &str) -> &'static str {
-    if message.contains("unknown field") {
-        "remove the key or correct its spelling; the keys allowed there are listed above"
-    } else if message.contains("missing field") {
-        "add the key; devices/vehicle.example.toml shows every key with a working value"
-    } else if message.contains("invalid type") || message.contains("invalid value") {
-        "give the value the type named above (text in quotes, numbers and true/false without)"
-    } else {
-        "correct the TOML at the line shown (each key = value on its own line, [sections] and \
-         [[lists]] in brackets)"
-    }
 }
 
 /// " (named by `key` in FILE)" for a file a configuration named.

@@ -17,7 +17,7 @@
 use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
 use super::profile::Profile;
 use super::{Outcome, PoseView};
-use crate::config::motion::MotionSettings;
+use crate::control::settings::MotionSettings;
 use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
@@ -282,7 +282,7 @@ mod tests {
             map_xy: located.then_some((p.x, p.y)),
             map_yaw: located.then_some(p.yaw),
             wheel_scale: None,
-            gnss: crate::config::motion::MinGnss::RtkFixed,
+            gnss: crate::control::settings::MinGnss::RtkFixed,
         }
     }
 

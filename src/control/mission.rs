@@ -15,8 +15,18 @@ use std::fmt;
 
 use super::goal::GoalPose;
 use super::{MotionId, MotionTag, Outcome};
-use crate::config::mission::MissionSettings;
 use crate::time::Timestamp;
+
+/// The settings missions run with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MissionSettings {
+    /// Path speed, m/s.
+    pub speed_mps: f64,
+    /// The dock pose (map frame).
+    pub dock: Option<GoalPose>,
+    /// How long to wait for charging at the dock, s.
+    pub charge_timeout_s: f64,
+}
 
 /// One step of a mission.
 #[derive(Debug, Clone, PartialEq)]

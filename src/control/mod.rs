@@ -8,17 +8,31 @@ pub mod moves;
 pub mod path;
 pub mod profile;
 pub mod response;
+pub mod settings;
 pub mod track;
 
 use std::fmt;
 
-use crate::config::motion::{MinGnss, MotionSettings};
+use crate::control::settings::{MinGnss, MotionSettings};
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
-use crate::vehicle::status::Navigation;
 use goal::{GoalMove, GoalPose};
 use moves::{RelativeMove, Step};
 use path::{CrossTrack, PathFollow, StartRefusal};
+
+/// Navigation task state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Navigation {
+    /// No task.
+    #[default]
+    Idle,
+    /// A task is running.
+    Running,
+    /// The last task succeeded.
+    Succeeded,
+    /// The last task failed.
+    Failed,
+}
 
 /// Names one motion from its start to its result.
 pub type MotionId = u64;

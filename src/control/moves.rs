@@ -20,7 +20,7 @@
 
 use super::profile::{Limits, Profile};
 use super::{MoveKind, Outcome, PoseView};
-use crate::config::motion::MotionSettings;
+use crate::control::settings::MotionSettings;
 use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 
@@ -412,17 +412,17 @@ pub(crate) mod tests {
             goal_angle_tolerance_rad: 1.0_f64.to_radians(),
             time_allowance_factor: 1.5,
             time_allowance_s: 1.0,
-            task: crate::config::motion::TaskSettings {
+            task: crate::control::settings::TaskSettings {
                 max_lateral_accel_mps2: 0.5,
-                min_gnss: crate::config::motion::MinGnss::RtkFixed,
+                min_gnss: crate::control::settings::MinGnss::RtkFixed,
                 gnss_wait_s: 5.0,
                 max_approach_m: 5.0,
             },
-            reach: crate::config::motion::Reach {
+            reach: crate::control::settings::Reach {
                 goal_m: 100.0,
                 path_m: 2000.0,
             },
-            creep: crate::config::motion::creep(0.5),
+            creep: crate::control::settings::creep(0.5),
         }
     }
 
@@ -445,7 +445,7 @@ pub(crate) mod tests {
             odom_at: at,
             yaw_rate_at: at,
             map_xy: None,
-            gnss: crate::config::motion::MinGnss::None,
+            gnss: crate::control::settings::MinGnss::None,
             map_yaw: None,
             wheel_scale: None,
         };

@@ -19,7 +19,7 @@
 use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
 use super::track::{MAX_LENGTH_M, SAMPLE_M, Segment, Track, polyline_length};
 use super::{Outcome, PoseView};
-use crate::config::motion::{MinGnss, MotionSettings};
+use crate::control::settings::{MinGnss, MotionSettings};
 use crate::fusion::planar::wrap;
 use crate::time::Timestamp;
 

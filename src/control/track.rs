@@ -10,8 +10,8 @@
 //! - The speed limit keeps the sideways acceleration and the yaw rate within the limits,
 //!   and brakes on the deceleration limit for the end of each segment.
 
-use crate::config::motion::MotionSettings;
 use crate::control::moves::planning_limits;
+use crate::control::settings::MotionSettings;
 use crate::fusion::planar::wrap;
 
 /// The longest path, m: 400,000 samples (some 19 MB) at most. A longer coverage is split

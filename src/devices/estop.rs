@@ -8,10 +8,22 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::ConfigError;
 use crate::devices::can::Frame;
+use crate::devices::profile::ProfileError;
 use crate::time::Timestamp;
-use crate::vehicle::safety::EStopInput;
+
+/// What an e-stop input reports at a control tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EStopInput {
+    /// Its name from the configuration.
+    pub name: String,
+    /// The last decoded level: `Some(true)` pressed. `None` until first heard.
+    pub pressed: Option<bool>,
+    /// When it was last heard.
+    pub heard: Option<Timestamp>,
+    /// Silence longer than this counts as pressed.
+    pub timeout: Duration,
+}
 
 /// The level of the bit while the e-stop is pressed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
@@ -46,19 +58,16 @@ pub struct EStopProfile {
 
 impl EStopProfile {
     /// Parses and checks a profile's text; `file` names it in errors.
-    pub fn from_toml(text: &str, file: &Path) -> Result<Self, ConfigError> {
-        let profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+    pub fn from_toml(text: &str, file: &Path) -> Result<Self, ProfileError> {
+        let profile: Self = toml::from_str(text).map_err(|e| ProfileError::parse(file, &e))?;
         profile.validate(file, "")?;
         Ok(profile)
     }
 
     /// Checks ranges; `prefix` is put before keys in errors.
-    pub fn validate(&self, file: &Path, prefix: &str) -> Result<(), ConfigError> {
+    pub fn validate(&self, file: &Path, prefix: &str) -> Result<(), ProfileError> {
         let invalid = |key: &str, problem: String, fix: &str| {
-            ConfigError::invalid(file, &format!("{prefix}{key}"), problem, fix)
+            ProfileError::invalid(file, &format!("{prefix}{key}"), problem, fix)
         };
         let max_id = if self.extended { 0x1FFF_FFFF } else { 0x7FF };
         if self.id > max_id {

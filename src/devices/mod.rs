@@ -7,3 +7,4 @@ pub mod cia402;
 pub mod estop;
 pub mod gnss;
 pub mod imu;
+pub mod profile;

@@ -19,7 +19,7 @@ use std::time::Duration;
 use crate::api::local;
 use crate::api::mqtt::{CoreAccess, Dialects, MQTT_SOURCE, Publish};
 use crate::api::ros1;
-use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
+use crate::api::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
 use crate::devices::can::{Frame, Received};

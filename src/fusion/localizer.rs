@@ -15,6 +15,7 @@ use super::gnss_only::GnssOnly;
 use super::gyro_drift::{Drift, GyroDrift};
 use super::map_filter::{Fix, FixOutcome, MapFilter, MapFilterConfig, Trust};
 use super::odometry::OdomPose;
+pub use super::planar::heading_deg_of_yaw;
 use super::planar::wrap;
 use super::wheel_scale::WheelScale;
 use crate::time::Timestamp;
@@ -665,9 +666,4 @@ impl MapFrame {
 /// north).
 pub fn yaw_of_heading_deg(heading_deg: f64) -> f64 {
     wrap(FRAC_PI_2 - heading_deg.to_radians())
-}
-
-/// True heading (degrees, 0–360, clockwise from north) of an ENU yaw.
-pub fn heading_deg_of_yaw(yaw: f64) -> f64 {
-    (90.0 - yaw.to_degrees()).rem_euclid(360.0)
 }

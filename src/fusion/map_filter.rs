@@ -725,7 +725,7 @@ impl MapFilter {
         self.stats.fits += 1;
         self.events.push(format!(
             "heading from the motion between {n} fixes: {:.1}° (1σ {:.1}°)",
-            super::localizer::heading_deg_of_yaw(self.x[YAW]),
+            super::planar::heading_deg_of_yaw(self.x[YAW]),
             yaw_sigma.to_degrees()
         ));
         true

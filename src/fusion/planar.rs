@@ -21,6 +21,11 @@ pub fn largest_sigma(xx: f64, yy: f64, xy: f64) -> f64 {
     (mean + spread).max(0.0).sqrt()
 }
 
+/// True heading (degrees, 0–360, clockwise from north) of an ENU yaw.
+pub fn heading_deg_of_yaw(yaw: f64) -> f64 {
+    (90.0 - yaw.to_degrees()).rem_euclid(360.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -116,31 +116,6 @@ impl Counters {
     }
 }
 
-/// Writes `frames` straight to their interfaces with blocking sockets, bypassing the driver
-/// tasks and the runtime: the last act of a panicking daemon. Returns how many went out.
-pub fn write_now(frames: &[(String, Frame)]) -> usize {
-    use socketcan::Socket;
-    let mut sent = 0;
-    let mut open: Vec<(&str, socketcan::CanSocket)> = Vec::new();
-    for (bus, frame) in frames {
-        if !open.iter().any(|(name, _)| name == bus) {
-            match socketcan::CanSocket::open(bus) {
-                Ok(s) => {
-                    let _ = s.set_write_timeout(WRITE_TIMEOUT);
-                    open.push((bus, s));
-                }
-                Err(_) => continue,
-            }
-        }
-        if let Some((_, socket)) = open.iter().find(|(name, _)| name == bus)
-            && socket.write_frame(&frame.to_socketcan()).is_ok()
-        {
-            sent += 1;
-        }
-    }
-    sent
-}
-
 /// Whether the kernel says the interface is administratively up (IFF_UP).
 pub(crate) fn interface_up(name: &str) -> Result<bool, String> {
     let flags = std::fs::read_to_string(format!("/sys/class/net/{name}/flags"))

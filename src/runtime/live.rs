@@ -28,7 +28,7 @@ use super::trajectory_writer;
 use crate::api::local;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
-use crate::api::rtk::trajectory::Unconfigured;
+use crate::api::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
 use crate::engine::{

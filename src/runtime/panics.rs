@@ -166,7 +166,7 @@ pub fn install(stop_frames: Vec<(String, Frame)>) {
         if in_safety_relevant() {
             report(info);
             if !stop_frames.is_empty() {
-                let sent = super::can::write_now(&stop_frames);
+                let sent = write_now(&stop_frames);
                 eprintln!(
                     "chassisd: panic in the control loop or a CAN driver: {sent} of {} stop \
                      frames sent; the process ends",
@@ -209,6 +209,34 @@ pub fn message_of(info: &std::panic::PanicHookInfo<'_>) -> String {
         .map(|s| (*s).to_owned())
         .or_else(|| payload.downcast_ref::<String>().cloned())
         .unwrap_or_default()
+}
+
+/// How long the last writes of a panicking daemon may block each.
+const LAST_WRITE_TIMEOUT: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// Writes `frames` straight to their interfaces with blocking sockets, bypassing the driver
+/// tasks and the runtime: the last act of a panicking daemon. Returns how many went out.
+fn write_now(frames: &[(String, Frame)]) -> usize {
+    use socketcan::Socket;
+    let mut sent = 0;
+    let mut open: Vec<(&str, socketcan::CanSocket)> = Vec::new();
+    for (bus, frame) in frames {
+        if !open.iter().any(|(name, _)| name == bus) {
+            match socketcan::CanSocket::open(bus) {
+                Ok(s) => {
+                    let _ = s.set_write_timeout(LAST_WRITE_TIMEOUT);
+                    open.push((bus, s));
+                }
+                Err(_) => continue,
+            }
+        }
+        if let Some((_, socket)) = open.iter().find(|(name, _)| name == bus)
+            && socket.write_frame(&frame.to_socketcan()).is_ok()
+        {
+            sent += 1;
+        }
+    }
+    sent
 }
 
 #[cfg(test)]

@@ -21,7 +21,7 @@ use super::ros1::Ros1Link;
 use super::status_out::StatusOut;
 use super::trajectory_writer;
 use crate::api::rtk::BaseStatus;
-use crate::api::rtk::trajectory::MemoryStore;
+use crate::api::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
 use crate::engine::{CORRECTIONS_SOURCE, EngineOutput, EngineStats, RTCM_PROTOCOL};

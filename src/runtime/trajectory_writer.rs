@@ -16,9 +16,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 
-use crate::api::rtk::trajectory::{
-    DirStore, MemoryStore, Trajectory, TrajectoryError, TrajectoryStore,
-};
+use crate::api::trajectory::{DirStore, MemoryStore, Trajectory, TrajectoryError, TrajectoryStore};
 use crate::config::VehicleConfig;
 
 /// Changes waiting for the disk before new ones are refused.
@@ -216,7 +214,7 @@ impl StoreWriter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::api::rtk::trajectory::Point;
+    use crate::api::trajectory::Point;
 
     fn trajectory(name: &str, points: usize) -> Trajectory {
         let p = Point {

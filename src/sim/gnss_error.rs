@@ -20,8 +20,45 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::plant::PerQuality;
 use crate::devices::gnss::FixQuality;
+
+/// The index of `q` in per-quality arrays: RTK fixed, float, DGPS, anything else (single).
+pub(crate) fn quality_index(q: FixQuality) -> usize {
+    match q {
+        FixQuality::RtkFixed => 0,
+        FixQuality::RtkFloat => 1,
+        FixQuality::Dgps => 2,
+        _ => 3,
+    }
+}
+
+/// A value per fix quality (RTK fixed, float, DGPS, single), or one for all.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum PerQuality {
+    /// The same for every quality.
+    All(f64),
+    /// RTK fixed, float, DGPS, single.
+    Each([f64; 4]),
+}
+
+impl PerQuality {
+    /// The value at `q`.
+    pub fn at(&self, q: FixQuality) -> f64 {
+        match self {
+            Self::All(v) => *v,
+            Self::Each(v) => v[quality_index(q)],
+        }
+    }
+
+    /// Every value.
+    pub fn values(&self) -> [f64; 4] {
+        match self {
+            Self::All(v) => [*v; 4],
+            Self::Each(v) => *v,
+        }
+    }
+}
 
 /// `[gnss.faults]`: the receiver's error events. Every rate defaults to zero (none).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize, Serialize)]

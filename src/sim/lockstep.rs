@@ -12,7 +12,7 @@ use bytes::Bytes;
 use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
 use super::scenario::Scenario;
 use crate::api::mqtt::MQTT_SOURCE;
-use crate::api::rtk::trajectory::{MemoryStore, TrajectoryStore};
+use crate::api::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::chassis::ProfileRef;
 use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
@@ -290,7 +290,10 @@ pub const BLADE_DRIVE: &str = "blade";
 
 /// The profile of the simulated drives.
 pub fn drive_profile() -> Result<DriveProfile, ConfigError> {
-    DriveProfile::from_toml(DRIVE_PROFILE, Path::new("cia402-generic.toml"))
+    Ok(DriveProfile::from_toml(
+        DRIVE_PROFILE,
+        Path::new("cia402-generic.toml"),
+    )?)
 }
 
 /// The sources of a simulated session, as a recording lists them.

@@ -16,6 +16,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+pub use super::gnss_error::PerQuality;
+use super::gnss_error::quality_index;
+
 use super::cia402_drive::{MotorModel, SimDrive};
 use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use super::nmea_out::{self, Epoch};
@@ -227,44 +230,6 @@ pub struct GnssModel {
     /// Steps, RTK-float episodes, wild fixes and the receiver's smoothing.
     #[serde(default)]
     pub faults: GnssFaults,
-}
-
-/// A value per fix quality (RTK fixed, float, DGPS, single), or one for all.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
-#[serde(untagged)]
-pub enum PerQuality {
-    /// The same for every quality.
-    All(f64),
-    /// RTK fixed, float, DGPS, single.
-    Each([f64; 4]),
-}
-
-impl PerQuality {
-    /// The value at `q`.
-    pub fn at(&self, q: FixQuality) -> f64 {
-        match self {
-            Self::All(v) => *v,
-            Self::Each(v) => v[quality_index(q)],
-        }
-    }
-
-    /// Every value.
-    pub fn values(&self) -> [f64; 4] {
-        match self {
-            Self::All(v) => [*v; 4],
-            Self::Each(v) => *v,
-        }
-    }
-}
-
-/// The index of `q` in per-quality arrays: RTK fixed, float, DGPS, anything else (single).
-fn quality_index(q: FixQuality) -> usize {
-    match q {
-        FixQuality::RtkFixed => 0,
-        FixQuality::RtkFloat => 1,
-        FixQuality::Dgps => 2,
-        _ => 3,
-    }
 }
 
 /// The plant `chassisd sim` and `chassisd bench fusion` use without `--plant`.

@@ -3,6 +3,7 @@
 
 pub mod chassis;
 pub mod corrections;
+pub mod feedback;
 pub mod safety;
 pub mod status;
 

@@ -24,7 +24,8 @@
 use std::fmt;
 use std::time::Duration;
 
-use super::chassis::ChassisFeedback;
+use super::feedback::ChassisFeedback;
+pub use crate::devices::estop::EStopInput;
 use crate::time::Timestamp;
 
 /// How long a latched stop keeps the drives in quick stop before disabling them.
@@ -53,19 +54,6 @@ pub struct ControlLinkConfig {
     /// Watch from start: no heartbeat within `timeout` of start is a lost link too. Otherwise
     /// the watchdog starts with the first heartbeat.
     pub required_from_start: bool,
-}
-
-/// What an e-stop input reports at a control tick.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EStopInput {
-    /// Its name from the configuration.
-    pub name: String,
-    /// The last decoded level: `Some(true)` pressed. `None` until first heard.
-    pub pressed: Option<bool>,
-    /// When it was last heard.
-    pub heard: Option<Timestamp>,
-    /// Silence longer than this counts as pressed.
-    pub timeout: Duration,
 }
 
 /// Why the supervisor holds the wheels at zero.
@@ -554,7 +542,7 @@ impl Safety {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vehicle::chassis::DriveSummary;
+    use crate::vehicle::feedback::DriveSummary;
 
     fn config() -> SafetyConfig {
         SafetyConfig {

@@ -1,6 +1,7 @@
 //! The vehicle status snapshot the core hands to the dialects, in SI units.
 
 use super::chassis::{ChassisStatus, DriveMode};
+pub use crate::control::Navigation;
 use crate::devices::bms::BmsReading;
 use crate::devices::gnss::FixQuality;
 use crate::time::Timestamp;
@@ -137,18 +138,4 @@ pub enum Localization {
     Good,
     /// Map pose beyond a bound, or with its heading not yet known (`LOCATE_FALSE`).
     Lost,
-}
-
-/// Navigation task state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum Navigation {
-    /// No task.
-    #[default]
-    Idle,
-    /// A task is running.
-    Running,
-    /// The last task succeeded.
-    Succeeded,
-    /// The last task failed.
-    Failed,
 }

@@ -17,13 +17,12 @@
 //! vehicle to rest (done when none is under way).
 
 pub mod status;
-pub mod trajectory;
 
 use serde::Serialize;
 use serde_json::Value;
 
+use super::trajectory::{self, Trajectory, TrajectoryError, TrajectoryStore};
 pub use status::BaseStatus;
-use trajectory::{Trajectory, TrajectoryError, TrajectoryStore};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::MotionTag;

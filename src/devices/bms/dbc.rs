@@ -3,11 +3,68 @@
 //! values.
 
 use can_dbc::{ByteOrder, Dbc, MessageId, Signal, ValueType};
+use serde::{Deserialize, Serialize};
 
-use super::profile::DbcProfile;
 use super::{BmsReading, ChargeState, alarm};
 use crate::devices::can::Frame;
 use crate::time::Timestamp;
+
+/// `kind = "dbc"`
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcProfile {
+    /// Human-readable name.
+    pub name: String,
+    /// DBC file, relative to the profile. Read into `dbc_text` on load.
+    #[serde(default, skip_serializing)]
+    pub dbc: Option<String>,
+    /// The DBC's text (written inline in effective configurations).
+    #[serde(default)]
+    pub dbc_text: String,
+    /// +1 when the DBC's current is positive while charging, -1 when while discharging.
+    #[serde(default = "default_sign")]
+    pub current_sign: f64,
+    /// Signals for the reading's fields, `"message.signal"`.
+    pub fields: DbcFields,
+    /// Signals that raise alarm bits while non-zero.
+    #[serde(default)]
+    pub alarm: Vec<DbcAlarm>,
+}
+
+fn default_sign() -> f64 {
+    1.0
+}
+
+/// `[fields]` of a DBC profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcFields {
+    /// Pack voltage, V.
+    pub voltage: String,
+    /// Current, A.
+    pub current: String,
+    /// SOC, %.
+    pub soc: String,
+    /// Temperature, °C.
+    #[serde(default)]
+    pub temperature: Option<String>,
+    /// Remaining capacity, Ah.
+    #[serde(default)]
+    pub remaining_capacity: Option<String>,
+}
+
+/// `[[alarm]]` of a DBC profile.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DbcAlarm {
+    /// The signal, `"message.signal"`.
+    pub signal: String,
+    /// The alarm bit's name (see the README's `bms.error` table).
+    pub bit: String,
+    /// Whether the BMS has tripped a protection when this is set.
+    #[serde(default)]
+    pub protection: bool,
+}
 
 /// The raw bits of a signal, or `None` when the frame is too short.
 pub fn raw_bits(signal: &Signal, data: &[u8]) -> Option<u64> {

@@ -6,7 +6,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::alarm;
-use crate::config::ConfigError;
+pub use super::dbc::{DbcAlarm, DbcFields, DbcProfile};
+use crate::devices::profile::ProfileError;
 
 /// A BMS profile.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -50,77 +51,17 @@ fn default_current() -> CurrentAboveOffset {
     CurrentAboveOffset::Charge
 }
 
-/// `kind = "dbc"`
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DbcProfile {
-    /// Human-readable name.
-    pub name: String,
-    /// DBC file, relative to the profile. Read into `dbc_text` on load.
-    #[serde(default, skip_serializing)]
-    pub dbc: Option<String>,
-    /// The DBC's text (written inline in effective configurations).
-    #[serde(default)]
-    pub dbc_text: String,
-    /// +1 when the DBC's current is positive while charging, -1 when while discharging.
-    #[serde(default = "default_sign")]
-    pub current_sign: f64,
-    /// Signals for the reading's fields, `"message.signal"`.
-    pub fields: DbcFields,
-    /// Signals that raise alarm bits while non-zero.
-    #[serde(default)]
-    pub alarm: Vec<DbcAlarm>,
-}
-
-fn default_sign() -> f64 {
-    1.0
-}
-
-/// `[fields]` of a DBC profile.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DbcFields {
-    /// Pack voltage, V.
-    pub voltage: String,
-    /// Current, A.
-    pub current: String,
-    /// SOC, %.
-    pub soc: String,
-    /// Temperature, °C.
-    #[serde(default)]
-    pub temperature: Option<String>,
-    /// Remaining capacity, Ah.
-    #[serde(default)]
-    pub remaining_capacity: Option<String>,
-}
-
-/// `[[alarm]]` of a DBC profile.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DbcAlarm {
-    /// The signal, `"message.signal"`.
-    pub signal: String,
-    /// The alarm bit's name (see the README's `bms.error` table).
-    pub bit: String,
-    /// Whether the BMS has tripped a protection when this is set.
-    #[serde(default)]
-    pub protection: bool,
-}
-
 impl BmsProfile {
     /// Parses a profile's text; `file` names it in errors. A DBC profile that names its DBC
     /// file (`dbc = "..."`) gets that file's text from `read_dbc`, called with the name as
     /// written: reading files is the configuration's job, not the profile's. The profile
     /// is checked once complete.
-    pub fn from_toml(
+    pub fn from_toml<E: From<ProfileError>>(
         text: &str,
         file: &Path,
-        read_dbc: impl FnOnce(&str) -> Result<String, ConfigError>,
-    ) -> Result<Self, ConfigError> {
-        let mut profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+        read_dbc: impl FnOnce(&str) -> Result<String, E>,
+    ) -> Result<Self, E> {
+        let mut profile: Self = toml::from_str(text).map_err(|e| ProfileError::parse(file, &e))?;
         if let Self::Dbc(p) = &mut profile
             && let Some(name) = &p.dbc
         {
@@ -131,9 +72,9 @@ impl BmsProfile {
     }
 
     /// Checks names and the DBC mapping.
-    pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+    pub fn validate(&self, file: &Path) -> Result<(), ProfileError> {
         let invalid =
-            |key: &str, problem: String, fix: &str| ConfigError::invalid(file, key, problem, fix);
+            |key: &str, problem: String, fix: &str| ProfileError::invalid(file, key, problem, fix);
         let Self::Dbc(p) = self else {
             return Ok(());
         };
@@ -179,7 +120,7 @@ mod tests {
     fn shipped(name: &str) -> BmsProfile {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
         let text = std::fs::read_to_string(dir.join(name)).unwrap();
-        BmsProfile::from_toml(&text, Path::new(name), |dbc| {
+        BmsProfile::from_toml::<ProfileError>(&text, Path::new(name), |dbc| {
             Ok(std::fs::read_to_string(dir.join(dbc)).unwrap())
         })
         .unwrap()
@@ -188,7 +129,9 @@ mod tests {
     #[test]
     fn a_dbc_profile_without_its_dbc_is_refused_without_reading_files() {
         let text = "kind = \"dbc\"\nname = \"x\"\n[fields]\nvoltage = \"a.b\"\ncurrent = \"a.c\"\nsoc = \"a.d\"\n";
-        let e = BmsProfile::from_toml(text, Path::new("x.toml"), |_| unreachable!()).unwrap_err();
+        let e =
+            BmsProfile::from_toml::<ProfileError>(text, Path::new("x.toml"), |_| unreachable!())
+                .unwrap_err();
         assert!(e.to_string().contains("no DBC given"), "{e}");
     }
 

@@ -5,10 +5,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::ConfigError;
 use crate::devices::canopen::ObjectAddress;
 use crate::devices::canopen::pdo::{PdoEntry, PdoMapping};
 use crate::devices::canopen::sdo::SdoData;
+use crate::devices::profile::ProfileError;
 
 /// A CiA 402 drive profile.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -306,14 +306,11 @@ impl SetupWrite {
 
 impl DriveProfile {
     /// Parses and checks a profile; `file` names it in errors.
-    pub fn from_toml(text: &str, file: &std::path::Path) -> Result<Self, ConfigError> {
-        let profile: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
-            file: file.to_owned(),
-            message: e.to_string(),
-        })?;
+    pub fn from_toml(text: &str, file: &std::path::Path) -> Result<Self, ProfileError> {
+        let profile: Self = toml::from_str(text).map_err(|e| ProfileError::parse(file, &e))?;
         profile
             .validate()
-            .map_err(|(key, problem, fix)| ConfigError::invalid(file, &key, problem, &fix))?;
+            .map_err(|(key, problem, fix)| ProfileError::invalid(file, &key, problem, &fix))?;
         Ok(profile)
     }
 

@@ -130,7 +130,7 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> anyhow::Result<ChildSetti
     // clients invent.
     let mut reserved_topics = crate::api::mqtt::Dialects::from_config(
         config,
-        Box::new(crate::api::rtk::trajectory::Unconfigured),
+        Box::new(crate::api::trajectory::Unconfigured),
         crate::api::DIALECTS,
     )
     .topics();
