@@ -685,7 +685,7 @@ mod broker {
 mod ros1 {
     use super::*;
     use chassisd::api::ros1 as codec;
-    use chassisd::runtime::ros1::messages::{geometry_msgs, map_msgs, std_msgs};
+    use chassisd::runtime::links::ros1::messages::{geometry_msgs, map_msgs, std_msgs};
     use roslibrust_serde_rosmsg::{from_slice, to_vec};
 
     /// What the node subscribes to and serves, in kind-byte order.

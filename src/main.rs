@@ -99,6 +99,6 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         Command::Check(args) => cli::check::execute(args),
         Command::CanSim(args) => cli::can_sim::execute(args),
         Command::Ntrip(args) => cli::ntrip::execute(args),
-        Command::BrokerChild => chassisd::runtime::broker::child::main().map(|()| true),
+        Command::BrokerChild => chassisd::runtime::links::broker::child::main().map(|()| true),
     }
 }

@@ -591,7 +591,7 @@ fn run_joins_the_graph_from_its_configuration() {
 
 #[test]
 fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
-    use chassisd::runtime::ros1::messages::{
+    use chassisd::runtime::links::ros1::messages::{
         geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs, tf2_msgs,
     };
     use roslibrust::{RosMessageType, RosServiceType};

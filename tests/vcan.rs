@@ -734,7 +734,7 @@ fn a_panic_in_an_auxiliary_task_leaves_the_drives_driving() {
     // An MQTT command meets the injected panic in the MQTT link, while stdin drives on. It
     // goes at QoS 1 (the broker has it when mosquitto_pub returns) and again until the
     // panic shows: under the VM's emulated CPU one publish has been seen to go unanswered.
-    let panicked = "an auxiliary task panicked at src/runtime/mqtt.rs";
+    let panicked = "an auxiliary task panicked at src/runtime/links/mqtt.rs";
     for id in 1..=5 {
         let published = Command::new("mosquitto_pub")
             .args(["-h", "127.0.0.1", "-p", &port.to_string(), "-q", "1"])

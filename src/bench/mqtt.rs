@@ -17,7 +17,7 @@ use serde_json::Value;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::mqtt::MqttConfig;
 use crate::record::{Payload, RecordingReader};
-use crate::runtime::sim::{self, SimOptions};
+use crate::runtime::modes::sim::{self, SimOptions};
 use crate::sim::plant::{LEFT_NODE, PlantConfig, SIM_BUS};
 use crate::time::Timestamp;
 use crate::vehicle::chassis::status_bits;
@@ -188,7 +188,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     let mut o = MqttOptions::new(format!("chassisd-bench-{}", std::process::id()), host, port);
     o.set_keep_alive(Duration::from_secs(5));
     let (client, mut events) = AsyncClient::new(o, 64);
-    events.set_network_options(crate::runtime::mqtt::low_latency());
+    events.set_network_options(crate::runtime::links::mqtt::low_latency());
     let chassis_set = format!("/root/{vehicle_id}/cmd/chassis/set");
     let chassis_ack = format!("/root/{vehicle_id}/cmd/chassis/ack");
     let heartbeat = format!("/root/{vehicle_id}/heartbeat/set");

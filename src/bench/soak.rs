@@ -28,9 +28,9 @@ use tokio::sync::watch;
 use super::Broker;
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
-use crate::runtime::broker::CHILD_COMMAND;
 use crate::runtime::host::{children_running, resident_memory_bytes};
-use crate::runtime::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
+use crate::runtime::links::broker::CHILD_COMMAND;
+use crate::runtime::modes::sim::{self, SimFaults, SimHandle, SimOptions, SimProbe};
 use crate::sim::lockstep;
 use crate::sim::plant::PlantConfig;
 use crate::vehicle::chassis::{CONTROL_PERIOD, status_bits};
@@ -626,7 +626,7 @@ async fn drive(
     let mut o = MqttOptions::new(format!("chassisd-soak-{}", std::process::id()), host, port);
     o.set_keep_alive(Duration::from_secs(5));
     let (client, mut events) = AsyncClient::new(o, 64);
-    events.set_network_options(crate::runtime::mqtt::low_latency());
+    events.set_network_options(crate::runtime::links::mqtt::low_latency());
     let mut next_drive = Instant::now();
     let mut id = 0u64;
     while Instant::now() < until {
@@ -736,7 +736,7 @@ async fn flood(host: String, port: u16, topics: Topics, hold: Duration) -> anyho
         port,
     );
     let (client, mut events) = AsyncClient::new(o, 256);
-    events.set_network_options(crate::runtime::mqtt::low_latency());
+    events.set_network_options(crate::runtime::links::mqtt::low_latency());
     // The flood ends when its time is up, whatever the connection does.
     let poller = tokio::spawn(async move { while events.poll().await.is_ok() {} });
     let until = Instant::now() + hold;

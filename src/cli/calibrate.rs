@@ -12,8 +12,8 @@ use chassisd::calib::{self, Procedure, Settings, data::Dataset};
 use chassisd::config::VehicleConfig;
 use chassisd::config::calibration::{CalibrationFile, default_path};
 use chassisd::record::segments::{Rotation, segment_dir};
-use chassisd::runtime::listen::{self, ListenOptions};
-use chassisd::runtime::live::{self, LiveOptions};
+use chassisd::runtime::modes::listen::{self, ListenOptions};
+use chassisd::runtime::modes::live::{self, LiveOptions};
 use chassisd::sim::scenario::{CalibrationPattern, Scenario};
 
 /// Calibrate: `imu` (standing still: gyro bias, mounting roll and pitch), `odometry`

@@ -16,6 +16,6 @@ pub struct Args {
 
 pub fn execute(a: Args) -> anyhow::Result<bool> {
     let vehicle = VehicleConfig::load(&a.config)?;
-    block_on(1, chassisd::runtime::can_sim::run(vehicle))??;
+    block_on(1, chassisd::runtime::modes::can_sim::run(vehicle))??;
     Ok(true)
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use super::block_on;
 use chassisd::config::VehicleConfig;
-use chassisd::runtime::check;
+use chassisd::runtime::modes::check;
 
 /// Check a vehicle configuration and probe each of its devices once: serial ports
 /// (valid sentences or frames), CAN interfaces (up), drives (an SDO read), the BMS and

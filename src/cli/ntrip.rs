@@ -9,7 +9,7 @@ use super::{block_on, seconds_arg};
 use chassisd::devices::gnss::encode::GgaFix;
 use chassisd::ntrip::request::Version;
 use chassisd::ntrip::url::{NtripUrl, Password};
-use chassisd::runtime::ntrip::{NtripSpec, fetch};
+use chassisd::runtime::links::ntrip::{NtripSpec, fetch};
 
 /// Fetch RTK corrections from an NTRIP caster with chassisd's client and write the valid
 /// RTCM 3 frames, whole and in order, to a file or a serial port (a receiver); prints the

@@ -7,7 +7,7 @@ use std::time::Duration;
 use super::{block_on, seconds_arg};
 use chassisd::config::VehicleConfig;
 use chassisd::record::segments::Rotation;
-use chassisd::runtime::listen::{self, ListenOptions};
+use chassisd::runtime::modes::listen::{self, ListenOptions};
 
 /// Record every raw frame of every device, and every command sent to the vehicle over
 /// MQTT, without driving anything (listen-only: no engine, nothing transmitted). Writes

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use super::{block_on, ensure_ros1_built, ntrip_override};
 use chassisd::config::VehicleConfig;
-use chassisd::runtime::live::{self, LiveOptions};
+use chassisd::runtime::modes::live::{self, LiveOptions};
 
 /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
 #[derive(clap::Args)]

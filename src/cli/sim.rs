@@ -9,8 +9,8 @@ use super::{
 };
 use chassisd::config::ros1::Ros1Config;
 use chassisd::config::websocket::WebsocketConfig;
-use chassisd::runtime::sim::{self, SimOptions};
-use chassisd::runtime::sim_fast::{self, FastOptions};
+use chassisd::runtime::modes::sim::{self, SimOptions};
+use chassisd::runtime::modes::sim_fast::{self, FastOptions};
 
 /// Run the simulated vehicle in real time through the live engine (no hardware): print
 /// base_status JSON lines at 10 Hz.

@@ -1,5 +1,5 @@
 //! NTRIP: RTK corrections from a caster on the internet (a base station's RTCM 3 stream),
-//! sans-IO. The connection itself lives in `runtime::ntrip`.
+//! sans-IO. The connection itself lives in `runtime::links::ntrip`.
 //!
 //! - [`url`]: the caster's address, with a password that never prints;
 //! - [`request`]: the GET a client sends (NTRIP 1.0 or 2.0, Basic authentication);

@@ -64,15 +64,18 @@ pub fn release_free_memory() -> Duration {
 /// Starts the periodic release on a blocking thread of the runtime (the trim walks every
 /// arena under its lock); it stops with the runtime.
 pub fn spawn() {
-    tokio::spawn(super::panics::restarting("heap release", || async {
-        let mut interval = tokio::time::interval(PERIOD);
-        interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        loop {
-            interval.tick().await;
-            match tokio::task::spawn_blocking(release_free_memory).await {
-                Ok(took) => tracing::trace!(?took, "freed heap pages handed back"),
-                Err(_) => return,
+    tokio::spawn(crate::runtime::panics::restarting(
+        "heap release",
+        || async {
+            let mut interval = tokio::time::interval(PERIOD);
+            interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            loop {
+                interval.tick().await;
+                match tokio::task::spawn_blocking(release_free_memory).await {
+                    Ok(took) => tracing::trace!(?took, "freed heap pages handed back"),
+                    Err(_) => return,
+                }
             }
-        }
-    }));
+        },
+    ));
 }

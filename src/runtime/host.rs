@@ -7,9 +7,9 @@ use std::time::Duration;
 use bytes::Bytes;
 use tokio::sync::mpsc;
 
-use super::clock::RecordClock;
 use crate::engine::HOST_SOURCE;
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
 use crate::vehicle::HostUsage;
 
 /// How often the load is sampled.
@@ -88,9 +88,10 @@ fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
 
 /// Starts the sampler; it stops when the engine goes.
 pub fn spawn(clock: RecordClock, tx: mpsc::Sender<Record>) {
-    tokio::spawn(super::panics::restarting("host sampler", move || {
-        sample(clock, tx.clone())
-    }));
+    tokio::spawn(crate::runtime::panics::restarting(
+        "host sampler",
+        move || sample(clock, tx.clone()),
+    ));
 }
 
 /// Sends the host's CPU and memory use every [`PERIOD`] until the engine goes.

@@ -5,9 +5,9 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::lossy::LossySender;
 use crate::record::segments::SegmentedWriter;
 use crate::record::{Payload, Record, RecordError, RecordingWriter};
+use crate::runtime::lossy::LossySender;
 use crate::time::Timestamp;
 
 /// Records queued for the writer thread before new ones are dropped (and counted).

@@ -8,7 +8,7 @@ use std::sync::mpsc::Receiver;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use super::lossy::LossySender;
+use crate::runtime::lossy::LossySender;
 
 /// Lines waiting for the writer before new ones are dropped (25 s of base_status).
 const QUEUE: usize = 256;

@@ -1,6 +1,6 @@
 //! The ROS1 interface of `ros1-navigation-interface.txt`: what its topics and services ask of
 //! the core, and the status codes it publishes. Sans-IO like the MQTT dialects; the node that
-//! moves the messages is `runtime::ros1` (the `ros1` feature).
+//! moves the messages is `runtime::links::ros1` (the `ros1` feature).
 //!
 //! Requests become the local channel's commands (`api::local`), recorded under the source
 //! [`SOURCE`], so a recorded session replays with them and without ROS:

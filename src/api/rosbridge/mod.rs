@@ -1,6 +1,6 @@
 //! device-mqtt-api.md's "WebSocket/ROS2 Topic" interfaces, served over the rosbridge v2
 //! protocol (what roslibjs, roslibpy and Foxglove speak): the operations, the topic table
-//! and the ROS messages as JSON. Moving them is `runtime::websocket`'s job.
+//! and the ROS messages as JSON. Moving them is `runtime::links::websocket`'s job.
 
 pub mod messages;
 pub mod ops;

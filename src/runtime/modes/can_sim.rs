@@ -12,7 +12,7 @@
 //! While an interface is down the drives on it keep running (their motors turn, their
 //! watchdogs count) with nothing to hear: a cut cable, as the drives see it.
 
-use crate::runtime::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
+use crate::runtime::links::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -21,12 +21,12 @@ use socketcan::tokio::CanSocket;
 use socketcan::{CanAnyFrame, CanFrame};
 use tokio::sync::mpsc;
 
-use super::can::{interface_up, open};
-use super::clock::RecordClock;
 use crate::config::VehicleConfig;
 use crate::devices::bms::BmsProfile;
 use crate::devices::can::{Frame, Received};
 use crate::devices::canopen::NodeId;
+use crate::runtime::clock::RecordClock;
+use crate::runtime::drivers::can::{interface_up, open};
 use crate::sim::bms::{Battery, SimDaly, SimDbcBms};
 use crate::sim::cia402_drive::{MotorModel, SimDrive};
 use crate::sim::estop::{Button, SimEStop};

@@ -1,18 +1,22 @@
 //! Starts the device drivers a vehicle configuration names (the GNSS receiver, the IMU, each
 //! CAN interface), for `chassisd run` and for `chassisd record` alike.
 
+pub mod can;
+pub mod serial;
+pub mod serial_tx;
+
 use std::collections::BTreeMap;
 use std::time::Duration;
 
 use tokio::sync::mpsc;
 
-use super::can::{self, CanSpec, CanTx};
-use super::clock::RecordClock;
-use super::serial::{self, SerialSpec};
-use super::serial_tx::SerialTx;
 use crate::config::VehicleConfig;
 use crate::engine::{CORRECTIONS_PORT, Decoder};
 use crate::record::{Record, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use can::{CanSpec, CanTx};
+use serial::SerialSpec;
+use serial_tx::SerialTx;
 
 /// Source name of the GNSS receiver.
 pub use crate::engine::GNSS_SOURCE;
@@ -86,9 +90,10 @@ pub fn start(
             forward_reads: false,
         };
         let tx = tx.clone();
-        tokio::spawn(super::panics::restarting("corrections port", move || {
-            serial::run(spec.clone(), clock, tx.clone())
-        }));
+        tokio::spawn(crate::runtime::panics::restarting(
+            "corrections port",
+            move || serial::run(spec.clone(), clock, tx.clone()),
+        ));
     }
     let serial_ports = [
         config.gnss.as_ref().map(|g| {
@@ -121,9 +126,10 @@ pub fn start(
             .push(SourceMeta::serial(&spec.source, decoder.protocol()));
         devices.names.push(spec.source.clone());
         let tx = tx.clone();
-        tokio::spawn(super::panics::restarting("serial driver", move || {
-            serial::run(spec.clone(), clock, tx.clone())
-        }));
+        tokio::spawn(crate::runtime::panics::restarting(
+            "serial driver",
+            move || serial::run(spec.clone(), clock, tx.clone()),
+        ));
     }
     for bus in &config.can {
         devices.sources.push(SourceMeta::can(&bus.interface));

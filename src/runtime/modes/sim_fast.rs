@@ -8,10 +8,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use super::clock::RecordClock;
 use crate::api::rtk::BaseStatus;
 use crate::engine::EngineOutput;
 use crate::record::{Record, RecordError, RecordingWriter};
+use crate::runtime::clock::RecordClock;
 use crate::sim::lockstep::{self, Lockstep, Sink};
 use crate::sim::plant::PlantConfig;
 use crate::sim::scenario::Scenario;
@@ -120,12 +120,13 @@ pub fn run(options: FastOptions, out: impl Write) -> anyhow::Result<FastSummary>
         lines: 0,
         error: None,
     };
-    let length = super::sim::run_length(options.duration, options.scenario.as_ref());
+    let length =
+        crate::runtime::modes::sim::run_length(options.duration, options.scenario.as_ref());
     let end = start.saturating_add(length.unwrap_or_default());
     while sim.time() < end && sink.error.is_none() {
         match &options.scenario {
             Some(s) => sim.step_scripted(s, &mut sink),
-            None => sim.step(super::sim::RTK_FIXED, &mut sink),
+            None => sim.step(crate::runtime::modes::sim::RTK_FIXED, &mut sink),
         }
     }
     if let Some(e) = sink.error.take() {

@@ -27,8 +27,6 @@ use serde_json::{Value, json};
 use tokio::sync::mpsc;
 
 use self::hub::{Client, ClientQueue};
-use super::clock::RecordClock;
-use super::command_rate::CommandRate;
 use crate::api::local;
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, ClientOp, Level};
@@ -38,6 +36,8 @@ use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
 use crate::record::{Payload, Record, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::links::command_rate::CommandRate;
 use crate::time::Timestamp;
 use crate::vehicle::VehicleStatus;
 

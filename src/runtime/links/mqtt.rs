@@ -21,11 +21,11 @@ use rumqttc::{
 };
 use tokio::sync::mpsc;
 
-use super::clock::RecordClock;
-use super::command_rate::{CommandRate, RateReport};
 use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
 use crate::config::mqtt::MqttConfig;
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::links::command_rate::{CommandRate, RateReport};
 use crate::vehicle::LinkState;
 
 /// Messages from the engine waiting for the link task.
@@ -198,7 +198,7 @@ pub fn spawn(
             let (client, mut eventloop) = AsyncClient::new(options.clone(), CLIENT_QUEUE);
             eventloop.set_network_options(low_latency());
             let link = run(&spec, client, eventloop, &mut rx, clock, records.clone());
-            match super::panics::contain(link).await {
+            match crate::runtime::panics::contain(link).await {
                 Ok(LinkEnd::EngineGone) => return,
                 Ok(LinkEnd::PollerLost) => {
                     tracing::error!("MQTT link restarted: its event loop ended (a panic in it?)");
@@ -335,8 +335,8 @@ async fn run(
                     }
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
-                    if super::panics::inject("mqtt") {
-                        panic!("injected panic ({}=mqtt)", super::panics::INJECT_PANIC);
+                    if crate::runtime::panics::inject("mqtt") {
+                        panic!("injected panic ({}=mqtt)", crate::runtime::panics::INJECT_PANIC);
                     }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;

@@ -1,7 +1,7 @@
 //! Live mode: drivers feed the engine task, which owns the core, runs the 10 ms control loop,
 //! sends the drives' frames, and writes a base_status line every 100 ms.
 
-use crate::runtime::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
+use crate::runtime::links::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
@@ -11,20 +11,6 @@ use anyhow::Context;
 use bytes::Bytes;
 use tokio::sync::mpsc;
 
-use super::broker;
-use super::can::CanTx;
-use super::clock::RecordClock;
-use super::drivers;
-use super::heap;
-use super::host;
-use super::mqtt::{self, MqttSender, MqttSpec};
-use super::notify::{InjectedStall, ServiceManager};
-use super::panics;
-use super::recorder::Recorder;
-use super::ros1::Ros1Link;
-use super::serial_tx::SerialTx;
-use super::status_out::StatusOut;
-use super::trajectory_writer;
 use crate::api::local;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
@@ -35,6 +21,20 @@ use crate::engine::{
     CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE, RTCM_PROTOCOL,
 };
 use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::drivers;
+use crate::runtime::drivers::can::CanTx;
+use crate::runtime::drivers::serial_tx::SerialTx;
+use crate::runtime::heap;
+use crate::runtime::host;
+use crate::runtime::links::broker;
+use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
+use crate::runtime::links::ros1::Ros1Link;
+use crate::runtime::notify::{InjectedStall, ServiceManager};
+use crate::runtime::panics;
+use crate::runtime::recorder::Recorder;
+use crate::runtime::status_out::StatusOut;
+use crate::runtime::trajectory_writer;
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
 use crate::vehicle::LinkState;
@@ -48,7 +48,7 @@ const SUMMARY_EVERY: Duration = Duration::from_secs(30);
 const STOP_FLUSH: Duration = Duration::from_millis(500);
 /// Devices still down this long after start: systemd hears READY anyway, with their names.
 const READY_GRACE: Duration = Duration::from_secs(10);
-pub use super::drivers::{GNSS_SOURCE, IMU_SOURCE};
+pub use crate::runtime::drivers::{GNSS_SOURCE, IMU_SOURCE};
 /// Source name of the local command channel.
 pub const STDIN_SOURCE: &str = crate::engine::LOCAL_COMMANDS;
 
@@ -125,7 +125,7 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     let corrections = match &config.ntrip {
         Some(n) => {
             source_meta.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
-            Some(super::ntrip::spawn(n, clock, tx.clone())?)
+            Some(crate::runtime::links::ntrip::spawn(n, clock, tx.clone())?)
         }
         None => None,
     };
@@ -189,8 +189,8 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     };
     let mut ros1 = match config.ros1.clone() {
         Some(r) => {
-            source_meta.push(super::ros1::source_meta());
-            Some(super::ros1::start(
+            source_meta.push(crate::runtime::links::ros1::source_meta());
+            Some(crate::runtime::links::ros1::start(
                 &mut engine,
                 config,
                 r,
@@ -202,8 +202,8 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     };
     let mut websocket = match config.websocket.clone() {
         Some(w) => {
-            source_meta.push(super::websocket::source_meta());
-            Some(super::websocket::start(
+            source_meta.push(crate::runtime::links::websocket::source_meta());
+            Some(crate::runtime::links::websocket::start(
                 &mut engine,
                 config,
                 w,
@@ -403,16 +403,19 @@ fn dispatch(
     (mqtt, mut ros1, mut websocket): (
         Option<&MqttSender>,
         Option<&mut Ros1Link>,
-        Option<&mut super::websocket::WebsocketLink>,
+        Option<&mut crate::runtime::links::websocket::WebsocketLink>,
     ),
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
 ) -> Option<u32> {
     let mut bits = None;
     for output in outputs.drain(..) {
-        let Some(output) =
-            super::forward_common(output, mqtt, ros1.as_deref_mut(), websocket.as_deref_mut())
-        else {
+        let Some(output) = crate::runtime::modes::forward_common(
+            output,
+            mqtt,
+            ros1.as_deref_mut(),
+            websocket.as_deref_mut(),
+        ) else {
             continue;
         };
         match output {

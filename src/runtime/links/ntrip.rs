@@ -15,7 +15,6 @@ use tokio::net::TcpStream;
 use tokio::sync::{mpsc, watch};
 use tokio::time::{Instant, sleep_until, timeout};
 
-use super::clock::RecordClock;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::rtcm::RtcmFramer;
 pub use crate::ntrip::NtripSpec;
@@ -25,6 +24,7 @@ use crate::ntrip::request::request;
 use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
 use crate::ntrip::sourcetable::{self, MAX_TABLE};
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
 use crate::vehicle::LinkState;
 
 /// Source name of the corrections in records.
@@ -507,15 +507,18 @@ pub fn spawn(
     tracing::info!(caster = %spec.url, version = ?spec.version,
         gga_interval_s = spec.gga_interval.map(|d| d.as_secs_f64()),
         "NTRIP client starting");
-    tokio::spawn(super::panics::restarting("NTRIP client", move || {
-        run(
-            spec.clone(),
-            clock,
-            tx.clone(),
-            position_rx.clone(),
-            state_tx.clone(),
-        )
-    }));
+    tokio::spawn(crate::runtime::panics::restarting(
+        "NTRIP client",
+        move || {
+            run(
+                spec.clone(),
+                clock,
+                tx.clone(),
+                position_rx.clone(),
+                state_tx.clone(),
+            )
+        },
+    ));
     Ok(CorrectionsClient {
         position,
         state,

@@ -10,22 +10,22 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::{mpsc, watch};
 
-use super::broker;
-use super::clock::RecordClock;
-use super::heap;
-use super::host;
-use super::live::read_commands;
-use super::mqtt::{self, MqttSender, MqttSpec};
-use super::recorder::Recorder;
-use super::ros1::Ros1Link;
-use super::status_out::StatusOut;
-use super::trajectory_writer;
 use crate::api::rtk::BaseStatus;
 use crate::api::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
 use crate::engine::{CORRECTIONS_SOURCE, EngineOutput, EngineStats, RTCM_PROTOCOL};
 use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::heap;
+use crate::runtime::host;
+use crate::runtime::links::broker;
+use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
+use crate::runtime::links::ros1::Ros1Link;
+use crate::runtime::modes::live::read_commands;
+use crate::runtime::recorder::Recorder;
+use crate::runtime::status_out::StatusOut;
+use crate::runtime::trajectory_writer;
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
@@ -135,7 +135,7 @@ struct Output {
     recorder: Option<Recorder>,
     mqtt: Option<MqttSender>,
     ros1: Option<Ros1Link>,
-    websocket: Option<super::websocket::WebsocketLink>,
+    websocket: Option<crate::runtime::links::websocket::WebsocketLink>,
 }
 
 impl Sink for Output {
@@ -147,7 +147,7 @@ impl Sink for Output {
 
     fn output(&mut self, output: EngineOutput) {
         // Frames go to the simulated drives inside the lockstep, not here.
-        if let Some(EngineOutput::Status(status)) = super::forward_common(
+        if let Some(EngineOutput::Status(status)) = crate::runtime::modes::forward_common(
             output,
             self.mqtt.as_ref(),
             self.ros1.as_mut(),
@@ -164,8 +164,8 @@ impl Sink for Output {
 /// loop is marked as `run`'s is: a panic in it ends the process, one elsewhere is contained
 /// (`panics`).
 pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
-    super::panics::install(Vec::new());
-    super::panics::safety_relevant(run_marked(options, out)).await
+    crate::runtime::panics::install(Vec::new());
+    crate::runtime::panics::safety_relevant(run_marked(options, out)).await
 }
 
 async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
@@ -194,10 +194,10 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         sources.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
     }
     if options.ros1.is_some() {
-        sources.push(super::ros1::source_meta());
+        sources.push(crate::runtime::links::ros1::source_meta());
     }
     if options.websocket.is_some() {
-        sources.push(super::websocket::source_meta());
+        sources.push(crate::runtime::links::websocket::source_meta());
     }
     let recorder = match &options.record {
         Some(dir) => {
@@ -248,7 +248,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
     let ros1 = match options.ros1.clone() {
         Some(ros1) => {
             let config = sim.config().clone();
-            Some(super::ros1::start(
+            Some(crate::runtime::links::ros1::start(
                 sim.engine_mut(),
                 &config,
                 ros1,
@@ -261,7 +261,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
     let websocket = match options.websocket.clone() {
         Some(w) => {
             let config = sim.config().clone();
-            Some(super::websocket::start(
+            Some(crate::runtime::links::websocket::start(
                 sim.engine_mut(),
                 &config,
                 w,
@@ -279,7 +279,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         websocket,
     };
     let corrections = match &options.ntrip {
-        Some(n) => Some(super::ntrip::spawn(n, clock, tx.clone())?),
+        Some(n) => Some(crate::runtime::links::ntrip::spawn(n, clock, tx.clone())?),
         None => None,
     };
     if options.commands_stdin {
@@ -342,8 +342,8 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
             command = commands.recv(), if commands_open => match command {
                 // Commands and link events take the simulation's time.
                 Some(record) => {
-                    if matches!(record.payload, Payload::Command { .. }) && super::panics::inject("control") {
-                        panic!("injected panic ({}=control)", super::panics::INJECT_PANIC);
+                    if matches!(record.payload, Payload::Command { .. }) && crate::runtime::panics::inject("control") {
+                        panic!("injected panic ({}=control)", crate::runtime::panics::INJECT_PANIC);
                     }
                     sim.input(&record.source, record.payload, &mut sink)
                 }

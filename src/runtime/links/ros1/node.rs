@@ -20,7 +20,7 @@ use crate::api::ros1::{self, Request};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
-use crate::runtime::command_rate::{CommandRate, RateReport};
+use crate::runtime::links::command_rate::{CommandRate, RateReport};
 use crate::runtime::outage_log::{OutageLog, Say};
 use crate::vehicle::{Localization, Pose2D};
 

@@ -11,15 +11,15 @@ use std::time::Duration;
 use anyhow::Context;
 use tokio::sync::mpsc;
 
-use super::clock::RecordClock;
-use super::drivers;
-use super::mqtt_observe;
-use super::recorder::Recorder;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::VehicleConfig;
 use crate::engine::Engine;
 use crate::record::segments::{Progress, Rotation, SegmentedWriter};
 use crate::record::{Payload, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::drivers;
+use crate::runtime::links::mqtt_observe;
+use crate::runtime::recorder::Recorder;
 use crate::vehicle::LinkState;
 
 /// Records waiting for the recorder loop before drivers wait.

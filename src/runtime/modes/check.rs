@@ -19,7 +19,6 @@ use tokio_serial::SerialPortBuilderExt;
 
 use std::net::ToSocketAddrs;
 
-use super::broker::BrokerHealth;
 use crate::config::VehicleConfig;
 use crate::config::imu::ImuProtocol;
 use crate::devices::can::Received;
@@ -28,6 +27,7 @@ use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::NmeaReceiver;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
+use crate::runtime::links::broker::BrokerHealth;
 use crate::time::Timestamp;
 
 /// How long a serial port is listened to.
@@ -109,7 +109,7 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
     }
     for bus in &config.can {
         let name = bus.interface.as_str();
-        let socket = match super::can::open(name) {
+        let socket = match crate::runtime::drivers::can::open(name) {
             Ok(s) => s,
             Err(e) => {
                 probes.push(Probe::new(
@@ -165,7 +165,7 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
                     .fallback_position
                     .map(|p| GgaFix::fallback(p.lat, p.lon, p.height));
                 let caster = spec.url.to_string();
-                for (what, result) in super::ntrip::probe(&spec, fallback).await {
+                for (what, result) in crate::runtime::links::ntrip::probe(&spec, fallback).await {
                     probes.push(Probe::new("ntrip", &format!("{what} ({caster})"), result));
                 }
             }
@@ -415,7 +415,7 @@ async fn probe_broker(
     };
     // A client id of its own (the daemon's stays connected) and no last will.
     let client_id = format!("{}-check", m.client_id(&config.vehicle.name));
-    let options = match super::mqtt::client_options(m, client_id) {
+    let options = match crate::runtime::links::mqtt::client_options(m, client_id) {
         Ok(o) => o,
         Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),
     };

@@ -7,11 +7,11 @@ use std::time::Duration;
 use rumqttc::{AsyncClient, Event, Packet, QoS};
 use tokio::sync::mpsc;
 
-use super::clock::RecordClock;
-use super::mqtt::{client_options, low_latency};
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::mqtt::MqttConfig;
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::links::mqtt::{client_options, low_latency};
 use crate::vehicle::LinkState;
 
 /// Requests rumqttc queues between the client handle and its event loop.
@@ -57,7 +57,7 @@ pub fn spawn(
                 }
                 // A retained message is an old command, not one sent during the recording.
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
-                    let refused = super::mqtt::refused_subscriptions(&ack);
+                    let refused = crate::runtime::links::mqtt::refused_subscriptions(&ack);
                     if refused > 0 {
                         tracing::error!(
                             refused,

@@ -12,10 +12,10 @@ use socketcan::tokio::CanSocket;
 use socketcan::{CanAnyFrame, CanError, CanFrame, SocketOptions};
 use tokio::sync::mpsc;
 
-use super::clock::RecordClock;
-use super::outage_log::{OutageLog, Say};
 use crate::devices::can::Frame;
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::outage_log::{OutageLog, Say};
 use crate::vehicle::LinkState;
 
 /// First reconnect delay; it doubles up to the configured maximum.
@@ -90,7 +90,7 @@ pub fn spawn(
         pending: pending.clone(),
     };
     // The drives' link: a panic here stops them and ends the process (`panics`).
-    tokio::spawn(super::panics::safety_relevant(run(
+    tokio::spawn(crate::runtime::panics::safety_relevant(run(
         spec, clock, records, frames, counters,
     )));
     CanTx {

@@ -25,9 +25,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 
-use super::mqtt::MqttSender;
 use crate::api::mqtt::Publish;
 use crate::config::mqtt::MqttConfig;
+use crate::runtime::links::mqtt::MqttSender;
 use child::{ChildReport, ChildSettings};
 use tls::ServerTls;
 

@@ -10,10 +10,10 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::mpsc;
 use tokio_serial::SerialPortBuilderExt;
 
-use super::clock::RecordClock;
-use super::outage_log::{OutageLog, Say};
-use super::serial_tx::SerialTx;
 use crate::record::{Payload, Record};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::drivers::serial_tx::SerialTx;
+use crate::runtime::outage_log::{OutageLog, Say};
 use crate::vehicle::LinkState;
 
 /// First reconnect delay; it doubles up to the configured maximum.

@@ -1,0 +1,11 @@
+//! The clients' protocols: each link carries one protocol's connections to and from the
+//! engine.
+
+pub mod broker;
+pub mod command_rate;
+pub mod input_lines;
+pub mod mqtt;
+pub mod mqtt_observe;
+pub mod ntrip;
+pub mod ros1;
+pub mod websocket;
