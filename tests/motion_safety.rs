@@ -5,6 +5,7 @@
 mod common;
 
 use chassisd::control::Outcome;
+use chassisd::control::outcome::{AbortReason, CancelReason, LostDuring};
 use chassisd::devices::gnss::FixQuality;
 use chassisd::sim::lockstep::Lockstep;
 use chassisd::sim::plant::{GnssCondition, LEFT_NODE, PlantConfig};
@@ -22,7 +23,9 @@ fn a_software_estop_aborts_the_move_and_moves_need_a_re_arm() {
     let r = v.result();
     assert_eq!(
         r.outcome,
-        Outcome::Aborted("safety stop: software emergency stop engaged".into())
+        Outcome::Aborted(AbortReason::SafetyStop(
+            "software emergency stop engaged".into()
+        ))
     );
     v.run(2.0);
     assert!(v.speed().abs() < 0.01, "stopped");
@@ -52,7 +55,7 @@ fn an_operator_stop_cancels_the_move_and_latches() {
     v.run(0.02);
     assert_eq!(
         v.result().outcome,
-        Outcome::Cancelled("stopped by the operator".into())
+        Outcome::Cancelled(CancelReason::StoppedByOperator)
     );
     v.run(1.5);
     assert!(v.sim.vehicle().truth().w.abs() < 0.01, "no longer turning");
@@ -78,7 +81,7 @@ fn a_velocity_command_takes_over_from_a_move_in_manual_mode() {
     v.run(0.02);
     assert_eq!(
         v.result().outcome,
-        Outcome::Cancelled("a velocity command took over".into())
+        Outcome::Cancelled(CancelReason::VelocityCommand)
     );
     // The operator's command holds until its watchdog (0.5 s).
     v.run(0.4);
@@ -99,7 +102,7 @@ fn a_stop_request_ends_the_move_at_rest_without_latching() {
     v.run(0.02);
     assert_eq!(
         v.result().outcome,
-        Outcome::Cancelled("stop requested".into())
+        Outcome::Cancelled(CancelReason::StopRequested)
     );
     v.run(1.5);
     assert!(v.speed().abs() < 0.01, "at rest: {}", v.speed());
@@ -145,7 +148,7 @@ fn a_goal_is_aborted_when_the_localisation_is_lost() {
     let r = v.result();
     assert_eq!(
         r.outcome,
-        Outcome::Aborted("localisation lost during the goal".into()),
+        Outcome::Aborted(AbortReason::LocalisationLost(LostDuring::Goal)),
         "{r}"
     );
     v.run_under(no_fix, 2.0, false);
@@ -242,7 +245,7 @@ fn a_task_is_aborted_when_the_localisation_is_lost() {
     v.run_under(no_fix, 200.0, true);
     let r = v.result();
     assert!(
-        matches!(&r.outcome, Outcome::Aborted(why) if why.contains("localisation lost") || why.contains("GNSS quality")),
+        matches!(&r.outcome, Outcome::Aborted(why) if matches!(why.root(), AbortReason::LocalisationLost(_) | AbortReason::GnssBelow { .. })),
         "{r}"
     );
     v.run_under(no_fix, 2.0, false);
@@ -305,7 +308,9 @@ fn a_lost_control_link_aborts_the_move_and_needs_a_re_arm() {
     let r = v.result();
     assert_eq!(
         r.outcome,
-        Outcome::Aborted("safety stop: control link heartbeat lost".into()),
+        Outcome::Aborted(AbortReason::SafetyStop(
+            "control link heartbeat lost".into()
+        )),
         "{r}"
     );
     v.run(2.0);
@@ -339,7 +344,7 @@ fn a_lost_control_link_aborts_the_move_and_needs_a_re_arm() {
     v.run(0.05);
     assert_eq!(
         v.result().outcome,
-        Outcome::Cancelled("the drive mode was switched".into())
+        Outcome::Cancelled(CancelReason::ModeSwitched)
     );
 }
 
@@ -368,7 +373,7 @@ fn a_drive_fault_aborts_a_move_or_a_task_and_needs_a_reset() {
         v.run_under(FIXED, 0.5, true);
         let r = v.result();
         assert!(
-            matches!(&r.outcome, Outcome::Aborted(why) if why.starts_with("safety stop: left: EMCY 0x2310")),
+            matches!(&r.outcome, Outcome::Aborted(AbortReason::SafetyStop(cause)) if cause.starts_with("left: EMCY 0x2310")),
             "{start}: {r}"
         );
         v.run(2.0);

@@ -40,7 +40,10 @@ fn a_panic_in_the_mqtt_link_is_contained_and_the_link_restarts() {
     // The first command meets the injected panic: no answer to it.
     let status = clients.subscribe(&["base_status"]);
     assert_eq!(drive(&clients, 1), None);
-    daemon.wait_log(WAIT, "an auxiliary task panicked at src/runtime/links/mqtt.rs");
+    daemon.wait_log(
+        WAIT,
+        "an auxiliary task panicked at src/runtime/links/mqtt.rs",
+    );
     daemon.wait_log(WAIT, "MQTT link restarted after a panic");
     daemon.wait_log(WAIT, "MQTT subscribed");
     // The link is back, and the vehicle takes commands; it never stopped reporting.

@@ -15,6 +15,7 @@
 //!   by slip) faces the goal and tries again, a few times.
 
 use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
+use super::outcome::{AbortReason, LostDuring};
 use super::profile::Profile;
 use super::{Outcome, PoseView};
 use crate::control::settings::MotionSettings;
@@ -159,7 +160,7 @@ impl GoalMove {
     pub fn step(&mut self, t: Timestamp, view: &PoseView, response_s: f64) -> Step {
         let Some(pose) = view.map_pose() else {
             return Step::Done(
-                Outcome::Aborted("localisation lost during the goal".into()),
+                Outcome::Aborted(AbortReason::LocalisationLost(LostDuring::Goal)),
                 self.left.0,
             );
         };
@@ -232,12 +233,11 @@ impl GoalMove {
             // the side (face the goal and try again).
             if distance > tolerance && self.approaches >= MAX_APPROACHES {
                 return Step::Done(
-                    Outcome::Aborted(format!(
-                        "ended {:.0} mm from the goal after {} approaches (tolerance {:.0} mm)",
-                        distance * 1000.0,
-                        self.approaches,
-                        tolerance * 1000.0
-                    )),
+                    Outcome::Aborted(AbortReason::GoalMissed {
+                        distance_m: distance,
+                        approaches: self.approaches,
+                        tolerance_m: tolerance,
+                    }),
                     distance,
                 );
             }
@@ -358,7 +358,7 @@ mod tests {
         assert!(GoalMove::new(t, goal, &view(OdomPose::default(), t, false), &s).is_none());
         let (outcome, _, took) = run(goal, OdomPose::default(), 0.1, 1.0);
         assert!(
-            matches!(&outcome, Outcome::Aborted(why) if why.contains("localisation lost")),
+            matches!(&outcome, Outcome::Aborted(AbortReason::LocalisationLost(_))),
             "{outcome:?}"
         );
         assert!((took - 1.0).abs() < 0.02, "{took}");

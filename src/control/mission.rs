@@ -14,6 +14,7 @@
 use std::fmt;
 
 use super::goal::GoalPose;
+use super::outcome::{AbortReason, CancelReason, StepAt};
 use super::{MotionId, MotionTag, Outcome};
 use crate::time::Timestamp;
 
@@ -190,8 +191,11 @@ impl Mission {
         if self.phase != Phase::Motion(id) {
             return;
         }
-        let (i, step) = (self.index, &self.steps[self.index]);
-        let action = step.action();
+        let (index, step) = (self.index, &self.steps[self.index]);
+        let at = StepAt {
+            index,
+            action: step.action(),
+        };
         match outcome {
             Outcome::Succeeded if matches!(step, MissionStep::Charge(_)) => {
                 self.phase = Phase::Charging {
@@ -201,13 +205,17 @@ impl Mission {
             }
             Outcome::Succeeded => self.step_done(),
             Outcome::Cancelled(why) => {
-                self.end(Outcome::Cancelled(format!("step {i} ({action}): {why}")));
+                self.end(Outcome::Cancelled(CancelReason::Step(
+                    at,
+                    Box::new(why.clone()),
+                )));
             }
-            Outcome::TimedOut => {
-                self.end(Outcome::Aborted(format!("step {i} ({action}) timed out")));
-            }
+            Outcome::TimedOut => self.end(Outcome::Aborted(AbortReason::StepTimedOut(at))),
             Outcome::Aborted(why) => {
-                self.end(Outcome::Aborted(format!("step {i} ({action}): {why}")));
+                self.end(Outcome::Aborted(AbortReason::Step(
+                    at,
+                    Box::new(why.clone()),
+                )));
             }
         }
     }
@@ -215,6 +223,14 @@ impl Mission {
     /// The motion the core started for the current step.
     pub fn started(&mut self, id: MotionId) {
         self.phase = Phase::Motion(id);
+    }
+
+    /// Step `index` as reasons name it.
+    fn step_at(&self, index: usize) -> StepAt {
+        StepAt {
+            index,
+            action: self.steps[index].action(),
+        }
     }
 
     fn step_done(&mut self) {
@@ -254,9 +270,10 @@ impl Mission {
                         }
                         MissionStep::Charge(_) => {
                             let Some(dock) = self.settings.dock else {
-                                self.end(Outcome::Aborted(format!(
-                                    "step {} (CHARGING): no dock is configured (mission.dock)",
-                                    self.index
+                                let at = self.step_at(self.index);
+                                self.end(Outcome::Aborted(AbortReason::Step(
+                                    at,
+                                    Box::new(AbortReason::NoDock),
                                 )));
                                 return None;
                             };
@@ -287,11 +304,11 @@ impl Mission {
                         return None;
                     }
                     if idle > self.settings.charge_timeout_s {
-                        self.end(Outcome::Aborted(format!(
-                            "step {} (CHARGING): the BMS has not reported charging for {} s \
-                             at the dock",
-                            self.index, self.settings.charge_timeout_s
-                        )));
+                        let why = AbortReason::NotCharging {
+                            timeout_s: self.settings.charge_timeout_s,
+                        };
+                        let at = self.step_at(self.index);
+                        self.end(Outcome::Aborted(AbortReason::Step(at, Box::new(why))));
                         return None;
                     }
                     self.phase = Phase::Charging { idle, charged };
@@ -386,12 +403,11 @@ mod tests {
         );
         m.tick(at(0), false);
         m.started(1);
-        m.motion_ended(1, &Outcome::Aborted("localisation lost".into()));
+        let lost = AbortReason::LocalisationLost(super::super::outcome::LostDuring::Goal);
+        m.motion_ended(1, &Outcome::Aborted(lost));
         assert_eq!(
-            m.ended(),
-            Some(&Outcome::Aborted(
-                "step 0 (MOVE_TO_POSITION): localisation lost".into()
-            ))
+            m.ended().map(ToString::to_string).as_deref(),
+            Some("aborted: step 0 (MOVE_TO_POSITION): localisation lost during the goal")
         );
         assert_eq!(m.tick(at(10), false), None);
 
@@ -403,7 +419,7 @@ mod tests {
             m.tick(at(s * 1_000), false);
         }
         assert!(
-            matches!(m.ended(), Some(Outcome::Aborted(why)) if why.contains("has not reported charging")),
+            matches!(m.ended(), Some(Outcome::Aborted(why)) if matches!(why.root(), AbortReason::NotCharging { .. })),
             "{:?}",
             m.ended()
         );
@@ -426,7 +442,7 @@ mod tests {
         );
         m.tick(at(16_500), false);
         assert!(
-            matches!(m.ended(), Some(Outcome::Aborted(why)) if why.contains("has not reported charging")),
+            matches!(m.ended(), Some(Outcome::Aborted(why)) if matches!(why.root(), AbortReason::NotCharging { .. })),
             "{:?}",
             m.ended()
         );
@@ -434,7 +450,7 @@ mod tests {
         let mut m = Mission::new(vec![MissionStep::Charge(0.0)], settings(false), None);
         assert_eq!(m.tick(at(0), false), None);
         assert!(
-            matches!(m.ended(), Some(Outcome::Aborted(why)) if why.contains("no dock")),
+            matches!(m.ended(), Some(Outcome::Aborted(why)) if *why.root() == AbortReason::NoDock),
             "{:?}",
             m.ended()
         );

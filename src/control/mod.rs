@@ -5,6 +5,7 @@
 pub mod goal;
 pub mod mission;
 pub mod moves;
+pub mod outcome;
 pub mod path;
 pub mod profile;
 pub mod response;
@@ -18,6 +19,7 @@ use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
 use goal::{GoalMove, GoalPose};
 use moves::{RelativeMove, Step};
+pub use outcome::{AbortReason, CancelReason, Outcome};
 use path::{CrossTrack, PathFollow, StartRefusal};
 
 /// Navigation task state.
@@ -67,11 +69,6 @@ impl fmt::Display for MoveKind {
     }
 }
 
-/// Why a motion ended on `set_navi_cmd` 5 (or `/navi_stop`): brought to rest, not latched.
-pub const STOP_REQUESTED: &str = "stop requested";
-/// Why a motion ended on an operator's stop (latched).
-pub const STOPPED_BY_OPERATOR: &str = "stopped by the operator";
-
 /// Who asked for a motion: a dialect's name and its own number for the request (it keeps
 /// what the number stands for, such as a `msg_id`), so that it can answer at the end.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,19 +113,6 @@ impl fmt::Display for MotionKind {
     }
 }
 
-/// How a motion ended.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Outcome {
-    /// Arrived within its tolerance.
-    Succeeded,
-    /// Ended on request (a new move, a velocity command, a stop, a mode switch): why.
-    Cancelled(String),
-    /// Did not arrive within its time allowance.
-    TimedOut,
-    /// Ended by a fault or a lost precondition: why.
-    Aborted(String),
-}
-
 impl Outcome {
     /// The `nav.status` it leaves: a cancel is no failure, the vehicle is idle again.
     pub fn navigation(&self) -> Navigation {
@@ -136,17 +120,6 @@ impl Outcome {
             Self::Succeeded => Navigation::Succeeded,
             Self::Cancelled(_) => Navigation::Idle,
             Self::TimedOut | Self::Aborted(_) => Navigation::Failed,
-        }
-    }
-}
-
-impl fmt::Display for Outcome {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Succeeded => write!(f, "succeeded"),
-            Self::Cancelled(why) => write!(f, "cancelled: {why}"),
-            Self::TimedOut => write!(f, "timed out"),
-            Self::Aborted(why) => write!(f, "aborted: {why}"),
         }
     }
 }
@@ -390,7 +363,7 @@ impl Motion {
         tag: Option<MotionTag>,
         points: Option<Vec<(f64, f64)>>,
     ) -> MotionId {
-        self.end(t, Outcome::Cancelled("replaced by a new move".into()), None);
+        self.end(t, Outcome::Cancelled(CancelReason::NewMotion), None);
         self.last_id += 1;
         self.active = Some((self.last_id, m, tag));
         self.plan = points.map(|points| Plan {
@@ -469,7 +442,7 @@ impl Motion {
     ) -> Option<(f64, f64)> {
         let (_, m, _) = self.active.as_mut()?;
         let Some(view) = view else {
-            self.end(t, Outcome::Aborted("no odometry".into()), None);
+            self.end(t, Outcome::Aborted(AbortReason::NoOdometry), None);
             return None;
         };
         let step = match m {

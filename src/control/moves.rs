@@ -18,6 +18,7 @@
 //!   within the tolerance, with the coast itself within a few tolerances (the prediction's
 //!   error is a share of it). It has timed out when the allowance is spent first.
 
+use super::outcome::{AbortReason, LostDuring};
 use super::profile::{Limits, Profile};
 use super::{MoveKind, Outcome, PoseView};
 use crate::control::settings::MotionSettings;
@@ -254,9 +255,7 @@ impl RelativeMove {
                 Some(yaw) => yaw,
                 None => {
                     return Step::Done(
-                        Outcome::Aborted(
-                            "localisation lost during the move (its heading was the map's)".into(),
-                        ),
+                        Outcome::Aborted(AbortReason::LocalisationLost(LostDuring::MapHeadingMove)),
                         self.remaining(view),
                     );
                 }

@@ -17,6 +17,7 @@
 //! - It reports the cross-track error: its RMS and maximum over the drive.
 
 use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
+use super::outcome::{AbortReason, LostDuring};
 use super::track::{MAX_LENGTH_M, SAMPLE_M, Segment, Track, polyline_length};
 use super::{Outcome, PoseView};
 use crate::control::settings::{MinGnss, MotionSettings};
@@ -332,7 +333,7 @@ impl PathFollow {
     pub fn step(&mut self, t: Timestamp, view: &PoseView, response_s: f64) -> Step {
         let Some(pose) = view.map_pose() else {
             return Step::Done(
-                Outcome::Aborted("localisation lost during the task".into()),
+                Outcome::Aborted(AbortReason::LocalisationLost(LostDuring::Task)),
                 self.left_m,
             );
         };
@@ -356,10 +357,11 @@ impl PathFollow {
                 let waited = t.saturating_since(since).as_secs_f64();
                 if waited > self.settings.task.gnss_wait_s {
                     return Step::Done(
-                        Outcome::Aborted(format!(
-                            "GNSS quality {} below {min} for {waited:.0} s",
-                            view.gnss
-                        )),
+                        Outcome::Aborted(AbortReason::GnssBelow {
+                            quality: view.gnss,
+                            min,
+                            waited_s: waited,
+                        }),
                         self.left_m,
                     );
                 }
@@ -416,10 +418,10 @@ impl PathFollow {
         self.max_abs = self.max_abs.max(here.e.abs());
         if here.e.abs() > OFF_PATH_ABORT_M {
             return Step::Done(
-                Outcome::Aborted(format!(
-                    "left the path by {:.2} m (limit {OFF_PATH_ABORT_M} m)",
-                    here.e.abs()
-                )),
+                Outcome::Aborted(AbortReason::OffPath {
+                    off_m: here.e.abs(),
+                    limit_m: OFF_PATH_ABORT_M,
+                }),
                 self.left_m,
             );
         }
@@ -689,7 +691,7 @@ mod tests {
         // settings() waits 5 s at most.
         let r = run(&line, 1.0, OdomPose::default(), 0.1, float(2.0, 100.0));
         assert!(
-            matches!(&r.outcome, Outcome::Aborted(why) if why.contains("GNSS quality")),
+            matches!(&r.outcome, Outcome::Aborted(AbortReason::GnssBelow { .. })),
             "{:?}",
             r.outcome
         );

@@ -17,6 +17,7 @@ use crate::config::motion::{MinGnss, MotionSettings, Reach};
 use crate::control::MotionId;
 use crate::control::goal::GoalPose;
 use crate::control::mission::{Mission, MissionEvent, MissionStep, Request};
+use crate::control::outcome::{AbortReason, CancelReason, Replacement};
 use crate::control::path::StartRefusal;
 use crate::control::{Motion, MotionResult, MotionTag, MoveKind, Outcome, PoseView};
 use crate::devices::bms::ChargeState;
@@ -572,29 +573,29 @@ impl Vehicle {
                 // refused (navigation mode, a bad value), the move goes on.
                 let result = self.with_chassis(|c| c.command(t, vx, wz));
                 if result.is_ok() {
-                    self.end_motion(t, Outcome::Cancelled("a velocity command took over".into()));
-                    self.cancel_mission("a velocity command took over");
+                    self.end_motion(t, Outcome::Cancelled(CancelReason::VelocityCommand));
+                    self.cancel_mission(CancelReason::VelocityCommand);
                 }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Move(kind)) => {
                 let result = self.start_move(t, kind);
                 if result.is_ok() {
-                    self.cancel_mission("a move replaced it");
+                    self.cancel_mission(CancelReason::Replaced(Replacement::Move));
                 }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Goal { goal, tag }) => {
                 let result = self.start_goal(t, goal, tag).map(|_| ());
                 if result.is_ok() {
-                    self.cancel_mission("a goal replaced it");
+                    self.cancel_mission(CancelReason::Replaced(Replacement::Goal));
                 }
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::FollowPath { path, tag }) => {
                 let result = self.start_path(t, &path, tag).map(|_| ());
                 if result.is_ok() {
-                    self.cancel_mission("a task replaced it");
+                    self.cancel_mission(CancelReason::Replaced(Replacement::Task));
                 }
                 vec![Output::CommandResult(result)]
             }
@@ -615,7 +616,7 @@ impl Vehicle {
                     }
                 }
                 if !held {
-                    self.end_motion(t, Outcome::Cancelled("paused by the operator".into()));
+                    self.end_motion(t, Outcome::Cancelled(CancelReason::PausedByOperator));
                 }
                 let result = self.with_chassis(|c| {
                     c.operator_stop(t);
@@ -628,8 +629,8 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::CancelMotion) => {
-                self.cancel_mission(crate::control::STOP_REQUESTED);
-                self.end_motion(t, Outcome::Cancelled(crate::control::STOP_REQUESTED.into()));
+                self.cancel_mission(CancelReason::StopRequested);
+                self.end_motion(t, Outcome::Cancelled(CancelReason::StopRequested));
                 let result = self.with_chassis(|c| {
                     c.hold_zero(t);
                     Ok(())
@@ -637,11 +638,8 @@ impl Vehicle {
                 vec![Output::CommandResult(result)]
             }
             Input::Command(Command::Stop) => {
-                self.cancel_mission(crate::control::STOPPED_BY_OPERATOR);
-                self.end_motion(
-                    t,
-                    Outcome::Cancelled(crate::control::STOPPED_BY_OPERATOR.into()),
-                );
+                self.cancel_mission(CancelReason::StoppedByOperator);
+                self.end_motion(t, Outcome::Cancelled(CancelReason::StoppedByOperator));
                 let result = self.with_chassis(|c| {
                     c.operator_stop(t);
                     Ok(())
@@ -667,8 +665,8 @@ impl Vehicle {
             }
             Input::Command(Command::SetMode(mode)) => {
                 if self.chassis.as_ref().is_some_and(|c| c.mode() != mode) {
-                    self.cancel_mission("the drive mode was switched");
-                    self.end_motion(t, Outcome::Cancelled("the drive mode was switched".into()));
+                    self.cancel_mission(CancelReason::ModeSwitched);
+                    self.end_motion(t, Outcome::Cancelled(CancelReason::ModeSwitched));
                 }
                 let result = self.with_chassis(|c| {
                     c.set_mode(mode);
@@ -741,9 +739,13 @@ impl Vehicle {
             match chassis.safety().latched() {
                 Some(Cause::Operator) if held => {}
                 Some(cause) => {
-                    motion.end(t, Outcome::Aborted(format!("safety stop: {cause}")), None);
+                    motion.end(
+                        t,
+                        Outcome::Aborted(AbortReason::SafetyStop(cause.to_string())),
+                        None,
+                    );
                     if let Some(m) = &mut self.mission {
-                        m.end(Outcome::Aborted(format!("safety stop: {cause}")));
+                        m.end(Outcome::Aborted(AbortReason::SafetyStop(cause.to_string())));
                     }
                 }
                 None => {}
@@ -752,7 +754,11 @@ impl Vehicle {
                 match motion.step(t, view.as_ref(), chassis.response_time()) {
                     Some((v, w)) => {
                         if let Err(e) = chassis.autonomous(t, v, w) {
-                            motion.end(t, Outcome::Aborted(e.to_string()), None);
+                            motion.end(
+                                t,
+                                Outcome::Aborted(AbortReason::DrivesRefused(e.to_string())),
+                                None,
+                            );
                         }
                     }
                     // Just ended: hold zero rather than let the last speed run to the timeout.
@@ -938,8 +944,11 @@ impl Vehicle {
                 )));
             }
         }
-        self.cancel_mission("replaced by a new mission");
-        self.end_motion(t, Outcome::Cancelled("a mission replaced it".into()));
+        self.cancel_mission(CancelReason::NewMission);
+        self.end_motion(
+            t,
+            Outcome::Cancelled(CancelReason::Replaced(Replacement::Mission)),
+        );
         self.mission = Some(Mission::new(steps.to_vec(), self.config.mission, tag));
         if let Some(m) = &mut self.motion {
             m.set_navigation(Navigation::Running);
@@ -948,9 +957,9 @@ impl Vehicle {
     }
 
     /// Cancels the mission under way, if any: `why`.
-    fn cancel_mission(&mut self, why: &str) {
+    fn cancel_mission(&mut self, why: CancelReason) {
         if let Some(m) = &mut self.mission {
-            m.end(Outcome::Cancelled(why.to_owned()));
+            m.end(Outcome::Cancelled(why));
         }
     }
 
@@ -1013,7 +1022,7 @@ impl Vehicle {
             if let Some(m) = &mut self.mission {
                 match started {
                     Ok(id) => m.started(id),
-                    Err(e) => m.end(Outcome::Aborted(format!("a step could not start: {e}"))),
+                    Err(e) => m.end(Outcome::Aborted(AbortReason::StepNotStarted(e.to_string()))),
                 }
             }
         }
@@ -1033,7 +1042,7 @@ impl Vehicle {
             None => motion.set_navigation(Navigation::Running),
             Some(outcome) => {
                 if outcome != Outcome::Succeeded {
-                    motion.end(t, Outcome::Cancelled("the mission ended".into()), None);
+                    motion.end(t, Outcome::Cancelled(CancelReason::MissionEnded), None);
                     // The blade stops with a mission that did not finish.
                     self.cutter_on = false;
                 }

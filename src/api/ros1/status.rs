@@ -14,7 +14,8 @@
 //! The codes the spec lists for maps, floors and the deprecated 42/43 have no counterpart here.
 
 use crate::control::mission::MissionEvent;
-use crate::control::{MotionResult, MotionTag, Outcome, STOP_REQUESTED, STOPPED_BY_OPERATOR};
+use crate::control::outcome::{AbortReason, CancelReason};
+use crate::control::{MotionResult, MotionTag, Outcome};
 use crate::devices::bms::ChargeState;
 use crate::vehicle::chassis::status_bits;
 use crate::vehicle::{Localization, Navigation, VehicleStatus};
@@ -108,11 +109,13 @@ impl Topic {
 pub fn navigation_code(outcome: &Outcome) -> i16 {
     match outcome {
         Outcome::Succeeded => NAV_SUCCEEDED,
-        Outcome::Cancelled(why) if why == STOP_REQUESTED || why == STOPPED_BY_OPERATOR => {
+        Outcome::Cancelled(CancelReason::StopRequested | CancelReason::StoppedByOperator) => {
             NAV_STOPPED
         }
         Outcome::Cancelled(_) => NAV_CANCELLED,
-        Outcome::Aborted(why) if why.contains("localisation lost") => NAV_LOCATION_LOST,
+        Outcome::Aborted(why) if matches!(why.root(), AbortReason::LocalisationLost(_)) => {
+            NAV_LOCATION_LOST
+        }
         Outcome::TimedOut | Outcome::Aborted(_) => NAV_FAILED,
     }
 }
@@ -218,12 +221,10 @@ impl StatusTopics {
             _ => Action::Failed,
         };
         if let Outcome::Aborted(why) = outcome {
-            let code = if why.contains("no dock") {
-                NAV_NO_DOCK
-            } else if why.contains("has not reported charging") {
-                NAV_FAILED
-            } else {
-                NAV_DOCK_FAILED
+            let code = match why.root() {
+                AbortReason::NoDock => NAV_NO_DOCK,
+                AbortReason::NotCharging { .. } => NAV_FAILED,
+                _ => NAV_DOCK_FAILED,
             };
             self.navigation = Some(code);
             out.push((Topic::Navigation, code));
@@ -438,7 +439,11 @@ mod tests {
             owner: super::super::OWNER,
             id: 0,
         });
-        let failed = Outcome::Aborted("step 0 (CHARGING): no dock is configured".into());
+        let at = crate::control::outcome::StepAt {
+            index: 0,
+            action: "CHARGING",
+        };
+        let failed = Outcome::Aborted(AbortReason::Step(at, Box::new(AbortReason::NoDock)));
         t.on_mission(tag, &MissionEvent::Ended(failed), &mut out);
         assert_eq!(
             out,
@@ -458,25 +463,25 @@ mod tests {
         assert_eq!(navigation_code(&Outcome::Succeeded), NAV_SUCCEEDED);
         assert_eq!(navigation_code(&Outcome::TimedOut), NAV_FAILED);
         assert_eq!(
-            navigation_code(&Outcome::Cancelled(STOP_REQUESTED.into())),
+            navigation_code(&Outcome::Cancelled(CancelReason::StopRequested)),
             NAV_STOPPED
         );
         assert_eq!(
-            navigation_code(&Outcome::Cancelled(STOPPED_BY_OPERATOR.into())),
+            navigation_code(&Outcome::Cancelled(CancelReason::StoppedByOperator)),
             NAV_STOPPED
         );
         assert_eq!(
-            navigation_code(&Outcome::Cancelled("replaced by a new move".into())),
+            navigation_code(&Outcome::Cancelled(CancelReason::NewMotion)),
             NAV_CANCELLED
         );
         assert_eq!(
-            navigation_code(&Outcome::Aborted(
-                "localisation lost during the goal".into()
-            )),
+            navigation_code(&Outcome::Aborted(AbortReason::LocalisationLost(
+                crate::control::outcome::LostDuring::Goal
+            ))),
             NAV_LOCATION_LOST
         );
         assert_eq!(
-            navigation_code(&Outcome::Aborted("safety stop: e-stop".into())),
+            navigation_code(&Outcome::Aborted(AbortReason::SafetyStop("e-stop".into()))),
             NAV_FAILED
         );
     }
