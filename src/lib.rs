@@ -2,7 +2,7 @@
 //!
 //! The logic is a sans-IO core ([`vehicle::Vehicle`]) fed through device decoders by the
 //! [`engine::Engine`]; live mode ([`runtime`]) and replay ([`replay`]) are thin edges around
-//! that one engine. See DESIGN.md in the shared folder for the architecture.
+//! that one engine. docs/architecture.md describes the layers and their rules.
 
 pub mod api;
 pub mod bench;

@@ -1,6 +1,6 @@
-//! The fusion benchmark through the real binary, across the sweep the README reports: both
+//! The fusion benchmark through the real binary, across the sweep docs/fusion.md reports: both
 //! plant files, one and two antennas, receivers at 1, 5 and 20 Hz on CI (and 2 and 10 Hz
-//! too with `CHASSISD_FULL_SWEEP=1`, as the README's table was measured). Every configuration
+//! too with `CHASSISD_FULL_SWEEP=1`, as docs/fusion.md's table was measured). Every configuration
 //! meets every target (accuracy, outage drift, jump rejection and the NEES consistency of the
 //! published covariance, pooled over the bench's Monte Carlo runs), and its last line is the
 //! JSON summary. The bench is slow unoptimised (some 140 times slower than in release), so
@@ -10,7 +10,7 @@ mod common;
 
 use std::process::Command;
 
-/// Every receiver rate the README's sweep reports ...
+/// Every receiver rate docs/fusion.md's sweep reports ...
 const RATES_HZ: [&str; 5] = ["1", "2", "5", "10", "20"];
 /// ... and the ones CI runs (the ends and the middle), to keep the suite inside its time
 /// budget; `CHASSISD_FULL_SWEEP=1` runs them all.

@@ -199,7 +199,7 @@ fn record(data: &Data, dir: &Path) -> f64 {
     let plant = PlantConfig::from_toml(&plant_text, Path::new("husky-data")).expect("plant");
     let mut sim = Lockstep::new(plant.clone(), 1, START).expect("lockstep");
     // The simulator's drive train, IMU and receiver ports with chassisd's own localisation
-    // defaults (fitted on this robot: README, Fusion), the first fix as the datum.
+    // defaults (fitted on this robot: docs/fusion.md), the first fix as the datum.
     let mut config: toml::Table =
         toml::from_str(&sim.config().to_effective_toml()).expect("effective configuration");
     config.insert("localization".into(), toml::Table::new().into());

@@ -1,4 +1,4 @@
-//! The safety rules of DESIGN.md §5, as properties of the drive-train arbiter and its
+//! The safety rules of docs/safety.md, as properties of the drive-train arbiter and its
 //! supervisor (`vehicle::chassis`, `vehicle::safety`) over random sequences of commands, faults,
 //! e-stops, resets and silences. Proptest keeps failing cases in
 //! `tests/safety_properties.proptest-regressions` (persistence on) and replays them first.

@@ -7,7 +7,7 @@
 //! available in this driver, 4 refused by the vehicle (the reason says why). An action that
 //! takes effect later ends with a `.../notify` in the ack's shape.
 //!
-//! Resolutions of the spec's gaps (documented in the README):
+//! Resolutions of the spec's gaps (documented in docs/protocols/root.md):
 //! - navigation general is published on `report/navigation/general` (the spec reuses
 //!   `report/chassis/general`, the chassis report's topic);
 //! - the `/log` codes that share 200 become LOW_BATTERY 200, FULL_BATTERY 201,

@@ -1,5 +1,5 @@
 //! A mosquitto broker that a benchmark starts on a free local port, restarts on demand and
-//! stops when dropped. It sets TCP_NODELAY, as a deployment should (see the README).
+//! stops when dropped. It sets TCP_NODELAY, as a deployment should (see docs/development.md).
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};

@@ -289,7 +289,7 @@ fn collect_live(vehicle: &VehicleConfig, live: LiveCalibration) -> anyhow::Resul
         folder.display(),
         match live.procedure {
             CalibrateProcedure::Imu => "; keep the vehicle still",
-            _ => "; drive the pattern by hand (see the README)",
+            _ => "; drive the pattern by hand (see docs/calibration.md)",
         }
     );
     let options = ListenOptions {

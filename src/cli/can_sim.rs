@@ -6,7 +6,7 @@ use super::block_on;
 use chassisd::config::VehicleConfig;
 
 /// Simulate the CAN devices of a vehicle configuration (drives, BMS) on its CAN
-/// interfaces, e.g. vcan0. Standard input takes fault injections; see the README.
+/// interfaces, e.g. vcan0. Standard input takes fault injections; see docs/simulator.md.
 #[derive(clap::Args)]
 pub struct Args {
     /// Vehicle configuration whose [[can]], [[drive]] and [bms] are simulated.

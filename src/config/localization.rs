@@ -102,11 +102,11 @@ fn default_gyro_bias_walk() -> f64 {
     2e-5
 }
 fn default_heading_walk() -> f64 {
-    // Fitted with the GNSS error's settings on a real robot's data (README, Fusion).
+    // Fitted with the GNSS error's settings on a real robot's data (docs/fusion.md).
     0.0045
 }
-// The odom error's defaults: fitted with the heading walk on a real robot's data (README,
-// Fusion), a skid-steered Husky on grass, so loose for most wheels.
+// The odom error's defaults: fitted with the heading walk on a real robot's data (docs/fusion.md),
+// a skid-steered Husky on grass, so loose for most wheels.
 fn default_odom_along() -> f64 {
     1e-2
 }

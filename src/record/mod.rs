@@ -1,5 +1,5 @@
 //! The recorded-frame layer: every raw frame with its time, written as a recording folder
-//! and read back in time order (DESIGN.md §3).
+//! and read back in time order (docs/recording.md).
 
 pub mod envelope;
 pub mod meta;

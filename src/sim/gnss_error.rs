@@ -1,6 +1,6 @@
 //! The simulated receiver's position error, with the processes real receivers show
-//! (fitted on the Husky's SBAS log in `../shared/data/ekf/husky-test1`; the README's
-//! *Simulator* section gives the fit):
+//! (fitted on the Husky's SBAS log in `../shared/data/ekf/husky-test1`; docs/fusion.md's
+//! section on the simulator's GNSS errors gives the fit):
 //!
 //! - a slow first-order Gauss-Markov wander, kept at unit variance and scaled by the current
 //!   quality's σ and correlated fraction, so a change of fix quality changes the error at

@@ -73,7 +73,7 @@ impl<S: Sink> Sink for ScriptSink<'_, S> {
 }
 
 /// The odom frame's error of a plant as the map filter models it (random walks), which an
-/// integrator fits on their vehicle's data as the README shows for a real robot.
+/// integrator fits on their vehicle's data as docs/fusion.md shows for a real robot.
 struct OdomError {
     along: f64,
     /// The random slip's part of `along`, m²/m.

@@ -1,7 +1,7 @@
 //! The safety supervisor: one explicit state machine that decides whether the drive train may
 //! move. It runs the command and control-link watchdogs and watches the e-stop inputs; it
 //! latches a stop with its reason on any fault, and it re-arms (and asks for drive fault
-//! resets) only on a deliberate act once every cause has cleared (DESIGN.md §5).
+//! resets) only on a deliberate act once every cause has cleared (docs/safety.md).
 //!
 //! States and transitions (`t` is the core's time; nothing here reads a clock):
 //!

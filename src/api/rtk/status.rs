@@ -6,7 +6,7 @@
 //! and the IMU and lidar chassisd does not drive yet) report zeros and a `false` sensor
 //! flag, so a consumer can tell "absent" from "zero". `sensor.gnss` is an addition to the
 //! protocol. `bms.status`, `bms.error` and `robot.robot_status` are bit sets documented in
-//! the README.
+//! docs/protocols/mqtt.md.
 
 use serde::Serialize;
 

@@ -59,7 +59,7 @@ pub struct DbcFields {
 pub struct DbcAlarm {
     /// The signal, `"message.signal"`.
     pub signal: String,
-    /// The alarm bit's name (see the README's `bms.error` table).
+    /// The alarm bit's name (see the `bms.error` table in docs/protocols/mqtt.md).
     pub bit: String,
     /// Whether the BMS has tripped a protection when this is set.
     #[serde(default)]

@@ -97,7 +97,7 @@ impl BmsProfile {
                 return Err(invalid(
                     &format!("alarm[{i}].bit"),
                     format!("{:?} is not an alarm bit", a.bit),
-                    "use a name from the README's bms.error table",
+                    "use a name from the bms.error table in docs/protocols/mqtt.md",
                 ));
             }
         }

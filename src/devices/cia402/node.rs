@@ -6,7 +6,7 @@
 //! (enabled, switched on, quick stop, disabled). A fault — a lost heartbeat, stale feedback,
 //! a drive fault, an EMCY, a failed SDO — is latched and reported; the target drops to zero
 //! and the drive is not enabled again until the owner resets the fault, which the safety
-//! supervisor asks for only on a deliberate act (DESIGN.md §5). A drive in Fault is reset by
+//! supervisor asks for only on a deliberate act (docs/safety.md). A drive in Fault is reset by
 //! the CiA 402 handshake: bit 7 of the controlword low for a cycle, then the rising edge, on
 //! every attempt; the fault stays latched until the statusword leaves Fault, and the attempts
 //! are bounded.

@@ -1,7 +1,7 @@
 //! Typed decoding of the NMEA sentences chassisd uses.
 //!
 //! RMC, VTG, GST, HDT, ZDA and the core of GGA go through the `nmea` crate's field parsers.
-//! The crate's gaps are filled here rather than losing data (DESIGN.md §4):
+//! The crate's gaps are filled here rather than losing data (docs/protocols/nmea.md):
 //! - its sentence-level entry point rejects sentences over 102 bytes, so sentences come from
 //!   our framer and are handed to the per-type parsers directly, whatever their length;
 //! - its GGA drops the differential age and station, parsed here from fields 13 and 14;
