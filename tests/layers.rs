@@ -83,6 +83,53 @@ fn no_modules_import_each_other_round_a_cycle() {
     assert!(cycles.is_empty(), "import cycles:\n{}", cycles.join("\n"));
 }
 
+/// The modules that turn requests into commands and results into protocol codes.
+const DECIDING_MODULES: &[&str] = &["api", "engine", "vehicle", "control"];
+
+/// The text searches these modules may make, each on a client's input and never on a reason
+/// or a reply: a trajectory name may not climb out of its folder.
+const ALLOWED_TEXT_SEARCHES: &[&str] = &["name.contains(\"..\")"];
+
+#[test]
+fn no_code_is_chosen_by_searching_text() {
+    // A protocol code chosen by searching a reason's words changes when the words do; the
+    // reasons are enums (control::outcome, vehicle::safety) to be matched instead.
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut searches = Vec::new();
+    for module in DECIDING_MODULES {
+        let mut files = Vec::new();
+        collect_rs_files(&src.join(module), &mut files);
+        for file in files {
+            let text = std::fs::read_to_string(&file).expect("readable source");
+            let library = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+            for (n, line) in without_comments(library).lines().enumerate() {
+                let searching = [
+                    ".contains(\"",
+                    ".starts_with(\"",
+                    ".ends_with(\"",
+                    ".find(\"",
+                ]
+                .iter()
+                .any(|s| line.contains(s));
+                if searching && !ALLOWED_TEXT_SEARCHES.iter().any(|a| line.contains(a)) {
+                    let shown = file.strip_prefix(&src).unwrap_or(&file);
+                    searches.push(format!(
+                        "src/{}:{}: {}",
+                        shown.display(),
+                        n + 1,
+                        line.trim()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        searches.is_empty(),
+        "text searched where a code may be chosen (match on a typed reason instead):\n{}",
+        searches.join("\n")
+    );
+}
+
 #[test]
 fn the_reader_finds_the_arrows_it_is_meant_to() {
     // The parser's own check, on lines of known meaning, so the rules above cannot pass by

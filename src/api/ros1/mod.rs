@@ -44,6 +44,8 @@ pub struct Request {
     pub topic: &'static str,
     /// Its JSON payload.
     pub payload: String,
+    /// Whether, accepted, it starts a motion (whose start the node announces).
+    pub starts_motion: bool,
 }
 
 /// `/cmd_vel`: the twist as it came; the local channel refuses components a ground vehicle
@@ -57,6 +59,7 @@ pub fn cmd_vel(linear: [f64; 3], angular: [f64; 3]) -> Request {
             "angular": {"x": angular[0], "y": angular[1], "z": angular[2]},
         })
         .to_string(),
+        starts_motion: false,
     }
 }
 
@@ -68,6 +71,7 @@ pub fn navi_stop(data: i16) -> Result<Request, String> {
     Ok(Request {
         topic: crate::api::local::SET_NAVI_CMD,
         payload: json!({"cmd": "5"}).to_string(),
+        starts_motion: false,
     })
 }
 
@@ -79,6 +83,7 @@ pub fn autocharge(data: i16) -> Result<Request, String> {
     Ok(Request {
         topic: crate::api::local::MISSION,
         payload: json!([{"action": "CHARGING", "parameters": {"time": 0}}]).to_string(),
+        starts_motion: true,
     })
 }
 
@@ -87,15 +92,8 @@ pub fn set_navi_cmd(cmd: &str, distance: i64) -> Request {
     Request {
         topic: crate::api::local::SET_NAVI_CMD,
         payload: json!({"cmd": cmd, "distance": distance}).to_string(),
-    }
-}
-
-/// Whether an accepted request of `topic` started a motion (its start is announced).
-pub fn starts_motion(request: &Request) -> bool {
-    match request.topic {
-        crate::api::local::MISSION => true,
-        crate::api::local::SET_NAVI_CMD => !request.payload.contains("\"5\""),
-        _ => false,
+        // Command 5 is the stop; every other one the local channel takes is a move.
+        starts_motion: cmd != "5",
     }
 }
 
@@ -156,13 +154,13 @@ mod tests {
             local::decode(r.topic, r.payload.as_bytes()),
             Ok(Some(Command::Move(_)))
         ));
-        assert!(starts_motion(&r));
+        assert!(r.starts_motion);
         let r = navi_stop(5).unwrap();
         assert_eq!(
             local::decode(r.topic, r.payload.as_bytes()),
             Ok(Some(Command::CancelMotion))
         );
-        assert!(!starts_motion(&r));
+        assert!(!r.starts_motion);
         let r = autocharge(1).unwrap();
         assert!(matches!(
             local::decode(r.topic, r.payload.as_bytes()).map(|c| c.map(tagged)),

@@ -90,7 +90,7 @@ impl Requests {
         }
         let entry = Pending {
             waiter,
-            starts_motion: ros1::starts_motion(&request),
+            starts_motion: request.starts_motion,
             charging: request.topic == crate::api::local::MISSION,
         };
         let record = Record {
