@@ -21,4 +21,5 @@ pub mod outage_log;
 pub mod panics;
 pub mod recorder;
 pub mod status_out;
+pub mod stderr;
 pub mod trajectory_writer;

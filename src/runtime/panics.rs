@@ -167,13 +167,15 @@ pub fn install(stop_frames: Vec<(String, Frame)>) {
             report(info);
             if !stop_frames.is_empty() {
                 let sent = write_now(&stop_frames);
-                eprintln!(
+                crate::runtime::stderr::line(format!(
                     "chassisd: panic in the control loop or a CAN driver: {sent} of {} stop \
                      frames sent; the process ends",
                     stop_frames.len()
-                );
+                ));
             } else {
-                eprintln!("chassisd: panic in the control loop or a CAN driver; the process ends");
+                crate::runtime::stderr::line(
+                    "chassisd: panic in the control loop or a CAN driver; the process ends".into(),
+                );
             }
             std::process::exit(SAFETY_PANIC_EXIT);
         }
@@ -191,12 +193,12 @@ pub fn install(stop_frames: Vec<(String, Frame)>) {
         if first {
             let message = message_of(info);
             let thread = std::thread::current();
-            eprintln!(
+            crate::runtime::stderr::line(format!(
                 "chassisd: an auxiliary task panicked at {place} (thread {}): {message}; it is \
                  contained, the vehicle's control goes on (panic {count}; further ones from \
                  here are only counted)",
                 thread.name().unwrap_or("unnamed")
-            );
+            ));
         }
     }));
 }

@@ -292,10 +292,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         || options.mqtt.is_some()
         || options.ros1.is_some()
         || options.websocket.is_some();
-    eprintln!(
-        "{}",
-        start_line(&options, sim.config().vehicle.name.as_str())
-    );
+    crate::runtime::stderr::line(start_line(&options, sim.config().vehicle.name.as_str()));
     let end =
         run_length(options.duration, options.scenario.as_ref()).map(|d| start.saturating_add(d));
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
@@ -360,7 +357,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
     finish(sink.recorder.take(), sim.time());
     sink.out.finish(Duration::from_millis(500));
     let elapsed = sim.time().saturating_since(start);
-    eprintln!("{}", summary.line(&options, elapsed, sim.engine().stats()));
+    crate::runtime::stderr::line(summary.line(&options, elapsed, sim.engine().stats()));
     // The simulation holds the trajectory queue; once it is gone the writer drains and ends.
     drop(sim);
     if let Some(writer) = writer {

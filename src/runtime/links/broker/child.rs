@@ -98,7 +98,9 @@ pub fn main() -> anyhow::Result<()> {
     let report = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         report(info);
-        eprintln!("chassisd broker: panic; the broker process ends and chassisd restarts it");
+        crate::runtime::stderr::line(
+            "chassisd broker: panic; the broker process ends and chassisd restarts it".into(),
+        );
         std::process::exit(101);
     }));
     let mut stdin = std::io::stdin().lock();
