@@ -2,15 +2,16 @@
 //! angles and the receiver's positions and headings, on one time axis. The recording goes
 //! through the same engine (decoders, CANopen drives) as a replay.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
 
-use crate::config::VehicleConfig;
+use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::engine::{EngineOutput, Measured};
 use crate::fusion::geodesy::{Enu, Geodetic};
-use crate::replay::{self, Consumer, ReplayOptions};
+use crate::record::RecordError;
+use crate::replay::{self, Consumer, ReplayError, ReplayOptions};
 use crate::time::Timestamp;
 
 /// At most this much of a recording is gathered (the memory of a calibration is bounded;
@@ -175,6 +176,31 @@ impl Consumer for Gather {
     }
 }
 
+/// Why a recording's measurements could not be gathered.
+#[derive(Debug, thiserror::Error)]
+pub enum GatherError {
+    /// The recording does not open.
+    #[error("cannot open the recording {}: {error}", .path.display())]
+    Open {
+        /// Its folder.
+        path: PathBuf,
+        /// Why.
+        error: RecordError,
+    },
+    /// It stores no configuration, and none was given.
+    #[error(
+        "the recording {} stores no vehicle configuration; give one with --config",
+        .0.display()
+    )]
+    NoConfiguration(PathBuf),
+    /// The configuration stored with it, or given, does not load.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// Replaying it failed.
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+}
+
 impl Dataset {
     /// Gathers the measurements of the recording at `path` (the configuration stored with
     /// it, or `config`), with a progress bar on stderr when `progress`.
@@ -182,15 +208,12 @@ impl Dataset {
         path: &Path,
         config: Option<VehicleConfig>,
         progress: bool,
-    ) -> anyhow::Result<Self> {
+    ) -> Result<Self, GatherError> {
         let (stored, span_ms) = stored_config(path)?;
         let vehicle = match (config, stored) {
             (Some(c), _) => c,
             (None, Some(c)) => c,
-            (None, None) => anyhow::bail!(
-                "the recording {} stores no vehicle configuration; give one with --config",
-                path.display()
-            ),
+            (None, None) => return Err(GatherError::NoConfiguration(path.to_owned())),
         };
         let progress = progress.then(|| {
             let bar = indicatif::ProgressBar::new(span_ms.unwrap_or(0));
@@ -274,10 +297,12 @@ impl Dataset {
 
 /// The configuration stored with the recording at `path`, and its length in ms when it
 /// ended cleanly.
-fn stored_config(path: &Path) -> anyhow::Result<(Option<VehicleConfig>, Option<u64>)> {
-    use anyhow::Context;
-    let (meta, _) = crate::record::RecordingReader::open(path)
-        .with_context(|| format!("cannot open the recording {}", path.display()))?;
+fn stored_config(path: &Path) -> Result<(Option<VehicleConfig>, Option<u64>), GatherError> {
+    let (meta, _) =
+        crate::record::RecordingReader::open(path).map_err(|error| GatherError::Open {
+            path: path.to_owned(),
+            error,
+        })?;
     let span_ms = meta
         .start_us
         .zip(meta.end_us)

@@ -4,7 +4,8 @@
 
 use std::path::Path;
 
-use anyhow::Context;
+use std::path::PathBuf;
+
 use plotters::prelude::*;
 
 use super::data::Dataset;
@@ -24,16 +25,40 @@ pub fn draw(
     data: &Dataset,
     found: &Found,
     path: &Path,
-) -> anyhow::Result<()> {
+) -> Result<(), PlotError> {
     let root = SVGBackend::new(path, (1200, 560)).into_drawing_area();
     root.fill(&WHITE)?;
     match procedure {
         Procedure::Imu => draw_imu(&root, data, found)?,
         Procedure::Odometry | Procedure::Gnss => draw_motion(&root, procedure, found)?,
     }
-    root.present()
-        .with_context(|| format!("cannot write the plot {}", path.display()))?;
+    root.present().map_err(|e| PlotError::Write {
+        path: path.to_owned(),
+        error: e.to_string(),
+    })?;
     Ok(())
+}
+
+/// Why the plot could not be drawn.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// Drawing failed (plotters' own words).
+    #[error("{0}")]
+    Draw(String),
+    /// The file could not be written.
+    #[error("cannot write the plot {}: {error}", .path.display())]
+    Write {
+        /// The SVG file.
+        path: PathBuf,
+        /// Why.
+        error: String,
+    },
+}
+
+impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for PlotError {
+    fn from(e: DrawingAreaErrorKind<E>) -> Self {
+        Self::Draw(e.to_string())
+    }
 }
 
 type Area<'a> = DrawingArea<SVGBackend<'a>, plotters::coord::Shift>;
@@ -52,7 +77,7 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     }
 }
 
-fn draw_imu(root: &Area, data: &Dataset, found: &Found) -> anyhow::Result<()> {
+fn draw_imu(root: &Area, data: &Dataset, found: &Found) -> Result<(), PlotError> {
     let Some(r) = &found.imu else {
         return Ok(());
     };
@@ -109,7 +134,7 @@ fn draw_imu(root: &Area, data: &Dataset, found: &Found) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn draw_motion(root: &Area, procedure: Procedure, found: &Found) -> anyhow::Result<()> {
+fn draw_motion(root: &Area, procedure: Procedure, found: &Found) -> Result<(), PlotError> {
     let Some(m) = &found.motion else {
         return Ok(());
     };
