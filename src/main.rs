@@ -72,7 +72,7 @@ fn main() -> ExitCode {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),
         Err(e) => {
-            eprintln!("chassisd: {e:#}");
+            eprintln!("chassisd: {}", cli::describe(&e));
             // A configuration error does not mend itself: 78 (EX_CONFIG) tells systemd not to
             // restart (the unit's RestartPreventExitStatus).
             if e.chain()
@@ -99,6 +99,9 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         Command::Check(args) => cli::check::execute(args),
         Command::CanSim(args) => cli::can_sim::execute(args),
         Command::Ntrip(args) => cli::ntrip::execute(args),
-        Command::BrokerChild => chassisd::runtime::links::broker::child::main().map(|()| true),
+        Command::BrokerChild => {
+            chassisd::runtime::links::broker::child::main()?;
+            Ok(true)
+        }
     }
 }

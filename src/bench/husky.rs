@@ -8,7 +8,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::{Context, bail};
+use crate::bench::error::{BenchError, invalid, missing};
 use serde::Serialize;
 
 use crate::fusion::geodesy::{Enu, Geodetic};
@@ -48,13 +48,13 @@ pub struct HuskyData {
 
 /// Reads one CSV with a header row: the named columns of every row (the shared data's robot
 /// recordings).
-pub fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+pub fn columns(path: &Path, names: &[&str]) -> crate::bench::error::Result<Vec<Vec<f64>>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(invalid(format!("cannot read {}", path.display())))?;
     let mut lines = text.lines();
     let header: HashMap<&str, usize> = lines
         .next()
-        .context("empty file")?
+        .ok_or_else(missing("empty file"))?
         .split(',')
         .enumerate()
         .map(|(i, h)| (h, i))
@@ -65,9 +65,9 @@ pub fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
             header
                 .get(n)
                 .copied()
-                .with_context(|| format!("{}: no column {n}", path.display()))
+                .ok_or_else(missing(format!("{}: no column {n}", path.display())))
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect::<crate::bench::error::Result<_>>()?;
     lines
         .filter(|l| !l.is_empty())
         .map(|l| {
@@ -78,7 +78,7 @@ pub fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
                     cells
                         .get(i)
                         .and_then(|c| c.parse::<f64>().ok())
-                        .with_context(|| format!("{}: bad row {l}", path.display()))
+                        .ok_or_else(missing(format!("{}: bad row {l}", path.display())))
                 })
                 .collect()
         })
@@ -88,7 +88,7 @@ pub fn columns(path: &Path, names: &[&str]) -> anyhow::Result<Vec<Vec<f64>>> {
 impl HuskyData {
     /// Loads `dir` (gps.csv, odom.csv, imu.csv). The IMU is mounted roll +90°, yaw −90°: the
     /// vehicle's yaw rate is the sensor's y axis.
-    pub fn load(dir: &Path) -> anyhow::Result<Self> {
+    pub fn load(dir: &Path) -> crate::bench::error::Result<Self> {
         let gps = columns(
             &dir.join("gps.csv"),
             &["t", "latitude", "longitude", "altitude"],
@@ -96,7 +96,7 @@ impl HuskyData {
         let odom = columns(&dir.join("odom.csv"), &["t", "vx", "wz"])?;
         let imu = columns(&dir.join("imu.csv"), &["t", "wy"])?;
         let Some(first) = gps.first() else {
-            bail!("{}: no fixes", dir.display());
+            return Err(BenchError::Failed(format!("{}: no fixes", dir.display())));
         };
         let t0 = first[0];
         let frame = Enu::new(Geodetic {

@@ -2,6 +2,7 @@
 //! micro-benchmarks under `benches/`.
 
 pub mod control;
+pub mod error;
 pub mod fusion;
 pub mod gnss_fit;
 pub mod husky;
@@ -12,7 +13,7 @@ pub mod soak;
 
 use std::process::{Command, Stdio};
 
-use anyhow::Context;
+use crate::bench::error::invalid;
 
 use crate::config::mqtt::MqttConfig;
 use mosquitto::Mosquitto;
@@ -37,7 +38,7 @@ impl Broker {
 
     /// Points `mqtt` at this broker on 127.0.0.1, starting mosquitto if it is the one; the
     /// embedded broker starts with the simulation.
-    pub fn start(self, mqtt: &mut MqttConfig) -> anyhow::Result<Option<Mosquitto>> {
+    pub fn start(self, mqtt: &mut MqttConfig) -> crate::bench::error::Result<Option<Mosquitto>> {
         mqtt.host = "127.0.0.1".into();
         mqtt.embedded_broker = self == Self::Embedded;
         match self {
@@ -56,10 +57,10 @@ impl Broker {
 }
 
 /// A TCP port on 127.0.0.1 that nobody listens on right now.
-pub fn free_local_port() -> anyhow::Result<u16> {
+pub fn free_local_port() -> crate::bench::error::Result<u16> {
     Ok(std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|l| l.local_addr())
-        .context("no free local port")?
+        .map_err(invalid("no free local port"))?
         .port())
 }
 

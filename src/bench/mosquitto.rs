@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
+use crate::bench::error::{BenchError, invalid};
 
 /// How long mosquitto may take to accept connections.
 const READY_WITHIN: Duration = Duration::from_secs(5);
@@ -26,7 +26,7 @@ impl Mosquitto {
 
     /// Starts mosquitto on a free port with its configuration in `dir`, and waits until it
     /// accepts connections.
-    pub fn start(dir: &Path) -> anyhow::Result<Self> {
+    pub fn start(dir: &Path) -> crate::bench::error::Result<Self> {
         let port = super::free_local_port()?;
         let conf = dir.join(format!("mosquitto-{port}.conf"));
         std::fs::write(
@@ -35,7 +35,7 @@ impl Mosquitto {
                 "listener {port} 127.0.0.1\nallow_anonymous true\nset_tcp_nodelay true\npersistence false\n"
             ),
         )
-        .with_context(|| format!("writing {}", conf.display()))?;
+        .map_err(invalid(format!("writing {}", conf.display())))?;
         let mut broker = Self {
             child: None,
             port,
@@ -65,7 +65,7 @@ impl Mosquitto {
 
     /// Starts it again on the same port (stopping it first if it runs), and waits until
     /// it accepts connections.
-    pub fn restart(&mut self) -> anyhow::Result<()> {
+    pub fn restart(&mut self) -> crate::bench::error::Result<()> {
         self.stop();
         let child = Command::new("mosquitto")
             .arg("-c")
@@ -73,7 +73,7 @@ impl Mosquitto {
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
-            .context("starting mosquitto")?;
+            .map_err(invalid("starting mosquitto"))?;
         self.child = Some(child);
         let deadline = Instant::now() + READY_WITHIN;
         while TcpStream::connect(("127.0.0.1", self.port)).is_err() {
@@ -83,17 +83,17 @@ impl Mosquitto {
                 .and_then(|c| c.try_wait().ok().flatten());
             if let Some(status) = exited {
                 self.child = None;
-                bail!(
+                return Err(BenchError::Failed(format!(
                     "mosquitto exited ({status}) instead of listening on {}",
                     self.port
-                );
+                )));
             }
             if Instant::now() > deadline {
                 self.stop();
-                bail!(
+                return Err(BenchError::Failed(format!(
                     "mosquitto did not listen on {} within {READY_WITHIN:?}",
                     self.port
-                );
+                )));
             }
             std::thread::sleep(Duration::from_millis(20));
         }

@@ -9,7 +9,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use anyhow::Context;
+use crate::bench::error::{BenchError, invalid, missing};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use serde::Serialize;
 use serde_json::Value;
@@ -149,15 +149,17 @@ impl MqttComparison {
 }
 
 /// The vehicle id of `mqtt`'s root dialect, which a benchmark's DRIVE commands need.
-pub fn root_vehicle_id(mqtt: &MqttConfig) -> anyhow::Result<String> {
+pub fn root_vehicle_id(mqtt: &MqttConfig) -> crate::bench::error::Result<String> {
     mqtt.root
         .as_ref()
         .map(|r| r.vehicle_id.clone())
-        .context("the root dialect must be on (DRIVE is one of its commands)")
+        .ok_or_else(missing(
+            "the root dialect must be on (DRIVE is one of its commands)",
+        ))
 }
 
 /// Runs the benchmark.
-pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
+pub async fn run(options: MqttBenchOptions) -> crate::bench::error::Result<MqttReport> {
     let vehicle_id = root_vehicle_id(&options.mqtt)?;
     let dir = std::env::temp_dir().join(format!(
         "chassisd-bench-mqtt-{}-{}",
@@ -195,7 +197,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
     client
         .subscribe("base_status", QoS::AtMostOnce)
         .await
-        .context("subscribe")?;
+        .map_err(invalid("subscribe"))?;
     client.subscribe(&chassis_ack, QoS::AtLeastOnce).await?;
 
     let mut arrivals: Vec<Instant> = Vec::new();
@@ -225,9 +227,10 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
                     .await?;
             }
         } else if now > give_up {
-            anyhow::bail!(
+            return Err(BenchError::Failed(
                 "no base_status with the drives enabled within 20 s: is the broker reachable?"
-            );
+                    .into(),
+            ));
         }
         let event = tokio::time::timeout(Duration::from_millis(50), events.poll()).await;
         match event {
@@ -267,7 +270,7 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
         }
     }
     drop(client);
-    sim.await.context("simulation task")??;
+    sim.await.map_err(invalid("simulation task"))??;
 
     let periods: Vec<f64> = arrivals
         .windows(2)
@@ -289,18 +292,20 @@ pub async fn run(options: MqttBenchOptions) -> anyhow::Result<MqttReport> {
 }
 
 /// One control-link heartbeat of the root dialect.
-async fn beat(client: &AsyncClient, topic: &str) -> anyhow::Result<()> {
+async fn beat(client: &AsyncClient, topic: &str) -> crate::bench::error::Result<()> {
     client
         .publish(topic, QoS::AtLeastOnce, false, r#"{"timestamp":"bench"}"#)
         .await
-        .context("publish a heartbeat")
+        .map_err(invalid("publish a heartbeat"))
 }
 
 /// From the recording: for each DRIVE chassisd took, how long until the left drive's RPDO
 /// first carried a target other than the one before it, ms.
-fn command_to_rpdo(dir: &Path) -> anyhow::Result<Vec<f64>> {
-    let (_, reader) = RecordingReader::open(dir)
-        .with_context(|| format!("the benchmark's recording in {}", dir.display()))?;
+fn command_to_rpdo(dir: &Path) -> crate::bench::error::Result<Vec<f64>> {
+    let (_, reader) = RecordingReader::open(dir).map_err(invalid(format!(
+        "the benchmark's recording in {}",
+        dir.display()
+    )))?;
     let rpdo = 0x200 + u32::from(LEFT_NODE.get());
     let mut received: Vec<Timestamp> = Vec::new();
     let mut targets: Vec<(Timestamp, i32)> = Vec::new();

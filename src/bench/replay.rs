@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
+use crate::bench::error::{BenchError, invalid, io, missing};
 use serde::Serialize;
 
 /// The speed-up over gpsdecode the concatenated log must reach.
@@ -64,10 +64,13 @@ pub struct ReplayReport {
 }
 
 /// Runs the benchmark; `chassisd` is this program's path.
-pub fn run(options: &ReplayBenchOptions, chassisd: &Path) -> anyhow::Result<ReplayReport> {
+pub fn run(
+    options: &ReplayBenchOptions,
+    chassisd: &Path,
+) -> crate::bench::error::Result<ReplayReport> {
     let logs = receiver_logs(&options.data)?;
     let dir = std::env::temp_dir().join(format!("chassisd-bench-replay-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(invalid(format!("creating {}", dir.display())))?;
     let result = run_in(options, chassisd, &logs, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     result
@@ -78,7 +81,7 @@ fn run_in(
     chassisd: &Path,
     logs: &[PathBuf],
     dir: &Path,
-) -> anyhow::Result<ReplayReport> {
+) -> crate::bench::error::Result<ReplayReport> {
     let gpsdecode_missing = super::missing_program("gpsdecode", "-V", "gpsd-clients");
     let mut inputs: Vec<(String, Vec<PathBuf>)> = vec![("all".into(), logs.to_vec())];
     for log in logs {
@@ -125,45 +128,57 @@ fn run_in(
 }
 
 /// The `*.log` files in `dir`, sorted.
-fn receiver_logs(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+fn receiver_logs(dir: &Path) -> crate::bench::error::Result<Vec<PathBuf>> {
     let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("reading the receiver logs in {}", dir.display()))?
+        .map_err(invalid(format!(
+            "reading the receiver logs in {}",
+            dir.display()
+        )))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|e| e == "log"))
         .collect();
     logs.sort();
     if logs.is_empty() {
-        bail!("no *.log receiver logs in {}", dir.display());
+        return Err(BenchError::Failed(format!(
+            "no *.log receiver logs in {}",
+            dir.display()
+        )));
     }
     Ok(logs)
 }
 
 /// Writes `parts` one after the other, over and over, until `size` bytes are reached;
 /// returns the size written.
-fn repeat_into(parts: &[PathBuf], size: u64, path: &Path) -> anyhow::Result<u64> {
+fn repeat_into(parts: &[PathBuf], size: u64, path: &Path) -> crate::bench::error::Result<u64> {
     let contents = parts
         .iter()
-        .map(|p| std::fs::read(p).with_context(|| format!("reading {}", p.display())))
-        .collect::<anyhow::Result<Vec<Vec<u8>>>>()?;
+        .map(|p| std::fs::read(p).map_err(invalid(format!("reading {}", p.display()))))
+        .collect::<crate::bench::error::Result<Vec<Vec<u8>>>>()?;
     let round: u64 = contents.iter().map(|c| c.len() as u64).sum();
     if round == 0 {
-        bail!("the receiver logs are empty");
+        return Err(BenchError::Failed("the receiver logs are empty".into()));
     }
-    let mut out =
-        BufWriter::new(File::create(path).with_context(|| format!("creating {}", path.display()))?);
+    let mut out = BufWriter::new(
+        File::create(path).map_err(invalid(format!("creating {}", path.display())))?,
+    );
     let mut written = 0;
     while written < size.max(1) {
         for c in &contents {
-            out.write_all(c)?;
+            out.write_all(c)
+                .map_err(io(format!("writing {}", path.display())))?;
         }
         written += round;
     }
-    out.flush()?;
+    out.flush()
+        .map_err(io(format!("writing {}", path.display())))?;
     Ok(written)
 }
 
 /// Runs `once` `runs` times: the fastest wall time (s) and what that run returned.
-fn fastest<T>(runs: u32, mut once: impl FnMut() -> anyhow::Result<T>) -> anyhow::Result<(f64, T)> {
+fn fastest<T>(
+    runs: u32,
+    mut once: impl FnMut() -> crate::bench::error::Result<T>,
+) -> crate::bench::error::Result<(f64, T)> {
     let mut best: Option<(Duration, T)> = None;
     for _ in 0..runs.max(1) {
         let start = Instant::now();
@@ -173,13 +188,17 @@ fn fastest<T>(runs: u32, mut once: impl FnMut() -> anyhow::Result<T>) -> anyhow:
             best = Some((took, out));
         }
     }
-    let (took, out) = best.context("no run")?;
+    let (took, out) = best.ok_or_else(missing("no run"))?;
     Ok((took.as_secs_f64(), out))
 }
 
 /// chassisd's replay of `log`: the fastest of `runs` wall times (s), and that run's peak
 /// memory.
-fn time_replay(chassisd: &Path, log: &Path, runs: u32) -> anyhow::Result<(f64, Option<u64>)> {
+fn time_replay(
+    chassisd: &Path,
+    log: &Path,
+    runs: u32,
+) -> crate::bench::error::Result<(f64, Option<u64>)> {
     fastest(runs, || {
         let out = Command::new(chassisd)
             .arg("replay")
@@ -187,10 +206,13 @@ fn time_replay(chassisd: &Path, log: &Path, runs: u32) -> anyhow::Result<(f64, O
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .output()
-            .context("running chassisd replay")?;
+            .map_err(invalid("running chassisd replay"))?;
         let stderr = String::from_utf8_lossy(&out.stderr);
         if !out.status.success() {
-            bail!("chassisd replay {} failed: {stderr}", log.display());
+            return Err(BenchError::Failed(format!(
+                "chassisd replay {} failed: {stderr}",
+                log.display()
+            )));
         }
         Ok(peak_from_summary(&stderr))
     })
@@ -204,17 +226,20 @@ fn peak_from_summary(stderr: &str) -> Option<u64> {
 }
 
 /// gpsdecode reading `log` on its standard input: the fastest of `runs`, s.
-fn time_gpsdecode(log: &Path, runs: u32) -> anyhow::Result<f64> {
+fn time_gpsdecode(log: &Path, runs: u32) -> crate::bench::error::Result<f64> {
     let (took, ()) = fastest(runs, || {
-        let input = File::open(log).with_context(|| format!("opening {}", log.display()))?;
+        let input = File::open(log).map_err(invalid(format!("opening {}", log.display())))?;
         let status = Command::new("gpsdecode")
             .stdin(input)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .status()
-            .context("running gpsdecode")?;
+            .map_err(invalid("running gpsdecode"))?;
         if !status.success() {
-            bail!("gpsdecode failed on {}: {status}", log.display());
+            return Err(BenchError::Failed(format!(
+                "gpsdecode failed on {}: {status}",
+                log.display()
+            )));
         }
         Ok(())
     })?;

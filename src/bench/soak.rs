@@ -19,7 +19,7 @@
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use crate::bench::error::{BenchError, invalid, missing};
 use rumqttc::{AsyncClient, Event, MqttOptions, Packet, QoS};
 use serde::Serialize;
 use serde_json::Value;
@@ -276,7 +276,7 @@ impl Log {
 }
 
 /// Runs every run in turn.
-pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
+pub async fn run(options: SoakOptions) -> crate::bench::error::Result<SoakReport> {
     let mut runs = Vec::new();
     for &broker in &options.brokers {
         eprintln!(
@@ -290,13 +290,13 @@ pub async fn run(options: SoakOptions) -> anyhow::Result<SoakReport> {
     Ok(SoakReport { runs, pass })
 }
 
-async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFigures> {
+async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::Result<RunFigures> {
     let vehicle_id = super::mqtt::root_vehicle_id(&options.mqtt)?;
     let mut mqtt = options.mqtt.clone();
     let mut mosquitto = broker.start(&mut mqtt)?;
     let chassis = lockstep::vehicle_config(&options.plant)?
         .chassis
-        .context("the simulated vehicle has a chassis")?;
+        .ok_or_else(missing("the simulated vehicle has a chassis"))?;
     let stop_bound = |speed: f64| {
         chassis.cmd_timeout_s + CONTROL_PERIOD.as_secs_f64() + speed / chassis.max_decel_mps2
     };
@@ -351,7 +351,9 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
     let mut cycles = 0;
     while start.elapsed() + cycle_length <= options.run_for {
         if sim.is_finished() {
-            anyhow::bail!("the simulation ended early (a signal?)");
+            return Err(BenchError::Failed(
+                "the simulation ended early (a signal?)".into(),
+            ));
         }
         floors.start_cycle(cycles as usize);
         for &kind in &schedule {
@@ -397,7 +399,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
                 tokio::task::block_in_place(|| m.restart())?;
             }
             if let Some(f) = flood {
-                f.await.context("flood task")??;
+                f.await.map_err(invalid("flood task"))??;
             }
             let cleared = Instant::now();
             if kind == FaultKind::BrokerRestart {
@@ -411,13 +413,13 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> anyhow::Result<RunFig
     let rss_end = resident_memory_with_broker();
     sampler.abort();
     let rss_floors = floors.take(cycles as usize);
-    client.await.context("client task")??;
-    sim.await.context("simulation task")??;
+    client.await.map_err(invalid("client task"))??;
+    sim.await.map_err(invalid("simulation task"))??;
     drop(mosquitto);
 
     let log = log
         .lock()
-        .map_err(|_| anyhow::anyhow!("the client panicked"))?;
+        .map_err(|_| BenchError::Failed("the client panicked".into()))?;
     let observations = log.observations();
     let acks = &log.acks_ok[..log.acks_len];
     let first_status_after = |t: Instant| observations.iter().find(|o| o.at >= t).map(|o| o.at);
@@ -622,7 +624,7 @@ async fn drive(
     topics: Topics,
     log: Arc<Mutex<Log>>,
     until: Instant,
-) -> anyhow::Result<()> {
+) -> crate::bench::error::Result<()> {
     let mut o = MqttOptions::new(format!("chassisd-soak-{}", std::process::id()), host, port);
     o.set_keep_alive(Duration::from_secs(5));
     let (client, mut events) = AsyncClient::new(o, 64);
@@ -703,7 +705,11 @@ fn kill_embedded_broker() {
 
 /// Raw clients beyond the embedded broker's limit, connected and held for `hold`; then one
 /// more at capacity. Each connects with an identifier of its own and keeps quiet.
-async fn connection_flood(host: String, port: u16, hold: Duration) -> anyhow::Result<()> {
+async fn connection_flood(
+    host: String,
+    port: u16,
+    hold: Duration,
+) -> crate::bench::error::Result<()> {
     let until = Instant::now() + hold;
     let mut held = Vec::new();
     for i in 0..FLOOD_CONNECTIONS + 1 {
@@ -729,7 +735,12 @@ async fn connection_flood(host: String, port: u16, hold: Duration) -> anyhow::Re
 /// Connections the connection flood holds: beyond the embedded broker's 64.
 const FLOOD_CONNECTIONS: usize = 80;
 
-async fn flood(host: String, port: u16, topics: Topics, hold: Duration) -> anyhow::Result<()> {
+async fn flood(
+    host: String,
+    port: u16,
+    topics: Topics,
+    hold: Duration,
+) -> crate::bench::error::Result<()> {
     let o = MqttOptions::new(
         format!("chassisd-soak-flood-{}", std::process::id()),
         host,

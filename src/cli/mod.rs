@@ -41,6 +41,20 @@ pub fn block_on<T>(threads: usize, task: impl Future<Output = T>) -> anyhow::Res
     Ok(result)
 }
 
+/// An error and its causes joined by ": ", as `{:#}` shows them, leaving out a cause whose
+/// words its wrapper already said (a library error that only carries another, such as
+/// `RuntimeError::Config`, keeps it as its source so the exit status can find it).
+pub fn describe(error: &anyhow::Error) -> String {
+    let mut said: Vec<String> = Vec::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if said.last() != Some(&text) {
+            said.push(text);
+        }
+    }
+    said.join(": ")
+}
+
 /// Refuses a ROS1 node in a build without the `ros1` feature, saying how to get one.
 pub fn ensure_ros1_built(wanted: bool) -> anyhow::Result<()> {
     anyhow::ensure!(

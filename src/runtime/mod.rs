@@ -10,6 +10,7 @@
 
 pub mod clock;
 pub mod drivers;
+pub mod error;
 pub mod heap;
 pub mod host;
 pub mod journal;

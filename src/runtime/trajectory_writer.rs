@@ -14,7 +14,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, invalid};
 
 use crate::api::trajectory::{DirStore, MemoryStore, Trajectory, TrajectoryError, TrajectoryStore};
 use crate::config::VehicleConfig;
@@ -72,7 +72,7 @@ pub struct OpenedStore {
 pub fn open(
     config: &VehicleConfig,
     fallback: Box<dyn TrajectoryStore>,
-) -> anyhow::Result<OpenedStore> {
+) -> Result<OpenedStore, RuntimeError> {
     let Some(dir) = config
         .mqtt
         .as_ref()
@@ -85,8 +85,8 @@ pub fn open(
             writer: None,
         });
     };
-    let (mut store, writer) =
-        spawn(Path::new(dir), QUEUE, LIMITS).with_context(|| format!("trajectory folder {dir}"))?;
+    let (mut store, writer) = spawn(Path::new(dir), QUEUE, LIMITS)
+        .map_err(invalid(format!("trajectory folder {dir}")))?;
     let snapshot = serde_json::to_vec(&store.all()?).ok();
     Ok(OpenedStore {
         store: Box::new(store),

@@ -13,7 +13,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, io};
 use bytes::Bytes;
 use rumqttc::{
     AsyncClient, Event, EventLoop, LastWill, MqttOptions, NetworkOptions, Outgoing, Packet, QoS,
@@ -188,7 +188,7 @@ pub fn spawn(
     spec: MqttSpec,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
-) -> anyhow::Result<MqttSender> {
+) -> Result<MqttSender, RuntimeError> {
     let options = options(&spec)?;
     let (tx, mut rx) = mpsc::channel(HANDOFF);
     tokio::spawn(async move {
@@ -220,7 +220,7 @@ pub fn low_latency() -> NetworkOptions {
 }
 
 /// The client options of `spec`: id, keep-alive, last will, credentials, TLS.
-pub(crate) fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
+pub(crate) fn options(spec: &MqttSpec) -> Result<MqttOptions, RuntimeError> {
     let c = &spec.config;
     let mut o = client_options(c, c.client_id(&spec.vehicle))?;
     o.set_last_will(LastWill::new(
@@ -234,7 +234,10 @@ pub(crate) fn options(spec: &MqttSpec) -> anyhow::Result<MqttOptions> {
 
 /// The options of any client of chassisd's on the broker of `c`, as `client_id`:
 /// keep-alive, a clean session, packet sizes, credentials, TLS. No last will.
-pub(crate) fn client_options(c: &MqttConfig, client_id: String) -> anyhow::Result<MqttOptions> {
+pub(crate) fn client_options(
+    c: &MqttConfig,
+    client_id: String,
+) -> Result<MqttOptions, RuntimeError> {
     let mut o = MqttOptions::new(client_id, c.host.clone(), c.port);
     o.set_keep_alive(c.keep_alive());
     o.set_clean_session(true);
@@ -248,7 +251,7 @@ pub(crate) fn client_options(c: &MqttConfig, client_id: String) -> anyhow::Resul
         // rustls needs a process-wide crypto provider; ring is the one compiled in. A second
         // install (another link) is refused harmlessly.
         let _ = rustls::crypto::ring::default_provider().install_default();
-        let read = |p: &str| std::fs::read(p).with_context(|| format!("mqtt.tls: cannot read {p}"));
+        let read = |p: &str| std::fs::read(p).map_err(io(format!("mqtt.tls: cannot read {p}")));
         let client_auth = match (&tls.client_cert_file, &tls.client_key_file) {
             (Some(cert), Some(key)) => Some((read(cert)?, read(key)?)),
             _ => None,

@@ -26,7 +26,7 @@ pub fn spawn(
     topics: Vec<String>,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
-) -> anyhow::Result<()> {
+) -> Result<(), crate::runtime::error::RuntimeError> {
     let client_id = format!("{}-recorder", config.client_id(vehicle));
     let (client, mut events) = AsyncClient::new(client_options(config, client_id)?, CLIENT_QUEUE);
     events.set_network_options(low_latency());

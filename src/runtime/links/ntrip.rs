@@ -25,6 +25,7 @@ use crate::ntrip::response::{Head, HeadError, MAX_HEAD, Status, parse_head};
 use crate::ntrip::sourcetable::{self, MAX_TABLE};
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
+use crate::runtime::error::RuntimeError;
 use crate::vehicle::LinkState;
 
 /// Source name of the corrections in records.
@@ -497,8 +498,8 @@ pub fn spawn(
     config: &crate::config::ntrip::NtripConfig,
     clock: RecordClock,
     tx: mpsc::Sender<Record>,
-) -> anyhow::Result<CorrectionsClient> {
-    let spec = config.spec().map_err(anyhow::Error::msg)?;
+) -> Result<CorrectionsClient, RuntimeError> {
+    let spec = config.spec().map_err(RuntimeError::Failed)?;
     let fallback = config
         .fallback_position
         .map(|p| GgaFix::fallback(p.lat, p.lon, p.height));

@@ -15,7 +15,7 @@
 use crate::runtime::links::input_lines::{InputLine, InputLines, MAX_LINE_BYTES};
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, io};
 use serde_json::json;
 use socketcan::tokio::CanSocket;
 use socketcan::{CanAnyFrame, CanFrame};
@@ -53,7 +53,7 @@ enum SimCommand {
 }
 
 /// Runs until standard input closes or SIGTERM.
-pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
+pub async fn run(config: VehicleConfig) -> crate::runtime::error::Result<()> {
     let clock = RecordClock::start();
     let mut senders = Vec::new();
     let mut tasks = Vec::new();
@@ -69,24 +69,34 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
             let profile = e
                 .profile
                 .get()
-                .context("e-stop profile not loaded")?
+                .ok_or_else(|| RuntimeError::Failed("e-stop profile not loaded".into()))?
                 .clone();
             sim.estops.push((e.name.clone(), SimEStop::new(profile)));
         }
         for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
-            let profile = d.profile.get().context("drive profile not loaded")?.clone();
-            let node = NodeId::new(d.node).context("node id out of range")?;
+            let profile = d
+                .profile
+                .get()
+                .ok_or_else(|| RuntimeError::Failed("drive profile not loaded".into()))?
+                .clone();
+            let node = NodeId::new(d.node)
+                .ok_or_else(|| RuntimeError::Failed("node id out of range".into()))?;
             sim.drives.push((
                 d.name.clone(),
                 SimDrive::new(node, profile, MotorModel::default()),
             ));
         }
         if let Some(b) = config.bms.as_ref().filter(|b| b.bus == bus.interface) {
-            match b.profile.get().context("BMS profile not loaded")? {
+            match b
+                .profile
+                .get()
+                .ok_or_else(|| RuntimeError::Failed("BMS profile not loaded".into()))?
+            {
                 BmsProfile::Daly(p) => sim.daly = Some(SimDaly::new(p, b.address)),
                 BmsProfile::Dbc(p) => {
-                    sim.dbc =
-                        Some(SimDbcBms::new(p).context("the BMS profile's DBC does not parse")?)
+                    sim.dbc = Some(SimDbcBms::new(p).ok_or_else(|| {
+                        RuntimeError::Failed("the BMS profile's DBC does not parse".into())
+                    })?)
                 }
             }
         }
@@ -94,18 +104,21 @@ pub async fn run(config: VehicleConfig) -> anyhow::Result<()> {
         senders.push(tx);
         tasks.push(tokio::spawn(serve_bus(sim, clock, rx)));
     }
-    anyhow::ensure!(
-        !tasks.is_empty(),
-        "the configuration has no [[can]] interface to simulate"
-    );
+    if tasks.is_empty() {
+        return Err(RuntimeError::Failed(
+            "the configuration has no [[can]] interface to simulate".into(),
+        ));
+    }
     let mut lines = InputLines::new(
         tokio::io::BufReader::new(tokio::io::stdin()),
         MAX_LINE_BYTES,
     );
-    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .map_err(io("cannot install the SIGTERM handler"))?;
     // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
     // signal that arrives between two turns.
-    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+        .map_err(io("cannot install the SIGINT handler"))?;
     loop {
         tokio::select! {
             line = lines.next() => {

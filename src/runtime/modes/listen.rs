@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, invalid, io};
 use tokio::sync::mpsc;
 
 use crate::api::mqtt::MQTT_SOURCE;
@@ -80,13 +80,15 @@ impl ListenSummary {
 }
 
 /// Records until SIGINT, SIGTERM or the duration's end.
-pub async fn run(options: ListenOptions) -> anyhow::Result<ListenSummary> {
+pub async fn run(options: ListenOptions) -> crate::runtime::error::Result<ListenSummary> {
     let config = &options.config;
-    anyhow::ensure!(
-        config.has_devices(),
-        "the configuration names no device ([gnss], [imu] or a [[can]] interface), so there \
-         is nothing to record"
-    );
+    if !config.has_devices() {
+        return Err(RuntimeError::Failed(
+            "the configuration names no device ([gnss], [imu] or a [[can]] interface), so \
+             there is nothing to record"
+                .into(),
+        ));
+    }
     let clock = RecordClock::start();
     let start = clock.now();
     let (tx, mut rx) = mpsc::channel(CHANNEL);
@@ -129,7 +131,10 @@ pub async fn run(options: ListenOptions) -> anyhow::Result<ListenSummary> {
         sources,
         options.rotation,
     )
-    .with_context(|| format!("cannot start recording in {}", options.out.display()))?;
+    .map_err(invalid(format!(
+        "cannot start recording in {}",
+        options.out.display()
+    )))?;
     let progress = writer.progress();
     let mut recorder = Recorder::start(writer);
     tracing::info!(folder = %options.out.display(), max_bytes = options.rotation.max_bytes,
@@ -139,9 +144,9 @@ pub async fn run(options: ListenOptions) -> anyhow::Result<ListenSummary> {
     let mut display = Display::new(options.progress, progress.clone());
     let mut links: BTreeMap<String, LinkState> = BTreeMap::new();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .context("cannot install the SIGTERM handler")?;
+        .map_err(io("cannot install the SIGTERM handler"))?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
-        .context("cannot install the SIGINT handler")?;
+        .map_err(io("cannot install the SIGINT handler"))?;
     let end = options.duration.map(|d| tokio::time::Instant::now() + d);
     let mut redraw = tokio::time::interval(REDRAW_EVERY);
     let mut drivers_running = true;

@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, invalid, io};
 use bytes::Bytes;
 use tokio::sync::mpsc;
 
@@ -96,11 +96,17 @@ fn log_calibration(config: &crate::config::VehicleConfig) {
 /// Runs until SIGINT or SIGTERM, writing base_status lines to `out` (from a thread of its
 /// own: a stalled `out` never holds up the control loop). The whole loop is safety-relevant
 /// code: a panic in it quick-stops the drives and ends the process (`panics`).
-pub async fn run(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+pub async fn run(
+    options: LiveOptions,
+    out: impl Write + Send + 'static,
+) -> crate::runtime::error::Result<()> {
     panics::safety_relevant(run_marked(options, out)).await
 }
 
-async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+async fn run_marked(
+    options: LiveOptions,
+    out: impl Write + Send + 'static,
+) -> crate::runtime::error::Result<()> {
     options
         .config
         .require_devices(std::path::Path::new("the configuration"))?;
@@ -225,11 +231,14 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
                 Some(&config.to_effective_toml()),
                 source_meta,
             )
-            .with_context(|| format!("cannot start recording in {}", dir.display()))?;
+            .map_err(invalid(format!(
+                "cannot start recording in {}",
+                dir.display()
+            )))?;
             if let Some(snapshot) = trajectories.snapshot.take() {
                 writer
                     .attach_trajectories(&snapshot)
-                    .context("cannot record the stored trajectories")?;
+                    .map_err(invalid("cannot record the stored trajectories"))?;
             }
             tracing::info!(folder = %dir.display(), "recording");
             Some(Recorder::start(writer))
@@ -255,11 +264,11 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
     let mut summary = tokio::time::interval(SUMMARY_EVERY);
     let mut reported: Vec<(String, GnssStats)> = Vec::new();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .context("cannot install the SIGTERM handler")?;
+        .map_err(io("cannot install the SIGTERM handler"))?;
     // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
     // signal that arrives between two turns.
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
-        .context("cannot install the SIGINT handler")?;
+        .map_err(io("cannot install the SIGINT handler"))?;
     let mut drivers_running = drivers_running;
     // Under a pattern: whether the drives have been enabled yet.
     let mut enabled_seen = false;
@@ -313,16 +322,16 @@ async fn run_marked(options: LiveOptions, out: impl Write + Send + 'static) -> a
             &mut out,
         );
         if let Some(e) = out.take_error() {
-            break Err(e).context("cannot write status output");
+            break Err(io("cannot write status output")(e));
         }
         if let (Some(_), Some(bits)) = (&pattern, bits) {
             enabled_seen |= bits & status_bits::ENABLED != 0;
             if enabled_seen && bits & PATTERN_ABORTS != 0 {
-                break Err(anyhow::anyhow!(
+                break Err(RuntimeError::Failed(format!(
                     "the vehicle was stopped ({}); the pattern is abandoned. Clear the \
                      cause and start again",
                     status_bits::describe(bits & PATTERN_ABORTS)
-                ));
+                )));
             }
         }
     };

@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::Context;
+use crate::runtime::error::{invalid, io};
 use tokio::sync::{mpsc, watch};
 
 use crate::api::rtk::BaseStatus;
@@ -163,12 +163,18 @@ impl Sink for Output {
 /// Runs until the scenario or duration ends, or SIGINT or SIGTERM. The simulated vehicle's
 /// loop is marked as `run`'s is: a panic in it ends the process, one elsewhere is contained
 /// (`panics`).
-pub async fn run(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+pub async fn run(
+    options: SimOptions,
+    out: impl Write + Send + 'static,
+) -> crate::runtime::error::Result<()> {
     crate::runtime::panics::install(Vec::new());
     crate::runtime::panics::safety_relevant(run_marked(options, out)).await
 }
 
-async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> anyhow::Result<()> {
+async fn run_marked(
+    options: SimOptions,
+    out: impl Write + Send + 'static,
+) -> crate::runtime::error::Result<()> {
     let clock = RecordClock::start();
     let start = clock.now();
     let config = crate::config::VehicleConfig {
@@ -208,11 +214,14 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
                 Some(&sim.config().to_effective_toml()),
                 sources,
             )
-            .with_context(|| format!("cannot start recording in {}", dir.display()))?;
+            .map_err(invalid(format!(
+                "cannot start recording in {}",
+                dir.display()
+            )))?;
             if let Some(snapshot) = &snapshot {
                 writer
                     .attach_trajectories(snapshot)
-                    .context("cannot record the stored trajectories")?;
+                    .map_err(invalid("cannot record the stored trajectories"))?;
             }
             tracing::info!(folder = %dir.display(), "recording");
             Some(Recorder::start(writer))
@@ -296,11 +305,11 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
     let end =
         run_length(options.duration, options.scenario.as_ref()).map(|d| start.saturating_add(d));
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .context("cannot install the SIGTERM handler")?;
+        .map_err(io("cannot install the SIGTERM handler"))?;
     // One SIGINT stream for the whole loop: a `ctrl_c()` made afresh each turn misses a
     // signal that arrives between two turns.
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
-        .context("cannot install the SIGINT handler")?;
+        .map_err(io("cannot install the SIGINT handler"))?;
     let mut pace = tokio::time::interval(PACE);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut summary = Summary::new(sim.vehicle().truth());
@@ -351,7 +360,7 @@ async fn run_marked(options: SimOptions, out: impl Write + Send + 'static) -> an
         }
         if let Some(e) = sink.out.take_error() {
             finish(sink.recorder.take(), sim.time());
-            return Err(e).context("cannot write status output");
+            return Err(io("cannot write status output")(e));
         }
     }
     finish(sink.recorder.take(), sim.time());

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, invalid, io};
 
 use crate::api::rtk::BaseStatus;
 use crate::engine::EngineOutput;
@@ -60,7 +60,7 @@ struct FastSink<W: Write> {
     out: W,
     recording: Option<RecordingWriter>,
     lines: u64,
-    error: Option<anyhow::Error>,
+    error: Option<RuntimeError>,
 }
 
 impl<W: Write> Sink for FastSink<W> {
@@ -68,7 +68,7 @@ impl<W: Write> Sink for FastSink<W> {
         if let Some(w) = self.recording.as_mut()
             && let Err(e) = w.write(record)
         {
-            self.fail(anyhow::Error::new(e).context("cannot write the recording"));
+            self.fail(invalid("cannot write the recording")(e));
         }
     }
 
@@ -77,7 +77,7 @@ impl<W: Write> Sink for FastSink<W> {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
             if let Err(e) = self.out.write_all(line.as_bytes()) {
-                self.fail(anyhow::Error::new(e).context("cannot write status output"));
+                self.fail(io("cannot write status output")(e));
             }
             self.lines += 1;
         }
@@ -85,7 +85,7 @@ impl<W: Write> Sink for FastSink<W> {
 }
 
 impl<W: Write> FastSink<W> {
-    fn fail(&mut self, e: anyhow::Error) {
+    fn fail(&mut self, e: RuntimeError) {
         self.error.get_or_insert(e);
         // Nothing more is written once one write failed.
         self.recording = None;
@@ -93,11 +93,12 @@ impl<W: Write> FastSink<W> {
 }
 
 /// Runs the simulation to the end of the scenario or the duration.
-pub fn run(options: FastOptions, out: impl Write) -> anyhow::Result<FastSummary> {
-    anyhow::ensure!(
-        options.scenario.is_some() || options.duration.is_some(),
-        "sim --fast runs to an end: give --scenario NAME or --duration SECONDS"
-    );
+pub fn run(options: FastOptions, out: impl Write) -> Result<FastSummary, RuntimeError> {
+    if options.scenario.is_none() && options.duration.is_none() {
+        return Err(RuntimeError::Failed(
+            "sim --fast runs to an end: give --scenario NAME or --duration SECONDS".into(),
+        ));
+    }
     let started = Instant::now();
     let start = RecordClock::start().now();
     let mut sim = Lockstep::new(options.plant.clone(), options.seed, start)?;
@@ -110,7 +111,10 @@ pub fn run(options: FastOptions, out: impl Write) -> anyhow::Result<FastSummary>
                 Some(&sim.config().to_effective_toml()),
                 lockstep::sources(&options.plant),
             )
-            .with_context(|| format!("cannot start recording in {}", dir.display()))?,
+            .map_err(invalid(format!(
+                "cannot start recording in {}",
+                dir.display()
+            )))?,
         ),
         None => None,
     };
@@ -132,11 +136,10 @@ pub fn run(options: FastOptions, out: impl Write) -> anyhow::Result<FastSummary>
     if let Some(e) = sink.error.take() {
         return Err(e);
     }
-    sink.out.flush().context("cannot write status output")?;
+    sink.out.flush().map_err(io("cannot write status output"))?;
     if let Some(w) = sink.recording.take() {
-        w.finish(sim.time()).map_err(|e: RecordError| {
-            anyhow::Error::new(e).context("cannot finish the recording")
-        })?;
+        w.finish(sim.time())
+            .map_err(|e: RecordError| invalid("cannot finish the recording")(e))?;
     }
     Ok(FastSummary {
         simulated_s: sim.time().saturating_since(start).as_secs_f64(),

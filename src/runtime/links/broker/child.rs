@@ -15,7 +15,7 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, TcpListener as StdListener};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
+use crate::runtime::error::{RuntimeError, invalid, io};
 use rumqttd::{Broker, Config, ConnectionSettings, RouterConfig, ServerSettings};
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -92,7 +92,7 @@ pub enum ChildReport {
 }
 
 /// The process's whole life; returns only on error (its end is an exit).
-pub fn main() -> anyhow::Result<()> {
+pub fn main() -> Result<(), RuntimeError> {
     // A panic anywhere in here (rumqttd's router included) leaves the broker half-dead:
     // end the process, so chassisd notices and starts a whole one.
     let report = std::panic::take_hook();
@@ -107,14 +107,14 @@ pub fn main() -> anyhow::Result<()> {
     let mut line = String::new();
     std::io::Read::take(&mut stdin, MAX_SETTINGS as u64)
         .read_line(&mut line)
-        .context("reading the broker's settings")?;
+        .map_err(io("reading the broker's settings"))?;
     let settings: ChildSettings =
-        serde_json::from_str(&line).context("the broker's settings are not valid JSON")?;
+        serde_json::from_str(&line).map_err(invalid("the broker's settings are not valid JSON"))?;
     let upstream = start_rumqttd(settings.max_clients, settings.max_packet)?;
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .context("the broker's runtime")?;
+        .map_err(io("the broker's runtime"))?;
     let gate = runtime.block_on(open_gate(&settings, upstream))?;
     let probe_id = format!("chassisd-probe-{:016x}", unguessable());
     runtime.spawn(probe(upstream.v4, probe_id));
@@ -160,17 +160,17 @@ fn say(report: &ChildReport) {
 }
 
 /// A loopback port free now, for one of rumqttd's listeners.
-fn free_loopback_port() -> anyhow::Result<SocketAddr> {
+fn free_loopback_port() -> Result<SocketAddr, RuntimeError> {
     let port = StdListener::bind(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0))
         .and_then(|l| l.local_addr())
-        .context("finding a loopback port for the broker")?
+        .map_err(io("finding a loopback port for the broker"))?
         .port();
     Ok(SocketAddr::from((Ipv4Addr::LOCALHOST, port)))
 }
 
 /// Starts rumqttd with an MQTT 3.1.1 and an MQTT 5 listener on free loopback ports, and
 /// returns their addresses once both answer.
-fn start_rumqttd(max_clients: usize, max_packet: usize) -> anyhow::Result<Upstreams> {
+fn start_rumqttd(max_clients: usize, max_packet: usize) -> Result<Upstreams, RuntimeError> {
     let upstreams = Upstreams {
         v4: free_loopback_port()?,
         v5: free_loopback_port()?,
@@ -216,12 +216,14 @@ fn start_rumqttd(max_clients: usize, max_packet: usize) -> anyhow::Result<Upstre
             // rumqttd only returns on failure: without it this process has no purpose.
             std::process::exit(1);
         })
-        .context("starting rumqttd's thread")?;
+        .map_err(io("starting rumqttd's thread"))?;
     let deadline = Instant::now() + START_TIMEOUT;
     for addr in [upstreams.v4, upstreams.v5] {
         while std::net::TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
             if Instant::now() > deadline {
-                bail!("rumqttd is not listening on {addr} after {START_TIMEOUT:?}");
+                return Err(RuntimeError::Failed(format!(
+                    "rumqttd is not listening on {addr} after {START_TIMEOUT:?}"
+                )));
             }
             std::thread::sleep(Duration::from_millis(10));
         }
@@ -230,15 +232,16 @@ fn start_rumqttd(max_clients: usize, max_packet: usize) -> anyhow::Result<Upstre
 }
 
 /// Opens the clients' listener with the gate on it.
-async fn open_gate(settings: &ChildSettings, upstream: Upstreams) -> anyhow::Result<Arc<Gate>> {
+async fn open_gate(
+    settings: &ChildSettings,
+    upstream: Upstreams,
+) -> Result<Arc<Gate>, RuntimeError> {
     let listener = tokio::net::TcpListener::bind(settings.listen)
         .await
-        .with_context(|| {
-            format!(
-                "embedded broker: cannot listen on {} (another broker running there?)",
-                settings.listen
-            )
-        })?;
+        .map_err(io(format!(
+            "embedded broker: cannot listen on {} (another broker running there?)",
+            settings.listen
+        )))?;
     let tls = settings
         .tls
         .as_ref()

@@ -23,7 +23,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, bail};
+use crate::runtime::error::{RuntimeError, invalid, io};
 
 use crate::api::mqtt::Publish;
 use crate::config::mqtt::MqttConfig;
@@ -103,21 +103,19 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 /// The broker's settings from `[mqtt]`, for the vehicle called `vehicle`.
-pub fn settings(config: &MqttConfig, vehicle: &str) -> anyhow::Result<ChildSettings> {
+pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, RuntimeError> {
     let listen: SocketAddr = (config.host.as_str(), config.port)
         .to_socket_addrs()
-        .with_context(|| {
-            format!(
-                "embedded broker: bad address {}:{}",
-                config.host, config.port
-            )
-        })?
+        .map_err(io(format!(
+            "embedded broker: bad address {}:{}",
+            config.host, config.port
+        )))?
         .next()
-        .with_context(|| {
-            format!(
+        .ok_or_else(|| {
+            RuntimeError::Failed(format!(
                 "embedded broker: {}:{} resolves to nothing",
                 config.host, config.port
-            )
+            ))
         })?;
     let tls = config.tls.as_ref().and_then(|t| {
         Some(ServerTls {
@@ -157,7 +155,7 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> anyhow::Result<ChildSetti
 pub fn start_if_embedded(
     config: &MqttConfig,
     vehicle: &str,
-) -> anyhow::Result<Option<EmbeddedBroker>> {
+) -> Result<Option<EmbeddedBroker>, RuntimeError> {
     if !config.embedded_broker {
         return Ok(None);
     }
@@ -185,14 +183,14 @@ pub fn spawn_health_reports(broker: EmbeddedBroker, mqtt: MqttSender, topic: Str
 
 /// Starts the broker process and returns once it accepts clients; from then on it is
 /// restarted whenever it ends. Fails loudly if its address is taken.
-pub fn start(settings: ChildSettings) -> anyhow::Result<EmbeddedBroker> {
+pub fn start(settings: ChildSettings) -> Result<EmbeddedBroker, RuntimeError> {
     let addr = settings.listen;
     // Probe: a port someone else holds is a start-up error, not a restart loop.
-    drop(TcpListener::bind(addr).with_context(|| {
-        format!("embedded broker: cannot listen on {addr} (another broker running there?)")
-    })?);
+    drop(TcpListener::bind(addr).map_err(io(format!(
+        "embedded broker: cannot listen on {addr} (another broker running there?)"
+    )))?);
     let exe = broker_exe()?;
-    let line = serde_json::to_string(&settings).context("embedded broker: settings")?;
+    let line = serde_json::to_string(&settings).map_err(invalid("embedded broker: settings"))?;
     let shared = Arc::new(Shared::default());
     let running = spawn(&exe, &line, &shared)?;
     let supervisor = {
@@ -202,19 +200,19 @@ pub fn start(settings: ChildSettings) -> anyhow::Result<EmbeddedBroker> {
     std::thread::Builder::new()
         .name("broker-watch".into())
         .spawn(supervisor)
-        .context("embedded broker: cannot start its supervisor")?;
+        .map_err(io("embedded broker: cannot start its supervisor"))?;
     Ok(EmbeddedBroker { addr, shared })
 }
 
 /// The program that runs the broker process: chassisd itself, through /proc/self/exe, the
 /// very file this process runs, even after a package upgrade replaced the one at its path
 /// (a restart then starts the same version, not the new one).
-fn broker_exe() -> anyhow::Result<PathBuf> {
+fn broker_exe() -> Result<PathBuf, RuntimeError> {
     let this = PathBuf::from("/proc/self/exe");
     if this.exists() {
         return Ok(this);
     }
-    std::env::current_exe().context("embedded broker: finding chassisd's program")
+    std::env::current_exe().map_err(io("embedded broker: finding chassisd's program"))
 }
 
 /// A broker process and the pipe whose end tells it chassisd is gone.
@@ -226,29 +224,31 @@ struct Running {
 }
 
 /// Starts one broker process and waits until it accepts clients.
-fn spawn(exe: &PathBuf, settings: &str, shared: &Arc<Shared>) -> anyhow::Result<Running> {
+fn spawn(exe: &PathBuf, settings: &str, shared: &Arc<Shared>) -> Result<Running, RuntimeError> {
     let mut child = Command::new(exe)
         .arg(CHILD_COMMAND)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
-        .with_context(|| format!("embedded broker: cannot run {}", exe.display()))?;
+        .map_err(io(format!("embedded broker: cannot run {}", exe.display())))?;
     let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
         let _ = child.kill();
-        bail!("embedded broker: its pipes were not set up");
+        return Err(RuntimeError::Failed(
+            "embedded broker: its pipes were not set up".into(),
+        ));
     };
     if let Err(e) = writeln!(stdin, "{settings}") {
         let _ = child.kill();
         let _ = child.wait();
-        bail!("embedded broker: cannot hand over its settings: {e}");
+        return Err(io("embedded broker: cannot hand over its settings")(e));
     }
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     let reader_shared = shared.clone();
     std::thread::Builder::new()
         .name("broker-reports".into())
         .spawn(move || read_reports(stdout, ready_tx, reader_shared))
-        .context("embedded broker: cannot start its report reader")?;
+        .map_err(io("embedded broker: cannot start its report reader"))?;
     match ready_rx.recv_timeout(START_TIMEOUT) {
         Ok(()) => {
             shared.pid.store(child.id(), Ordering::Relaxed);
@@ -261,7 +261,9 @@ fn spawn(exe: &PathBuf, settings: &str, shared: &Arc<Shared>) -> anyhow::Result<
         Err(_) => {
             let _ = child.kill();
             let status = child.wait().map(|s| s.to_string()).unwrap_or_default();
-            bail!("embedded broker: did not start ({status}); its log lines above say why")
+            Err(RuntimeError::Failed(format!(
+                "embedded broker: did not start ({status}); its log lines above say why"
+            )))
         }
     }
 }

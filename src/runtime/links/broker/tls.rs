@@ -4,11 +4,12 @@
 
 use std::sync::Arc;
 
-use anyhow::Context;
 use rustls::pki_types::pem::PemObject;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer};
 use serde::{Deserialize, Serialize};
 use tokio_rustls::TlsAcceptor;
+
+use crate::runtime::error::{RuntimeError, invalid};
 
 /// The broker's side of TLS.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -23,46 +24,48 @@ pub struct ServerTls {
 
 impl ServerTls {
     /// The acceptor for the listener; an error names the file that failed.
-    pub fn acceptor(&self) -> anyhow::Result<TlsAcceptor> {
+    pub fn acceptor(&self) -> Result<TlsAcceptor, RuntimeError> {
         // rustls needs a process-wide crypto provider; ring is the one compiled in.
         let _ = rustls::crypto::ring::default_provider().install_default();
         let certs = CertificateDer::pem_file_iter(&self.cert_file)
             .and_then(|certs| certs.collect::<Result<Vec<_>, _>>())
-            .with_context(|| format!("mqtt.tls.cert_file: cannot read {}", self.cert_file))?;
-        anyhow::ensure!(
-            !certs.is_empty(),
-            "mqtt.tls.cert_file: no certificate in {}",
-            self.cert_file
-        );
-        let key = PrivateKeyDer::from_pem_file(&self.key_file).with_context(|| {
-            format!(
-                "mqtt.tls.key_file: cannot read a key from {}",
-                self.key_file
-            )
-        })?;
+            .map_err(invalid(format!(
+                "mqtt.tls.cert_file: cannot read {}",
+                self.cert_file
+            )))?;
+        if certs.is_empty() {
+            return Err(RuntimeError::Failed(format!(
+                "mqtt.tls.cert_file: no certificate in {}",
+                self.cert_file
+            )));
+        }
+        let key = PrivateKeyDer::from_pem_file(&self.key_file).map_err(invalid(format!(
+            "mqtt.tls.key_file: cannot read a key from {}",
+            self.key_file
+        )))?;
         let builder = rustls::ServerConfig::builder();
         let builder = match &self.client_ca_file {
             Some(ca_file) => {
                 let mut roots = rustls::RootCertStore::empty();
                 for cert in CertificateDer::pem_file_iter(ca_file)
-                    .with_context(|| format!("mqtt.tls.ca_file: cannot read {ca_file}"))?
+                    .map_err(invalid(format!("mqtt.tls.ca_file: cannot read {ca_file}")))?
                 {
                     let cert =
-                        cert.with_context(|| format!("mqtt.tls.ca_file: bad PEM in {ca_file}"))?;
-                    roots.add(cert).with_context(|| {
-                        format!("mqtt.tls.ca_file: bad certificate in {ca_file}")
-                    })?;
+                        cert.map_err(invalid(format!("mqtt.tls.ca_file: bad PEM in {ca_file}")))?;
+                    roots.add(cert).map_err(invalid(format!(
+                        "mqtt.tls.ca_file: bad certificate in {ca_file}"
+                    )))?;
                 }
                 let verifier = rustls::server::WebPkiClientVerifier::builder(Arc::new(roots))
                     .build()
-                    .context("mqtt.tls.ca_file: cannot verify clients with it")?;
+                    .map_err(invalid("mqtt.tls.ca_file: cannot verify clients with it"))?;
                 builder.with_client_cert_verifier(verifier)
             }
             None => builder.with_no_client_auth(),
         };
-        let config = builder
-            .with_single_cert(certs, key)
-            .context("mqtt.tls: the certificate and key do not go together")?;
+        let config = builder.with_single_cert(certs, key).map_err(invalid(
+            "mqtt.tls: the certificate and key do not go together",
+        ))?;
         Ok(TlsAcceptor::from(Arc::new(config)))
     }
 }

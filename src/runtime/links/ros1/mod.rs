@@ -174,7 +174,7 @@ pub fn start(
     ros1: crate::config::ros1::Ros1Config,
     clock: crate::runtime::clock::RecordClock,
     records: mpsc::Sender<crate::record::Record>,
-) -> anyhow::Result<Ros1Link> {
+) -> Result<Ros1Link, crate::runtime::error::RuntimeError> {
     engine.emit_poses();
     let (link, queues) = Ros1Link::new();
     spawn(spec_for(config, ros1), clock, records, queues);
@@ -189,6 +189,8 @@ pub fn start(
     _: crate::config::ros1::Ros1Config,
     _: crate::runtime::clock::RecordClock,
     _: mpsc::Sender<crate::record::Record>,
-) -> anyhow::Result<Ros1Link> {
-    anyhow::bail!("this chassisd was built without the ros1 feature")
+) -> Result<Ros1Link, crate::runtime::error::RuntimeError> {
+    Err(crate::runtime::error::RuntimeError::Failed(
+        "this chassisd was built without the ros1 feature".into(),
+    ))
 }

@@ -498,6 +498,8 @@ async fn build(
                     .map(|()| map_msgs::SetNaviCmdResponse {})
                     .map_err(|reason| {
                         tracing::warn!(%reason, "/set_navi_cmd refused");
+                        // roslibrust's service callbacks answer with its ServiceError,
+                        // which is an anyhow::Error.
                         anyhow::anyhow!(reason)
                     })
             },

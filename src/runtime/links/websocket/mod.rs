@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use crate::runtime::error::{RuntimeError, io};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::http::StatusCode;
@@ -135,12 +135,14 @@ pub fn start(
     config: WebsocketConfig,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
-) -> anyhow::Result<WebsocketLink> {
-    let address = config
-        .address()
-        .with_context(|| format!("websocket.bind {:?} is not an address", config.bind))?;
-    let listener =
-        listen(address).with_context(|| format!("websocket: cannot listen on {address}"))?;
+) -> Result<WebsocketLink, RuntimeError> {
+    let address = config.address().ok_or_else(|| {
+        RuntimeError::Failed(format!(
+            "websocket.bind {:?} is not an address",
+            config.bind
+        ))
+    })?;
+    let listener = listen(address).map_err(io(format!("websocket: cannot listen on {address}")))?;
     engine.emit_poses();
     let localizer = crate::config::localization::localizer_config(vehicle);
     let noise = OdometryNoise::from_localizer(&localizer, vehicle.imu.is_some());
