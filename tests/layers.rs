@@ -130,6 +130,37 @@ fn no_code_is_chosen_by_searching_text() {
     );
 }
 
+/// The one place in the library that may name `anyhow`: roslibrust's service callbacks
+/// answer with its `ServiceError`, which is `anyhow::Error`.
+const ANYHOW_ALLOWED: &[&str] = &["runtime/links/ros1/node.rs"];
+
+#[test]
+fn anyhow_stays_at_the_binarys_edge() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    collect_rs_files(&src, &mut files);
+    let mut found = Vec::new();
+    for file in files {
+        let relative = file.strip_prefix(&src).expect("under src");
+        let shown = relative.display().to_string();
+        if module_of(relative).is_none() || ANYHOW_ALLOWED.contains(&shown.as_str()) {
+            continue;
+        }
+        let text = std::fs::read_to_string(&file).expect("readable source");
+        let library = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        for (n, line) in without_comments(library).lines().enumerate() {
+            if line.contains("anyhow") {
+                found.push(format!("src/{shown}:{}: {}", n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "anyhow in the library (give the module a thiserror enum):\n{}",
+        found.join("\n")
+    );
+}
+
 #[test]
 fn the_reader_finds_the_arrows_it_is_meant_to() {
     // The parser's own check, on lines of known meaning, so the rules above cannot pass by

@@ -177,3 +177,20 @@ pub fn gnss_rate_arg(s: &str) -> Result<f64, String> {
         _ => Err(format!("{s:?}: give a rate from 0.1 to 50 Hz")),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use chassisd::config::ConfigError;
+    use chassisd::runtime::error::RuntimeError;
+
+    #[test]
+    fn a_wrapped_configuration_error_is_said_once_and_still_found() {
+        let config = ConfigError::invalid(Path::new("v.toml"), "gnss.baud", "0", "use 9600");
+        let said = config.to_string();
+        let e = anyhow::Error::from(RuntimeError::from(config)).context("starting the vehicle");
+        assert_eq!(describe(&e), format!("starting the vehicle: {said}"));
+        // main's exit status 78 looks for it among the causes.
+        assert!(e.chain().any(|c| c.downcast_ref::<ConfigError>().is_some()));
+    }
+}
