@@ -130,6 +130,29 @@ fn no_code_is_chosen_by_searching_text() {
     );
 }
 
+#[test]
+fn the_engine_routes_records_by_a_lookup_not_by_comparing_names() {
+    // Each source's route is resolved once, when the engine is built (engine::Route).
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/engine");
+    let mut files = Vec::new();
+    collect_rs_files(&src, &mut files);
+    let mut compared = Vec::new();
+    for file in files {
+        let text = std::fs::read_to_string(&file).expect("readable source");
+        let library = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
+        for (n, line) in without_comments(library).lines().enumerate() {
+            if line.contains("source ==") || line.contains("source !=") {
+                compared.push(format!("{}:{}: {}", file.display(), n + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        compared.is_empty(),
+        "records routed by name:\n{}",
+        compared.join("\n")
+    );
+}
+
 /// The one place in the library that may name `anyhow`: roslibrust's service callbacks
 /// answer with its `ServiceError`, which is `anyhow::Error`.
 const ANYHOW_ALLOWED: &[&str] = &["runtime/links/ros1/node.rs"];

@@ -334,9 +334,9 @@ impl Drivetrain {
         }
     }
 
-    /// Whether `source` names one of the interfaces.
-    pub fn has_bus(&self, source: &str) -> bool {
-        self.buses.iter().any(|b| b.name == source)
+    /// The interfaces' names.
+    pub fn bus_names(&self) -> impl Iterator<Item = &str> {
+        self.buses.iter().map(|b| b.name.as_str())
     }
 
     /// Whether there is no CAN device at all.

@@ -13,7 +13,7 @@
 
 pub mod drivetrain;
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::Duration;
 
 use crate::api::local;
@@ -188,9 +188,66 @@ pub struct EngineStats {
     pub tx_mismatched: u64,
 }
 
+/// Where the records of one source go: resolved from the source's name once, when the
+/// engine is built, so a record is routed by a lookup and never by comparing names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Route {
+    /// RTCM corrections for the receiver.
+    Corrections,
+    /// An NMEA receiver.
+    Gnss,
+    /// An IMU.
+    Imu,
+    /// The MQTT link: its commands go to the dialects.
+    Mqtt,
+    /// A CAN interface.
+    Bus,
+    /// The process's own events (its shutdown).
+    Process,
+    /// The host's load samples.
+    Host,
+    /// A channel that speaks the local command set: standard input, the rosbridge clients,
+    /// and the ROS1 node, whose missions and goals carry its tag.
+    Local {
+        /// The ROS1 node's: tag what it asks for.
+        ros1: bool,
+    },
+}
+
+/// The routes of a configuration's sources: later entries win a name taken twice.
+fn routes(
+    nmea: &BTreeMap<String, NmeaReceiver>,
+    imu: &BTreeMap<String, (ImuDecoder, Mounting)>,
+    drivetrain: &Drivetrain,
+) -> HashMap<String, Route> {
+    let fixed = [
+        (LOCAL_COMMANDS, Route::Local { ros1: false }),
+        (crate::api::rosbridge::SOURCE, Route::Local { ros1: false }),
+        (ros1::SOURCE, Route::Local { ros1: true }),
+        (HOST_SOURCE, Route::Host),
+        (PROCESS_SOURCE, Route::Process),
+    ];
+    let mut routes: HashMap<String, Route> = fixed
+        .into_iter()
+        .map(|(name, route)| (name.to_owned(), route))
+        .collect();
+    routes.extend(
+        drivetrain
+            .bus_names()
+            .map(|name| (name.to_owned(), Route::Bus)),
+    );
+    routes.insert(MQTT_SOURCE.to_owned(), Route::Mqtt);
+    routes.extend(imu.keys().map(|name| (name.clone(), Route::Imu)));
+    routes.extend(nmea.keys().map(|name| (name.clone(), Route::Gnss)));
+    routes.insert(CORRECTIONS_SOURCE.to_owned(), Route::Corrections);
+    routes
+}
+
 /// Records and ticks in, outputs out.
 pub struct Engine {
     vehicle: Vehicle,
+    /// Each source's route, by name.
+    routes: HashMap<String, Route>,
     nmea: BTreeMap<String, NmeaReceiver>,
     imu: BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: Drivetrain,
@@ -289,11 +346,13 @@ impl Engine {
                 Decoder::Nmea => None,
             })
             .collect();
+        let drivetrain = Drivetrain::new(config);
         Self {
             vehicle: Vehicle::new(CoreConfig::from_vehicle(config)),
+            routes: routes(&nmea, &imu, &drivetrain),
             nmea,
             imu,
-            drivetrain: Drivetrain::new(config),
+            drivetrain,
             next_tick: None,
             last_record: None,
             last_tick: None,
@@ -351,9 +410,10 @@ impl Engine {
     pub fn handle(&mut self, record: &Record, out: &mut Vec<EngineOutput>) -> Timestamp {
         // A recorded transmission is an output of the live run, not an input: it is checked
         // against what this engine sends, and does not move time.
+        let route = self.routes.get(record.source.as_str()).copied();
         if let Payload::CanTx(frame) = &record.payload
             && self.sent.is_some()
-            && self.drivetrain.has_bus(&record.source)
+            && route == Some(Route::Bus)
             && !self.drivetrain.is_listen_only(&record.source)
         {
             self.count_record(&record.source);
@@ -373,11 +433,11 @@ impl Engine {
         self.last_record = Some((t, record.source.clone()));
         self.count_record(&record.source);
         let mut tx = Vec::new();
-        match &record.payload {
-            Payload::Serial(bytes) if record.source == CORRECTIONS_SOURCE => {
+        match (route, &record.payload) {
+            (Some(Route::Corrections), Payload::Serial(bytes)) => {
                 self.relay_corrections(t, bytes, out);
             }
-            Payload::Link(state) if record.source == CORRECTIONS_SOURCE => {
+            (Some(Route::Corrections), Payload::Link(state)) => {
                 if let Some(relay) = &mut self.corrections
                     && *state == LinkState::Down
                 {
@@ -387,7 +447,7 @@ impl Engine {
                 self.vehicle
                     .handle(t, Input::Link(Device::Corrections, *state));
             }
-            Payload::Serial(bytes) => {
+            (Some(Route::Gnss | Route::Imu), Payload::Serial(bytes)) => {
                 let vehicle = &mut self.vehicle;
                 let measure = self.emit_measurements;
                 if let Some(receiver) = self.nmea.get_mut(&record.source) {
@@ -417,26 +477,28 @@ impl Engine {
                     self.stats.undecoded += 1;
                 }
             }
-            Payload::Link(state) if self.nmea.contains_key(&record.source) => {
+            (Some(Route::Gnss), Payload::Link(state)) => {
                 self.vehicle.handle(t, Input::Link(Device::Gnss, *state));
             }
-            Payload::Link(state) if self.imu.contains_key(&record.source) => {
+            (Some(Route::Imu), Payload::Link(state)) => {
                 self.vehicle.handle(t, Input::Link(Device::Imu, *state));
             }
             // The control link's state is recorded; the dialects do not act on it yet.
-            Payload::Link(_) if record.source == MQTT_SOURCE => {}
-            Payload::Link(state) if self.drivetrain.has_bus(&record.source) => {
+            (Some(Route::Mqtt), Payload::Link(_)) => {}
+            (Some(Route::Bus), Payload::Link(state)) => {
                 self.drivetrain
                     .link(t, &record.source, *state == LinkState::Up, &mut tx);
             }
-            Payload::Can(frame) if self.drivetrain.has_bus(&record.source) => {
+            (Some(Route::Bus), Payload::Can(frame)) => {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
             // A monitor sees every frame on the bus, another master's included.
-            Payload::CanTx(frame) if self.drivetrain.is_listen_only(&record.source) => {
+            (Some(Route::Bus), Payload::CanTx(frame))
+                if self.drivetrain.is_listen_only(&record.source) =>
+            {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
-            Payload::Command { topic, payload } if record.source == MQTT_SOURCE => {
+            (Some(Route::Mqtt), Payload::Command { topic, payload }) => {
                 self.stats.commands += 1;
                 let mut replies = Vec::new();
                 let mut core = CoreAt {
@@ -451,14 +513,12 @@ impl Engine {
                 }
                 out.extend(replies.into_iter().map(EngineOutput::Publish));
             }
-            Payload::Command { topic, .. }
-                if record.source == PROCESS_SOURCE && topic == "shutdown" =>
-            {
+            (Some(Route::Process), Payload::Command { topic, .. }) if topic == "shutdown" => {
                 self.vehicle
                     .handle(t, Input::Command(crate::vehicle::Command::Stop));
                 self.drivetrain.shut_down(&mut tx);
             }
-            Payload::Command { payload, .. } if record.source == HOST_SOURCE => {
+            (Some(Route::Host), Payload::Command { payload, .. }) => {
                 match serde_json::from_slice::<HostUsage>(payload) {
                     Ok(usage) => {
                         self.vehicle.handle(t, Input::Host(usage));
@@ -466,20 +526,14 @@ impl Engine {
                     Err(_) => self.stats.undecoded += 1,
                 }
             }
-            Payload::Command { .. }
-                if record.source != LOCAL_COMMANDS
-                    && record.source != ros1::SOURCE
-                    && record.source != crate::api::rosbridge::SOURCE =>
-            {
-                self.stats.commands_without_dialect += 1;
-            }
+
             // The local channel, the ROS1 node and the WebSocket clients speak the same
             // commands; what the node asks for carries its tag, so that it can tell its own
             // mission's end.
-            Payload::Command { topic, payload } => {
+            (Some(Route::Local { ros1 }), Payload::Command { topic, payload }) => {
                 self.stats.commands += 1;
                 let decoded = local::decode(topic, payload).map(|command| {
-                    if record.source == ros1::SOURCE {
+                    if ros1 {
                         command.map(ros1::tagged)
                     } else {
                         command
@@ -509,6 +563,7 @@ impl Engine {
                     result,
                 });
             }
+            (_, Payload::Command { .. }) => self.stats.commands_without_dialect += 1,
             _ => self.stats.undecoded += 1,
         }
         self.transmit(tx, out);
