@@ -1,5 +1,5 @@
-//! What can stop a benchmark before it has figures: the benchmarks' one error type. Each
-//! variant says what was being done, `what: why`.
+//! What can stop a benchmark before it has figures: the benchmarks' one error type. A step
+//! that failed while doing something is the runtime's `what: why` error.
 
 use crate::config::ConfigError;
 use crate::runtime::error::RuntimeError;
@@ -7,22 +7,6 @@ use crate::runtime::error::RuntimeError;
 /// Why a benchmark could not run to its figures.
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
-    /// An operating-system call failed.
-    #[error("{what}: {error}")]
-    Io {
-        /// What was being done.
-        what: String,
-        /// The operating system's word.
-        error: std::io::Error,
-    },
-    /// Data, a recording or a client refused what was asked of it.
-    #[error("{what}: {error}")]
-    Invalid {
-        /// What was being done.
-        what: String,
-        /// Why it failed.
-        error: String,
-    },
     /// A configuration or plant does not load.
     #[error("{0}")]
     Config(#[from] ConfigError),
@@ -37,19 +21,16 @@ pub enum BenchError {
     Failed(String),
 }
 
-/// The error of an operating-system call made while doing `what`.
+/// The error of an operating-system call made while doing `what` (the runtime's).
 pub fn io(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> BenchError {
-    let what = what.into();
-    move |error| BenchError::Io { what, error }
+    let error = crate::runtime::error::io(what);
+    move |e| BenchError::Runtime(error(e))
 }
 
-/// The error of anything that failed while doing `what`, in its own words.
+/// The error of anything that failed while doing `what`, in its own words (the runtime's).
 pub fn invalid<E: std::fmt::Display>(what: impl Into<String>) -> impl FnOnce(E) -> BenchError {
-    let what = what.into();
-    move |error| BenchError::Invalid {
-        what,
-        error: error.to_string(),
-    }
+    let error = crate::runtime::error::invalid(what);
+    move |e| BenchError::Runtime(error(e))
 }
 
 /// The result of the benchmarks' fallible steps.
