@@ -235,3 +235,96 @@ fn can_drive_replays_drives_and_bms() {
             .any(|r| bits(r) & 2 == 0 && r["robot"]["vx"].as_f64().unwrap() > 0.15)
     );
 }
+
+/// `fixtures/ros-legacy`: a simulated session (`chassisd sim --fast --duration 10 --plant
+/// devices/plant.delivery.toml --record`) with ROS1 node and rosbridge requests written in
+/// the form recordings held before the protocol adapters: the local channel's topics and
+/// JSON under the sources `ros1` and `websocket`. Such a recording must replay to the bytes
+/// it replayed to then, and each request must get the answer it got then
+/// (`expected/answers.txt`). The requests drive the vehicle otherwise than the recorded
+/// run, so its transmissions differ and the replay runs `--lenient`.
+#[test]
+fn ros_requests_recorded_before_the_adapters_replay_as_before() {
+    let fixture = common::repo().join("fixtures/ros-legacy");
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg("--lenient")
+        .arg(&fixture)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let answers = engine_answers(&fixture);
+    let expected_status = fixture.join("expected/base_status.jsonl");
+    let expected_answers = fixture.join("expected/answers.txt");
+    if std::env::var_os("CHASSISD_BLESS").is_some() {
+        std::fs::create_dir_all(expected_status.parent().unwrap()).unwrap();
+        std::fs::write(&expected_status, &out.stdout).unwrap();
+        std::fs::write(&expected_answers, &answers).unwrap();
+    }
+    assert!(
+        out.stdout == std::fs::read(&expected_status).expect("expected status"),
+        "replay differs from {}",
+        expected_status.display()
+    );
+    assert_eq!(
+        answers,
+        std::fs::read_to_string(&expected_answers).expect("expected answers")
+    );
+    let summary = String::from_utf8_lossy(&out.stderr);
+    for part in [
+        "ros1 8, sim0 3525, websocket 5",
+        "100 status lines",
+        "13 commands (5 refused)",
+        "recorded transmissions: 314 reproduced, 1340 differ",
+    ] {
+        assert!(summary.contains(part), "summary lacks {part:?}: {summary}");
+    }
+    for request in ["set_navi_cmd", "cmd_vel", "goal", "mission"] {
+        assert!(answers.contains(request), "{request} unanswered: {answers}");
+    }
+}
+
+/// What the engine answers and announces over a recording, one line per output, each with
+/// the time of the record that caused it.
+fn engine_answers(dir: &std::path::Path) -> String {
+    use chassisd::config::VehicleConfig;
+    use chassisd::engine::{Engine, EngineOutput};
+    use chassisd::record::RecordingReader;
+    use chassisd::time::Timestamp;
+    use std::fmt::Write as _;
+
+    let (meta, reader) = RecordingReader::open(dir).expect("recording opens");
+    let config = VehicleConfig::load(&dir.join(meta.vehicle_config.as_deref().expect("config")))
+        .expect("stored configuration loads");
+    let mut engine = Engine::new(&config, &[]);
+    if let Some(start) = meta.start_us {
+        engine.start_at(Timestamp::from_micros(start));
+    }
+    let mut text = String::new();
+    let mut out = Vec::new();
+    for record in reader {
+        let t = engine.handle(&record, &mut out);
+        for output in out.drain(..) {
+            let line = match output {
+                EngineOutput::CommandResult {
+                    source,
+                    topic,
+                    result,
+                    ..
+                } => format!("{source} {topic} {result:?}"),
+                EngineOutput::MotionEnded(r) => {
+                    format!("ended {:?} {:?} {:?} {}", r.id, r.kind, r.tag, r.outcome)
+                }
+                EngineOutput::Mission { tag, event } => format!("mission {tag:?} {event:?}"),
+                EngineOutput::Event(e) => format!("event {e}"),
+                _ => continue,
+            };
+            writeln!(text, "{} {line}", t.as_micros()).unwrap();
+        }
+    }
+    text
+}
