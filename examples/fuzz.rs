@@ -685,6 +685,7 @@ mod broker {
 mod ros1 {
     use super::*;
     use chassisd::api::ros1 as codec;
+    use chassisd::api::ros1::adapter::Ros1Request;
     use chassisd::runtime::links::ros1::messages::{geometry_msgs, map_msgs, std_msgs};
     use roslibrust_serde_rosmsg::{from_slice, to_vec};
 
@@ -723,20 +724,23 @@ mod ros1 {
         seeds
     }
 
-    fn request(kind: u8, body: &[u8]) -> Option<Result<codec::Request, String>> {
+    fn request(kind: u8, body: &[u8]) -> Option<Result<Ros1Request, String>> {
         Some(match kind % KINDS {
             0 => {
                 let t: geometry_msgs::Twist = from_slice(body).ok()?;
-                Ok(codec::cmd_vel(
-                    [t.linear.x, t.linear.y, t.linear.z],
-                    [t.angular.x, t.angular.y, t.angular.z],
-                ))
+                Ok(Ros1Request::CmdVel {
+                    linear: [t.linear.x, t.linear.y, t.linear.z],
+                    angular: [t.angular.x, t.angular.y, t.angular.z],
+                })
             }
-            1 => codec::navi_stop(from_slice::<std_msgs::Int16>(body).ok()?.data),
-            2 => codec::autocharge(from_slice::<std_msgs::Int16>(body).ok()?.data),
+            1 => Ros1Request::navi_stop(from_slice::<std_msgs::Int16>(body).ok()?.data),
+            2 => Ros1Request::autocharge(from_slice::<std_msgs::Int16>(body).ok()?.data),
             _ => {
                 let r: map_msgs::SetNaviCmdRequest = from_slice(body).ok()?;
-                Ok(codec::set_navi_cmd(&r.cmd, r.distance))
+                Ok(Ros1Request::SetNaviCmd {
+                    cmd: r.cmd,
+                    distance: r.distance,
+                })
             }
         })
     }
@@ -761,8 +765,8 @@ mod ros1 {
                     sim.input(
                         codec::SOURCE,
                         Payload::Command {
-                            topic: r.topic.into(),
-                            payload: Bytes::from(r.payload),
+                            topic: r.name().into(),
+                            payload: r.encode(Some(n)),
                         },
                         &mut sink,
                     );
@@ -1280,7 +1284,7 @@ fn rosbridge_seeds() -> Vec<Vec<u8>> {
 }
 
 fn rosbridge_runner() -> Runner {
-    use chassisd::api::rosbridge::{SOURCE, messages, ops};
+    use chassisd::api::rosbridge::{SOURCE, adapter, ops, topics};
     let mut sim = simulated_vehicle(5, None);
     let mut n = 0u64;
     Box::new(move |input| {
@@ -1298,25 +1302,29 @@ fn rosbridge_runner() -> Runner {
         let ops::ClientOp::Publish { topic, msg, .. } = op else {
             return 1;
         };
-        let command = match topic.as_str() {
-            "/cmd_vel" => ("cmd_vel", msg.to_string()),
-            "/goal_pose" => match messages::goal_from_pose_stamped(&msg) {
-                Ok(goal) => ("goal", goal),
-                Err(reason) => return reason.len() as u64,
-            },
-            _ => return 2,
+        let Some(name) = topics::find(&topic)
+            .filter(|t| t.flow == topics::Flow::Subscribed)
+            .map(|t| t.name)
+        else {
+            return 2;
         };
+        if let Err(reason) = adapter::check(name, &topic, &msg) {
+            return reason.len() as u64;
+        }
         let mut sink = Collect::default();
         sim.input(
             SOURCE,
             Payload::Command {
-                topic: command.0.into(),
-                payload: Bytes::from(command.1),
+                topic: name.into(),
+                payload: adapter::encode(n, &msg),
             },
             &mut sink,
         );
         settle(&mut sim, n, &mut sink);
-        signature(&[3 + u64::from(command.0 == "goal"), sink.outputs.min(8)])
+        signature(&[
+            3 + u64::from(name == topics::GOAL_POSE),
+            sink.outputs.min(8),
+        ])
     })
 }
 

@@ -153,6 +153,41 @@ fn the_engine_routes_records_by_a_lookup_not_by_comparing_names() {
     );
 }
 
+/// The ROS protocols' adapters and links: their requests reach the core typed, through
+/// their own adapter, never re-encoded as the local channel's JSON (`api::legacy` reads
+/// recordings made before, when they were).
+const ROS_ADAPTERS: &[&[&str]] = &[
+    &["api", "ros1"],
+    &["api", "rosbridge"],
+    &["runtime", "links", "ros1"],
+    &["runtime", "links", "websocket"],
+];
+
+#[test]
+fn ros_adapters_do_not_speak_the_local_channel() {
+    let within = |path: &ModulePath, prefix: &[&str]| {
+        path.len() >= prefix.len() && path.iter().zip(prefix).all(|(a, b)| a == b)
+    };
+    let imports = library_imports();
+    assert!(
+        imports
+            .iter()
+            .any(|i| within(&i.from, &["api", "ros1"]) && within(&i.to, &["api", "requests"])),
+        "the ROS1 adapter's own requests are not found: the reader reads nothing"
+    );
+    let found: Vec<&str> = imports
+        .iter()
+        .filter(|i| ROS_ADAPTERS.iter().any(|a| within(&i.from, a)))
+        .filter(|i| within(&i.to, &["api", "local"]))
+        .map(|i| i.at.as_str())
+        .collect();
+    assert!(
+        found.is_empty(),
+        "a ROS adapter speaks the local channel:\n{}",
+        found.join("\n")
+    );
+}
+
 /// The one place in the library that may name `anyhow`: roslibrust's service callbacks
 /// answer with its `ServiceError`, which is `anyhow::Error`.
 const ANYHOW_ALLOWED: &[&str] = &["runtime/links/ros1/node.rs"];

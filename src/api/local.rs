@@ -44,10 +44,10 @@
 
 use serde::Deserialize;
 
-use crate::control::MoveKind;
-use crate::control::goal::GoalPose;
+use super::adapter::RequestAdapter;
+
+use super::requests;
 use crate::fusion::geodesy::Geodetic;
-use crate::fusion::planar::wrap;
 use crate::vehicle::{Command, PathPoints, PathRequest};
 
 /// Topic of velocity commands.
@@ -76,34 +76,10 @@ pub const PAUSE: &str = "pause";
 pub const CONTINUE: &str = "continue";
 /// Topic of missions.
 pub const MISSION: &str = "mission";
-/// Longest distance move, cm.
-const MAX_MOVE_CM: f64 = 10_000.0;
-/// Largest angle move, degrees.
-const MAX_TURN_DEG: f64 = 3_600.0;
 /// Largest payload accepted, bytes ...
 pub const MAX_PAYLOAD: usize = 4096;
 /// ... except for a path, bytes (some 10,000 points).
 pub const MAX_PATH_PAYLOAD: usize = 256 * 1024;
-
-#[derive(Debug, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-struct Vector3 {
-    #[serde(default)]
-    x: f64,
-    #[serde(default)]
-    y: f64,
-    #[serde(default)]
-    z: f64,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Twist {
-    #[serde(default)]
-    linear: Vector3,
-    #[serde(default)]
-    angular: Vector3,
-}
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -140,6 +116,23 @@ struct Pose {
     yaw: f64,
 }
 
+/// Source name of the local command channel (`chassisd run --commands-stdin`) in
+/// recordings and the engine.
+pub const SOURCE: &str = "stdin";
+
+/// The local channel's adapter: each line's command to the core, and its answer.
+pub const ADAPTER: RequestAdapter =
+    RequestAdapter::new(SOURCE, |topic, payload| (None, command(topic, payload)));
+
+/// A line's command, or why it is refused (a topic this channel does not know included).
+pub fn command(topic: &str, payload: &[u8]) -> Result<Command, String> {
+    match decode(topic, payload) {
+        Ok(Some(command)) => Ok(command),
+        Ok(None) => Err(format!("unknown topic {topic:?}")),
+        Err(e) => Err(e),
+    }
+}
+
 /// Decodes a command; `Ok(None)` for topics this channel does not know.
 pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     if ![
@@ -174,7 +167,9 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     }
     let parse_error = |e: serde_json::Error| format!("{topic}: {e}");
     match topic {
-        CMD_VEL => velocity(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
+        CMD_VEL => {
+            requests::velocity(&serde_json::from_slice(payload).map_err(parse_error)?).map(Some)
+        }
         INIT_RTK_DATA => Ok(Some(Command::ZeroLocalFrame)),
         STOP | RESET | PAUSE | CONTINUE => {
             if !payload.iter().all(u8::is_ascii_whitespace) {
@@ -207,24 +202,17 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
                 tag: None,
             }))
         }
-        SET_NAVI_CMD => navi_cmd(serde_json::from_slice(payload).map_err(parse_error)?).map(Some),
+        SET_NAVI_CMD => {
+            let n: NaviCmd = serde_json::from_slice(payload).map_err(parse_error)?;
+            requests::navi_cmd(&n.cmd, n.distance).map(Some)
+        }
         ESTOP => {
             let e: EStop = serde_json::from_slice(payload).map_err(parse_error)?;
             Ok(Some(Command::EmergencyStop { engaged: e.engaged }))
         }
         GOAL => {
             let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;
-            if ![p.x, p.y, p.yaw].iter().all(|v| v.is_finite()) {
-                return Err(format!("{topic}: x, y and yaw must be finite"));
-            }
-            Ok(Some(Command::Goal {
-                goal: GoalPose {
-                    x: p.x,
-                    y: p.y,
-                    yaw: wrap(p.yaw),
-                },
-                tag: None,
-            }))
+            requests::goal(topic, p.x, p.y, p.yaw).map(Some)
         }
         INIT_POSITION => {
             let p: Pose = serde_json::from_slice(payload).map_err(parse_error)?;
@@ -257,71 +245,6 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
     }
 }
 
-/// `/set_navi_cmd`: 1 forward, 2 back (cm), 3 left, 4 right (degrees), 5 stop.
-fn navi_cmd(request: NaviCmd) -> Result<Command, String> {
-    let cmd = match &request.cmd {
-        serde_json::Value::String(s) => s.trim().parse::<u8>().ok(),
-        serde_json::Value::Number(n) => n.as_u64().and_then(|n| u8::try_from(n).ok()),
-        _ => None,
-    };
-    let Some(cmd @ 1..=5) = cmd else {
-        return Err(format!(
-            "set_navi_cmd: cmd must be \"1\" (forward), \"2\" (back), \"3\" (left), \"4\" \
-             (right) or \"5\" (stop), not {}",
-            request.cmd
-        ));
-    };
-    if cmd == 5 {
-        return Ok(Command::CancelMotion);
-    }
-    let Some(distance) = request.distance else {
-        return Err(
-            "set_navi_cmd: distance is needed (cm for cmd 1 and 2, degrees for 3 and 4)".into(),
-        );
-    };
-    let max = if cmd <= 2 { MAX_MOVE_CM } else { MAX_TURN_DEG };
-    if !(0.0..=max).contains(&distance) {
-        return Err(format!(
-            "set_navi_cmd: distance {distance} is outside 0..={max} {}",
-            if cmd <= 2 { "cm" } else { "degrees" }
-        ));
-    }
-    Ok(Command::Move(match cmd {
-        1 => MoveKind::Straight {
-            distance_m: distance / 100.0,
-        },
-        2 => MoveKind::Straight {
-            distance_m: -distance / 100.0,
-        },
-        3 => MoveKind::Turn {
-            angle_rad: distance.to_radians(),
-        },
-        _ => MoveKind::Turn {
-            angle_rad: -distance.to_radians(),
-        },
-    }))
-}
-
-fn velocity(twist: Twist) -> Result<Command, String> {
-    if twist.linear.y != 0.0
-        || twist.linear.z != 0.0
-        || twist.angular.x != 0.0
-        || twist.angular.y != 0.0
-    {
-        return Err(
-            "cmd_vel: a differential drive moves only along linear.x and turns about angular.z"
-                .into(),
-        );
-    }
-    if !twist.linear.x.is_finite() || !twist.angular.z.is_finite() {
-        return Err("cmd_vel: velocities must be finite".into());
-    }
-    Ok(Command::Velocity {
-        vx: twist.linear.x,
-        wz: twist.angular.z,
-    })
-}
-
 /// Splits a console line `TOPIC JSON` into topic and payload.
 pub fn split_line(line: &str) -> Option<(&str, &str)> {
     let line = line.trim();
@@ -337,6 +260,7 @@ pub fn split_line(line: &str) -> Option<(&str, &str)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::control::MoveKind;
 
     #[test]
     fn decodes_twists() {

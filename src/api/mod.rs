@@ -1,8 +1,12 @@
 //! Protocol dialects: codecs between each protocol's JSON and the core's types.
 
+pub mod adapter;
 pub mod device;
+pub mod legacy;
 pub mod local;
 pub mod mqtt;
+pub mod publish;
+pub mod requests;
 pub mod root;
 pub mod ros1;
 pub mod rosbridge;
@@ -13,6 +17,14 @@ pub mod trajectory;
 /// A new dialect adds its module and its entry here; the engine lists none of them.
 pub const DIALECTS: &[mqtt::DialectFactory] =
     &[rtk::from_setup, root::from_setup, device::from_setup];
+
+/// Every command channel's adapter but the MQTT link's (whose dialects the configuration
+/// chooses): a new channel adds its adapter here, and the engine routes its source to it.
+pub const ADAPTERS: &[fn() -> Box<dyn adapter::Adapter>] = &[
+    || Box::new(local::ADAPTER),
+    || Box::new(rosbridge::adapter::ADAPTER),
+    || Box::new(ros1::adapter::ADAPTER),
+];
 
 /// Most points in one path.
 pub const MAX_PATH_POINTS: usize = trajectory::MAX_POINTS;

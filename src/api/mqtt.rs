@@ -2,65 +2,18 @@
 //! implements, and the router that hands an incoming message to the dialect owning its topic.
 //! Dialects are sans-IO like the core: messages in, messages out; the runtime moves them.
 
-use bytes::Bytes;
-
+pub use crate::api::adapter::CoreAccess;
+use crate::api::adapter::{Adapter, Handled, Reply};
+pub use crate::api::publish::{Publish, Qos};
 use crate::api::trajectory::TrajectoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};
 use crate::time::Timestamp;
-use crate::vehicle::{Command, VehicleStatus, chassis::CommandRejected};
+use crate::vehicle::VehicleStatus;
 
 /// Source name of MQTT messages in recordings and the engine.
 pub const MQTT_SOURCE: &str = "mqtt";
-
-/// Delivery guarantee of a publication.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Qos {
-    /// Telemetry: at most once; dropped first when the broker is away.
-    AtMostOnce,
-    /// Replies and events: at least once; kept while the broker is away.
-    AtLeastOnce,
-}
-
-/// One message to publish.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Publish {
-    /// Topic.
-    pub topic: String,
-    /// Payload (JSON).
-    pub payload: Bytes,
-    /// Delivery guarantee.
-    pub qos: Qos,
-    /// Retained by the broker.
-    pub retain: bool,
-}
-
-impl Publish {
-    /// Telemetry: QoS 0, not retained.
-    pub fn telemetry(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
-        Self {
-            topic: topic.into(),
-            payload: payload.into(),
-            qos: Qos::AtMostOnce,
-            retain: false,
-        }
-    }
-
-    /// A reply or event: QoS 1, not retained.
-    pub fn reply(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
-        Self {
-            qos: Qos::AtLeastOnce,
-            ..Self::telemetry(topic, payload)
-        }
-    }
-}
-
-/// The core, as a dialect sees it: commands in, acceptance or a reason out.
-pub trait CoreAccess {
-    /// Hands `command` to the core at the current time.
-    fn command(&mut self, command: Command) -> Result<(), CommandRejected>;
-}
 
 /// One protocol dialect.
 pub trait Dialect: Send {
@@ -118,6 +71,60 @@ pub struct DialectSetup<'a> {
 /// A dialect's entry point: the dialect, when the configuration turns it on. Each dialect
 /// module provides one, and [`crate::api::DIALECTS`] lists them.
 pub type DialectFactory = fn(&mut DialectSetup<'_>) -> Option<Box<dyn Dialect>>;
+
+/// The MQTT link's adapter: every dialect in force, each owning its topics.
+impl Adapter for Dialects {
+    fn source(&self) -> &'static str {
+        MQTT_SOURCE
+    }
+
+    fn on_request(
+        &mut self,
+        t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Reply>,
+    ) -> Handled {
+        let mut replies = Vec::new();
+        let owned = self.on_message(t, topic, payload, core, &mut replies);
+        out.extend(replies.into_iter().map(Reply::Publish));
+        if owned {
+            Handled::Taken
+        } else {
+            Handled::NotOwned
+        }
+    }
+
+    fn on_status(
+        &mut self,
+        status: &VehicleStatus,
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Reply>,
+    ) {
+        let mut reports = Vec::new();
+        Dialects::on_status(self, status, core, &mut reports);
+        out.extend(reports.into_iter().map(Reply::Publish));
+    }
+
+    fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Reply>) {
+        let mut replies = Vec::new();
+        Dialects::on_motion_ended(self, t, result, &mut replies);
+        out.extend(replies.into_iter().map(Reply::Publish));
+    }
+
+    fn on_mission_event(
+        &mut self,
+        t: Timestamp,
+        tag: Option<MotionTag>,
+        event: &MissionEvent,
+        out: &mut Vec<Reply>,
+    ) {
+        let mut replies = Vec::new();
+        Dialects::on_mission_event(self, t, tag, event, &mut replies);
+        out.extend(replies.into_iter().map(Reply::Publish));
+    }
+}
 
 /// The dialects in force, in the order they were configured.
 #[derive(Default)]

@@ -16,9 +16,8 @@ pub mod drivetrain;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::Duration;
 
-use crate::api::local;
+use crate::api::adapter::{Adapter, Handled, Reply};
 use crate::api::mqtt::{CoreAccess, Dialects, MQTT_SOURCE, Publish};
-use crate::api::ros1;
 use crate::api::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
@@ -43,7 +42,7 @@ pub const STATUS_PERIOD: Duration = Duration::from_millis(100);
 pub const HOST_SOURCE: &str = "host";
 
 /// Source name of the local command channel (`chassisd run --commands-stdin`).
-pub const LOCAL_COMMANDS: &str = "stdin";
+pub const LOCAL_COMMANDS: &str = crate::api::local::SOURCE;
 
 /// Source name of process events: a `shutdown` record (topic `shutdown`, payload the signal's
 /// name) marks where live mode stopped the drives on exit, so a replay stops them too.
@@ -143,6 +142,8 @@ pub enum EngineOutput {
         source: String,
         /// Its topic.
         topic: String,
+        /// The request's id, when its channel waits for the answer.
+        request: Option<u64>,
         /// Accepted, or why not.
         result: Result<(), String>,
     },
@@ -198,20 +199,35 @@ enum Route {
     Gnss,
     /// An IMU.
     Imu,
-    /// The MQTT link: its commands go to the dialects.
-    Mqtt,
     /// A CAN interface.
     Bus,
     /// The process's own events (its shutdown).
     Process,
     /// The host's load samples.
     Host,
-    /// A channel that speaks the local command set: standard input, the rosbridge clients,
-    /// and the ROS1 node, whose missions and goals carry its tag.
-    Local {
-        /// The ROS1 node's: tag what it asks for.
-        ros1: bool,
-    },
+    /// A command channel: its protocol's adapter.
+    Adapter(AdapterId),
+}
+
+/// One of the engine's adapters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AdapterId {
+    /// The MQTT dialects.
+    Mqtt,
+    /// One of [`crate::api::ADAPTERS`], by its place there.
+    Listed(usize),
+}
+
+/// The adapter `id` names.
+fn adapter_mut<'a>(
+    mqtt: &'a mut Dialects,
+    listed: &'a mut [Box<dyn Adapter>],
+    id: AdapterId,
+) -> &'a mut dyn Adapter {
+    match id {
+        AdapterId::Mqtt => mqtt,
+        AdapterId::Listed(i) => listed[i].as_mut(),
+    }
 }
 
 /// The routes of a configuration's sources: later entries win a name taken twice.
@@ -219,16 +235,15 @@ fn routes(
     nmea: &BTreeMap<String, NmeaReceiver>,
     imu: &BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: &Drivetrain,
+    adapters: &[Box<dyn Adapter>],
 ) -> HashMap<String, Route> {
-    let fixed = [
-        (LOCAL_COMMANDS, Route::Local { ros1: false }),
-        (crate::api::rosbridge::SOURCE, Route::Local { ros1: false }),
-        (ros1::SOURCE, Route::Local { ros1: true }),
-        (HOST_SOURCE, Route::Host),
-        (PROCESS_SOURCE, Route::Process),
-    ];
-    let mut routes: HashMap<String, Route> = fixed
-        .into_iter()
+    let listed = adapters
+        .iter()
+        .enumerate()
+        .map(|(i, a)| (a.source(), Route::Adapter(AdapterId::Listed(i))));
+    let fixed = [(HOST_SOURCE, Route::Host), (PROCESS_SOURCE, Route::Process)];
+    let mut routes: HashMap<String, Route> = listed
+        .chain(fixed)
         .map(|(name, route)| (name.to_owned(), route))
         .collect();
     routes.extend(
@@ -236,7 +251,7 @@ fn routes(
             .bus_names()
             .map(|name| (name.to_owned(), Route::Bus)),
     );
-    routes.insert(MQTT_SOURCE.to_owned(), Route::Mqtt);
+    routes.insert(MQTT_SOURCE.to_owned(), Route::Adapter(AdapterId::Mqtt));
     routes.extend(imu.keys().map(|name| (name.clone(), Route::Imu)));
     routes.extend(nmea.keys().map(|name| (name.clone(), Route::Gnss)));
     routes.insert(CORRECTIONS_SOURCE.to_owned(), Route::Corrections);
@@ -264,8 +279,10 @@ pub struct Engine {
     drive_states: Vec<(bool, Option<String>)>,
     /// The latched stop's reason at the last status.
     stop_reason: Option<String>,
-    /// The MQTT protocol dialects.
+    /// The MQTT protocol dialects, the MQTT link's adapter.
     dialects: Dialects,
+    /// The other command channels' adapters ([`crate::api::ADAPTERS`]).
+    adapters: Vec<Box<dyn Adapter>>,
     /// Emit the poses every control tick and every IMU sample.
     emit_poses: bool,
     /// Emit every raw measurement.
@@ -300,6 +317,37 @@ impl CoreAccess for CoreAt<'_> {
             })
             .unwrap_or(Ok(()))
     }
+}
+
+/// An adapter's replies as engine outputs; answers name `source`, the channel the request
+/// came on.
+fn emit_replies(source: &str, replies: Vec<Reply>, out: &mut Vec<EngineOutput>) {
+    out.extend(replies.into_iter().map(|reply| match reply {
+        Reply::Publish(message) => EngineOutput::Publish(message),
+        Reply::Answer(answer) => EngineOutput::CommandResult {
+            source: source.to_owned(),
+            topic: answer.topic,
+            request: answer.request,
+            result: answer.result,
+        },
+    }))
+}
+
+/// What every adapter, the MQTT dialects first, replies to one event, as engine outputs.
+fn from_every_adapter(
+    mqtt: &mut Dialects,
+    listed: &mut [Box<dyn Adapter>],
+    mut event: impl FnMut(&mut dyn Adapter, &mut Vec<Reply>),
+) -> Vec<EngineOutput> {
+    let mut out = Vec::new();
+    let every =
+        std::iter::once(mqtt as &mut dyn Adapter).chain(listed.iter_mut().map(|a| a.as_mut()));
+    for adapter in every {
+        let mut replies = Vec::new();
+        event(adapter, &mut replies);
+        emit_replies(adapter.source(), replies, &mut out);
+    }
+    out
 }
 
 /// The dialects a configuration turns on, trajectories kept in `trajectories`.
@@ -347,9 +395,11 @@ impl Engine {
             })
             .collect();
         let drivetrain = Drivetrain::new(config);
+        let adapters: Vec<Box<dyn Adapter>> = crate::api::ADAPTERS.iter().map(|a| a()).collect();
         Self {
             vehicle: Vehicle::new(CoreConfig::from_vehicle(config)),
-            routes: routes(&nmea, &imu, &drivetrain),
+            routes: routes(&nmea, &imu, &drivetrain, &adapters),
+            adapters,
             nmea,
             imu,
             drivetrain,
@@ -484,7 +534,7 @@ impl Engine {
                 self.vehicle.handle(t, Input::Link(Device::Imu, *state));
             }
             // The control link's state is recorded; the dialects do not act on it yet.
-            (Some(Route::Mqtt), Payload::Link(_)) => {}
+            (Some(Route::Adapter(AdapterId::Mqtt)), Payload::Link(_)) => {}
             (Some(Route::Bus), Payload::Link(state)) => {
                 self.drivetrain
                     .link(t, &record.source, *state == LinkState::Up, &mut tx);
@@ -498,20 +548,20 @@ impl Engine {
             {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
-            (Some(Route::Mqtt), Payload::Command { topic, payload }) => {
+            (Some(Route::Adapter(id)), Payload::Command { topic, payload }) => {
                 self.stats.commands += 1;
-                let mut replies = Vec::new();
+                let adapter = adapter_mut(&mut self.dialects, &mut self.adapters, id);
                 let mut core = CoreAt {
                     vehicle: &mut self.vehicle,
                     t,
                 };
-                if !self
-                    .dialects
-                    .on_message(t, topic, payload, &mut core, &mut replies)
-                {
-                    self.stats.commands_without_dialect += 1;
+                let mut replies = Vec::new();
+                match adapter.on_request(t, topic, payload, &mut core, &mut replies) {
+                    Handled::Taken => {}
+                    Handled::Refused => self.stats.commands_rejected += 1,
+                    Handled::NotOwned => self.stats.commands_without_dialect += 1,
                 }
-                out.extend(replies.into_iter().map(EngineOutput::Publish));
+                emit_replies(&record.source, replies, out);
             }
             (Some(Route::Process), Payload::Command { topic, .. }) if topic == "shutdown" => {
                 self.vehicle
@@ -527,42 +577,6 @@ impl Engine {
                 }
             }
 
-            // The local channel, the ROS1 node and the WebSocket clients speak the same
-            // commands; what the node asks for carries its tag, so that it can tell its own
-            // mission's end.
-            (Some(Route::Local { ros1 }), Payload::Command { topic, payload }) => {
-                self.stats.commands += 1;
-                let decoded = local::decode(topic, payload).map(|command| {
-                    if ros1 {
-                        command.map(ros1::tagged)
-                    } else {
-                        command
-                    }
-                });
-                let result = match decoded {
-                    Ok(Some(command)) => self
-                        .vehicle
-                        .handle(t, Input::Command(command))
-                        .into_iter()
-                        .find_map(|o| match o {
-                            Output::CommandResult(r) => {
-                                Some(r.map_err(|e: CommandRejected| e.to_string()))
-                            }
-                            _ => None,
-                        })
-                        .unwrap_or(Ok(())),
-                    Ok(None) => Err(format!("unknown topic {topic:?}")),
-                    Err(e) => Err(e),
-                };
-                if result.is_err() {
-                    self.stats.commands_rejected += 1;
-                }
-                out.push(EngineOutput::CommandResult {
-                    source: record.source.clone(),
-                    topic: topic.clone(),
-                    result,
-                });
-            }
             (_, Payload::Command { .. }) => self.stats.commands_without_dialect += 1,
             _ => self.stats.undecoded += 1,
         }
@@ -701,14 +715,16 @@ impl Engine {
                     }
                     if let Output::Status(s) = output {
                         self.announce_stop_reason(&s, out);
-                        let mut reports = Vec::new();
                         let mut core = CoreAt {
                             vehicle: &mut self.vehicle,
                             t: tick,
                         };
-                        self.dialects.on_status(&s, &mut core, &mut reports);
+                        let reports =
+                            from_every_adapter(&mut self.dialects, &mut self.adapters, |a, r| {
+                                a.on_status(&s, &mut core, r)
+                            });
                         out.push(EngineOutput::Status(s));
-                        out.extend(reports.into_iter().map(EngineOutput::Publish));
+                        out.extend(reports);
                         self.stats.ticks += 1;
                     }
                 }
@@ -740,9 +756,11 @@ impl Engine {
                     Output::Wheels(command) => self.drivetrain.command(t, &command),
                     Output::Event(event) => out.push(EngineOutput::Event(event)),
                     Output::MotionEnded(result) => {
-                        let mut replies = Vec::new();
-                        self.dialects.on_motion_ended(t, &result, &mut replies);
-                        out.extend(replies.into_iter().map(EngineOutput::Publish));
+                        out.extend(from_every_adapter(
+                            &mut self.dialects,
+                            &mut self.adapters,
+                            |a, r| a.on_motion_ended(t, &result, r),
+                        ));
                         out.push(EngineOutput::MotionEnded(result));
                     }
                     Output::Cutter(on) => {
@@ -754,9 +772,11 @@ impl Engine {
                         out.push(EngineOutput::Event(event));
                     }
                     Output::Mission { tag, event } => {
-                        let mut replies = Vec::new();
-                        self.dialects.on_mission_event(t, tag, &event, &mut replies);
-                        out.extend(replies.into_iter().map(EngineOutput::Publish));
+                        out.extend(from_every_adapter(
+                            &mut self.dialects,
+                            &mut self.adapters,
+                            |a, r| a.on_mission_event(t, tag, &event, r),
+                        ));
                         out.push(EngineOutput::Mission { tag, event });
                     }
                     Output::Status(_) | Output::CommandResult(_) => {}

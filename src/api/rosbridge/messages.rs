@@ -353,9 +353,10 @@ pub fn path(t: Timestamp, points: &[(f64, f64)]) -> Value {
     json!({"header": header(t, MAP_FRAME), "poses": poses})
 }
 
-/// The local `goal` command of a `/goal_pose` message (geometry_msgs/PoseStamped): its
-/// frame must be `map` (or empty, taken as `map`), its orientation a rotation about z.
-pub fn goal_from_pose_stamped(msg: &Value) -> Result<String, String> {
+/// The goal (x, y in m, yaw in rad, map frame) of a `/goal_pose` message
+/// (geometry_msgs/PoseStamped): its frame must be `map` (or empty, taken as `map`), its
+/// orientation a rotation about z.
+pub fn goal_from_pose_stamped(msg: &Value) -> Result<(f64, f64, f64), String> {
     let frame = msg
         .pointer("/header/frame_id")
         .and_then(Value::as_str)
@@ -389,8 +390,7 @@ pub fn goal_from_pose_stamped(msg: &Value) -> Result<String, String> {
     if (qx * qx + qy * qy).sqrt() > 0.02 {
         return Err("/pose/orientation must be a rotation about z (a planar goal)".into());
     }
-    let yaw = 2.0 * qz.atan2(qw);
-    Ok(json!({"x": x, "y": y, "yaw": yaw}).to_string())
+    Ok((x, y, 2.0 * qz.atan2(qw)))
 }
 
 #[cfg(test)]
@@ -442,16 +442,16 @@ mod tests {
     }
 
     #[test]
-    fn a_goal_pose_becomes_a_local_goal() {
+    fn a_goal_pose_becomes_a_goal() {
         let msg = json!({
             "header": {"frame_id": "map", "stamp": {"sec": 0, "nanosec": 0}},
             "pose": {"position": {"x": 2.0, "y": 1.0, "z": 0.0},
                      "orientation": {"x": 0.0, "y": 0.0, "z": std::f64::consts::FRAC_1_SQRT_2,
                                      "w": std::f64::consts::FRAC_1_SQRT_2}},
         });
-        let goal: Value = serde_json::from_str(&goal_from_pose_stamped(&msg).unwrap()).unwrap();
-        assert_eq!(goal["x"], 2.0);
-        assert!((goal["yaw"].as_f64().unwrap() - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
+        let (x, _, yaw) = goal_from_pose_stamped(&msg).unwrap();
+        assert_eq!(x, 2.0);
+        assert!((yaw - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
     }
 
     #[test]

@@ -2,10 +2,11 @@
 //! protocol (what roslibjs, roslibpy and Foxglove speak): the operations, the topic table
 //! and the ROS messages as JSON. Moving them is `runtime::links::websocket`'s job.
 
+pub mod adapter;
 pub mod messages;
 pub mod ops;
 pub mod topics;
 
-/// The command source of what WebSocket clients publish (`/cmd_vel`, `/goal_pose`): the
-/// local channel's commands, so a recording keeps them and replays without a client.
+/// The command source of what WebSocket clients publish (`/cmd_vel`, `/goal_pose`), so a
+/// recording keeps it and replays without a client ([`adapter`]).
 pub const SOURCE: &str = "websocket";

@@ -39,11 +39,13 @@ pub(crate) fn forward_common(
             source,
             topic,
             result: Ok(()),
+            ..
         } => tracing::info!(%source, %topic, "command accepted"),
         EngineOutput::CommandResult {
             source,
             topic,
             result: Err(reason),
+            ..
         } => tracing::warn!(%source, %topic, %reason, "command refused"),
         other => return Some(other),
     }

@@ -14,7 +14,6 @@ mod node;
 
 use tokio::sync::mpsc;
 
-use crate::api::local;
 use crate::api::ros1::SOURCE;
 use crate::engine::EngineOutput;
 
@@ -52,7 +51,7 @@ pub enum Feed {
 /// is dropped and counted (the node publishes the next pose instead).
 pub struct Ros1Link {
     feed: mpsc::Sender<Feed>,
-    answers: mpsc::Sender<Result<(), String>>,
+    answers: mpsc::Sender<Answer>,
     dropped: u64,
 }
 
@@ -60,14 +59,17 @@ pub struct Ros1Link {
 pub struct Ros1Queues {
     /// What to publish.
     pub feed: mpsc::Receiver<Feed>,
-    /// The engine's answers to the node's tracked requests, in order.
-    pub answers: mpsc::Receiver<Result<(), String>>,
+    /// The engine's answers to the requests the node gave an id.
+    pub answers: mpsc::Receiver<Answer>,
 }
 
-/// Whether the engine's answer to a request of `topic` goes back to the node: the moves,
-/// stops and missions it waits on or announces (a velocity command's answer is only logged).
-pub fn is_tracked(topic: &str) -> bool {
-    topic == local::SET_NAVI_CMD || topic == local::MISSION
+/// The engine's answer to the node's request `request`.
+#[derive(Debug, Clone)]
+pub struct Answer {
+    /// The id the node gave the request.
+    pub request: u64,
+    /// Accepted, or why not.
+    pub result: Result<(), String>,
 }
 
 impl Ros1Link {
@@ -115,16 +117,22 @@ impl Ros1Link {
             EngineOutput::CommandResult {
                 source,
                 topic,
+                request: Some(request),
                 result,
-            } if source == SOURCE && is_tracked(&topic) => {
-                // Every tracked request gets exactly one answer, in order; the queue is
-                // longer than the requests the node lets wait, so it never overflows.
-                if self.answers.try_send(result.clone()).is_err() {
+            } if source == SOURCE => {
+                // Every request with an id gets exactly one answer; the queue is longer
+                // than the requests the node lets wait, so it never overflows.
+                let answer = Answer {
+                    request,
+                    result: result.clone(),
+                };
+                if self.answers.try_send(answer).is_err() {
                     tracing::error!("ROS1 node: an answer was lost; its caller times out");
                 }
                 return Some(EngineOutput::CommandResult {
                     source,
                     topic,
+                    request: Some(request),
                     result,
                 });
             }
@@ -193,4 +201,37 @@ pub fn start(
     Err(crate::runtime::error::RuntimeError::Failed(
         "this chassisd was built without the ros1 feature".into(),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn answer(source: &str, request: Option<u64>, result: Result<(), String>) -> EngineOutput {
+        EngineOutput::CommandResult {
+            source: source.into(),
+            topic: "/set_navi_cmd".into(),
+            request,
+            result,
+        }
+    }
+
+    #[test]
+    fn the_node_gets_its_own_answers_by_id_and_no_others() {
+        let (mut link, mut queues) = Ros1Link::new();
+        // Answered out of order, one refused: each keeps its id.
+        for output in [
+            answer(SOURCE, Some(2), Err("cmd must be 1 to 5".into())),
+            answer(SOURCE, None, Ok(())),
+            answer("websocket", Some(7), Ok(())),
+            answer(SOURCE, Some(1), Ok(())),
+        ] {
+            assert!(link.take(output).is_some(), "answers go on to the log too");
+        }
+        let mut got = Vec::new();
+        while let Ok(a) = queues.answers.try_recv() {
+            got.push((a.request, a.result.is_ok()));
+        }
+        assert_eq!(got, [(2, false), (1, true)]);
+    }
 }

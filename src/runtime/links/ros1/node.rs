@@ -3,20 +3,20 @@
 //! registration when it has forgotten the node (a restarted rosmaster keeps none, and a
 //! roslibrust node does not register again by itself).
 
-use std::collections::VecDeque;
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use bytes::Bytes;
 use roslibrust::ros1::{MasterClient, NodeHandle, Publisher, ServiceServer};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
 use super::messages::{self, geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs, tf2_msgs};
-use super::{Feed, Ros1Queues};
+use super::{Answer, Feed, Ros1Queues};
+use crate::api::ros1;
+use crate::api::ros1::adapter::Ros1Request;
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::ros1::status::{StatusTopics, Topic};
-use crate::api::ros1::{self, Request};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
@@ -34,6 +34,9 @@ const TRACKED_POSE_PERIOD: Duration = Duration::from_nanos(1_000_000_000 / 15);
 const MAX_PENDING: usize = 64;
 /// How long a service call waits for the engine's answer.
 const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long a request keeps its place while no answer comes (one lost on the way, which the
+/// queues' sizes rule out, must not hold a place for ever).
+const FORGET_AFTER: Duration = Duration::from_secs(10);
 /// Messages queued per subscribed topic in roslibrust before the oldest go.
 const SUBSCRIBER_QUEUE: usize = 16;
 /// Why `/robot_ssh` and `/set_wifi` answer no.
@@ -60,59 +63,75 @@ struct Pending {
     starts_motion: bool,
     /// Whether it is the charging action.
     charging: bool,
+    /// When it went to the engine.
+    sent: Instant,
 }
 
-/// Hands requests to the engine, in the order their answers will come back.
+/// The requests waiting for the engine's answer, by the id each was recorded with.
+#[derive(Default)]
+struct Waiting {
+    last_id: u64,
+    by_id: HashMap<u64, Pending>,
+}
+
+/// Hands requests to the engine; their answers come back by id.
 #[derive(Clone)]
 struct Requests {
     records: mpsc::Sender<Record>,
     clock: RecordClock,
-    pending: Arc<Mutex<VecDeque<Pending>>>,
+    waiting: Arc<Mutex<Waiting>>,
 }
 
 impl Requests {
     /// Sends `request`; a `waiter` gets the engine's answer.
     fn submit(
         &self,
-        request: Request,
+        request: Ros1Request,
         waiter: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
     ) -> Result<(), String> {
-        let tracked = super::is_tracked(request.topic);
-        // The lock spans the send, so the pending order is the order the engine sees.
-        let mut pending = self
-            .pending
+        // The lock spans the send, so an answer never comes before its request waits.
+        let mut waiting = self
+            .waiting
             .lock()
             .map_err(|_| "the ROS1 node's request queue is broken".to_owned())?;
-        if tracked && pending.len() >= MAX_PENDING {
-            return Err(format!(
-                "busy: {MAX_PENDING} requests already wait for the vehicle"
-            ));
-        }
-        let entry = Pending {
-            waiter,
-            starts_motion: request.starts_motion,
-            charging: request.topic == crate::api::local::MISSION,
+        let id = if request.awaits_answer() {
+            waiting.by_id.retain(|_, p| p.sent.elapsed() < FORGET_AFTER);
+            if waiting.by_id.len() >= MAX_PENDING {
+                return Err(format!(
+                    "busy: {MAX_PENDING} requests already wait for the vehicle"
+                ));
+            }
+            waiting.last_id += 1;
+            Some(waiting.last_id)
+        } else {
+            None
         };
         let record = Record {
             t: self.clock.now(),
             source: ros1::SOURCE.into(),
             payload: Payload::Command {
-                topic: request.topic.to_owned(),
-                payload: Bytes::from(request.payload),
+                topic: request.name().to_owned(),
+                payload: request.encode(id),
             },
         };
         self.records
             .try_send(record)
             .map_err(|_| "the vehicle's command queue is full".to_owned())?;
-        if tracked {
-            pending.push_back(entry);
+        if let Some(id) = id {
+            let entry = Pending {
+                waiter,
+                starts_motion: request.starts_motion(),
+                charging: request.is_charging(),
+                sent: Instant::now(),
+            };
+            waiting.by_id.insert(id, entry);
         }
         Ok(())
     }
 
     /// Sends `request` and waits for the engine's answer (on a blocking thread: roslibrust
     /// runs service callbacks there).
-    fn call(&self, request: Request) -> Result<(), String> {
+    fn call(&self, request: Ros1Request) -> Result<(), String> {
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         self.submit(request, Some(tx))?;
         rx.recv_timeout(ANSWER_TIMEOUT)
@@ -169,7 +188,7 @@ async fn run(
     let requests = Requests {
         records,
         clock,
-        pending: Arc::new(Mutex::new(VecDeque::new())),
+        waiting: Arc::new(Mutex::new(Waiting::default())),
     };
     let (position, position_rx) = watch::channel(None);
     let mut publishing = Publishing {
@@ -287,20 +306,21 @@ async fn run(
     }
 }
 
-/// Answers the oldest pending request with the engine's `answer`.
+/// Gives the engine's `answer` to the request it names.
 async fn answer_pending(
     requests: &Requests,
     publishing: &mut Publishing,
-    answer: Result<(), String>,
+    Answer { request, result }: Answer,
     graph: Option<&Graph>,
 ) {
-    let entry = match requests.pending.lock() {
-        Ok(mut p) => p.pop_front(),
+    let entry = match requests.waiting.lock() {
+        Ok(mut w) => w.by_id.remove(&request),
         Err(_) => None,
     };
     let Some(entry) = entry else {
         return;
     };
+    let answer = result;
     if answer.is_ok() && entry.starts_motion {
         let mut codes = Vec::new();
         publishing
@@ -462,10 +482,10 @@ async fn build(
         .subscribe::<geometry_msgs::Twist>("/cmd_vel", SUBSCRIBER_QUEUE)
         .await?;
     subscribers.spawn(forward(cmd_vel, "/cmd_vel", requests.clone(), rate, |t| {
-        Ok(ros1::cmd_vel(
-            [t.linear.x, t.linear.y, t.linear.z],
-            [t.angular.x, t.angular.y, t.angular.z],
-        ))
+        Ok(Ros1Request::CmdVel {
+            linear: [t.linear.x, t.linear.y, t.linear.z],
+            angular: [t.angular.x, t.angular.y, t.angular.z],
+        })
     }));
     let navi_stop = node
         .subscribe::<std_msgs::Int16>("/navi_stop", SUBSCRIBER_QUEUE)
@@ -475,7 +495,7 @@ async fn build(
         "/navi_stop",
         requests.clone(),
         rate,
-        |m| ros1::navi_stop(m.data),
+        |m| Ros1Request::navi_stop(m.data),
     ));
     let autocharge = node
         .subscribe::<std_msgs::Int16>("/autocharge", SUBSCRIBER_QUEUE)
@@ -485,7 +505,7 @@ async fn build(
         "/autocharge",
         requests.clone(),
         rate,
-        |m| ros1::autocharge(m.data),
+        |m| Ros1Request::autocharge(m.data),
     ));
 
     let mut services = Vec::new();
@@ -494,14 +514,17 @@ async fn build(
         node.advertise_service::<map_msgs::SetNaviCmd, _>(
             "/set_navi_cmd",
             move |request: map_msgs::SetNaviCmdRequest| {
-                r.call(ros1::set_navi_cmd(&request.cmd, request.distance))
-                    .map(|()| map_msgs::SetNaviCmdResponse {})
-                    .map_err(|reason| {
-                        tracing::warn!(%reason, "/set_navi_cmd refused");
-                        // roslibrust's service callbacks answer with its ServiceError,
-                        // which is an anyhow::Error.
-                        anyhow::anyhow!(reason)
-                    })
+                r.call(Ros1Request::SetNaviCmd {
+                    cmd: request.cmd,
+                    distance: request.distance,
+                })
+                .map(|()| map_msgs::SetNaviCmdResponse {})
+                .map_err(|reason| {
+                    tracing::warn!(%reason, "/set_navi_cmd refused");
+                    // roslibrust's service callbacks answer with its ServiceError,
+                    // which is an anyhow::Error.
+                    anyhow::anyhow!(reason)
+                })
             },
         )
         .await?,
@@ -586,7 +609,7 @@ async fn forward<T, F>(
     to_request: F,
 ) where
     T: roslibrust::RosMessageType,
-    F: Fn(T) -> Result<Request, String> + Send + 'static,
+    F: Fn(T) -> Result<Ros1Request, String> + Send + 'static,
 {
     let mut rate = CommandRate::new(rate_hz, burst);
     while let Some(message) = subscriber.next().await {

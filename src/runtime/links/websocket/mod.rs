@@ -12,7 +12,7 @@
 
 pub mod hub;
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -22,16 +22,14 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
-use bytes::Bytes;
 use serde_json::{Value, json};
 use tokio::sync::mpsc;
 
 use self::hub::{Client, ClientQueue};
-use crate::api::local;
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, ClientOp, Level};
 use crate::api::rosbridge::topics::{self, Flow};
-use crate::api::rosbridge::{SOURCE, messages};
+use crate::api::rosbridge::{SOURCE, adapter, messages};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
@@ -57,7 +55,7 @@ const SLOW_EVERY_STATUS: u64 = 10;
 enum Feed {
     Status(Box<VehicleStatus>),
     Odom(Timestamp, OdomPose),
-    Answer(Result<(), String>),
+    Answer(crate::api::adapter::Answer),
     Event(String),
 }
 
@@ -83,9 +81,16 @@ impl WebsocketLink {
                     _ => return,
                 }
             }
-            EngineOutput::CommandResult { source, result, .. } if source == SOURCE => {
-                Feed::Answer(result.clone())
-            }
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                request: Some(request),
+                result,
+            } if source == SOURCE => Feed::Answer(crate::api::adapter::Answer {
+                topic: topic.clone(),
+                request: Some(*request),
+                result: result.clone(),
+            }),
             EngineOutput::Event(text) => Feed::Event(text.clone()),
             _ => return,
         };
@@ -162,7 +167,8 @@ pub fn start(
         clients: BTreeMap::new(),
         rates: BTreeMap::new(),
         command_rate_hz: config.command_rate_hz,
-        pending: VecDeque::new(),
+        pending: BTreeMap::new(),
+        last_request: 0,
         odometry: OdometryUncertainty::new(noise),
         status_ticks: 0,
         plan: None,
@@ -373,8 +379,10 @@ struct Server {
     /// Each client's publishing rate limit.
     rates: BTreeMap<u64, CommandRate>,
     command_rate_hz: f64,
-    /// Who sent each command the engine has not answered yet, in order.
-    pending: VecDeque<(u64, &'static str)>,
+    /// Who sent each command the engine has not answered yet, by the command's id.
+    pending: BTreeMap<u64, u64>,
+    /// The id of the last command sent.
+    last_request: u64,
     odometry: OdometryUncertainty,
     status_ticks: u64,
     /// The motion whose path `/plan` last carried, and that message (sent to a new
@@ -456,11 +464,12 @@ impl Server {
                 let t = self.clock.now();
                 self.publish(topics::ROSOUT, || Some(messages::log(t, &text)));
             }
-            Feed::Answer(result) => {
-                let Some((id, topic)) = self.pending.pop_front() else {
+            Feed::Answer(answer) => {
+                let Some(id) = answer.request.and_then(|r| self.pending.remove(&r)) else {
                     return;
                 };
-                if let (Some(client), Err(reason)) = (self.clients.get(&id), result) {
+                let topic = answer.topic;
+                if let (Some(client), Err(reason)) = (self.clients.get(&id), answer.result) {
                     client.status(
                         Level::Error,
                         ops::status(Level::Error, None, &format!("{topic}: refused: {reason}")),
@@ -587,24 +596,10 @@ impl Server {
                 ops::status(Level::Error, op_id, &format!("publish: {reason}")),
             );
         };
-        let (name, local_topic, payload) = match topics::find(topic) {
-            Some(t) if t.name == topics::CMD_VEL => {
-                // A Twist names both speeds; one missing is a broken message, not a zero.
-                let number = |v: &str, axis: &str| {
-                    msg.get(v)
-                        .and_then(|o| o.get(axis))
-                        .is_some_and(Value::is_number)
-                };
-                if !number("linear", "x") || !number("angular", "z") {
-                    return refuse(&format!(
-                        "{topic}: msg needs linear.x and angular.z as numbers (a geometry_msgs/Twist)"
-                    ));
-                }
-                (t.name, local::CMD_VEL, msg.to_string())
-            }
-            Some(t) if t.name == topics::GOAL_POSE => match messages::goal_from_pose_stamped(msg) {
-                Ok(goal) => (t.name, local::GOAL, goal),
-                Err(reason) => return refuse(&format!("{topic}: {reason}")),
+        let name = match topics::find(topic) {
+            Some(t) if t.flow == Flow::Subscribed => match adapter::check(t.name, topic, msg) {
+                Ok(()) => t.name,
+                Err(reason) => return refuse(&reason),
             },
             Some(t) => {
                 return refuse(&format!("{topic} ({}) is chassisd's own", t.msg_type));
@@ -627,21 +622,24 @@ impl Server {
                 ),
             );
         }
+        let request = self.last_request + 1;
         let record = Record {
             t: self.clock.now(),
             source: SOURCE.into(),
             payload: Payload::Command {
-                topic: local_topic.into(),
-                payload: Bytes::from(payload),
+                topic: name.into(),
+                payload: adapter::encode(request, msg),
             },
         };
         if self.records.try_send(record).is_err() {
             return refuse(&format!("{topic}: the vehicle's queue is full; dropped"));
         }
+        self.last_request = request;
         if self.pending.len() >= PENDING_ANSWERS {
-            self.pending.pop_front();
+            // The oldest: an answer lost on the way must not hold a place for ever.
+            self.pending.pop_first();
         }
-        self.pending.push_back((id, name));
+        self.pending.insert(request, id);
     }
 }
 

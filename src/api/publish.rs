@@ -1,0 +1,45 @@
+//! A message for the MQTT broker, as the dialects and the engine hand it to the link.
+
+use bytes::Bytes;
+
+/// Delivery guarantee of a publication.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Qos {
+    /// Telemetry: at most once; dropped first when the broker is away.
+    AtMostOnce,
+    /// Replies and events: at least once; kept while the broker is away.
+    AtLeastOnce,
+}
+
+/// One message to publish.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Publish {
+    /// Topic.
+    pub topic: String,
+    /// Payload (JSON).
+    pub payload: Bytes,
+    /// Delivery guarantee.
+    pub qos: Qos,
+    /// Retained by the broker.
+    pub retain: bool,
+}
+
+impl Publish {
+    /// Telemetry: QoS 0, not retained.
+    pub fn telemetry(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
+        Self {
+            topic: topic.into(),
+            payload: payload.into(),
+            qos: Qos::AtMostOnce,
+            retain: false,
+        }
+    }
+
+    /// A reply or event: QoS 1, not retained.
+    pub fn reply(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
+        Self {
+            qos: Qos::AtLeastOnce,
+            ..Self::telemetry(topic, payload)
+        }
+    }
+}
