@@ -2,6 +2,7 @@
 //! the frames they exchange are the frames real hardware would.
 
 pub mod bms;
+pub mod can_devices;
 pub mod cia402_drive;
 pub mod estop;
 pub mod gnss_error;

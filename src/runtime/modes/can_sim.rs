@@ -22,33 +22,25 @@ use socketcan::{CanAnyFrame, CanFrame};
 use tokio::sync::mpsc;
 
 use crate::config::VehicleConfig;
-use crate::devices::bms::BmsProfile;
 use crate::devices::can::{Frame, Received};
-use crate::devices::canopen::NodeId;
 use crate::runtime::clock::RecordClock;
 use crate::runtime::drivers::can::{interface_up, open};
-use crate::sim::bms::{Battery, SimDaly, SimDbcBms};
-use crate::sim::cia402_drive::{MotorModel, SimDrive};
-use crate::sim::estop::{Button, SimEStop};
+use crate::sim::can_devices::{self, BusLoad, Injection, Report, SimCanDevice};
+use crate::sim::estop::Button;
 
 /// Simulation step.
 const STEP: Duration = Duration::from_millis(5);
 
-/// The devices on one interface.
+/// The devices on one interface, built by `sim::can_devices`' registry.
 struct SimBus {
     name: String,
-    drives: Vec<(String, SimDrive)>,
-    daly: Option<SimDaly>,
-    dbc: Option<SimDbcBms>,
-    estops: Vec<(String, SimEStop)>,
+    devices: Vec<Box<dyn SimCanDevice>>,
 }
 
 #[derive(Debug, Clone)]
 enum SimCommand {
-    Heartbeat(String, bool),
-    Fault(String, usize, u16, u32),
-    Tpdo(String, bool),
-    EStop(String, Button),
+    /// An injection for the device of this name.
+    Inject(String, Injection),
     Report,
 }
 
@@ -58,48 +50,10 @@ pub async fn run(config: VehicleConfig) -> crate::runtime::error::Result<()> {
     let mut senders = Vec::new();
     let mut tasks = Vec::new();
     for bus in &config.can {
-        let mut sim = SimBus {
+        let sim = SimBus {
             name: bus.interface.clone(),
-            drives: Vec::new(),
-            daly: None,
-            dbc: None,
-            estops: Vec::new(),
+            devices: can_devices::build(&config, bus).map_err(RuntimeError::Failed)?,
         };
-        for e in config.estop.iter().filter(|e| e.bus == bus.interface) {
-            let profile = e
-                .profile
-                .get()
-                .ok_or_else(|| RuntimeError::Failed("e-stop profile not loaded".into()))?
-                .clone();
-            sim.estops.push((e.name.clone(), SimEStop::new(profile)));
-        }
-        for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
-            let profile = d
-                .profile
-                .get()
-                .ok_or_else(|| RuntimeError::Failed("drive profile not loaded".into()))?
-                .clone();
-            let node = NodeId::new(d.node)
-                .ok_or_else(|| RuntimeError::Failed("node id out of range".into()))?;
-            sim.drives.push((
-                d.name.clone(),
-                SimDrive::new(node, profile, MotorModel::default()),
-            ));
-        }
-        if let Some(b) = config.bms.as_ref().filter(|b| b.bus == bus.interface) {
-            match b
-                .profile
-                .get()
-                .ok_or_else(|| RuntimeError::Failed("BMS profile not loaded".into()))?
-            {
-                BmsProfile::Daly(p) => sim.daly = Some(SimDaly::new(p, b.address)),
-                BmsProfile::Dbc(p) => {
-                    sim.dbc = Some(SimDbcBms::new(p).ok_or_else(|| {
-                        RuntimeError::Failed("the BMS profile's DBC does not parse".into())
-                    })?)
-                }
-            }
-        }
         let (tx, rx) = mpsc::channel(64);
         senders.push(tx);
         tasks.push(tokio::spawn(serve_bus(sim, clock, rx)));
@@ -151,8 +105,8 @@ fn parse(line: &str) -> Result<Option<SimCommand>, String> {
     let words: Vec<&str> = line.split_whitespace().collect();
     Ok(Some(match words.as_slice() {
         [] => return Ok(None),
-        ["heartbeat", name, "on"] => SimCommand::Heartbeat((*name).to_owned(), true),
-        ["heartbeat", name, "off"] => SimCommand::Heartbeat((*name).to_owned(), false),
+        ["heartbeat", name, "on"] => inject(name, Injection::Heartbeat(true)),
+        ["heartbeat", name, "off"] => inject(name, Injection::Heartbeat(false)),
         ["fault", name, axis, code, refused @ ..] if refused.len() <= 1 => {
             let axis: usize = axis.parse().map_err(|_| format!("axis {axis:?}"))?;
             let code = u16::from_str_radix(code.trim_start_matches("0x"), 16)
@@ -161,13 +115,20 @@ fn parse(line: &str) -> Result<Option<SimCommand>, String> {
                 Some(n) => n.parse().map_err(|_| format!("refused edges {n:?}"))?,
                 None => 0,
             };
-            SimCommand::Fault((*name).to_owned(), axis.saturating_sub(1), code, refused)
+            inject(
+                name,
+                Injection::Fault {
+                    axis: axis.saturating_sub(1),
+                    code,
+                    refused,
+                },
+            )
         }
-        ["tpdo", name, "on"] => SimCommand::Tpdo((*name).to_owned(), true),
-        ["tpdo", name, "off"] => SimCommand::Tpdo((*name).to_owned(), false),
-        ["estop", name, state] => SimCommand::EStop(
-            (*name).to_owned(),
-            match *state {
+        ["tpdo", name, "on"] => inject(name, Injection::Tpdo(true)),
+        ["tpdo", name, "off"] => inject(name, Injection::Tpdo(false)),
+        ["estop", name, state] => inject(
+            name,
+            Injection::EStop(match *state {
                 "pressed" => Button::Pressed,
                 "released" => Button::Released,
                 "silent" => Button::Silent,
@@ -176,11 +137,15 @@ fn parse(line: &str) -> Result<Option<SimCommand>, String> {
                         "e-stop state {state:?}: pressed, released or silent"
                     ));
                 }
-            },
+            }),
         ),
         ["report"] => SimCommand::Report,
         _ => return Err(format!("unknown command {line:?}")),
     }))
+}
+
+fn inject(name: &str, injection: Injection) -> SimCommand {
+    SimCommand::Inject(name.to_owned(), injection)
 }
 
 async fn serve_bus(mut sim: SimBus, clock: RecordClock, mut commands: mpsc::Receiver<SimCommand>) {
@@ -199,8 +164,9 @@ async fn serve_bus(mut sim: SimBus, clock: RecordClock, mut commands: mpsc::Rece
                         () = tokio::time::sleep(STEP) => {
                             let t = clock.now();
                             let mut lost = Vec::new();
-                            for (_, d) in &mut sim.drives {
-                                d.step(t, &mut lost);
+                            let mut load = BusLoad::default();
+                            for d in &mut sim.devices {
+                                d.step(t, &mut load, &mut lost);
                             }
                         }
                         cmd = commands.recv() => match cmd {
@@ -226,40 +192,22 @@ async fn exchange(
     let mut step = tokio::time::interval(STEP);
     step.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut check = tokio::time::interval(Duration::from_millis(200));
-    let mut last = clock.now();
     loop {
         let mut out = Vec::new();
         tokio::select! {
             _ = step.tick() => {
                 let t = clock.now();
-                let mut load_rpm = 0.0;
-                for (_, d) in &mut sim.drives {
-                    d.step(t, &mut out);
-                    load_rpm += d.report().iter().map(|a| a.rpm.abs()).sum::<f64>();
-                }
-                let dt = t.saturating_since(last);
-                last = t;
-                let draw = -(1.5 + 0.004 * load_rpm);
-                for battery in batteries(sim) {
-                    battery.current_a = draw;
-                    battery.step(dt);
-                }
-                if let Some(dbc) = &mut sim.dbc {
-                    dbc.step(t, &mut out);
-                }
-                for (_, e) in &mut sim.estops {
-                    e.step(t, &mut out);
+                let mut load = BusLoad::default();
+                for d in &mut sim.devices {
+                    d.step(t, &mut load, &mut out);
                 }
             }
             read = socket.read_frame() => {
                 let frame = read.map_err(|e| e.to_string())?;
                 let t = clock.now();
                 if let Received::Data(f) = Received::from_socketcan(&CanAnyFrame::from(frame)) {
-                    for (_, d) in &mut sim.drives {
+                    for d in &mut sim.devices {
                         d.on_frame(t, &f, &mut out);
-                    }
-                    if let Some(daly) = &mut sim.daly {
-                        daly.on_frame(&f, &mut out);
                     }
                 }
             }
@@ -282,63 +230,26 @@ async fn exchange(
     }
 }
 
-fn batteries(sim: &mut SimBus) -> impl Iterator<Item = &mut Battery> {
-    sim.daly
-        .as_mut()
-        .map(|d| &mut d.battery)
-        .into_iter()
-        .chain(sim.dbc.as_mut().map(|d| &mut d.battery))
-}
-
 fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
     match cmd {
-        SimCommand::Heartbeat(name, on) => {
-            for (n, d) in &mut sim.drives {
-                if *n == name {
-                    d.set_heartbeat(on);
-                }
-            }
-        }
-        SimCommand::Fault(name, axis, code, refused) => {
-            for (n, d) in &mut sim.drives {
-                if *n == name {
-                    d.refuse_resets(refused);
-                    d.inject_fault(axis, code, out);
-                }
-            }
-        }
-        SimCommand::Tpdo(name, on) => {
-            for (n, d) in &mut sim.drives {
-                if *n == name {
-                    d.set_tpdos(on);
-                }
-            }
-        }
-        SimCommand::EStop(name, button) => {
-            for (n, e) in &mut sim.estops {
-                if *n == name {
-                    e.set(button);
-                }
+        SimCommand::Inject(name, injection) => {
+            for d in sim.devices.iter_mut().filter(|d| d.name() == name) {
+                d.inject(injection, out);
             }
         }
         SimCommand::Report => {
-            let drives: Vec<_> = sim
-                .drives
+            let reports: Vec<Report> = sim.devices.iter().map(|d| d.report()).collect();
+            let drives: Vec<&serde_json::Value> = reports
                 .iter()
-                .map(|(n, d)| {
-                    json!({
-                        "name": n,
-                        "node": d.node().get(),
-                        "nmt": format!("{:?}", d.nmt_state()),
-                        "axes": d.report(),
-                        "master_losses": d.master_losses(),
-                        "reset_edges": d.reset_edges(),
-                    })
+                .filter_map(|r| match r {
+                    Report::Drive(v) => Some(v),
+                    _ => None,
                 })
                 .collect();
-            let battery = batteries(sim)
-                .next()
-                .map(|b| json!({"voltage": b.voltage_v, "current": b.current_a, "soc": b.soc_pct}));
+            let battery = reports.iter().find_map(|r| match r {
+                Report::Battery(v) => Some(v),
+                _ => None,
+            });
             println!(
                 "{}",
                 json!({"bus": sim.name, "drives": drives, "battery": battery})
