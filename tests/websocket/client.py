@@ -100,6 +100,11 @@ def latest(ros, topic, kind, wait=5.0):
     return box[-1] if box else None
 
 
+def echo(ros, _statuses, topic, kind):
+    """The latest message of one topic, as a client subscribed to it sees it."""
+    return {"message": latest(ros, topic, kind)}
+
+
 def yaw_of(q):
     return 2.0 * math.atan2(q["z"], q["w"])
 

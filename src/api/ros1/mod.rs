@@ -19,6 +19,7 @@
 
 pub mod adapter;
 pub mod odometry;
+pub mod published;
 pub mod status;
 
 use serde_json::json;

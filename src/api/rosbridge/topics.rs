@@ -41,7 +41,7 @@ pub const GOAL_POSE: &str = "/goal_pose";
 pub const CMD_VEL: &str = "/cmd_vel";
 
 /// Every topic the server has.
-pub const TOPICS: [Topic; 9] = [
+pub const TOPICS: &[Topic] = &[
     Topic {
         name: POSE,
         msg_type: "geometry_msgs/msg/PoseWithCovarianceStamped",

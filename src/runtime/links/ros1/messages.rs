@@ -10,6 +10,22 @@ use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
 use crate::vehicle::{Pose2D, PoseReport};
 
+/// `msg` (JSON, fields as `descriptor`'s type names them) checked against that type and
+/// serialised for the wire: its length, then its fields.
+pub fn wire(
+    descriptor: &'static roslibrust::MessageDescriptor,
+    msg: &serde_json::Value,
+) -> Result<Vec<u8>, String> {
+    let message = descriptor.message_from(msg).map_err(|e| e.to_string())?;
+    let mut bytes = vec![0u8; 4];
+    message
+        .serialize_with(&mut roslibrust_serde_rosmsg::Serializer::new(&mut bytes))
+        .map_err(|e| e.to_string())?;
+    let length = u32::try_from(bytes.len() - 4).map_err(|_| "message over 4 GiB".to_owned())?;
+    bytes[..4].copy_from_slice(&length.to_le_bytes());
+    Ok(bytes)
+}
+
 /// The IMU's noise, 1σ, for `/imu/data`'s covariances.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImuNoise {
@@ -178,5 +194,32 @@ pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> sensor_msgs::Imu {
         angular_velocity_covariance: diagonal(noise.gyro_rps.powi(2)),
         linear_acceleration: vector(&sample.accel),
         linear_acceleration_covariance: diagonal(noise.accel_mps2.powi(2)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_goes_on_the_wire_as_its_generated_type_would() {
+        let int16 = MESSAGE_REGISTRY.get("std_msgs/Int16").expect("generated");
+        let typed = roslibrust_serde_rosmsg::to_vec(&std_msgs::Int16 { data: -7 }).unwrap();
+        assert_eq!(wire(int16, &serde_json::json!({"data": -7})), Ok(typed));
+        // The type checks every field: a wrong one, a missing one, or one out of range.
+        assert!(wire(int16, &serde_json::json!({"date": 1})).is_err());
+        assert!(wire(int16, &serde_json::json!({"data": 70000})).is_err());
+    }
+
+    #[test]
+    fn every_published_topic_has_its_interface() {
+        for topic in crate::api::ros1::published::STATUS_TOPICS {
+            assert!(
+                MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
+                "{}: no {} in src/api/ros1/interfaces",
+                topic.name,
+                topic.msg_type
+            );
+        }
     }
 }

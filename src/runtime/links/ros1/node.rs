@@ -16,6 +16,7 @@ use super::{Answer, Feed, Ros1Queues};
 use crate::api::ros1;
 use crate::api::ros1::adapter::Ros1Request;
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
+use crate::api::ros1::published;
 use crate::api::ros1::status::{StatusTopics, Topic};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
@@ -158,10 +159,63 @@ struct Graph {
     imu: Publisher<sensor_msgs::Imu>,
     tracked_pose: Publisher<geometry_msgs::PoseStamped>,
     tf: Publisher<tf2_msgs::TFMessage>,
+    /// The topics of `api::ros1::published`, by name, each with its type.
+    status_topics: Vec<StatusPublisher>,
     codes: Vec<(Topic, Publisher<std_msgs::Int16>)>,
     _services: Vec<ServiceServer>,
     _subscribers: JoinSet<()>,
     node: NodeHandle,
+}
+
+/// A topic of `api::ros1::published`: advertised with its type's generated definition, its
+/// JSON serialised through that type.
+struct StatusPublisher {
+    name: &'static str,
+    descriptor: &'static roslibrust::MessageDescriptor,
+    publisher: roslibrust::ros1::PublisherAny,
+}
+
+impl StatusPublisher {
+    async fn advertise(
+        node: &NodeHandle,
+        topic: &published::StatusTopic,
+    ) -> Result<Self, roslibrust::ros1::NodeError> {
+        let descriptor = messages::MESSAGE_REGISTRY
+            .get(topic.msg_type)
+            .ok_or_else(|| {
+                roslibrust::ros1::NodeError::IoError(std::io::Error::other(format!(
+                    "{}: no interface {} in src/api/ros1/interfaces",
+                    topic.name, topic.msg_type
+                )))
+            })?;
+        let publisher = node
+            .advertise_any(
+                topic.name,
+                descriptor.ros_type_name,
+                descriptor.definition,
+                10,
+                false,
+            )
+            .await?;
+        Ok(Self {
+            name: topic.name,
+            descriptor,
+            publisher,
+        })
+    }
+
+    /// Publishes `msg`, checked field by field against the type.
+    async fn publish(&self, msg: &serde_json::Value) {
+        match messages::wire(self.descriptor, msg) {
+            Ok(bytes) => {
+                if let Err(e) = self.publisher.publish(bytes).await {
+                    tracing::debug!(topic = self.name, error = %e, "ROS1 publish failed");
+                }
+            }
+            // The table's own message not fitting its type: a fault to show, not to hide.
+            Err(e) => tracing::error!(topic = self.name, error = %e, "ROS1 message not built"),
+        }
+    }
 }
 
 /// What the publishers keep between messages.
@@ -169,6 +223,8 @@ struct Publishing {
     odometry: OdometryUncertainty,
     imu_noise: messages::ImuNoise,
     status: StatusTopics,
+    /// Status ticks seen, for the rates of `api::ros1::published`.
+    status_ticks: u64,
     next_tracked_pose: Option<crate::time::Timestamp>,
     seq: u32,
     imu_seq: u32,
@@ -198,6 +254,7 @@ async fn run(
         next_tracked_pose: None,
         seq: 0,
         imu_seq: 0,
+        status_ticks: 0,
         position,
     };
     let mut outage = OutageLog::default();
@@ -388,7 +445,10 @@ impl Publishing {
     fn absorb(&mut self, item: &Feed) {
         let mut codes = Vec::new();
         match item {
-            Feed::Status(status) => self.status.on_status(status, &mut codes),
+            Feed::Status(status) => {
+                self.status_ticks += 1;
+                self.status.on_status(status, &mut codes);
+            }
             Feed::MotionEnded(result) => self.status.on_motion_ended(result, &mut codes),
             Feed::Mission { tag, event } => self.status.on_mission(*tag, event, &mut codes),
             Feed::Poses(_, report) => {
@@ -443,7 +503,19 @@ impl Publishing {
                     tracing::debug!(error = %e, "/imu/data publish failed");
                 }
             }
-            Feed::Status(status) => self.status.on_status(&status, &mut codes),
+            Feed::Status(status) => {
+                self.status_ticks += 1;
+                self.status.on_status(&status, &mut codes);
+                for topic in published::due(self.status_ticks) {
+                    let Some(publisher) = graph.status_topics.iter().find(|p| p.name == topic.name)
+                    else {
+                        continue;
+                    };
+                    if let Some(msg) = (topic.build)(&status, self.status_ticks as u32) {
+                        publisher.publish(&msg).await;
+                    }
+                }
+            }
             Feed::MotionEnded(result) => self.status.on_motion_ended(&result, &mut codes),
             Feed::Mission { tag, event } => self.status.on_mission(tag, &event, &mut codes),
         }
@@ -472,6 +544,10 @@ async fn build(
     let imu = node.advertise("/imu/data", 10, false).await?;
     let tracked_pose = node.advertise("/tracked_pose", 10, false).await?;
     let tf = node.advertise("/tf", 10, false).await?;
+    let mut status_topics = Vec::new();
+    for topic in published::STATUS_TOPICS {
+        status_topics.push(StatusPublisher::advertise(&node, topic).await?);
+    }
     let mut codes = Vec::new();
     for topic in Topic::ALL {
         codes.push((topic, node.advertise(topic.name(), 1, true).await?));
@@ -593,6 +669,7 @@ async fn build(
         imu,
         tracked_pose,
         tf,
+        status_topics,
         codes,
         _services: services,
         _subscribers: subscribers,

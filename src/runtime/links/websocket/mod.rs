@@ -29,7 +29,7 @@ use self::hub::{Client, ClientQueue};
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, ClientOp, Level};
 use crate::api::rosbridge::topics::{self, Flow};
-use crate::api::rosbridge::{SOURCE, adapter, messages};
+use crate::api::rosbridge::{SOURCE, adapter, messages, published};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
@@ -47,8 +47,6 @@ const EVENT_QUEUE: usize = 1024;
 const PENDING_ANSWERS: usize = 1024;
 /// `/odom` goes out every this many control ticks (50 Hz).
 const ODOM_EVERY_TICKS: u64 = 2;
-/// `/battery_state` and `/diagnostics` go out every this many status ticks (1 Hz).
-const SLOW_EVERY_STATUS: u64 = 10;
 
 /// What the engine's outputs give the server.
 #[derive(Debug, Clone)]
@@ -435,8 +433,9 @@ impl Server {
         match item {
             Feed::Status(status) => {
                 self.status_ticks += 1;
-                self.publish(topics::POSE, || messages::pose(&status));
-                self.publish(topics::TF, || messages::tf(&status));
+                for topic in published::due(self.status_ticks) {
+                    self.publish(topic.name, || (topic.build)(&status));
+                }
                 let plan = status.plan.as_ref().map(|p| p.id);
                 if self.plan != Some(plan) {
                     self.plan = Some(plan);
@@ -447,10 +446,6 @@ impl Server {
                         client.offer(topics::PLAN, &text, now);
                     }
                     self.plan_text = Some(text);
-                }
-                if self.status_ticks.is_multiple_of(SLOW_EVERY_STATUS) {
-                    self.publish(topics::BATTERY_STATE, || messages::battery_state(&status));
-                    self.publish(topics::DIAGNOSTICS, || Some(messages::diagnostics(&status)));
                 }
             }
             Feed::Odom(t, pose) => {

@@ -1,0 +1,73 @@
+//! The topics the server publishes from the status ticks, each with its rate and its
+//! message (JSON of its ROS 2 type, [`super::messages`]). The server publishes them by this
+//! table, so a new one is a line here, its entry in [`super::topics::TOPICS`] and its
+//! message.
+
+use serde_json::Value;
+
+use super::messages;
+use super::topics::{BATTERY_STATE, DIAGNOSTICS, POSE, TF};
+use crate::vehicle::VehicleStatus;
+
+/// One topic published from the status ticks.
+#[derive(Debug, Clone, Copy)]
+pub struct StatusTopic {
+    /// Its name, one of [`super::topics::TOPICS`].
+    pub name: &'static str,
+    /// Status ticks (10 Hz) from one message to the next.
+    pub every: u64,
+    /// Its message for a status; `None` when there is nothing to say.
+    pub build: fn(&VehicleStatus) -> Option<Value>,
+}
+
+/// Every topic the server publishes from the status ticks.
+pub const STATUS_TOPICS: &[StatusTopic] = &[
+    StatusTopic {
+        name: POSE,
+        every: 1,
+        build: messages::pose,
+    },
+    StatusTopic {
+        name: TF,
+        every: 1,
+        build: messages::tf,
+    },
+    StatusTopic {
+        name: BATTERY_STATE,
+        every: 10,
+        build: messages::battery_state,
+    },
+    StatusTopic {
+        name: DIAGNOSTICS,
+        every: 10,
+        build: |status| Some(messages::diagnostics(status)),
+    },
+];
+
+/// The topics due at the `tick`th status tick (counted from 1).
+pub fn due(tick: u64) -> impl Iterator<Item = &'static StatusTopic> {
+    STATUS_TOPICS
+        .iter()
+        .filter(move |t| tick.is_multiple_of(t.every.max(1)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::rosbridge::topics::{Flow, find};
+
+    #[test]
+    fn every_status_topic_is_a_published_topic_at_its_rate() {
+        for t in STATUS_TOPICS {
+            let topic = find(t.name).expect("in the topic table");
+            assert_eq!(
+                topic.flow,
+                Flow::Published(10.0 / t.every as f64),
+                "{}",
+                t.name
+            );
+        }
+        assert_eq!(due(1).count(), 2);
+        assert_eq!(due(10).count(), 4);
+    }
+}
