@@ -6,6 +6,7 @@ pub mod adapter;
 pub mod messages;
 pub mod ops;
 pub mod published;
+pub mod session;
 pub mod topics;
 
 /// The command source of what WebSocket clients publish (`/cmd_vel`, `/goal_pose`), so a

@@ -1,21 +1,22 @@
-//! The server's state: its clients, what each subscribed to (with its throttle and queue
-//! length), and each one's outgoing queue. Plain data driven by the server's task, with the
-//! time passed in, so the rules are tested without sockets.
+//! The server's clients: each one's session (`api::rosbridge::session`: what it subscribed
+//! to, with its throttle and queue length) and its outgoing queue. Plain data driven by the
+//! server's task, with the time passed in, so the rules are tested without sockets.
 //!
 //! A client's queue is bounded twice: per subscription by its `queue_length` (its oldest
 //! message of that topic goes first) and in all by `websocket.client_queue`. What is dropped
 //! is counted. Putting a message in a queue never waits, so a client that does not read
 //! never slows the vehicle or another client.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use tokio::sync::Notify;
 
 use crate::api::rosbridge::ops::Level;
+use crate::api::rosbridge::session::Session;
 
 /// One message waiting for a client, and the topic it belongs to (`None`: an answer or a
 /// status, never dropped for a topic's queue length). Topics are the server's own, from
@@ -103,33 +104,13 @@ impl ClientQueue {
     }
 }
 
-/// Subscriptions one client may hold on one topic.
-pub const MAX_SUBSCRIPTIONS: usize = 16;
-
-/// One subscription of a client.
-#[derive(Debug, Clone)]
-struct Subscription {
-    id: Option<String>,
-    throttle: Duration,
-    queue_length: usize,
-    last_sent: Option<Instant>,
-}
-
-/// One connected client.
+/// One connected client: its session (what it asked for) and its outgoing queue.
 #[derive(Debug)]
 pub struct Client {
     /// Its outgoing queue.
     pub queue: Arc<ClientQueue>,
-    /// Presented the token (or none is needed).
-    pub authenticated: bool,
-    /// The lowest level of status messages it wants.
-    pub level: Level,
-    /// Wrong tokens it sent.
-    pub auth_failures: u32,
-    /// No token is checked for it before this (after a wrong one).
-    pub locked_until: Option<Instant>,
-    /// Its subscriptions, by topic.
-    subscriptions: BTreeMap<&'static str, Vec<Subscription>>,
+    /// Its authentication, status level and subscriptions.
+    pub session: Session,
 }
 
 impl Client {
@@ -137,83 +118,30 @@ impl Client {
     pub fn new(queue: Arc<ClientQueue>, authenticated: bool) -> Self {
         Self {
             queue,
-            authenticated,
-            level: Level::Info,
-            auth_failures: 0,
-            locked_until: None,
-            subscriptions: BTreeMap::new(),
-        }
-    }
-
-    /// Adds a subscription to `topic`; refused beyond [`MAX_SUBSCRIPTIONS`] on one topic
-    /// (a client subscribing in a loop must not grow the server without end).
-    pub fn subscribe(
-        &mut self,
-        topic: &'static str,
-        id: Option<String>,
-        throttle: Duration,
-        queue_length: usize,
-    ) -> Result<(), String> {
-        let subs = self.subscriptions.entry(topic).or_default();
-        // The same id again replaces its subscription (a client re-subscribing).
-        subs.retain(|s| id.is_none() || s.id != id);
-        if subs.len() >= MAX_SUBSCRIPTIONS {
-            return Err(format!(
-                "{topic} has {MAX_SUBSCRIPTIONS} subscriptions of this client already; \
-                 unsubscribe first"
-            ));
-        }
-        subs.push(Subscription {
-            id,
-            throttle,
-            queue_length,
-            last_sent: None,
-        });
-        Ok(())
-    }
-
-    /// Ends the subscription `id` on `topic`, or every one on `topic` without an id.
-    pub fn unsubscribe(&mut self, topic: &str, id: Option<&str>) {
-        if let Some(subs) = self.subscriptions.get_mut(topic) {
-            match id {
-                Some(id) => subs.retain(|s| s.id.as_deref() != Some(id)),
-                None => subs.clear(),
-            }
-            if subs.is_empty() {
-                self.subscriptions.remove(topic);
-            }
+            session: Session::new(authenticated),
         }
     }
 
     /// Whether any subscription on `topic` would take a message at `now`.
     pub fn wants(&self, topic: &str, now: Instant) -> bool {
-        self.subscriptions
-            .get(topic)
-            .is_some_and(|subs| subs.iter().any(|s| due(s, now)))
+        self.session.wants(topic, now)
     }
 
     /// Queues `text` on `topic` if a subscription is due (once, however many subscribe);
     /// returns whether it was queued.
     pub fn offer(&mut self, topic: &'static str, text: &str, now: Instant) -> bool {
-        let Some(subs) = self.subscriptions.get_mut(topic) else {
-            return false;
-        };
-        let mut keep = 0;
-        let mut taken = false;
-        for s in subs.iter_mut().filter(|s| due(s, now)) {
-            s.last_sent = Some(now);
-            keep = keep.max(s.queue_length);
-            taken = true;
+        match self.session.take(topic, now) {
+            Some(keep) => {
+                self.queue.push(Some((topic, keep)), text.to_owned());
+                true
+            }
+            None => false,
         }
-        if taken {
-            self.queue.push(Some((topic, keep)), text.to_owned());
-        }
-        taken
     }
 
     /// Queues a status message if the client wants its level.
     pub fn status(&self, level: Level, text: String) {
-        if level >= self.level {
+        if self.session.wants_level(level) {
             self.queue.push(None, text);
         }
     }
@@ -224,41 +152,24 @@ impl Client {
     }
 }
 
-fn due(s: &Subscription, now: Instant) -> bool {
-    s.last_sent
-        .is_none_or(|last| now.saturating_duration_since(last) >= s.throttle)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
 
     fn client(capacity: usize) -> Client {
         Client::new(Arc::new(ClientQueue::new(capacity)), true)
     }
 
     #[test]
-    fn a_throttled_subscription_takes_one_message_per_period() {
-        let mut c = client(100);
-        c.subscribe("/pose", None, Duration::from_millis(500), 10)
-            .unwrap();
-        let t0 = Instant::now();
-        let taken: Vec<bool> = (0..10)
-            .map(|i| c.offer("/pose", "m", t0 + Duration::from_millis(100 * i)))
-            .collect();
-        assert_eq!(
-            taken,
-            [
-                true, false, false, false, false, true, false, false, false, false
-            ]
-        );
-    }
-
-    #[test]
     fn a_topics_queue_length_keeps_its_newest_and_the_drops_are_counted() {
         let mut c = client(100);
-        c.subscribe("/odom", None, Duration::ZERO, 2).unwrap();
-        c.subscribe("/pose", None, Duration::ZERO, 1).unwrap();
+        c.session
+            .subscribe("/odom", None, Duration::ZERO, 2)
+            .unwrap();
+        c.session
+            .subscribe("/pose", None, Duration::ZERO, 1)
+            .unwrap();
         let now = Instant::now();
         for i in 0..5 {
             c.offer("/odom", &format!("odom {i}"), now);
@@ -272,7 +183,9 @@ mod tests {
     #[test]
     fn a_full_queue_loses_its_oldest_message() {
         let mut c = client(4);
-        c.subscribe("/odom", None, Duration::ZERO, 100).unwrap();
+        c.session
+            .subscribe("/odom", None, Duration::ZERO, 100)
+            .unwrap();
         let now = Instant::now();
         for i in 0..10 {
             c.offer("/odom", &i.to_string(), now);
@@ -282,41 +195,9 @@ mod tests {
     }
 
     #[test]
-    fn subscriptions_on_a_topic_are_bounded() {
-        let mut c = client(10);
-        for _ in 0..MAX_SUBSCRIPTIONS {
-            c.subscribe("/pose", None, Duration::ZERO, 1).unwrap();
-        }
-        assert!(c.subscribe("/pose", None, Duration::ZERO, 1).is_err());
-        // Re-subscribing under an id it holds replaces that one.
-        let mut c = client(10);
-        for i in 0..MAX_SUBSCRIPTIONS {
-            c.subscribe("/pose", Some(i.to_string()), Duration::ZERO, 1)
-                .unwrap();
-        }
-        assert!(
-            c.subscribe("/pose", Some("3".into()), Duration::ZERO, 1)
-                .is_ok()
-        );
-    }
-
-    #[test]
-    fn unsubscribing_by_id_keeps_the_others() {
-        let mut c = client(10);
-        c.subscribe("/pose", Some("a".into()), Duration::ZERO, 1)
-            .unwrap();
-        c.subscribe("/pose", Some("b".into()), Duration::ZERO, 1)
-            .unwrap();
-        c.unsubscribe("/pose", Some("a"));
-        assert!(c.wants("/pose", Instant::now()));
-        c.unsubscribe("/pose", Some("b"));
-        assert!(!c.wants("/pose", Instant::now()));
-    }
-
-    #[test]
     fn status_messages_below_the_clients_level_are_not_sent() {
         let mut c = client(10);
-        c.level = Level::Error;
+        c.session.level = Level::Error;
         c.status(Level::Info, "info".into());
         c.status(Level::Error, "error".into());
         assert_eq!(c.queue.take(), ["error"]);

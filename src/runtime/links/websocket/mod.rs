@@ -15,20 +15,21 @@ pub mod hub;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use crate::runtime::error::{RuntimeError, io};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
-use serde_json::{Value, json};
+use serde_json::Value;
 use tokio::sync::mpsc;
 
 use self::hub::{Client, ClientQueue};
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
-use crate::api::rosbridge::ops::{self, ClientOp, Level};
-use crate::api::rosbridge::topics::{self, Flow};
+use crate::api::rosbridge::ops::{self, Level};
+use crate::api::rosbridge::session::{Action, token_matches};
+use crate::api::rosbridge::topics;
 use crate::api::rosbridge::{SOURCE, adapter, messages, published};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
@@ -475,113 +476,44 @@ impl Server {
     }
 
     fn on_op(&mut self, id: u64, text: &str) {
+        let now = Instant::now();
         let Some(client) = self.clients.get_mut(&id) else {
             return;
         };
-        let op = match ops::parse(text) {
-            Ok(op) => op,
-            Err(refusal) => {
-                client.status(Level::Error, refusal.status());
-                return;
-            }
-        };
-        if !client.authenticated {
-            authenticate(client, id, op, self.token.as_deref());
-            return;
-        }
-        let refuse = |client: &Client, op_id: Option<&str>, reason: &str| {
-            client.status(Level::Error, ops::status(Level::Error, op_id, reason));
-        };
-        match op {
-            ClientOp::Auth { .. } | ClientOp::Unadvertise { .. } => {}
-            ClientOp::SetLevel { level, .. } => client.level = level,
-            ClientOp::Subscribe {
-                id: sub_id,
-                topic,
-                msg_type,
-                throttle_ms,
-                queue_length,
-            } => match topics::find(&topic) {
-                Some(t) if matches!(t.flow, Flow::Published(_)) => {
-                    match msg_type.filter(|given| !topics::type_matches(t, given)) {
-                        Some(given) => refuse(
-                            client,
-                            sub_id.as_deref(),
-                            &format!("subscribe: {topic} is {}, not {given}", t.msg_type),
-                        ),
-                        None => {
-                            let op_id = sub_id.clone();
-                            if let Err(reason) = client.subscribe(
-                                t.name,
-                                sub_id,
-                                Duration::from_millis(throttle_ms),
-                                queue_length,
-                            ) {
-                                refuse(client, op_id.as_deref(), &format!("subscribe: {reason}"));
-                            } else if let (topics::PLAN, Some(text)) = (t.name, &self.plan_text) {
-                                client.offer(topics::PLAN, text, Instant::now());
-                            }
-                        }
+        let mut publishes = Vec::new();
+        for action in client.session.on_op(id, text, now, self.token.as_deref()) {
+            match action {
+                Action::Status(level, text) => client.status(level, text),
+                Action::Answer(text) => client.answer(text),
+                Action::Close => client.queue.close(),
+                Action::SubscribedToPlan => {
+                    if let Some(text) = &self.plan_text {
+                        client.offer(topics::PLAN, text, now);
                     }
                 }
-                Some(t) => refuse(
-                    client,
-                    sub_id.as_deref(),
-                    &format!(
-                        "subscribe: {topic} ({}) is published by clients, not by chassisd",
-                        t.msg_type
-                    ),
-                ),
-                None => refuse(
-                    client,
-                    sub_id.as_deref(),
-                    &unknown_topic("subscribe", &topic),
-                ),
-            },
-            ClientOp::Unsubscribe { id: sub_id, topic } => {
-                client.unsubscribe(&topic, sub_id.as_deref());
+                Action::Publish {
+                    name,
+                    topic,
+                    msg,
+                    id: op_id,
+                } => publishes.push((name, topic, msg, op_id)),
             }
-            ClientOp::Advertise {
-                id: op_id,
-                topic,
-                msg_type,
-            } => match topics::find(&topic) {
-                Some(t) if t.flow == Flow::Subscribed && topics::type_matches(t, &msg_type) => {}
-                Some(t) if t.flow == Flow::Subscribed => refuse(
-                    client,
-                    op_id.as_deref(),
-                    &format!("advertise: {topic} is {}, not {msg_type}", t.msg_type),
-                ),
-                Some(t) => refuse(
-                    client,
-                    op_id.as_deref(),
-                    &format!("advertise: {topic} ({}) is chassisd's own", t.msg_type),
-                ),
-                None => refuse(
-                    client,
-                    op_id.as_deref(),
-                    &unknown_topic("advertise", &topic),
-                ),
-            },
-            ClientOp::CallService {
-                id: op_id,
-                service,
-                args,
-            } => client.answer(ops::service_response(
-                &service,
-                op_id.as_deref(),
-                call_service(&service, &args),
-            )),
-            ClientOp::Publish {
-                id: op_id,
-                topic,
-                msg,
-            } => self.command(id, op_id.as_deref(), &topic, &msg),
+        }
+        for (name, topic, msg, op_id) in publishes {
+            self.command(id, op_id.as_deref(), name, &topic, &msg);
         }
     }
 
-    /// A client's `publish`: a command for the engine, or a refusal with the reason.
-    fn command(&mut self, id: u64, op_id: Option<&str>, topic: &str, msg: &Value) {
+    /// A client's checked `publish` on `name`: a command for the engine, within the
+    /// client's rate.
+    fn command(
+        &mut self,
+        id: u64,
+        op_id: Option<&str>,
+        name: &'static str,
+        topic: &str,
+        msg: &Value,
+    ) {
         let Some(client) = self.clients.get(&id) else {
             return;
         };
@@ -590,16 +522,6 @@ impl Server {
                 Level::Error,
                 ops::status(Level::Error, op_id, &format!("publish: {reason}")),
             );
-        };
-        let name = match topics::find(topic) {
-            Some(t) if t.flow == Flow::Subscribed => match adapter::check(t.name, topic, msg) {
-                Ok(()) => t.name,
-                Err(reason) => return refuse(&reason),
-            },
-            Some(t) => {
-                return refuse(&format!("{topic} ({}) is chassisd's own", t.msg_type));
-            }
-            None => return refuse(&unknown_topic("publish", topic)),
         };
         let now = Instant::now();
         if let Some(rate) = self.rates.get_mut(&id)
@@ -638,62 +560,6 @@ impl Server {
     }
 }
 
-/// Wrong tokens a client may send; the last one closes its connection.
-const MAX_AUTH_FAILURES: u32 = 5;
-/// After a wrong token, no other is checked for this long, doubled each time (1, 2, 4, 8 s).
-const AUTH_DELAY: Duration = Duration::from_secs(1);
-
-/// An operation from a client that has not authenticated: only `auth` is taken, and a
-/// wrong token costs it time, then its connection.
-fn authenticate(client: &mut Client, id: u64, op: ClientOp, token: Option<&str>) {
-    let now = Instant::now();
-    if let Some(until) = client.locked_until.filter(|&u| now < u) {
-        let wait = until.duration_since(now).as_secs_f64();
-        let text = format!("authentication: wait {wait:.1} s before trying again");
-        client.status(Level::Error, ops::status(Level::Error, None, &text));
-        return;
-    }
-    match op {
-        ClientOp::Auth { token: given } if token_matches(token, &given) => {
-            client.authenticated = true;
-            client.status(Level::Info, ops::status(Level::Info, None, "authenticated"));
-        }
-        ClientOp::Auth { .. } => {
-            client.auth_failures += 1;
-            let n = client.auth_failures;
-            if n == 1 {
-                tracing::warn!(
-                    client = id,
-                    "websocket: a wrong token; the client's next tries are delayed, and its \
-                     {MAX_AUTH_FAILURES}th closes the connection"
-                );
-            }
-            let text = if n >= MAX_AUTH_FAILURES {
-                client.queue.close();
-                format!("authentication failed {n} times: the connection closes")
-            } else {
-                let delay = AUTH_DELAY * 2u32.pow(n - 1);
-                client.locked_until = Some(now + delay);
-                format!(
-                    "authentication failed ({n} of {MAX_AUTH_FAILURES}); the next try is \
-                     taken after {} s",
-                    delay.as_secs()
-                )
-            };
-            client.status(Level::Error, ops::status(Level::Error, None, &text));
-        }
-        _ => client.status(
-            Level::Error,
-            ops::status(
-                Level::Error,
-                None,
-                "authenticate first: send {\"op\": \"auth\", \"mac\": TOKEN} or connect \
-                 with ?token=TOKEN (websocket.token)",
-            ),
-        ),
-    }
-}
-
 /// Whether a browser page from `origin` may open a WebSocket: chassisd's own page (the
 /// origin of the address the browser asked for, when that is an IP address or
 /// `localhost`: a name could be an attacker's that resolves here, DNS rebinding), or a
@@ -717,60 +583,4 @@ fn origin_allowed(origin: &str, host: Option<&str>, allowed: &[String]) -> bool 
             .and_then(|n| n.strip_suffix(']'))
             .is_some_and(|n| n.parse::<std::net::Ipv6Addr>().is_ok());
     literal && origin.eq_ignore_ascii_case(&format!("http://{host}"))
-}
-
-/// Whether `given` is the configured token, compared in a time that does not depend on
-/// where they differ.
-fn token_matches(configured: Option<&str>, given: &str) -> bool {
-    configured.is_some_and(|c| crate::secret::matches(c.as_bytes(), given.as_bytes()))
-}
-
-/// Why `topic` is not one of the server's, for `op`.
-fn unknown_topic(op: &str, topic: &str) -> String {
-    match topics::refusal(topic) {
-        Some(reason) => format!("{op}: {reason}"),
-        None => format!(
-            "{op}: no topic {topic}; chassisd's topics are {}",
-            topics::TOPICS
-                .iter()
-                .map(|t| t.name)
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
-}
-
-/// The services a client may call: rosapi's topic list and topic type.
-fn call_service(service: &str, args: &Value) -> Result<Value, String> {
-    match service {
-        "/rosapi/topics" => Ok(json!({
-            "topics": topics::TOPICS.iter().map(|t| t.name).collect::<Vec<_>>(),
-            "types": topics::TOPICS.iter().map(|t| t.msg_type).collect::<Vec<_>>(),
-        })),
-        "/rosapi/topic_type" => {
-            let topic = args.get("topic").and_then(Value::as_str).unwrap_or("");
-            Ok(json!({"type": topics::find(topic).map_or("", |t| t.msg_type)}))
-        }
-        other => Err(format!(
-            "no service {other}; chassisd answers /rosapi/topics and /rosapi/topic_type"
-        )),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn only_the_configured_token_matches() {
-        assert!(token_matches(Some("s3cret-token"), "s3cret-token"));
-        assert!(!token_matches(Some("s3cret-token"), "s3cret-tokeN"));
-        assert!(!token_matches(Some("s3cret-token"), "s3cret"));
-        assert!(!token_matches(
-            Some("s3cret-token"),
-            "s3cret-token-and-more"
-        ));
-        assert!(!token_matches(Some("s3cret-token"), ""));
-        assert!(!token_matches(None, "anything"));
-    }
 }
