@@ -71,12 +71,15 @@ pub trait SimCanDevice: Send + std::fmt::Debug {
     }
 }
 
+/// The simulated devices a kind puts on an interface, or why they cannot be built.
+pub type Built = Result<Vec<Box<dyn SimCanDevice>>, String>;
+
 /// How the devices of one kind are simulated.
 pub struct SimKind {
     /// The engine's kind it stands for (`DeviceKind::name`).
     pub simulates: &'static str,
     /// The simulated devices the configuration puts on an interface, or why they cannot be.
-    pub build: fn(&VehicleConfig, &CanBusConfig) -> Result<Vec<Box<dyn SimCanDevice>>, String>,
+    pub build: fn(&VehicleConfig, &CanBusConfig) -> Built,
 }
 
 /// Every simulated kind, in the engine's order (the order frames are offered and sent).
@@ -100,10 +103,7 @@ pub const KINDS: &[SimKind] = &[
 pub const NOT_SIMULATED: &[&str] = &["cutter switch frame", "CANopen master heartbeat and SYNC"];
 
 /// The simulated devices of `bus`, every kind in order.
-pub fn build(
-    config: &VehicleConfig,
-    bus: &CanBusConfig,
-) -> Result<Vec<Box<dyn SimCanDevice>>, String> {
+pub fn build(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
     let mut devices = Vec::new();
     for kind in KINDS {
         devices.extend((kind.build)(config, bus)?);
@@ -117,10 +117,7 @@ struct Drive {
     drive: SimDrive,
 }
 
-fn drives(
-    config: &VehicleConfig,
-    bus: &CanBusConfig,
-) -> Result<Vec<Box<dyn SimCanDevice>>, String> {
+fn drives(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
     let mut out: Vec<Box<dyn SimCanDevice>> = Vec::new();
     for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
         let profile = d.profile.get().ok_or("drive profile not loaded")?.clone();
@@ -189,7 +186,7 @@ struct Bms {
     last: Option<Timestamp>,
 }
 
-fn bms(config: &VehicleConfig, bus: &CanBusConfig) -> Result<Vec<Box<dyn SimCanDevice>>, String> {
+fn bms(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
     let Some(b) = config.bms.as_ref().filter(|b| b.bus == bus.interface) else {
         return Ok(Vec::new());
     };
@@ -244,10 +241,7 @@ struct EStop {
     module: SimEStop,
 }
 
-fn estops(
-    config: &VehicleConfig,
-    bus: &CanBusConfig,
-) -> Result<Vec<Box<dyn SimCanDevice>>, String> {
+fn estops(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
     let mut out: Vec<Box<dyn SimCanDevice>> = Vec::new();
     for e in config.estop.iter().filter(|e| e.bus == bus.interface) {
         let profile = e.profile.get().ok_or("e-stop profile not loaded")?.clone();
