@@ -18,8 +18,10 @@
 //! `map_msgs` from its field tables (its `long` is int64, `int` int32).
 
 pub mod adapter;
+pub mod messages;
 pub mod odometry;
 pub mod published;
+pub mod publisher;
 pub mod status;
 
 use serde_json::json;

@@ -1,14 +1,7 @@
-//! The ROS1 types generated from `src/api/ros1/interfaces` (build.rs), and the messages
-//! built from the core's poses and samples, stamped and framed by REP-103/105.
+//! The ROS1 types generated from `src/api/ros1/interfaces` (build.rs), and the wire form of
+//! a message given as JSON (`api::ros1::messages` builds them), checked by its type.
 
 include!(concat!(env!("OUT_DIR"), "/ros1_interfaces.rs"));
-
-use crate::api::ros1::odometry::OdometryCovariance;
-use crate::api::ros1::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
-use crate::devices::imu::ImuSample;
-use crate::fusion::odometry::OdomPose;
-use crate::time::Timestamp;
-use crate::vehicle::{Pose2D, PoseReport};
 
 /// `msg` (JSON, fields as `descriptor`'s type names them) checked against that type and
 /// serialised for the wire: its length, then its fields.
@@ -26,177 +19,6 @@ pub fn wire(
     Ok(bytes)
 }
 
-/// The IMU's noise, 1σ, for `/imu/data`'s covariances.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ImuNoise {
-    /// Angular rate, rad/s.
-    pub gyro_rps: f64,
-    /// Specific force, m/s².
-    pub accel_mps2: f64,
-    /// The sensor's own orientation, rad.
-    pub orientation_rad: f64,
-}
-
-fn header(t: Timestamp, seq: u32, frame: &str) -> std_msgs::Header {
-    let (secs, nsecs) = ros_time(t);
-    std_msgs::Header {
-        seq,
-        // ROS1 time is two uint32 on the wire; roslibrust types them i32, which carries the
-        // same 32 bits.
-        stamp: roslibrust::codegen::integral_types::Time {
-            secs: secs as i32,
-            nsecs: nsecs as i32,
-        },
-        frame_id: frame.to_owned(),
-    }
-}
-
-fn quaternion([x, y, z, w]: [f64; 4]) -> geometry_msgs::Quaternion {
-    geometry_msgs::Quaternion { x, y, z, w }
-}
-
-fn vector(v: &nalgebra::Vector3<f64>) -> geometry_msgs::Vector3 {
-    geometry_msgs::Vector3 {
-        x: v.x,
-        y: v.y,
-        z: v.z,
-    }
-}
-
-/// A diagonal 3×3 covariance, row-major.
-fn diagonal(variance: f64) -> [f64; 9] {
-    let mut m = [0.0; 9];
-    m[0] = variance;
-    m[4] = variance;
-    m[8] = variance;
-    m
-}
-
-/// `/raw_odom`: the `odom` frame's pose and the speeds in the vehicle frame.
-pub fn odometry(
-    t: Timestamp,
-    seq: u32,
-    odom: &OdomPose,
-    covariance: &OdometryCovariance,
-) -> nav_msgs::Odometry {
-    nav_msgs::Odometry {
-        header: header(t, seq, ODOM_FRAME),
-        child_frame_id: BASE_FRAME.to_owned(),
-        pose: geometry_msgs::PoseWithCovariance {
-            pose: geometry_msgs::Pose {
-                position: geometry_msgs::Point {
-                    x: odom.x,
-                    y: odom.y,
-                    z: 0.0,
-                },
-                orientation: quaternion(yaw_quaternion(odom.yaw)),
-            },
-            covariance: covariance.pose,
-        },
-        twist: geometry_msgs::TwistWithCovariance {
-            twist: geometry_msgs::Twist {
-                linear: geometry_msgs::Vector3 {
-                    x: odom.v,
-                    y: 0.0,
-                    z: 0.0,
-                },
-                angular: geometry_msgs::Vector3 {
-                    x: 0.0,
-                    y: 0.0,
-                    z: odom.w,
-                },
-            },
-            covariance: covariance.twist,
-        },
-    }
-}
-
-/// `/tracked_pose`: the fused pose in the map frame.
-pub fn pose_stamped(t: Timestamp, seq: u32, pose: &Pose2D) -> geometry_msgs::PoseStamped {
-    geometry_msgs::PoseStamped {
-        header: header(t, seq, MAP_FRAME),
-        pose: geometry_msgs::Pose {
-            position: geometry_msgs::Point {
-                x: pose.x,
-                y: pose.y,
-                z: 0.0,
-            },
-            orientation: quaternion(yaw_quaternion(pose.yaw)),
-        },
-    }
-}
-
-/// One transform: `child` placed at `pose` in `parent`.
-fn transform(
-    t: Timestamp,
-    parent: &str,
-    child: &str,
-    pose: &Pose2D,
-) -> geometry_msgs::TransformStamped {
-    geometry_msgs::TransformStamped {
-        // tf ignores seq; each transform's is 0, as tf's own broadcasters leave it.
-        header: header(t, 0, parent),
-        child_frame_id: child.to_owned(),
-        transform: geometry_msgs::Transform {
-            translation: geometry_msgs::Vector3 {
-                x: pose.x,
-                y: pose.y,
-                z: 0.0,
-            },
-            rotation: quaternion(yaw_quaternion(pose.yaw)),
-        },
-    }
-}
-
-/// `/tf`: map→odom (the correction GNSS estimates) and odom→base_link (the dead reckoning)
-/// once the vehicle is placed, odom→base_link alone before; `None` without odometry.
-pub fn tf(t: Timestamp, report: &PoseReport) -> Option<tf2_msgs::TFMessage> {
-    let transforms = match (report.frames, report.odom) {
-        (Some(f), _) => vec![
-            transform(t, MAP_FRAME, ODOM_FRAME, &f.map_to_odom),
-            transform(t, ODOM_FRAME, BASE_FRAME, &f.odom_to_base),
-        ],
-        (None, Some(o)) => vec![transform(
-            t,
-            ODOM_FRAME,
-            BASE_FRAME,
-            &Pose2D {
-                x: o.x,
-                y: o.y,
-                yaw: o.yaw,
-            },
-        )],
-        (None, None) => return None,
-    };
-    Some(tf2_msgs::TFMessage { transforms })
-}
-
-/// `/imu/data`: a sample in the vehicle frame (the mounting applied), stamped when it was
-/// received. Without the sensor's own orientation, orientation_covariance[0] is -1, as
-/// sensor_msgs/Imu says.
-pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> sensor_msgs::Imu {
-    let (orientation, orientation_covariance) = match sample.orientation {
-        Some(q) => (
-            quaternion([q.i, q.j, q.k, q.w]),
-            diagonal(noise.orientation_rad.powi(2)),
-        ),
-        None => {
-            let mut unknown = [0.0; 9];
-            unknown[0] = -1.0;
-            (quaternion([0.0, 0.0, 0.0, 1.0]), unknown)
-        }
-    };
-    sensor_msgs::Imu {
-        header: header(sample.rx, seq, BASE_FRAME),
-        orientation,
-        orientation_covariance,
-        angular_velocity: vector(&sample.gyro),
-        angular_velocity_covariance: diagonal(noise.gyro_rps.powi(2)),
-        linear_acceleration: vector(&sample.accel),
-        linear_acceleration_covariance: diagonal(noise.accel_mps2.powi(2)),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -209,6 +31,190 @@ mod tests {
         // The type checks every field: a wrong one, a missing one, or one out of range.
         assert!(wire(int16, &serde_json::json!({"date": 1})).is_err());
         assert!(wire(int16, &serde_json::json!({"data": 70000})).is_err());
+    }
+
+    /// Each JSON message on the wire, byte for byte what its generated type gives for the
+    /// same values (built here field by field, as the node built them before).
+    #[test]
+    fn the_json_messages_serialise_as_their_typed_messages() {
+        use crate::api::ros1::messages as json;
+        use crate::api::ros1::odometry::OdometryCovariance;
+        use roslibrust::codegen::integral_types::Time;
+        use roslibrust_serde_rosmsg::to_vec;
+
+        let t = crate::time::Timestamp::from_nanos(1_795_000_000_123_456_789);
+        let header = |seq: u32, frame: &str| std_msgs::Header {
+            seq,
+            stamp: Time {
+                secs: 1_795_000_000u32 as i32,
+                nsecs: 123_456_789,
+            },
+            frame_id: frame.to_owned(),
+        };
+        let q = |yaw: f64| {
+            let [x, y, z, w] = crate::api::ros1::yaw_quaternion(yaw);
+            geometry_msgs::Quaternion { x, y, z, w }
+        };
+        let on_wire = |msg_type: &str, msg: &serde_json::Value| {
+            wire(MESSAGE_REGISTRY.get(msg_type).expect("generated"), msg).expect("fits")
+        };
+
+        let odom = crate::fusion::odometry::OdomPose {
+            x: 1.5,
+            y: -2.25,
+            yaw: 0.3,
+            v: 0.4,
+            w: -0.1,
+        };
+        let mut covariance = OdometryCovariance {
+            pose: [0.0; 36],
+            twist: [0.0; 36],
+        };
+        covariance.pose[0] = 0.01;
+        covariance.twist[35] = 0.002;
+        let typed = nav_msgs::Odometry {
+            header: header(7, "odom"),
+            child_frame_id: "base_link".into(),
+            pose: geometry_msgs::PoseWithCovariance {
+                pose: geometry_msgs::Pose {
+                    position: geometry_msgs::Point {
+                        x: 1.5,
+                        y: -2.25,
+                        z: 0.0,
+                    },
+                    orientation: q(0.3),
+                },
+                covariance: covariance.pose,
+            },
+            twist: geometry_msgs::TwistWithCovariance {
+                twist: geometry_msgs::Twist {
+                    linear: geometry_msgs::Vector3 {
+                        x: 0.4,
+                        y: 0.0,
+                        z: 0.0,
+                    },
+                    angular: geometry_msgs::Vector3 {
+                        x: 0.0,
+                        y: 0.0,
+                        z: -0.1,
+                    },
+                },
+                covariance: covariance.twist,
+            },
+        };
+        assert_eq!(
+            on_wire(
+                "nav_msgs/Odometry",
+                &json::odometry(t, 7, &odom, &covariance)
+            ),
+            to_vec(&typed).unwrap()
+        );
+
+        let pose = crate::vehicle::Pose2D {
+            x: 3.0,
+            y: 4.0,
+            yaw: -1.0,
+        };
+        let typed = geometry_msgs::PoseStamped {
+            header: header(9, "map"),
+            pose: geometry_msgs::Pose {
+                position: geometry_msgs::Point {
+                    x: 3.0,
+                    y: 4.0,
+                    z: 0.0,
+                },
+                orientation: q(-1.0),
+            },
+        };
+        assert_eq!(
+            on_wire(
+                "geometry_msgs/PoseStamped",
+                &json::pose_stamped(t, 9, &pose)
+            ),
+            to_vec(&typed).unwrap()
+        );
+
+        let report = crate::vehicle::PoseReport {
+            odom: Some(odom),
+            map: None,
+            frames: None,
+            localization: crate::vehicle::Localization::Uninitialized,
+        };
+        let typed = tf2_msgs::TFMessage {
+            transforms: vec![geometry_msgs::TransformStamped {
+                header: header(0, "odom"),
+                child_frame_id: "base_link".into(),
+                transform: geometry_msgs::Transform {
+                    translation: geometry_msgs::Vector3 {
+                        x: 1.5,
+                        y: -2.25,
+                        z: 0.0,
+                    },
+                    rotation: q(0.3),
+                },
+            }],
+        };
+        assert_eq!(
+            on_wire("tf2_msgs/TFMessage", &json::tf(t, &report).unwrap()),
+            to_vec(&typed).unwrap()
+        );
+
+        let noise = json::ImuNoise {
+            gyro_rps: 0.01,
+            accel_mps2: 0.05,
+            orientation_rad: 0.02,
+        };
+        let sample = crate::devices::imu::ImuSample {
+            rx: t,
+            accel: nalgebra::Vector3::new(0.1, -0.2, 9.8),
+            gyro: nalgebra::Vector3::new(0.001, 0.002, -0.3),
+            orientation: None,
+        };
+        let diagonal = |v: f64| [v, 0.0, 0.0, 0.0, v, 0.0, 0.0, 0.0, v];
+        let mut unknown = [0.0; 9];
+        unknown[0] = -1.0;
+        let typed = sensor_msgs::Imu {
+            header: header(3, "base_link"),
+            orientation: geometry_msgs::Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            },
+            orientation_covariance: unknown,
+            angular_velocity: geometry_msgs::Vector3 {
+                x: 0.001,
+                y: 0.002,
+                z: -0.3,
+            },
+            angular_velocity_covariance: diagonal(0.01f64.powi(2)),
+            linear_acceleration: geometry_msgs::Vector3 {
+                x: 0.1,
+                y: -0.2,
+                z: 9.8,
+            },
+            linear_acceleration_covariance: diagonal(0.05f64.powi(2)),
+        };
+        assert_eq!(
+            on_wire("sensor_msgs/Imu", &json::imu(&sample, 3, &noise)),
+            to_vec(&typed).unwrap()
+        );
+        assert_eq!(
+            on_wire("std_msgs/Int16", &json::code(41)),
+            to_vec(&std_msgs::Int16 { data: 41 }).unwrap()
+        );
+    }
+
+    #[test]
+    fn every_advertised_topic_has_its_interface() {
+        for topic in crate::api::ros1::publisher::advertised() {
+            assert!(
+                MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
+                "{}: no {} in src/api/ros1/interfaces",
+                topic.name,
+                topic.msg_type
+            );
+        }
     }
 
     #[test]

@@ -17,8 +17,7 @@ use tokio::sync::mpsc;
 use crate::api::ros1::SOURCE;
 use crate::engine::EngineOutput;
 
-#[cfg(feature = "ros1")]
-pub use messages::ImuNoise;
+pub use crate::api::ros1::messages::ImuNoise;
 #[cfg(feature = "ros1")]
 pub use node::{Ros1Spec, spawn};
 
@@ -27,25 +26,7 @@ const FEED_QUEUE: usize = 256;
 /// Answers waiting for the node: more than the requests it may have in flight.
 const ANSWER_QUEUE: usize = 256;
 
-/// What the engine's outputs give the node.
-#[derive(Debug, Clone)]
-pub enum Feed {
-    /// The poses at a control tick.
-    Poses(crate::time::Timestamp, crate::vehicle::PoseReport),
-    /// An IMU sample, in the vehicle frame.
-    Imu(crate::devices::imu::ImuSample),
-    /// A status tick.
-    Status(Box<crate::vehicle::VehicleStatus>),
-    /// A motion ended.
-    MotionEnded(crate::control::MotionResult),
-    /// A mission made progress.
-    Mission {
-        /// Who asked.
-        tag: Option<crate::control::MotionTag>,
-        /// What happened.
-        event: crate::control::mission::MissionEvent,
-    },
-}
+pub use crate::api::ros1::publisher::Feed;
 
 /// The engine task's end of the node's queues: sending never blocks, and what does not fit
 /// is dropped and counted (the node publishes the next pose instead).
@@ -160,7 +141,7 @@ pub fn spec_for(
             &localizer,
             config.imu.is_some(),
         ),
-        imu_noise: messages::ImuNoise {
+        imu_noise: ImuNoise {
             gyro_rps: localizer.gyro_sigma,
             accel_mps2,
             orientation_rad: orientation_deg.to_radians(),

@@ -7,30 +7,28 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use roslibrust::ros1::{MasterClient, NodeHandle, Publisher, ServiceServer};
+use roslibrust::ros1::{MasterClient, NodeHandle, ServiceServer};
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 
-use super::messages::{self, geometry_msgs, map_msgs, nav_msgs, sensor_msgs, std_msgs, tf2_msgs};
+use super::messages::{self, geometry_msgs, map_msgs, std_msgs};
 use super::{Answer, Feed, Ros1Queues};
 use crate::api::ros1;
 use crate::api::ros1::adapter::Ros1Request;
-use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
-use crate::api::ros1::published;
-use crate::api::ros1::status::{StatusTopics, Topic};
+use crate::api::ros1::messages::ImuNoise;
+use crate::api::ros1::odometry::OdometryNoise;
+use crate::api::ros1::publisher::{self, Advertised, Messages, Publishing};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
 use crate::runtime::outage_log::{OutageLog, Say};
-use crate::vehicle::{Localization, Pose2D};
+use crate::vehicle::Pose2D;
 
 /// How often the master is asked whether it still knows the node.
 const WATCH_EVERY: Duration = Duration::from_secs(1);
 /// The longest wait between connection attempts.
 const RETRY_MAX: Duration = Duration::from_secs(5);
-/// `/tracked_pose`'s and `/tf`'s period (15 Hz).
-const TRACKED_POSE_PERIOD: Duration = Duration::from_nanos(1_000_000_000 / 15);
 /// Requests that may wait for the engine's answer at once; more are refused as busy.
 const MAX_PENDING: usize = 64;
 /// How long a service call waits for the engine's answer.
@@ -53,7 +51,7 @@ pub struct Ros1Spec {
     /// The odometry's noise (`/raw_odom`'s covariance).
     pub odometry_noise: OdometryNoise,
     /// The IMU's noise (`/imu/data`'s covariances).
-    pub imu_noise: messages::ImuNoise,
+    pub imu_noise: ImuNoise,
 }
 
 /// One request waiting for the engine's answer.
@@ -155,30 +153,36 @@ pub fn spawn(
 
 /// The registered graph: dropping it unregisters everything (the node handle goes last).
 struct Graph {
-    raw_odom: Publisher<nav_msgs::Odometry>,
-    imu: Publisher<sensor_msgs::Imu>,
-    tracked_pose: Publisher<geometry_msgs::PoseStamped>,
-    tf: Publisher<tf2_msgs::TFMessage>,
-    /// The topics of `api::ros1::published`, by name, each with its type.
-    status_topics: Vec<StatusPublisher>,
-    codes: Vec<(Topic, Publisher<std_msgs::Int16>)>,
+    /// Every topic of `api::ros1::publisher::advertised`.
+    publishers: Vec<TopicPublisher>,
     _services: Vec<ServiceServer>,
     _subscribers: JoinSet<()>,
     node: NodeHandle,
 }
 
-/// A topic of `api::ros1::published`: advertised with its type's generated definition, its
-/// JSON serialised through that type.
-struct StatusPublisher {
+impl Graph {
+    /// Publishes each message on its topic.
+    async fn publish(&self, messages: Messages) {
+        for (topic, msg) in messages {
+            if let Some(p) = self.publishers.iter().find(|p| p.name == topic) {
+                p.publish(&msg).await;
+            }
+        }
+    }
+}
+
+/// One advertised topic: its type's generated definition, its JSON serialised through that
+/// type.
+struct TopicPublisher {
     name: &'static str,
     descriptor: &'static roslibrust::MessageDescriptor,
     publisher: roslibrust::ros1::PublisherAny,
 }
 
-impl StatusPublisher {
+impl TopicPublisher {
     async fn advertise(
         node: &NodeHandle,
-        topic: &published::StatusTopic,
+        topic: &Advertised,
     ) -> Result<Self, roslibrust::ros1::NodeError> {
         let descriptor = messages::MESSAGE_REGISTRY
             .get(topic.msg_type)
@@ -193,8 +197,8 @@ impl StatusPublisher {
                 topic.name,
                 descriptor.ros_type_name,
                 descriptor.definition,
-                10,
-                false,
+                topic.queue,
+                topic.latched,
             )
             .await?;
         Ok(Self {
@@ -212,23 +216,28 @@ impl StatusPublisher {
                     tracing::debug!(topic = self.name, error = %e, "ROS1 publish failed");
                 }
             }
-            // The table's own message not fitting its type: a fault to show, not to hide.
+            // A message of chassisd's own not fitting its type: a fault to show, not hide.
             Err(e) => tracing::error!(topic = self.name, error = %e, "ROS1 message not built"),
         }
     }
 }
 
-/// What the publishers keep between messages.
-struct Publishing {
-    odometry: OdometryUncertainty,
-    imu_noise: messages::ImuNoise,
-    status: StatusTopics,
-    /// Status ticks seen, for the rates of `api::ros1::published`.
-    status_ticks: u64,
-    next_tracked_pose: Option<crate::time::Timestamp>,
-    seq: u32,
-    imu_seq: u32,
+/// The node's state between messages: what is due to publish, and `/get_position`'s answer.
+struct State {
+    publishing: Publishing,
     position: watch::Sender<Option<Pose2D>>,
+}
+
+impl State {
+    /// The messages `item` makes due (published when the node is registered).
+    fn on_feed(&mut self, item: &Feed) -> Messages {
+        if let Feed::Poses(_, report) = item {
+            self.position.send_replace(publisher::position(report));
+        }
+        let mut out = Vec::new();
+        self.publishing.on_feed(item, &mut out);
+        out
+    }
 }
 
 async fn run(
@@ -247,14 +256,8 @@ async fn run(
         waiting: Arc::new(Mutex::new(Waiting::default())),
     };
     let (position, position_rx) = watch::channel(None);
-    let mut publishing = Publishing {
-        odometry: OdometryUncertainty::new(spec.odometry_noise),
-        imu_noise: spec.imu_noise,
-        status: StatusTopics::default(),
-        next_tracked_pose: None,
-        seq: 0,
-        imu_seq: 0,
-        status_ticks: 0,
+    let mut state = State {
+        publishing: Publishing::new(spec.odometry_noise, spec.imu_noise),
         position,
     };
     let mut outage = OutageLog::default();
@@ -269,9 +272,9 @@ async fn run(
         let graph = loop {
             tokio::select! {
                 graph = &mut building => break graph,
-                Some(item) = feed.recv() => publishing.absorb(&item),
+                Some(item) = feed.recv() => drop(state.on_feed(&item)),
                 Some(answer) = answers.recv() => {
-                    answer_pending(&requests, &mut publishing, answer, None).await;
+                    answer_pending(&requests, &mut state, answer, None).await;
                 }
             }
         };
@@ -299,9 +302,9 @@ async fn run(
                 loop {
                     tokio::select! {
                         () = &mut pause => break,
-                        Some(item) = feed.recv() => publishing.absorb(&item),
+                        Some(item) = feed.recv() => drop(state.on_feed(&item)),
                         Some(answer) = answers.recv() => {
-                            answer_pending(&requests, &mut publishing, answer, None).await;
+                            answer_pending(&requests, &mut state, answer, None).await;
                         }
                     }
                 }
@@ -320,9 +323,9 @@ async fn run(
         outage_start = None;
         retry = Duration::from_millis(250);
         // The latched status codes again, for the new registrations.
-        for (topic, code) in publishing.status.current() {
-            publish_code(&graph, topic, code).await;
-        }
+        let mut latched = Vec::new();
+        state.publishing.latched(&mut latched);
+        graph.publish(latched).await;
         let master = MasterClient::new(
             spec.config.master_uri.as_str(),
             uri.as_str(),
@@ -333,9 +336,9 @@ async fn run(
         let mut master_away = false;
         loop {
             tokio::select! {
-                Some(item) = feed.recv() => publishing.publish(&graph, item).await,
+                Some(item) = feed.recv() => graph.publish(state.on_feed(&item)).await,
                 Some(answer) = answers.recv() => {
-                    answer_pending(&requests, &mut publishing, answer, Some(&graph)).await;
+                    answer_pending(&requests, &mut state, answer, Some(&graph)).await;
                 }
                 _ = watch.tick() => {
                     match still_registered(master.as_ref(), &spec.config.master_uri, &spec.config.node_name, &uri).await {
@@ -366,7 +369,7 @@ async fn run(
 /// Gives the engine's `answer` to the request it names.
 async fn answer_pending(
     requests: &Requests,
-    publishing: &mut Publishing,
+    state: &mut State,
     Answer { request, result }: Answer,
     graph: Option<&Graph>,
 ) {
@@ -380,13 +383,11 @@ async fn answer_pending(
     let answer = result;
     if answer.is_ok() && entry.starts_motion {
         let mut codes = Vec::new();
-        publishing
-            .status
+        state
+            .publishing
             .on_request_accepted(entry.charging, &mut codes);
         if let Some(graph) = graph {
-            for (topic, code) in codes {
-                publish_code(graph, topic, code).await;
-            }
+            graph.publish(codes).await;
         }
     }
     if let Some(waiter) = entry.waiter {
@@ -432,107 +433,6 @@ async fn still_registered(
     }
 }
 
-async fn publish_code(graph: &Graph, topic: Topic, code: i16) {
-    if let Some((_, publisher)) = graph.codes.iter().find(|(t, _)| *t == topic)
-        && let Err(e) = publisher.publish(&std_msgs::Int16 { data: code }).await
-    {
-        tracing::debug!(topic = topic.name(), error = %e, "ROS1 publish failed");
-    }
-}
-
-impl Publishing {
-    /// Keeps what the next registration needs while the node is not registered.
-    fn absorb(&mut self, item: &Feed) {
-        let mut codes = Vec::new();
-        match item {
-            Feed::Status(status) => {
-                self.status_ticks += 1;
-                self.status.on_status(status, &mut codes);
-            }
-            Feed::MotionEnded(result) => self.status.on_motion_ended(result, &mut codes),
-            Feed::Mission { tag, event } => self.status.on_mission(*tag, event, &mut codes),
-            Feed::Poses(_, report) => {
-                self.position.send_replace(position(report));
-            }
-            Feed::Imu(_) => {}
-        }
-    }
-
-    async fn publish(&mut self, graph: &Graph, item: Feed) {
-        let mut codes = Vec::new();
-        match item {
-            Feed::Poses(t, report) => {
-                self.position.send_replace(position(&report));
-                if let Some(odom) = report.odom {
-                    let covariance = self.odometry.update(t, &odom);
-                    self.seq = self.seq.wrapping_add(1);
-                    let message = messages::odometry(t, self.seq, &odom, &covariance);
-                    if let Err(e) = graph.raw_odom.publish(&message).await {
-                        tracing::debug!(error = %e, "/raw_odom publish failed");
-                    }
-                }
-                // `/tracked_pose` and `/tf` at 15 Hz.
-                let due = self.next_tracked_pose.is_none_or(|next| t >= next);
-                if due && (report.map.is_some() || report.odom.is_some()) {
-                    let next = self
-                        .next_tracked_pose
-                        .map_or(t, |n| n.saturating_add(TRACKED_POSE_PERIOD));
-                    // Late by more than a period (a pause in the feed): start again from now.
-                    self.next_tracked_pose = Some(if next < t {
-                        t.saturating_add(TRACKED_POSE_PERIOD)
-                    } else {
-                        next
-                    });
-                    if let Some((pose, _)) = report.map {
-                        let message = messages::pose_stamped(t, self.seq, &pose);
-                        if let Err(e) = graph.tracked_pose.publish(&message).await {
-                            tracing::debug!(error = %e, "/tracked_pose publish failed");
-                        }
-                    }
-                    if let Some(message) = messages::tf(t, &report)
-                        && let Err(e) = graph.tf.publish(&message).await
-                    {
-                        tracing::debug!(error = %e, "/tf publish failed");
-                    }
-                }
-            }
-            Feed::Imu(sample) => {
-                self.imu_seq = self.imu_seq.wrapping_add(1);
-                let message = messages::imu(&sample, self.imu_seq, &self.imu_noise);
-                if let Err(e) = graph.imu.publish(&message).await {
-                    tracing::debug!(error = %e, "/imu/data publish failed");
-                }
-            }
-            Feed::Status(status) => {
-                self.status_ticks += 1;
-                self.status.on_status(&status, &mut codes);
-                for topic in published::due(self.status_ticks) {
-                    let Some(publisher) = graph.status_topics.iter().find(|p| p.name == topic.name)
-                    else {
-                        continue;
-                    };
-                    if let Some(msg) = (topic.build)(&status, self.status_ticks as u32) {
-                        publisher.publish(&msg).await;
-                    }
-                }
-            }
-            Feed::MotionEnded(result) => self.status.on_motion_ended(&result, &mut codes),
-            Feed::Mission { tag, event } => self.status.on_mission(tag, &event, &mut codes),
-        }
-        for (topic, code) in codes {
-            publish_code(graph, topic, code).await;
-        }
-    }
-}
-
-/// `/get_position`'s answer: the map pose when located, else none.
-fn position(report: &crate::vehicle::PoseReport) -> Option<Pose2D> {
-    match (report.localization, report.map) {
-        (Localization::Good | Localization::Lost, Some((pose, _))) => Some(pose),
-        _ => None,
-    }
-}
-
 /// Connects and registers every publisher, subscriber and service.
 async fn build(
     spec: &Ros1Spec,
@@ -540,17 +440,9 @@ async fn build(
     position: &watch::Receiver<Option<Pose2D>>,
 ) -> Result<Graph, roslibrust::ros1::NodeError> {
     let node = NodeHandle::new(&spec.config.master_uri, &spec.config.node_name).await?;
-    let raw_odom = node.advertise("/raw_odom", 10, false).await?;
-    let imu = node.advertise("/imu/data", 10, false).await?;
-    let tracked_pose = node.advertise("/tracked_pose", 10, false).await?;
-    let tf = node.advertise("/tf", 10, false).await?;
-    let mut status_topics = Vec::new();
-    for topic in published::STATUS_TOPICS {
-        status_topics.push(StatusPublisher::advertise(&node, topic).await?);
-    }
-    let mut codes = Vec::new();
-    for topic in Topic::ALL {
-        codes.push((topic, node.advertise(topic.name(), 1, true).await?));
+    let mut publishers = Vec::new();
+    for topic in publisher::advertised() {
+        publishers.push(TopicPublisher::advertise(&node, &topic).await?);
     }
     let mut subscribers = JoinSet::new();
     let rate = (spec.config.command_rate_hz, spec.config.command_burst);
@@ -665,12 +557,7 @@ async fn build(
         .await?,
     );
     Ok(Graph {
-        raw_odom,
-        imu,
-        tracked_pose,
-        tf,
-        status_topics,
-        codes,
+        publishers,
         _services: services,
         _subscribers: subscribers,
         node,

@@ -1,0 +1,153 @@
+//! The messages the node publishes, as JSON of their ROS1 types (the field names of
+//! `interfaces/`), built from the core's poses, samples and codes, stamped and framed by
+//! REP-103/105. The node serialises each through its generated type, which checks every
+//! field.
+
+use serde_json::{Value, json};
+
+use super::odometry::OdometryCovariance;
+use super::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
+use crate::devices::imu::ImuSample;
+use crate::fusion::odometry::OdomPose;
+use crate::time::Timestamp;
+use crate::vehicle::{Pose2D, PoseReport};
+
+/// The IMU's noise, 1σ, for `/imu/data`'s covariances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImuNoise {
+    /// Angular rate, rad/s.
+    pub gyro_rps: f64,
+    /// Specific force, m/s².
+    pub accel_mps2: f64,
+    /// The sensor's own orientation, rad.
+    pub orientation_rad: f64,
+}
+
+/// std_msgs/Header. ROS1 time is two uint32 on the wire; the generated type holds them as
+/// i32, which carries the same 32 bits.
+pub fn header(t: Timestamp, seq: u32, frame: &str) -> Value {
+    let (secs, nsecs) = ros_time(t);
+    json!({
+        "seq": seq,
+        "stamp": {"secs": secs as i32, "nsecs": nsecs as i32},
+        "frame_id": frame,
+    })
+}
+
+fn quaternion([x, y, z, w]: [f64; 4]) -> Value {
+    json!({"x": x, "y": y, "z": z, "w": w})
+}
+
+fn vector(v: &nalgebra::Vector3<f64>) -> Value {
+    json!({"x": v.x, "y": v.y, "z": v.z})
+}
+
+/// A diagonal 3×3 covariance, row-major.
+fn diagonal(variance: f64) -> [f64; 9] {
+    let mut m = [0.0; 9];
+    m[0] = variance;
+    m[4] = variance;
+    m[8] = variance;
+    m
+}
+
+/// A planar pose: z 0, a rotation about z.
+fn pose(x: f64, y: f64, yaw: f64) -> Value {
+    json!({
+        "position": {"x": x, "y": y, "z": 0.0},
+        "orientation": quaternion(yaw_quaternion(yaw)),
+    })
+}
+
+/// `/raw_odom` (nav_msgs/Odometry): the `odom` frame's pose and the speeds in the vehicle
+/// frame.
+pub fn odometry(t: Timestamp, seq: u32, odom: &OdomPose, covariance: &OdometryCovariance) -> Value {
+    json!({
+        "header": header(t, seq, ODOM_FRAME),
+        "child_frame_id": BASE_FRAME,
+        "pose": {
+            "pose": pose(odom.x, odom.y, odom.yaw),
+            "covariance": covariance.pose.to_vec(),
+        },
+        "twist": {
+            "twist": {
+                "linear": {"x": odom.v, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": odom.w},
+            },
+            "covariance": covariance.twist.to_vec(),
+        },
+    })
+}
+
+/// `/tracked_pose` (geometry_msgs/PoseStamped): the fused pose in the map frame.
+pub fn pose_stamped(t: Timestamp, seq: u32, p: &Pose2D) -> Value {
+    json!({"header": header(t, seq, MAP_FRAME), "pose": pose(p.x, p.y, p.yaw)})
+}
+
+/// One transform: `child` placed at `p` in `parent`.
+fn transform(t: Timestamp, parent: &str, child: &str, p: &Pose2D) -> Value {
+    json!({
+        // tf ignores seq; each transform's is 0, as tf's own broadcasters leave it.
+        "header": header(t, 0, parent),
+        "child_frame_id": child,
+        "transform": {
+            "translation": {"x": p.x, "y": p.y, "z": 0.0},
+            "rotation": quaternion(yaw_quaternion(p.yaw)),
+        },
+    })
+}
+
+/// `/tf` (tf2_msgs/TFMessage): map→odom (the correction GNSS estimates) and odom→base_link
+/// (the dead reckoning) once the vehicle is placed, odom→base_link alone before; `None`
+/// without odometry.
+pub fn tf(t: Timestamp, report: &PoseReport) -> Option<Value> {
+    let transforms = match (report.frames, report.odom) {
+        (Some(f), _) => vec![
+            transform(t, MAP_FRAME, ODOM_FRAME, &f.map_to_odom),
+            transform(t, ODOM_FRAME, BASE_FRAME, &f.odom_to_base),
+        ],
+        (None, Some(o)) => vec![transform(
+            t,
+            ODOM_FRAME,
+            BASE_FRAME,
+            &Pose2D {
+                x: o.x,
+                y: o.y,
+                yaw: o.yaw,
+            },
+        )],
+        (None, None) => return None,
+    };
+    Some(json!({"transforms": transforms}))
+}
+
+/// `/imu/data` (sensor_msgs/Imu): a sample in the vehicle frame (the mounting applied),
+/// stamped when it was received. Without the sensor's own orientation,
+/// orientation_covariance[0] is -1, as sensor_msgs/Imu says.
+pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> Value {
+    let (orientation, orientation_covariance) = match sample.orientation {
+        Some(q) => (
+            quaternion([q.i, q.j, q.k, q.w]),
+            diagonal(noise.orientation_rad.powi(2)),
+        ),
+        None => {
+            let mut unknown = [0.0; 9];
+            unknown[0] = -1.0;
+            (quaternion([0.0, 0.0, 0.0, 1.0]), unknown)
+        }
+    };
+    json!({
+        "header": header(sample.rx, seq, BASE_FRAME),
+        "orientation": orientation,
+        "orientation_covariance": orientation_covariance,
+        "angular_velocity": vector(&sample.gyro),
+        "angular_velocity_covariance": diagonal(noise.gyro_rps.powi(2)),
+        "linear_acceleration": vector(&sample.accel),
+        "linear_acceleration_covariance": diagonal(noise.accel_mps2.powi(2)),
+    })
+}
+
+/// A status code topic's std_msgs/Int16.
+pub fn code(data: i16) -> Value {
+    json!({"data": data})
+}
