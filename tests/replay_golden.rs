@@ -246,17 +246,7 @@ fn can_drive_replays_drives_and_bms() {
 #[test]
 fn ros_requests_recorded_before_the_adapters_replay_as_before() {
     let fixture = common::repo().join("fixtures/ros-legacy");
-    let out = Command::new(common::chassisd())
-        .arg("replay")
-        .arg("--lenient")
-        .arg(&fixture)
-        .output()
-        .expect("chassisd runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::replay_lenient(&fixture);
     let answers = engine_answers(&fixture);
     let expected_status = fixture.join("expected/base_status.jsonl");
     let expected_answers = fixture.join("expected/answers.txt");
@@ -291,23 +281,12 @@ fn ros_requests_recorded_before_the_adapters_replay_as_before() {
 /// What the engine answers and announces over a recording, one line per output, each with
 /// the time of the record that caused it.
 fn engine_answers(dir: &std::path::Path) -> String {
-    use chassisd::config::VehicleConfig;
-    use chassisd::engine::{Engine, EngineOutput};
-    use chassisd::record::RecordingReader;
-    use chassisd::time::Timestamp;
+    use chassisd::engine::EngineOutput;
     use std::fmt::Write as _;
 
-    let (meta, reader) = RecordingReader::open(dir).expect("recording opens");
-    let config = VehicleConfig::load(&dir.join(meta.vehicle_config.as_deref().expect("config")))
-        .expect("stored configuration loads");
-    let mut engine = Engine::new(&config, &[]);
-    if let Some(start) = meta.start_us {
-        engine.start_at(Timestamp::from_micros(start));
-    }
     let mut text = String::new();
-    let mut out = Vec::new();
-    for record in reader {
-        let t = engine.handle(&record, &mut out);
+    // Every record as a record, transmissions included, as when the answers were taken.
+    common::through_engine(dir, false, |t, out| {
         for output in out.drain(..) {
             let line = match output {
                 EngineOutput::CommandResult {
@@ -325,6 +304,6 @@ fn engine_answers(dir: &std::path::Path) -> String {
             };
             writeln!(text, "{} {line}", t.as_micros()).unwrap();
         }
-    }
+    });
     text
 }

@@ -72,7 +72,8 @@ pub struct DialectSetup<'a> {
 /// module provides one, and [`crate::api::DIALECTS`] lists them.
 pub type DialectFactory = fn(&mut DialectSetup<'_>) -> Option<Box<dyn Dialect>>;
 
-/// The MQTT link's adapter: every dialect in force, each owning its topics.
+/// The MQTT link's adapter: every dialect in force, each owning its topics; what a dialect
+/// publishes goes out as [`Reply::Publish`].
 impl Adapter for Dialects {
     fn source(&self) -> &'static str {
         MQTT_SOURCE
@@ -86,14 +87,11 @@ impl Adapter for Dialects {
         core: &mut dyn CoreAccess,
         out: &mut Vec<Reply>,
     ) -> Handled {
-        let mut replies = Vec::new();
-        let owned = self.on_message(t, topic, payload, core, &mut replies);
-        out.extend(replies.into_iter().map(Reply::Publish));
-        if owned {
-            Handled::Taken
-        } else {
-            Handled::NotOwned
-        }
+        let Some(d) = self.dialects.iter_mut().find(|d| d.owns(topic)) else {
+            return Handled::NotOwned;
+        };
+        publishing(out, |p| d.on_message(t, topic, payload, core, p));
+        Handled::Taken
     }
 
     fn on_status(
@@ -102,15 +100,15 @@ impl Adapter for Dialects {
         core: &mut dyn CoreAccess,
         out: &mut Vec<Reply>,
     ) {
-        let mut reports = Vec::new();
-        Dialects::on_status(self, status, core, &mut reports);
-        out.extend(reports.into_iter().map(Reply::Publish));
+        for d in &mut self.dialects {
+            publishing(out, |p| d.on_status(status, core, p));
+        }
     }
 
     fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Reply>) {
-        let mut replies = Vec::new();
-        Dialects::on_motion_ended(self, t, result, &mut replies);
-        out.extend(replies.into_iter().map(Reply::Publish));
+        if let Some(d) = result.tag.and_then(|tag| self.owner(tag)) {
+            publishing(out, |p| d.on_motion_ended(t, result, p));
+        }
     }
 
     fn on_mission_event(
@@ -120,10 +118,19 @@ impl Adapter for Dialects {
         event: &MissionEvent,
         out: &mut Vec<Reply>,
     ) {
-        let mut replies = Vec::new();
-        Dialects::on_mission_event(self, t, tag, event, &mut replies);
-        out.extend(replies.into_iter().map(Reply::Publish));
+        if let Some(tag) = tag
+            && let Some(d) = self.owner(tag)
+        {
+            publishing(out, |p| d.on_mission_event(t, tag.id, event, p));
+        }
     }
+}
+
+/// What `dialect` publishes, as replies.
+fn publishing(out: &mut Vec<Reply>, dialect: impl FnOnce(&mut Vec<Publish>)) {
+    let mut publishes = Vec::new();
+    dialect(&mut publishes);
+    out.extend(publishes.into_iter().map(Reply::Publish));
 }
 
 /// The dialects in force, in the order they were configured.
@@ -173,57 +180,8 @@ impl Dialects {
             .collect()
     }
 
-    /// Routes an incoming message; returns false when no dialect owns its topic.
-    pub fn on_message(
-        &mut self,
-        t: Timestamp,
-        topic: &str,
-        payload: &[u8],
-        core: &mut dyn CoreAccess,
-        out: &mut Vec<Publish>,
-    ) -> bool {
-        let Some(d) = self.dialects.iter_mut().find(|d| d.owns(topic)) else {
-            return false;
-        };
-        d.on_message(t, topic, payload, core, out);
-        true
-    }
-
-    /// The end of a motion, to the dialect that tagged it.
-    pub fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Publish>) {
-        let Some(tag) = result.tag else {
-            return;
-        };
-        if let Some(d) = self.dialects.iter_mut().find(|d| d.name() == tag.owner) {
-            d.on_motion_ended(t, result, out);
-        }
-    }
-
-    /// A mission's progress, to the dialect that tagged it.
-    pub fn on_mission_event(
-        &mut self,
-        t: Timestamp,
-        tag: Option<MotionTag>,
-        event: &MissionEvent,
-        out: &mut Vec<Publish>,
-    ) {
-        let Some(tag) = tag else {
-            return;
-        };
-        if let Some(d) = self.dialects.iter_mut().find(|d| d.name() == tag.owner) {
-            d.on_mission_event(t, tag.id, event, out);
-        }
-    }
-
-    /// Every dialect's publications at a status tick.
-    pub fn on_status(
-        &mut self,
-        status: &VehicleStatus,
-        core: &mut dyn CoreAccess,
-        out: &mut Vec<Publish>,
-    ) {
-        for d in &mut self.dialects {
-            d.on_status(status, core, out);
-        }
+    /// The dialect that tagged a motion or mission.
+    fn owner(&mut self, tag: MotionTag) -> Option<&mut Box<dyn Dialect>> {
+        self.dialects.iter_mut().find(|d| d.name() == tag.owner)
     }
 }

@@ -96,11 +96,34 @@ pub fn tempdir(name: &str) -> PathBuf {
     dir
 }
 
-/// Replays a recording through the library's engine and returns the drive train's wheel
-/// odometry at its end.
-pub fn replay_odometry(dir: &std::path::Path) -> chassisd::vehicle::chassis::WheelOdometry {
+/// `chassisd replay --lenient PATH`, which must succeed (transmissions may differ).
+pub fn replay_lenient(path: &Path) -> Output {
+    let out = Command::new(chassisd())
+        .arg("replay")
+        .arg("--lenient")
+        .arg(path)
+        .output()
+        .expect("chassisd runs");
+    assert!(
+        out.status.success(),
+        "replay --lenient failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A recording's records through the library's engine, built from the configuration the
+/// recording holds and started where it starts; with `check_transmissions` the recorded
+/// transmissions are compared with the engine's, as `chassisd replay` does, instead of being
+/// taken as records. `each` sees the time the engine used for each record and the outputs
+/// it caused. Returns the engine after the records.
+pub fn through_engine(
+    dir: &Path,
+    check_transmissions: bool,
+    mut each: impl FnMut(chassisd::time::Timestamp, &mut Vec<chassisd::engine::EngineOutput>),
+) -> (chassisd::engine::Engine, chassisd::record::Meta) {
     use chassisd::config::VehicleConfig;
-    use chassisd::engine::{Engine, EngineOutput};
+    use chassisd::engine::Engine;
     use chassisd::record::RecordingReader;
     use chassisd::time::Timestamp;
 
@@ -111,14 +134,28 @@ pub fn replay_odometry(dir: &std::path::Path) -> chassisd::vehicle::chassis::Whe
         .expect("recording holds its configuration");
     let config = VehicleConfig::load(&dir.join(file)).expect("stored configuration loads");
     let mut engine = Engine::new(&config, &[]);
-    engine.check_recorded_transmissions();
+    if check_transmissions {
+        engine.check_recorded_transmissions();
+    }
     if let Some(start) = meta.start_us {
         engine.start_at(Timestamp::from_micros(start));
     }
     let mut out = Vec::new();
     for record in reader {
-        engine.handle(&record, &mut out);
+        let t = engine.handle(&record, &mut out);
+        each(t, &mut out);
     }
+    (engine, meta)
+}
+
+/// Replays a recording through the library's engine and returns the drive train's wheel
+/// odometry at its end.
+pub fn replay_odometry(dir: &Path) -> chassisd::vehicle::chassis::WheelOdometry {
+    use chassisd::engine::EngineOutput;
+    use chassisd::time::Timestamp;
+
+    let mut out = Vec::new();
+    let (mut engine, meta) = through_engine(dir, true, |_, outputs| out.append(outputs));
     if let Some(end) = meta.end_us {
         engine.advance_to(Timestamp::from_micros(end), &mut out);
     }

@@ -175,6 +175,7 @@ impl Graph {
 /// type.
 struct TopicPublisher {
     name: &'static str,
+    latched: bool,
     descriptor: &'static roslibrust::MessageDescriptor,
     publisher: roslibrust::ros1::PublisherAny,
 }
@@ -203,13 +204,19 @@ impl TopicPublisher {
             .await?;
         Ok(Self {
             name: topic.name,
+            latched: topic.latched,
             descriptor,
             publisher,
         })
     }
 
-    /// Publishes `msg`, checked field by field against the type.
+    /// Publishes `msg`, checked field by field against the type (some 20 µs a message,
+    /// `cargo bench --bench ros1`: skipped while nobody subscribes; latched topics are
+    /// kept, for the subscriber that comes).
     async fn publish(&self, msg: &serde_json::Value) {
+        if !self.latched && !self.publisher.has_connected_clients() {
+            return;
+        }
         match messages::wire(self.descriptor, msg) {
             Ok(bytes) => {
                 if let Err(e) = self.publisher.publish(bytes).await {
