@@ -272,6 +272,14 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
         o.contains("angular_velocity_covariance")
     });
     assert!(imu.contains("frame_id: \"base_link\""), "{imu}");
+    // A topic from the published table (api::ros1::published): the wheels, left then right.
+    let wheels = echo_until(&master, "/wheel_speeds", Duration::from_secs(5), |o| {
+        o.contains("label: \"left_right\"")
+    });
+    assert!(
+        wheels.contains("size: 2") && wheels.contains("data: ["),
+        "{wheels}"
+    );
 
     for (topic, code) in [
         ("/androidmsg_initstatus", "data: 12"),
@@ -605,6 +613,7 @@ fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
     let ours = [
         message::<std_msgs::Header>(),
         message::<std_msgs::Int16>(),
+        message::<std_msgs::Float64MultiArray>(),
         message::<geometry_msgs::Twist>(),
         message::<geometry_msgs::PoseStamped>(),
         message::<geometry_msgs::Transform>(),

@@ -89,6 +89,20 @@ fn pose_odom_battery_and_diagnostics_arrive_at_their_rates() {
 }
 
 #[test]
+fn wheel_speeds_arrive_left_then_right() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(
+        port,
+        &["echo", "/wheel_speeds", "std_msgs/msg/Float64MultiArray"],
+    );
+    let message = &seen["message"];
+    assert_eq!(message["layout"]["dim"][0]["label"], "left_right", "{seen}");
+    assert_eq!(message["data"].as_array().map(Vec::len), Some(2), "{seen}");
+    drop(sim);
+}
+
+#[test]
 fn a_goal_pose_drives_the_vehicle_there_along_its_plan() {
     let port = free_port();
     let sim = sim(port);

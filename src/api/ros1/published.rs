@@ -4,7 +4,7 @@
 //! the JSON through that type, which checks every field; so a topic, even of a new type,
 //! needs only its interface files and a line in [`STATUS_TOPICS`].
 
-use serde_json::Value;
+use serde_json::{Value, json};
 
 use crate::vehicle::VehicleStatus;
 
@@ -23,11 +23,55 @@ pub struct StatusTopic {
 }
 
 /// Every topic the node publishes from the status ticks.
-pub const STATUS_TOPICS: &[StatusTopic] = &[];
+pub const STATUS_TOPICS: &[StatusTopic] = &[StatusTopic {
+    name: "/wheel_speeds",
+    msg_type: "std_msgs/Float64MultiArray",
+    every: 1,
+    build: wheel_speeds,
+}];
+
+/// `/wheel_speeds`: the left and the right wheel's measured surface speed, m/s (forward
+/// positive), at 10 Hz; nothing without a drive train.
+fn wheel_speeds(status: &VehicleStatus, _seq: u32) -> Option<Value> {
+    let odometry = status.chassis.as_ref()?.odometry;
+    Some(json!({
+        "layout": {
+            "dim": [{"label": "left_right", "size": 2, "stride": 2}],
+            "data_offset": 0,
+        },
+        "data": [odometry.left_mps, odometry.right_mps],
+    }))
+}
 
 /// The topics due at the `tick`th status tick (counted from 1).
 pub fn due(tick: u64) -> impl Iterator<Item = &'static StatusTopic> {
     STATUS_TOPICS
         .iter()
         .filter(move |t| tick.is_multiple_of(t.every.max(1)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wheel_speeds_are_left_then_right() {
+        let mut status = VehicleStatus::default();
+        assert!(
+            wheel_speeds(&status, 1).is_none(),
+            "no drive train, no speeds"
+        );
+        status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
+            odometry: crate::vehicle::chassis::WheelOdometry {
+                left_mps: 0.25,
+                right_mps: 0.5,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let msg = wheel_speeds(&status, 1).unwrap();
+        assert_eq!(msg["data"], json!([0.25, 0.5]));
+        assert_eq!(msg["layout"]["dim"][0]["size"], 2);
+        assert_eq!(due(1).count(), STATUS_TOPICS.len());
+    }
 }

@@ -353,6 +353,19 @@ pub fn path(t: Timestamp, points: &[(f64, f64)]) -> Value {
     json!({"header": header(t, MAP_FRAME), "poses": poses})
 }
 
+/// `/wheel_speeds` (std_msgs/Float64MultiArray): the left and the right wheel's measured
+/// surface speed, m/s (forward positive); nothing without a drive train.
+pub fn wheel_speeds(status: &VehicleStatus) -> Option<Value> {
+    let odometry = status.chassis.as_ref()?.odometry;
+    Some(json!({
+        "layout": {
+            "dim": [{"label": "left_right", "size": 2, "stride": 2}],
+            "data_offset": 0,
+        },
+        "data": [odometry.left_mps, odometry.right_mps],
+    }))
+}
+
 /// The goal (x, y in m, yaw in rad, map frame) of a `/goal_pose` message
 /// (geometry_msgs/PoseStamped): its frame must be `map` (or empty, taken as `map`), its
 /// orientation a rotation about z.
@@ -439,6 +452,23 @@ mod tests {
                 .unwrap_or_default()
                 .contains("not connected")
         );
+    }
+
+    #[test]
+    fn wheel_speeds_are_left_then_right() {
+        let mut status = VehicleStatus::default();
+        assert!(wheel_speeds(&status).is_none(), "no drive train, no speeds");
+        status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
+            odometry: crate::vehicle::chassis::WheelOdometry {
+                left_mps: -0.1,
+                right_mps: 0.3,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let msg = wheel_speeds(&status).unwrap();
+        assert_eq!(msg["data"], json!([-0.1, 0.3]));
+        assert_eq!(msg["layout"]["dim"][0]["label"], "left_right");
     }
 
     #[test]

@@ -6,7 +6,7 @@
 use serde_json::Value;
 
 use super::messages;
-use super::topics::{BATTERY_STATE, DIAGNOSTICS, POSE, TF};
+use super::topics::{BATTERY_STATE, DIAGNOSTICS, POSE, TF, WHEEL_SPEEDS};
 use crate::vehicle::VehicleStatus;
 
 /// One topic published from the status ticks.
@@ -31,6 +31,11 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
         name: TF,
         every: 1,
         build: messages::tf,
+    },
+    StatusTopic {
+        name: WHEEL_SPEEDS,
+        every: 1,
+        build: messages::wheel_speeds,
     },
     StatusTopic {
         name: BATTERY_STATE,
@@ -67,7 +72,7 @@ mod tests {
                 t.name
             );
         }
-        assert_eq!(due(1).count(), 2);
-        assert_eq!(due(10).count(), 4);
+        assert_eq!(due(1).count(), 3);
+        assert_eq!(due(10).count(), 5);
     }
 }

@@ -31,6 +31,8 @@ pub const TF: &str = "/tf";
 pub const BATTERY_STATE: &str = "/battery_state";
 /// The health of each part.
 pub const DIAGNOSTICS: &str = "/diagnostics";
+/// The wheels' measured speeds.
+pub const WHEEL_SPEEDS: &str = "/wheel_speeds";
 /// The path of the move under way.
 pub const PLAN: &str = "/plan";
 /// The engine's events.
@@ -66,6 +68,11 @@ pub const TOPICS: &[Topic] = &[
         name: DIAGNOSTICS,
         msg_type: "diagnostic_msgs/msg/DiagnosticArray",
         flow: Flow::Published(1.0),
+    },
+    Topic {
+        name: WHEEL_SPEEDS,
+        msg_type: "std_msgs/msg/Float64MultiArray",
+        flow: Flow::Published(10.0),
     },
     Topic {
         name: PLAN,
