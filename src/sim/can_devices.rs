@@ -1,15 +1,19 @@
-//! The simulated CAN devices of a vehicle configuration, for `chassisd can-sim`: one trait,
-//! [`SimCanDevice`], and a registry, [`KINDS`], that follows the engine's own
-//! ([`crate::engine::drivetrain::KINDS`]): every kind of device chassisd drives has its
-//! simulated counterpart here, built from the same configuration, in the same order.
+//! The simulated CAN devices of a vehicle configuration, for `chassisd can-sim` and the
+//! simulated plant: one trait, [`SimCanDevice`], and a registry, [`KINDS`], that follows the
+//! engine's own ([`crate::engine::drivetrain::KINDS`]): every kind of device chassisd
+//! drives has its simulated counterpart here, built from the same configuration, in the
+//! same order. The plant couples them to its physics through the trait (the drives' motor
+//! speeds, the battery's current, the cutter's state), never by knowing their types.
 
 use serde_json::{Value, json};
 
-use super::bms::{SimDaly, SimDbcBms};
+use super::bms::{Battery, SimDaly, SimDbcBms};
 use super::cia402_drive::{MotorModel, SimDrive};
+use super::cutter_switch::SimCutterSwitch;
 use super::estop::{Button, SimEStop};
 use crate::config::VehicleConfig;
 use crate::config::chassis::CanBusConfig;
+use crate::config::mission::Cutter;
 use crate::devices::bms::BmsProfile;
 use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
@@ -21,6 +25,16 @@ use crate::time::Timestamp;
 pub struct BusLoad {
     /// The motors' speeds summed, r/min.
     pub rpm: f64,
+    /// The pack's current when a plant's physics decides it (the vehicle on its charger, the
+    /// blade turning), A, positive while charging; else it follows `rpm`.
+    pub current_a: Option<f64>,
+}
+
+/// What a configuration does not say about simulated hardware.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Hardware {
+    /// The drives' motors.
+    pub motor: MotorModel,
 }
 
 /// A fault or a state a test injects into one simulated device, by its name.
@@ -51,6 +65,8 @@ pub enum Report {
     Drive(Value),
     /// The battery's state.
     Battery(Value),
+    /// The cutter switch's relay.
+    Cutter(Value),
     /// Nothing to say.
     Nothing,
 }
@@ -69,6 +85,22 @@ pub trait SimCanDevice: Send + std::fmt::Debug {
     fn report(&self) -> Report {
         Report::Nothing
     }
+    /// The drive, when it is one: the plant turns its wheels and blade by its motors.
+    fn drive(&self) -> Option<&SimDrive> {
+        None
+    }
+    /// The drive, when it is one, to back-drive.
+    fn drive_mut(&mut self) -> Option<&mut SimDrive> {
+        None
+    }
+    /// The battery, when it is a BMS.
+    fn battery(&self) -> Option<Battery> {
+        None
+    }
+    /// Whether the relay is closed, when it is a cutter switch.
+    fn cutter_on(&self) -> Option<bool> {
+        None
+    }
 }
 
 /// The simulated devices a kind puts on an interface, or why they cannot be built.
@@ -79,11 +111,15 @@ pub struct SimKind {
     /// The engine's kind it stands for (`DeviceKind::name`).
     pub simulates: &'static str,
     /// The simulated devices the configuration puts on an interface, or why they cannot be.
-    pub build: fn(&VehicleConfig, &CanBusConfig) -> Built,
+    pub build: fn(&VehicleConfig, &CanBusConfig, &Hardware) -> Built,
 }
 
 /// Every simulated kind, in the engine's order (the order frames are offered and sent).
 pub const KINDS: &[SimKind] = &[
+    SimKind {
+        simulates: "cutter switch frame",
+        build: cutter_switch,
+    },
     SimKind {
         simulates: "CiA 402 drive",
         build: drives,
@@ -98,17 +134,55 @@ pub const KINDS: &[SimKind] = &[
     },
 ];
 
-/// The engine's kinds that have no simulated device: chassisd's own frames, and the
-/// cutter's switch, whose frames the simulated plant listens for itself.
-pub const NOT_SIMULATED: &[&str] = &["cutter switch frame", "CANopen master heartbeat and SYNC"];
+/// The engine's kinds that have no simulated device: chassisd's own frames.
+pub const NOT_SIMULATED: &[&str] = &["CANopen master heartbeat and SYNC"];
 
 /// The simulated devices of `bus`, every kind in order.
-pub fn build(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
+pub fn build(config: &VehicleConfig, bus: &CanBusConfig, hardware: &Hardware) -> Built {
     let mut devices = Vec::new();
     for kind in KINDS {
-        devices.extend((kind.build)(config, bus)?);
+        devices.extend((kind.build)(config, bus, hardware)?);
     }
     Ok(devices)
+}
+
+#[derive(Debug)]
+struct CutterSwitch(SimCutterSwitch);
+
+fn cutter_switch(config: &VehicleConfig, bus: &CanBusConfig, _: &Hardware) -> Built {
+    Ok(match config.cutter.as_ref().and_then(|c| c.cutter().ok()) {
+        Some(Cutter::Frame {
+            bus: name,
+            on,
+            off,
+            repeat,
+        }) if name == bus.interface => vec![Box::new(CutterSwitch(SimCutterSwitch::new(
+            on, off, repeat,
+        )))],
+        _ => Vec::new(),
+    })
+}
+
+impl SimCanDevice for CutterSwitch {
+    fn name(&self) -> &str {
+        "cutter"
+    }
+
+    fn on_frame(&mut self, t: Timestamp, frame: &Frame, _out: &mut Vec<Frame>) {
+        self.0.on_frame(t, frame);
+    }
+
+    fn step(&mut self, t: Timestamp, _load: &mut BusLoad, _out: &mut Vec<Frame>) {
+        self.0.step(t);
+    }
+
+    fn report(&self) -> Report {
+        Report::Cutter(json!({"on": self.0.on()}))
+    }
+
+    fn cutter_on(&self) -> Option<bool> {
+        Some(self.0.on())
+    }
 }
 
 #[derive(Debug)]
@@ -117,14 +191,14 @@ struct Drive {
     drive: SimDrive,
 }
 
-fn drives(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
+fn drives(config: &VehicleConfig, bus: &CanBusConfig, hardware: &Hardware) -> Built {
     let mut out: Vec<Box<dyn SimCanDevice>> = Vec::new();
     for d in config.drive.iter().filter(|d| d.bus == bus.interface) {
         let profile = d.profile.get().ok_or("drive profile not loaded")?.clone();
         let node = NodeId::new(d.node).ok_or("node id out of range")?;
         out.push(Box::new(Drive {
             name: d.name.clone(),
-            drive: SimDrive::new(node, profile, MotorModel::default()),
+            drive: SimDrive::new(node, profile, hardware.motor),
         }));
     }
     Ok(out)
@@ -141,7 +215,7 @@ impl SimCanDevice for Drive {
 
     fn step(&mut self, t: Timestamp, load: &mut BusLoad, out: &mut Vec<Frame>) {
         self.drive.step(t, out);
-        load.rpm += self.drive.report().iter().map(|a| a.rpm.abs()).sum::<f64>();
+        load.rpm += self.drive.motor_rpm().iter().map(|r| r.abs()).sum::<f64>();
     }
 
     fn inject(&mut self, injection: Injection, out: &mut Vec<Frame>) {
@@ -158,6 +232,14 @@ impl SimCanDevice for Drive {
             Injection::Tpdo(on) => self.drive.set_tpdos(on),
             Injection::EStop(_) => {}
         }
+    }
+
+    fn drive(&self) -> Option<&SimDrive> {
+        Some(&self.drive)
+    }
+
+    fn drive_mut(&mut self) -> Option<&mut SimDrive> {
+        Some(&mut self.drive)
     }
 
     fn report(&self) -> Report {
@@ -186,7 +268,7 @@ struct Bms {
     last: Option<Timestamp>,
 }
 
-fn bms(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
+fn bms(config: &VehicleConfig, bus: &CanBusConfig, _: &Hardware) -> Built {
     let Some(b) = config.bms.as_ref().filter(|b| b.bus == bus.interface) else {
         return Ok(Vec::new());
     };
@@ -219,7 +301,7 @@ impl SimCanDevice for Bms {
             Pack::Daly(d) => &mut d.battery,
             Pack::Dbc(d) => &mut d.battery,
         };
-        battery.current_a = -(1.5 + 0.004 * load.rpm);
+        battery.current_a = load.current_a.unwrap_or(-(1.5 + 0.004 * load.rpm));
         battery.step(dt);
         if let Pack::Dbc(dbc) = &mut self.pack {
             dbc.step(t, out);
@@ -227,11 +309,15 @@ impl SimCanDevice for Bms {
     }
 
     fn report(&self) -> Report {
-        let b = match &self.pack {
-            Pack::Daly(d) => &d.battery,
-            Pack::Dbc(d) => &d.battery,
-        };
+        let b = self.battery().unwrap_or_default();
         Report::Battery(json!({"voltage": b.voltage_v, "current": b.current_a, "soc": b.soc_pct}))
+    }
+
+    fn battery(&self) -> Option<Battery> {
+        Some(match &self.pack {
+            Pack::Daly(d) => d.battery,
+            Pack::Dbc(d) => d.battery,
+        })
     }
 }
 
@@ -241,7 +327,7 @@ struct EStop {
     module: SimEStop,
 }
 
-fn estops(config: &VehicleConfig, bus: &CanBusConfig) -> Built {
+fn estops(config: &VehicleConfig, bus: &CanBusConfig, _: &Hardware) -> Built {
     let mut out: Vec<Box<dyn SimCanDevice>> = Vec::new();
     for e in config.estop.iter().filter(|e| e.bus == bus.interface) {
         let profile = e.profile.get().ok_or("e-stop profile not loaded")?.clone();
@@ -298,7 +384,7 @@ mod tests {
         let text = "[[can]]\ninterface = \"can0\"\n\
                     [[estop]]\nname = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can0\"\n";
         let config = VehicleConfig::from_toml(text, &dir.join("test.toml")).unwrap();
-        let mut devices = build(&config, &config.can[0]).unwrap();
+        let mut devices = build(&config, &config.can[0], &Hardware::default()).unwrap();
         assert_eq!(
             devices.iter().map(|d| d.name()).collect::<Vec<_>>(),
             ["body"]

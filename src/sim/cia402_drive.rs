@@ -58,6 +58,9 @@ struct Axis {
     rpm: f64,
     /// Encoder position, counts (fractional inside).
     counts: f64,
+    /// Motor speed forced from outside (the wheel back-driven: a recorded motion played
+    /// through the simulator), r/min, in place of the motor model.
+    back_driven: Option<f64>,
 }
 
 #[derive(Debug, Clone)]
@@ -148,9 +151,6 @@ pub struct SimDrive {
     /// TPDOs are sent (false: they stop while the heartbeat goes on, as a half-failed node).
     tpdos_on: bool,
     last_step: Option<Timestamp>,
-    /// Motor speed forced from outside (the wheels back-driven: a recorded motion played
-    /// through the simulator), r/min, in place of the motor model.
-    back_driven: Option<f64>,
 }
 
 impl SimDrive {
@@ -192,7 +192,6 @@ impl SimDrive {
             reset_edges: 0,
             tpdos_on: true,
             last_step: None,
-            back_driven: None,
             profile,
         }
     }
@@ -682,10 +681,12 @@ impl SimDrive {
         self.read(addr).map_or(0, |d| i64::from(d.as_i32()))
     }
 
-    /// Forces every axis's motor speed (r/min) whatever the drive commands, or gives the
-    /// motors back to the model (`None`).
-    pub fn back_drive(&mut self, rpm: Option<f64>) {
-        self.back_driven = rpm;
+    /// Forces `axis`'s motor speed (r/min) whatever the drive commands, or gives the motor
+    /// back to the model (`None`). An axis the drive does not have is ignored.
+    pub fn back_drive(&mut self, axis: usize, rpm: Option<f64>) {
+        if let Some(a) = self.axes.get_mut(axis) {
+            a.back_driven = rpm;
+        }
     }
 
     /// Advances the motor model and sends what is due: boot-up, heartbeats, TPDOs.
@@ -723,7 +724,7 @@ impl SimDrive {
             } else {
                 wanted - a.rpm
             };
-            let change = match self.back_driven {
+            let change = match a.back_driven {
                 Some(forced) => forced - a.rpm,
                 None => lagged.clamp(-max_step, max_step),
             };

@@ -9,7 +9,9 @@ use std::time::Duration;
 
 use bytes::Bytes;
 
-use super::plant::{GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SimVehicle};
+use super::plant::{
+    GnssCondition, LEFT_NODE, PlantConfig, RIGHT_NODE, SIM_BUS, SIM_CONFIG_NAME, SimVehicle,
+};
 use super::scenario::Scenario;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::trajectory::{MemoryStore, TrajectoryStore};
@@ -40,8 +42,6 @@ pub const IMU_SOURCE: &str = "imu";
 
 /// The drive profile of the simulated drives.
 const DRIVE_PROFILE: &str = include_str!("../../devices/cia402-generic.toml");
-/// Names the configuration built for a plant in errors.
-const SIM_CONFIG_NAME: &str = "<simulated vehicle>";
 
 /// Where a lockstep run's records and outputs go.
 pub trait Sink {
@@ -374,7 +374,7 @@ impl Lockstep {
                 payload: Payload::Link(LinkState::Up),
             })
             .collect();
-        let mut vehicle = SimVehicle::new(plant, drive_profile()?, seed, start);
+        let mut vehicle = SimVehicle::new(plant, &config, seed, start)?;
         if let Some(n) = &config.ntrip {
             vehicle.expect_corrections(n.timeout());
         }

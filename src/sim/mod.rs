@@ -4,6 +4,7 @@
 pub mod bms;
 pub mod can_devices;
 pub mod cia402_drive;
+pub mod cutter_switch;
 pub mod estop;
 pub mod gnss_error;
 pub mod lockstep;

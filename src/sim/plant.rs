@@ -2,7 +2,10 @@
 //! wheel slip, and the sensors it carries — an IMU (HiPNUC or WitMotion frames) with noise and
 //! a drifting gyro bias, and an RTK receiver (NMEA) with noise per fix quality, outages, jumps
 //! and latency. It emits the frames a real vehicle would; the truth is kept beside them.
-//! Parameters come from a plant TOML file (`devices/plant.*.toml`).
+//! Parameters come from a plant TOML file (`devices/plant.*.toml`). Its CAN devices (drives,
+//! BMS, cutter switch) are the ones the vehicle's configuration names, built by the
+//! simulated devices' table ([`super::can_devices::KINDS`]) as `can-sim` builds them; the
+//! plant couples them to its physics through their trait.
 
 use std::collections::VecDeque;
 use std::f64::consts::TAU;
@@ -19,15 +22,15 @@ use serde::{Deserialize, Serialize};
 pub use super::gnss_error::PerQuality;
 use super::gnss_error::quality_index;
 
+use super::can_devices::{self, BusLoad, Hardware, Injection, SimCanDevice};
 use super::cia402_drive::{MotorModel, SimDrive};
 use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use super::nmea_out::{self, Epoch};
-use crate::config::ConfigError;
-use crate::config::chassis::WheelRadius;
+use crate::config::chassis::{Wheel, WheelRadius};
 use crate::config::imu::ImuProtocol;
+use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
-use crate::devices::cia402::DriveProfile;
 use crate::devices::gnss::FixQuality;
 use crate::devices::imu::{G, hipnuc, witmotion};
 use crate::fusion::geodesy::{Enu, Geodetic};
@@ -37,6 +40,9 @@ use crate::time::Timestamp;
 
 /// The CAN interface name of the simulated drives.
 pub const SIM_BUS: &str = "sim0";
+
+/// Names the configuration built for a plant in errors.
+pub const SIM_CONFIG_NAME: &str = "<simulated vehicle>";
 
 /// The node of the left wheel's drive.
 pub const LEFT_NODE: NodeId = match NodeId::new(1) {
@@ -409,8 +415,12 @@ pub struct Truth {
 pub struct SimVehicle {
     plant: PlantConfig,
     rng: ChaCha8Rng,
-    left: SimDrive,
-    right: SimDrive,
+    /// The CAN devices on [`SIM_BUS`], in the table's order.
+    devices: Vec<Box<dyn SimCanDevice>>,
+    /// The left and right wheels' motors among them.
+    wheels: [WheelMotor; 2],
+    /// The blade's drive among them, when the cutter is one.
+    blade: Option<usize>,
     truth: Truth,
     frame: Enu,
     utc_at_zero: NaiveDateTime,
@@ -428,14 +438,17 @@ pub struct SimVehicle {
     imu_stalled: bool,
     /// A recorded motion played through the simulator, in place of the motors and the gyro.
     forced: Option<ForcedMotion>,
-    /// The yard's battery pack.
-    bms: Option<super::bms::SimDaly>,
-    /// Whether the blade's switch frame last said on.
-    cutter_on: bool,
-    /// The blade's drive, when the yard has one.
-    blade: Option<SimDrive>,
     /// RTK corrections, when the simulation has a caster (without, RTK is always possible).
     corrections: Option<super::receiver_corrections::ReceiverCorrections>,
+}
+
+/// The motor that turns a wheel: a drive among the plant's devices, its axis, and the
+/// configured sense (+1 when a positive motor speed drives the wheel forward).
+#[derive(Debug, Clone, Copy)]
+struct WheelMotor {
+    device: usize,
+    axis: usize,
+    direction: f64,
 }
 
 /// A motion imposed on the simulated vehicle (a real robot's recorded wheel odometry and
@@ -451,14 +464,73 @@ pub struct ForcedMotion {
 }
 
 impl SimVehicle {
-    /// A vehicle at rest at the datum facing east, its drives on `profile`, started at `start`.
-    pub fn new(plant: PlantConfig, profile: DriveProfile, seed: u64, start: Timestamp) -> Self {
-        let model = MotorModel {
-            accel_rpm_per_s: plant.motors.accel_rpm_per_s,
-            time_constant_s: plant.motors.time_constant_s,
+    /// A vehicle at rest at the datum facing east, started at `start`, with the CAN devices
+    /// `config` puts on [`SIM_BUS`] (the configuration [`super::lockstep::vehicle_config`]
+    /// builds from the plant, or one that keeps its wheels there).
+    pub fn new(
+        plant: PlantConfig,
+        config: &VehicleConfig,
+        seed: u64,
+        start: Timestamp,
+    ) -> Result<Self, ConfigError> {
+        let hardware = Hardware {
+            motor: MotorModel {
+                accel_rpm_per_s: plant.motors.accel_rpm_per_s,
+                time_constant_s: plant.motors.time_constant_s,
+            },
         };
-        let yard = plant.yard;
-        let blade_profile = profile.clone();
+        let file = Path::new(SIM_CONFIG_NAME);
+        let bus = config
+            .can
+            .iter()
+            .find(|b| b.interface == SIM_BUS)
+            .ok_or_else(|| {
+                ConfigError::invalid(
+                    file,
+                    "can",
+                    format!("has no interface {SIM_BUS}"),
+                    "put the simulated vehicle's devices on [[can]] interface sim0",
+                )
+            })?;
+        let devices = can_devices::build(config, bus, &hardware)
+            .map_err(|e| ConfigError::invalid(file, "can", e, "check the devices' profiles"))?;
+        let drive_index = |name: &str| {
+            devices
+                .iter()
+                .position(|d| d.name() == name && d.drive().is_some())
+        };
+        let wheel = |wheel: Wheel| {
+            let (side, sense) = match wheel {
+                Wheel::Left => ("left", config.wheels.map_or(1, |w| w.left.direction)),
+                Wheel::Right => ("right", config.wheels.map_or(1, |w| w.right.direction)),
+            };
+            config
+                .drive
+                .iter()
+                .filter(|d| d.bus == SIM_BUS)
+                .find_map(|d| {
+                    let axis = d.wheels.iter().position(|w| *w == wheel)?;
+                    Some(WheelMotor {
+                        device: drive_index(&d.name)?,
+                        axis,
+                        direction: f64::from(sense),
+                    })
+                })
+                .ok_or_else(|| {
+                    ConfigError::invalid(
+                        file,
+                        "drive",
+                        format!("no drive on {SIM_BUS} turns the {side} wheel"),
+                        "give each wheel a [[drive]] on the simulated interface",
+                    )
+                })
+        };
+        let wheels = [wheel(Wheel::Left)?, wheel(Wheel::Right)?];
+        let blade = config
+            .cutter
+            .as_ref()
+            .and_then(|c| c.drive_name())
+            .and_then(drive_index);
         let gnss_error = GnssErrorProcess::new(
             1.0 / plant.gnss.rate_hz,
             plant.gnss.correlated_fraction,
@@ -469,10 +541,11 @@ impl SimVehicle {
         let utc_at_zero = chrono::DateTime::from_timestamp_micros(start.as_micros() as i64)
             .map(|d| d.naive_utc())
             .unwrap_or_default();
-        Self {
+        Ok(Self {
             frame: Enu::new(plant.datum()),
-            left: SimDrive::new(LEFT_NODE, profile.clone(), model),
-            right: SimDrive::new(RIGHT_NODE, profile, model),
+            devices,
+            wheels,
+            blade,
             gyro_bias: plant.imu.gyro_bias_rps,
             plant,
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -489,24 +562,8 @@ impl SimVehicle {
             imu_count: 0,
             imu_stalled: false,
             forced: None,
-            bms: yard.map(|y| {
-                super::bms::SimDaly::new(
-                    &crate::devices::bms::profile::DalyProfile {
-                        name: "simulated Daly".into(),
-                        host_address: 0x40,
-                        current_above_offset:
-                            crate::devices::bms::profile::CurrentAboveOffset::Charge,
-                    },
-                    y.bms_address,
-                )
-            }),
-            cutter_on: false,
-            blade: yard
-                .and_then(|y| y.blade_node)
-                .and_then(NodeId::new)
-                .map(|node| SimDrive::new(node, blade_profile, model)),
             corrections: None,
-        }
+        })
     }
 
     /// From now on the receiver holds RTK fixed only while corrections reach it (within
@@ -529,12 +586,12 @@ impl SimVehicle {
         self.corrections.as_ref().map_or(0, |c| c.frames())
     }
 
-    /// Whether the blade runs: the last switch frame said so, or its drive turns it at more
+    /// Whether the blade runs: its switch's relay is closed, or its drive turns it at more
     /// than half its speed.
     pub fn cutter_on(&self) -> bool {
-        match (&self.blade, self.plant.yard) {
+        match (self.blade_drive(), self.plant.yard) {
             (Some(_), Some(y)) => self.blade_rpm().abs() > 0.5 * y.blade_rpm.abs(),
-            _ => self.cutter_on,
+            _ => self.devices.iter().find_map(|d| d.cutter_on()) == Some(true),
         }
     }
 
@@ -548,12 +605,14 @@ impl SimVehicle {
         out: &mut Vec<Record>,
     ) {
         let mut frames = Vec::new();
-        for drive in [&mut self.left, &mut self.right]
-            .into_iter()
-            .chain(self.blade.as_mut())
-        {
-            if drive.node() == node {
-                drive.inject_fault(0, code, &mut frames);
+        let fault = Injection::Fault {
+            axis: 0,
+            code,
+            refused: 0,
+        };
+        for d in &mut self.devices {
+            if d.drive().is_some_and(|drive| drive.node() == node) {
+                d.inject(fault, &mut frames);
             }
         }
         out.extend(frames.into_iter().map(|f| can_record(t, f)));
@@ -567,31 +626,41 @@ impl SimVehicle {
     /// Stops or restarts the wheel drives' heartbeats (a drive whose CANopen stack hangs
     /// while its motor still obeys).
     pub fn set_drive_heartbeats(&mut self, on: bool) {
-        self.left.set_heartbeat(on);
-        self.right.set_heartbeat(on);
+        for w in self.wheels {
+            if let Some(d) = self.devices.get_mut(w.device) {
+                d.inject(Injection::Heartbeat(on), &mut Vec::new());
+            }
+        }
     }
 
     /// Whether both wheel drives are commanded to stop (see [`SimDrive::commanded_to_stop`]).
     pub fn wheels_commanded_to_stop(&self) -> bool {
-        self.left.commanded_to_stop() && self.right.commanded_to_stop()
+        self.wheels
+            .iter()
+            .all(|w| self.wheel_drive(w).is_some_and(|d| d.commanded_to_stop()))
+    }
+
+    fn wheel_drive(&self, wheel: &WheelMotor) -> Option<&SimDrive> {
+        self.devices.get(wheel.device).and_then(|d| d.drive())
     }
 
     /// The blade drive's motor speed, r/min (0 without one).
     pub fn blade_rpm(&self) -> f64 {
-        self.blade
-            .as_ref()
+        self.blade_drive()
             .and_then(|b| b.motor_rpm().first().copied())
             .unwrap_or(0.0)
     }
 
-    /// The blade's drive, when the yard has one.
+    /// The blade's drive, when the cutter is one.
     pub fn blade_drive(&self) -> Option<&SimDrive> {
-        self.blade.as_ref()
+        self.blade
+            .and_then(|i| self.devices.get(i))
+            .and_then(|d| d.drive())
     }
 
-    /// The battery, when the yard has one.
+    /// The battery, when the vehicle has a BMS.
     pub fn battery(&self) -> Option<super::bms::Battery> {
-        self.bms.as_ref().map(|b| b.battery)
+        self.devices.iter().find_map(|d| d.battery())
     }
 
     /// Whether the vehicle rests on the dock.
@@ -628,8 +697,11 @@ impl SimVehicle {
             }
             None => (None, None),
         };
-        self.left.back_drive(l);
-        self.right.back_drive(r);
+        for (w, wheel_rpm) in self.wheels.into_iter().zip([l, r]) {
+            if let Some(d) = self.devices.get_mut(w.device).and_then(|d| d.drive_mut()) {
+                d.back_drive(w.axis, wheel_rpm.map(|r| r * w.direction));
+            }
+        }
     }
 
     /// The gyro's z bias now, rad/s (it walks).
@@ -666,8 +738,12 @@ impl SimVehicle {
     fn wheel_surface_speeds(&self) -> (f64, f64) {
         let g = &self.plant.geometry;
         let speed = |rpm: f64, radius: f64| rpm * TAU / 60.0 / g.gear_ratio * radius;
-        let l = self.left.motor_rpm().first().copied().unwrap_or(0.0);
-        let r = self.right.motor_rpm().first().copied().unwrap_or(0.0);
+        let [l, r] = self.wheels.map(|w| {
+            let rpm = self
+                .wheel_drive(&w)
+                .and_then(|d| d.motor_rpm().get(w.axis).copied());
+            rpm.unwrap_or(0.0) * w.direction
+        });
         (
             speed(l, g.wheel_radius_m.left),
             speed(r, g.wheel_radius_m.right),
@@ -681,13 +757,10 @@ impl SimVehicle {
             .map_or(0.0, |l| t.saturating_since(l).as_secs_f64());
         self.last = Some(t);
         let mut frames = Vec::new();
-        self.left.step(t, &mut frames);
-        self.right.step(t, &mut frames);
-        if let Some(b) = &mut self.blade {
-            b.step(t, &mut frames);
-        }
-        for f in frames {
-            out.push(can_record(t, f));
+        let mut load = BusLoad::default();
+        // The drives turn first: the motion, and the current it draws, follow their speeds.
+        for d in self.devices.iter_mut().filter(|d| d.drive().is_some()) {
+            d.step(t, &mut load, &mut frames);
         }
         if t >= self.next_slip {
             self.next_slip = t.saturating_add(Duration::from_millis(100));
@@ -719,15 +792,18 @@ impl SimVehicle {
         }
         let docked = self.docked();
         let cutting = self.cutter_on();
-        if let (Some(b), Some(y)) = (&mut self.bms, self.plant.yard) {
-            // On the dock the charger feeds the pack; elsewhere the drives and the blade draw.
-            b.battery.current_a = if docked {
+        // On the dock the charger feeds the pack; elsewhere the drives and the blade draw.
+        load.current_a = self.plant.yard.map(|y| {
+            if docked {
                 y.charge_current_a
             } else {
                 -(2.0 + 4.0 * v.abs() + if cutting { 6.0 } else { 0.0 })
-            };
-            b.battery.step(Duration::from_secs_f64(dt));
+            }
+        });
+        for d in self.devices.iter_mut().filter(|d| d.drive().is_none()) {
+            d.step(t, &mut load, &mut frames);
         }
+        out.extend(frames.into_iter().map(|f| can_record(t, f)));
         self.gyro_bias += self.normal(self.plant.imu.gyro_bias_walk * dt.sqrt());
         if t >= self.next_imu {
             self.next_imu = t.saturating_add(Duration::from_secs_f64(1.0 / self.plant.imu.rate_hz));
@@ -757,20 +833,8 @@ impl SimVehicle {
     /// A frame chassisd sent to the drives; their answers go to `out`.
     pub fn on_can(&mut self, t: Timestamp, frame: &Frame, out: &mut Vec<Record>) {
         let mut frames = Vec::new();
-        self.left.on_frame(t, frame, &mut frames);
-        self.right.on_frame(t, frame, &mut frames);
-        if let Some(b) = &mut self.blade {
-            b.on_frame(t, frame, &mut frames);
-        }
-        if let Some(b) = &mut self.bms {
-            b.on_frame(frame, &mut frames);
-        }
-        if let Some(y) = self.plant.yard
-            && !frame.is_extended()
-            && Some(frame.id()) == y.cutter_can_id
-            && let Some(&on) = frame.data().first()
-        {
-            self.cutter_on = on != 0;
+        for d in &mut self.devices {
+            d.on_frame(t, frame, &mut frames);
         }
         out.extend(frames.into_iter().map(|f| can_record(t, f)));
     }
@@ -885,5 +949,65 @@ fn can_record(t: Timestamp, frame: Frame) -> Record {
         t,
         source: SIM_BUS.into(),
         payload: Payload::Can(frame.into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::chassis::ProfileRef;
+    use crate::devices::cia402::DriveProfile;
+    use crate::sim::lockstep::vehicle_config;
+
+    fn at(ms: u64) -> Timestamp {
+        Timestamp::from_nanos(1_000_000_000 + ms * 1_000_000)
+    }
+
+    #[test]
+    fn a_dual_axis_drive_mounted_reversed_turns_the_wheels_its_configuration_names() {
+        let plant = PlantConfig::builtin().unwrap();
+        let mut config = vehicle_config(&plant).unwrap();
+        let text = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/zlac8015d.toml"),
+        )
+        .unwrap();
+        let profile = DriveProfile::from_toml(&text, Path::new("zlac8015d.toml")).unwrap();
+        config.drive.truncate(1);
+        config.drive[0].name = "both".into();
+        config.drive[0].wheels = vec![Wheel::Left, Wheel::Right];
+        config.drive[0].profile = ProfileRef::Inline(Box::new(profile));
+        if let Some(w) = config.wheels.as_mut() {
+            w.left.direction = -1;
+        }
+        let mut vehicle = SimVehicle::new(plant, &config, 7, at(0)).unwrap();
+        vehicle.force_motion(Some(ForcedMotion {
+            v: 0.5,
+            wheel_yaw_rate: 0.0,
+            gyro_z: 0.0,
+        }));
+        let mut out = Vec::new();
+        for ms in (0..=2000).step_by(10) {
+            let outage = GnssCondition {
+                quality: None,
+                offset: (0.0, 0.0),
+            };
+            vehicle.step(at(ms), outage, &mut out);
+        }
+        let truth = vehicle.truth();
+        assert!((truth.x - 1.0).abs() < 0.05, "{truth:?}");
+        assert!(truth.yaw.abs() < 0.01, "straight: {truth:?}");
+        let rpm = vehicle.wheel_drive(&vehicle.wheels[0]).unwrap().motor_rpm();
+        assert!(rpm[0] < 0.0 && rpm[1] > 0.0, "left axis reversed: {rpm:?}");
+    }
+
+    #[test]
+    fn a_configuration_without_the_wheels_on_the_simulated_bus_is_refused() {
+        let plant = PlantConfig::builtin().unwrap();
+        let mut config = vehicle_config(&plant).unwrap();
+        config.drive.retain(|d| d.name != "right");
+        let Err(e) = SimVehicle::new(plant, &config, 7, at(0)) else {
+            panic!("a plant without its right wheel's drive");
+        };
+        assert!(e.to_string().contains("right wheel"), "{e}");
     }
 }

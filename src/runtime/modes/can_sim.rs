@@ -25,7 +25,7 @@ use crate::config::VehicleConfig;
 use crate::devices::can::{Frame, Received};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::drivers::can::{interface_up, open};
-use crate::sim::can_devices::{self, BusLoad, Injection, Report, SimCanDevice};
+use crate::sim::can_devices::{self, BusLoad, Hardware, Injection, Report, SimCanDevice};
 use crate::sim::estop::Button;
 
 /// Simulation step.
@@ -52,7 +52,8 @@ pub async fn run(config: VehicleConfig) -> crate::runtime::error::Result<()> {
     for bus in &config.can {
         let sim = SimBus {
             name: bus.interface.clone(),
-            devices: can_devices::build(&config, bus).map_err(RuntimeError::Failed)?,
+            devices: can_devices::build(&config, bus, &Hardware::default())
+                .map_err(RuntimeError::Failed)?,
         };
         let (tx, rx) = mpsc::channel(64);
         senders.push(tx);
@@ -250,9 +251,13 @@ fn apply(sim: &mut SimBus, cmd: SimCommand, out: &mut Vec<Frame>) {
                 Report::Battery(v) => Some(v),
                 _ => None,
             });
+            let cutter = reports.iter().find_map(|r| match r {
+                Report::Cutter(v) => Some(v),
+                _ => None,
+            });
             println!(
                 "{}",
-                json!({"bus": sim.name, "drives": drives, "battery": battery})
+                json!({"bus": sim.name, "drives": drives, "battery": battery, "cutter": cutter})
             );
         }
     }
