@@ -565,18 +565,61 @@ fn canplayer_session_decodes_like_replay() {
 
 /// `vehicle-vcan.toml` with an e-stop module (`devices/estop-canopen-di.toml`, node 10) on
 /// vcan0, written to `dir`.
-fn estop_config(dir: &Path) -> PathBuf {
+/// `vehicle-vcan.toml` with `more` appended, written to `dir` as `name`.
+fn config_with(dir: &Path, name: &str, more: &str) -> PathBuf {
     let devices = common::repo().join("devices");
     let text = std::fs::read_to_string(config("vehicle-vcan.toml"))
         .expect("vehicle-vcan.toml")
         .replace("../../devices/", &format!("{}/", devices.display()));
-    let path = dir.join("vehicle-estop.toml");
+    let path = dir.join(name);
+    std::fs::write(&path, text + more).expect("config written");
+    path
+}
+
+fn estop_config(dir: &Path) -> PathBuf {
+    let profile = common::repo().join("devices/estop-canopen-di.toml");
     let estop = format!(
         "\n[[estop]]\nname = \"body\"\nprofile = \"{}\"\nbus = \"vcan0\"\n",
-        devices.join("estop-canopen-di.toml").display()
+        profile.display()
     );
-    std::fs::write(&path, text + &estop).expect("config written");
-    path
+    config_with(dir, "vehicle-estop.toml", &estop)
+}
+
+/// Waits until the simulated cutter switch's relay is `on`; how long that took.
+fn wait_cutter(rig: &mut Rig, on: bool, since: Instant) -> Duration {
+    loop {
+        let report = rig.report();
+        if report["cutter"]["on"] == on {
+            return since.elapsed();
+        }
+        assert!(since.elapsed() < WAIT, "cutter never {on}: {report}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+#[ignore = "needs vcan0: run by tests/vm/can-tests"]
+fn killed_daemon_a_repeated_cutter_switch_opens_by_its_keep_alive() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("vcan-cutter");
+    let cutter =
+        "\n[cutter]\nbus = \"vcan0\"\ncan_id = 0x6A0\non = [1]\noff = [0]\nrepeat_ms = 100\n";
+    let mut rig = Rig::start_with(&config_with(&dir, "vehicle-cutter.toml", cutter), None);
+    rig.wait_enabled();
+    assert_eq!(rig.report()["cutter"]["on"], false, "open at start");
+    rig.daemon.send(
+        r#"mission [{"action": "OPEN_CUTTER", "parameters": {"cutter": true}}, {"action": "WAIT", "parameters": {"seconds": 60}}]"#,
+    );
+    wait_cutter(&mut rig, true, Instant::now());
+    // The repeats hold it on well past the module's keep-alive (three repeats).
+    std::thread::sleep(Duration::from_millis(1000));
+    assert_eq!(rig.report()["cutter"]["on"], true, "held on by the repeats");
+    let pid = nix::unistd::Pid::from_raw(rig.daemon.child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGKILL).expect("kill -9");
+    let took = wait_cutter(&mut rig, false, Instant::now());
+    eprintln!("cutter relay opened {took:?} after kill -9 (keep-alive 300 ms)");
+    // Keep-alive 300 ms plus the VM's scheduling and the report's round trip.
+    assert!(took < Duration::from_millis(1500), "{took:?}");
 }
 
 #[test]
