@@ -280,6 +280,11 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
         wheels.contains("size: 2") && wheels.contains("data: ["),
         "{wheels}"
     );
+    // Another, of a type added with it (std_msgs/String): who may drive, at 1 Hz.
+    let mode = echo_until(&master, "/drive_mode", Duration::from_secs(5), |o| {
+        o.contains("data: ")
+    });
+    assert!(mode.contains("data: \"manual\""), "{mode}");
 
     for (topic, code) in [
         ("/androidmsg_initstatus", "data: 12"),
@@ -614,6 +619,7 @@ fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
         message::<std_msgs::Header>(),
         message::<std_msgs::Int16>(),
         message::<std_msgs::Float64MultiArray>(),
+        message::<std_msgs::String>(),
         message::<geometry_msgs::Twist>(),
         message::<geometry_msgs::PoseStamped>(),
         message::<geometry_msgs::Transform>(),

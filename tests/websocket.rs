@@ -103,6 +103,15 @@ fn wheel_speeds_arrive_left_then_right() {
 }
 
 #[test]
+fn the_drive_mode_arrives_by_name() {
+    let port = free_port();
+    let sim = sim(port);
+    let seen = client(port, &["echo", "/drive_mode", "std_msgs/msg/String"]);
+    assert_eq!(seen["message"]["data"], "manual", "{seen}");
+    drop(sim);
+}
+
+#[test]
 fn a_goal_pose_drives_the_vehicle_there_along_its_plan() {
     let port = free_port();
     let sim = sim(port);

@@ -7,6 +7,7 @@
 use serde_json::{Value, json};
 
 use crate::vehicle::VehicleStatus;
+use crate::vehicle::chassis::DriveMode;
 
 /// One topic published from the status ticks.
 #[derive(Debug, Clone, Copy)]
@@ -23,12 +24,20 @@ pub struct StatusTopic {
 }
 
 /// Every topic the node publishes from the status ticks.
-pub const STATUS_TOPICS: &[StatusTopic] = &[StatusTopic {
-    name: "/wheel_speeds",
-    msg_type: "std_msgs/Float64MultiArray",
-    every: 1,
-    build: wheel_speeds,
-}];
+pub const STATUS_TOPICS: &[StatusTopic] = &[
+    StatusTopic {
+        name: "/wheel_speeds",
+        msg_type: "std_msgs/Float64MultiArray",
+        every: 1,
+        build: wheel_speeds,
+    },
+    StatusTopic {
+        name: "/drive_mode",
+        msg_type: "std_msgs/String",
+        every: 10,
+        build: drive_mode,
+    },
+];
 
 /// `/wheel_speeds`: the left and the right wheel's measured surface speed, m/s (forward
 /// positive), at 10 Hz; nothing without a drive train.
@@ -41,6 +50,20 @@ fn wheel_speeds(status: &VehicleStatus, _seq: u32) -> Option<Value> {
         },
         "data": [odometry.left_mps, odometry.right_mps],
     }))
+}
+
+/// `/drive_mode`: who may drive, `manual` (velocity commands) or `navigation` (autonomous
+/// moves only), at 1 Hz; nothing without a drive train.
+fn drive_mode(status: &VehicleStatus, _seq: u32) -> Option<Value> {
+    Some(json!({ "data": mode_name(status.mode?) }))
+}
+
+/// A drive mode's name on the ROS topics.
+pub fn mode_name(mode: DriveMode) -> &'static str {
+    match mode {
+        DriveMode::Manual => "manual",
+        DriveMode::Navigation => "navigation",
+    }
 }
 
 /// The topics due at the `tick`th status tick (counted from 1).
@@ -72,6 +95,17 @@ mod tests {
         let msg = wheel_speeds(&status, 1).unwrap();
         assert_eq!(msg["data"], json!([0.25, 0.5]));
         assert_eq!(msg["layout"]["dim"][0]["size"], 2);
-        assert_eq!(due(1).count(), STATUS_TOPICS.len());
+        assert_eq!(due(1).count(), 1);
+        assert_eq!(due(10).count(), STATUS_TOPICS.len());
+    }
+
+    #[test]
+    fn the_drive_mode_is_named() {
+        let mut status = VehicleStatus::default();
+        assert!(drive_mode(&status, 1).is_none(), "no drive train, no mode");
+        status.mode = Some(DriveMode::Navigation);
+        assert_eq!(drive_mode(&status, 1), Some(json!({"data": "navigation"})));
+        status.mode = Some(DriveMode::Manual);
+        assert_eq!(drive_mode(&status, 1), Some(json!({"data": "manual"})));
     }
 }

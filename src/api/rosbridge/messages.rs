@@ -7,6 +7,7 @@
 use serde_json::{Value, json};
 
 use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
+use crate::api::ros1::published::mode_name;
 use crate::api::ros1::{ros_time, yaw_quaternion};
 use crate::api::rtk::status::{locate_name, navigation_name};
 use crate::devices::gnss::FixQuality;
@@ -366,6 +367,12 @@ pub fn wheel_speeds(status: &VehicleStatus) -> Option<Value> {
     }))
 }
 
+/// `/drive_mode` (std_msgs/String): who may drive, `manual` or `navigation`; nothing
+/// without a drive train.
+pub fn drive_mode(status: &VehicleStatus) -> Option<Value> {
+    Some(json!({ "data": mode_name(status.mode?) }))
+}
+
 /// The goal (x, y in m, yaw in rad, map frame) of a `/goal_pose` message
 /// (geometry_msgs/PoseStamped): its frame must be `map` (or empty, taken as `map`), its
 /// orientation a rotation about z.
@@ -469,6 +476,15 @@ mod tests {
         let msg = wheel_speeds(&status).unwrap();
         assert_eq!(msg["data"], json!([-0.1, 0.3]));
         assert_eq!(msg["layout"]["dim"][0]["label"], "left_right");
+    }
+
+    #[test]
+    fn the_drive_mode_is_named() {
+        use crate::vehicle::chassis::DriveMode;
+        let mut status = VehicleStatus::default();
+        assert!(drive_mode(&status).is_none(), "no drive train, no mode");
+        status.mode = Some(DriveMode::Navigation);
+        assert_eq!(drive_mode(&status), Some(json!({"data": "navigation"})));
     }
 
     #[test]

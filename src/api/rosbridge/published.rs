@@ -6,7 +6,7 @@
 use serde_json::Value;
 
 use super::messages;
-use super::topics::{BATTERY_STATE, DIAGNOSTICS, POSE, TF, WHEEL_SPEEDS};
+use super::topics::{BATTERY_STATE, DIAGNOSTICS, DRIVE_MODE, POSE, TF, WHEEL_SPEEDS};
 use crate::vehicle::VehicleStatus;
 
 /// One topic published from the status ticks.
@@ -47,6 +47,11 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
         every: 10,
         build: |status| Some(messages::diagnostics(status)),
     },
+    StatusTopic {
+        name: DRIVE_MODE,
+        every: 10,
+        build: messages::drive_mode,
+    },
 ];
 
 /// The topics due at the `tick`th status tick (counted from 1).
@@ -73,6 +78,6 @@ mod tests {
             );
         }
         assert_eq!(due(1).count(), 3);
-        assert_eq!(due(10).count(), 5);
+        assert_eq!(due(10).count(), 6);
     }
 }

@@ -33,6 +33,8 @@ pub const BATTERY_STATE: &str = "/battery_state";
 pub const DIAGNOSTICS: &str = "/diagnostics";
 /// The wheels' measured speeds.
 pub const WHEEL_SPEEDS: &str = "/wheel_speeds";
+/// Who may drive.
+pub const DRIVE_MODE: &str = "/drive_mode";
 /// The path of the move under way.
 pub const PLAN: &str = "/plan";
 /// The engine's events.
@@ -73,6 +75,11 @@ pub const TOPICS: &[Topic] = &[
         name: WHEEL_SPEEDS,
         msg_type: "std_msgs/msg/Float64MultiArray",
         flow: Flow::Published(10.0),
+    },
+    Topic {
+        name: DRIVE_MODE,
+        msg_type: "std_msgs/msg/String",
+        flow: Flow::Published(1.0),
     },
     Topic {
         name: PLAN,
