@@ -21,3 +21,4 @@ pub mod secret;
 pub mod sim;
 pub mod time;
 pub mod vehicle;
+pub mod zones;

@@ -166,3 +166,42 @@ fn the_ntrip_caster_is_probed_step_by_step() {
     assert!(auth.contains("FAILED") && auth.contains("401"), "{table}");
     assert!(fix.contains("password"), "{table}");
 }
+
+#[test]
+fn zones_are_counted_and_a_file_with_latitude_and_longitude_swapped_is_doubted() {
+    let dir = common::tempdir("check-zones");
+    let square = |lon: f64, lat: f64| {
+        format!(
+            r#"{{"type": "FeatureCollection", "features": [{{"type": "Feature",
+            "properties": {{"kind": "keep_out", "name": "pond"}},
+            "geometry": {{"type": "Polygon", "coordinates": [[[{lon}, {lat}], [{}, {lat}],
+            [{}, {}], [{lon}, {}], [{lon}, {lat}]]]}}}}]}}"#,
+            lon + 0.0003,
+            lon + 0.0003,
+            lat + 0.0002,
+            lat + 0.0002
+        )
+    };
+    let config = "[gnss]\nport = \"/dev/chassisd-no-such-port\"\n\
+                  [localization]\ndatum = [47.3977, 8.5456, 480.0]\n\
+                  [zones]\nfile = \"zones.geojson\"\n\
+                  footprint = { front_m = 0.5, rear_m = 0.3, width_m = 0.6 }\n";
+    std::fs::write(dir.join("zones.geojson"), square(8.5455, 47.3975)).expect("zones");
+    let (_, table) = check(config, &dir);
+    let (zones, _) = line_of(&table, "zones");
+    assert!(
+        zones.contains("ok: boundaries: 0, keep-out zones: 1, walls: 0, within 27 m of the datum"),
+        "{table}"
+    );
+    std::fs::write(dir.join("zones.geojson"), square(47.3975, 8.5455)).expect("zones");
+    let (code, table) = check(config, &dir);
+    assert_ne!(code, Some(0), "{table}");
+    let (zones, fix) = line_of(&table, "zones");
+    assert!(zones.contains("FAILED: a zone lies"), "{table}");
+    assert!(fix.contains("[longitude, latitude]"), "{table}");
+    // A zones file that is not one is a configuration error, before any probe.
+    std::fs::write(dir.join("zones.geojson"), "{\"type\": \"Feature\"}").expect("zones");
+    let (code, out) = check(config, &dir);
+    assert_eq!(code, Some(78), "{out}");
+    assert!(out.contains("zones.geojson"), "{out}");
+}

@@ -12,7 +12,7 @@ use std::path::Path;
 const LAYERS: &[&[&str]] = &[
     &["time", "secret"],
     &["devices", "fusion", "broker"],
-    &["ntrip", "control"],
+    &["ntrip", "control", "zones"],
     &["config"],
     &["vehicle"],
     &["record", "api"],

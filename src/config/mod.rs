@@ -17,6 +17,7 @@ pub mod mqtt;
 pub mod ntrip;
 pub mod ros1;
 pub mod websocket;
+pub mod zones;
 
 /// A configuration that failed to load or validate.
 #[derive(Debug, thiserror::Error)]
@@ -177,6 +178,9 @@ pub struct VehicleConfig {
     /// The rosbridge WebSocket server.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub websocket: Option<websocket::WebsocketConfig>,
+    /// The zones the vehicle keeps to, and the GNSS gate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zones: Option<zones::ZonesConfig>,
     /// The calibration file read on load and the values it put in force, for the log.
     #[serde(skip)]
     pub calibration_in_force: Option<(PathBuf, Vec<String>)>,
@@ -367,6 +371,9 @@ impl VehicleConfig {
             bms.profile.resolve(base, file, "bms.profile")?;
         }
         config.load_calibration(base, file)?;
+        if let Some(zones) = &mut config.zones {
+            zones.load(base, file)?;
+        }
         if let Some(ntrip) = &mut config.ntrip {
             ntrip.resolve(base);
         }
@@ -437,6 +444,9 @@ impl VehicleConfig {
                 }
             }
         }
+        if let Some(file) = self.zones.as_ref().and_then(|z| z.file.as_ref()) {
+            named.push(("zones.file".into(), file.to_string_lossy().into_owned()));
+        }
         for (key, name) in named {
             if !lies_within(&base.join(&name), root) {
                 return Err(ConfigError::invalid(
@@ -491,6 +501,9 @@ impl VehicleConfig {
         if let Some(n) = &mut recorded.ntrip {
             *n = n.redacted();
         }
+        if let Some(z) = &mut recorded.zones {
+            *z = z.recorded();
+        }
         // Plain data structures always serialise.
         toml::to_string(&recorded).unwrap_or_default()
     }
@@ -530,6 +543,9 @@ impl VehicleConfig {
         }
         if let Some(w) = &self.websocket {
             w.validate(file)?;
+        }
+        if let Some(z) = &self.zones {
+            z.validate(file)?;
         }
         if let Some(n) = &self.ntrip {
             n.validate(file)?;

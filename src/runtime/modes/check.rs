@@ -21,14 +21,17 @@ use std::net::ToSocketAddrs;
 
 use crate::config::VehicleConfig;
 use crate::config::imu::ImuProtocol;
+use crate::config::zones::ZonesConfig;
 use crate::devices::can::Received;
 use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
 use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::NmeaReceiver;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
+use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::runtime::links::broker::BrokerHealth;
 use crate::time::Timestamp;
+use crate::zones::ZoneKind;
 
 /// How long a serial port is listened to.
 const SERIAL_LISTEN: Duration = Duration::from_secs(3);
@@ -176,6 +179,13 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
             )),
         }
     }
+    if let Some(z) = &config.zones {
+        let what = z
+            .file
+            .as_ref()
+            .map_or("inline".into(), |f| f.display().to_string());
+        probes.push(Probe::new("zones", &what, probe_zones(config, z)));
+    }
     if let Some(m) = &config.mqtt {
         let what = format!("broker {}:{}", m.host, m.port);
         let result = if m.embedded_broker {
@@ -187,6 +197,50 @@ pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
     }
     probes
 }
+
+/// The zones' kinds (they were checked on load), and whether they lie near the datum: a
+/// file with latitude and longitude swapped lies thousands of kilometres away.
+fn probe_zones(config: &VehicleConfig, zones: &ZonesConfig) -> Result<String, (String, String)> {
+    let count = |kind: ZoneKind| zones.set.zones().iter().filter(|z| z.kind == kind).count();
+    let seen = format!(
+        "boundaries: {}, keep-out zones: {}, walls: {}",
+        count(ZoneKind::Boundary),
+        count(ZoneKind::KeepOut),
+        count(ZoneKind::Wall)
+    );
+    let Some([lat_deg, lon_deg, h_m]) = config.localization.as_ref().and_then(|l| l.datum) else {
+        return Ok(format!(
+            "{seen} (no datum configured: placed at the first RTK fix)"
+        ));
+    };
+    let frame = Enu::new(Geodetic {
+        lat_deg,
+        lon_deg,
+        h_m,
+    });
+    let farthest = zones
+        .set
+        .positions()
+        .map(|[lon_deg, lat_deg]| {
+            let p = frame.to_enu(&Geodetic {
+                lat_deg,
+                lon_deg,
+                h_m,
+            });
+            p.x.hypot(p.y)
+        })
+        .fold(0.0, f64::max);
+    if farthest > MAX_ZONE_REACH_M {
+        return fail(
+            format!("a zone lies {:.0} km from the datum", farthest / 1000.0),
+            "positions are [longitude, latitude] (RFC 7946): check the order, and the datum",
+        );
+    }
+    Ok(format!("{seen}, within {farthest:.0} m of the datum"))
+}
+
+/// How far from the datum a zone may lie before `check` doubts the file, m.
+const MAX_ZONE_REACH_M: f64 = 50_000.0;
 
 /// What listens on a serial port.
 enum Listener {

@@ -111,6 +111,12 @@ async fn run_marked(
         .config
         .require_devices(std::path::Path::new("the configuration"))?;
     log_calibration(&options.config);
+    if let Some(z) = &options.config.zones {
+        tracing::warn!(
+            zones = z.set.zones().len(),
+            "zones read and checked, but not enforced yet: the vehicle does not keep to them"
+        );
+    }
     // The broker first: its process takes a moment to start on a slow PC, and nothing that
     // keeps time (the drives' set-up) should be waiting meanwhile.
     let embedded = match &options.config.mqtt {

@@ -1,0 +1,386 @@
+//! Zones placed in a map frame (east, north, m, of a datum's ENU frame) and the questions the
+//! checks ask of them: how far a disc (the vehicle's footprint grown by a margin) stands
+//! from each zone, and where a path swept by that disc first meets one.
+
+use geo::{Contains, Coord, Distance, Euclidean, Line, LineString, Point, Polygon};
+use nalgebra::Vector3;
+
+use super::{LonLat, Shape, ZoneKind, ZoneSet};
+use crate::fusion::geodesy::{Enu, Geodetic};
+
+/// One zone in the map frame.
+#[derive(Debug, Clone)]
+pub struct LocalZone {
+    /// Its id in its set.
+    pub id: u32,
+    /// Its name.
+    pub name: String,
+    /// What it asks.
+    pub kind: ZoneKind,
+    shape: LocalShape,
+}
+
+#[derive(Debug, Clone)]
+enum LocalShape {
+    Polygon(Polygon<f64>),
+    Circle { centre: Coord<f64>, radius_m: f64 },
+    Line(LineString<f64>),
+}
+
+/// Where a disc or a path meets a zone.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Conflict {
+    /// The zone's id.
+    pub id: u32,
+    /// The zone's name.
+    pub name: String,
+    /// Its kind.
+    pub kind: ZoneKind,
+    /// The disc's centre where it first comes within its radius (east, north, m).
+    pub at: (f64, f64),
+    /// The disc's clearance there: its centre's distance from the zone's edge on the
+    /// allowed side (negative on the wrong side), m.
+    pub clearance_m: f64,
+}
+
+/// A set of zones in one map frame.
+#[derive(Debug, Clone, Default)]
+pub struct LocalZones {
+    zones: Vec<LocalZone>,
+}
+
+/// How finely a path's conflict is placed, m.
+const PLACE_STEP_M: f64 = 0.01;
+/// The most halvings of one segment (a 10,000 km segment still reaches 1 cm).
+const MAX_HALVINGS: u32 = 40;
+
+impl LocalZones {
+    /// `set` in the ENU frame of `frame`'s datum.
+    pub fn new(set: &ZoneSet, frame: &Enu) -> Self {
+        let local = |p: &LonLat| {
+            let v: Vector3<f64> = frame.to_enu(&Geodetic {
+                lat_deg: p[1],
+                lon_deg: p[0],
+                h_m: frame.datum().h_m,
+            });
+            Coord { x: v.x, y: v.y }
+        };
+        let line = |points: &[LonLat]| LineString::new(points.iter().map(local).collect());
+        let zones = set
+            .zones()
+            .iter()
+            .map(|z| LocalZone {
+                id: z.id,
+                name: z.name.clone(),
+                kind: z.kind,
+                shape: match &z.shape {
+                    Shape::Polygon(rings) => LocalShape::Polygon(Polygon::new(
+                        rings
+                            .first()
+                            .map_or_else(|| LineString::new(Vec::new()), |r| line(r)),
+                        rings.iter().skip(1).map(|r| line(r)).collect(),
+                    )),
+                    Shape::Circle { centre, radius_m } => LocalShape::Circle {
+                        centre: local(centre),
+                        radius_m: *radius_m,
+                    },
+                    Shape::Line(points) => LocalShape::Line(line(points)),
+                },
+            })
+            .collect();
+        Self { zones }
+    }
+
+    /// The zones.
+    pub fn zones(&self) -> &[LocalZone] {
+        &self.zones
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.zones.is_empty()
+    }
+
+    /// The disc of `radius` m at `p` against every zone: the first it meets (the one with
+    /// the least clearance), if any. With boundaries, the disc must lie inside one of them.
+    pub fn disc_conflict(&self, p: (f64, f64), radius: f64) -> Option<Conflict> {
+        let c = Coord { x: p.0, y: p.1 };
+        let mut worst: Option<Conflict> = None;
+        let mut consider = |zone: &LocalZone, clearance: f64| {
+            if clearance < radius && worst.as_ref().is_none_or(|w| clearance < w.clearance_m) {
+                worst = Some(conflict(zone, p, clearance));
+            }
+        };
+        for zone in self.zones.iter().filter(|z| z.kind != ZoneKind::Boundary) {
+            consider(zone, zone.clearance(c));
+        }
+        if let Some((zone, clearance)) = self.best_boundary(c) {
+            consider(zone, clearance);
+        }
+        worst
+    }
+
+    /// The least clearance of `p` from any zone, and that zone (none without zones).
+    pub fn nearest(&self, p: (f64, f64)) -> Option<(&LocalZone, f64)> {
+        let c = Coord { x: p.0, y: p.1 };
+        self.zones
+            .iter()
+            .filter(|z| z.kind != ZoneKind::Boundary)
+            .map(|z| (z, z.clearance(c)))
+            .chain(self.best_boundary(c))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    /// The path through `points` swept by a disc of `radius` m: where it first meets a zone.
+    /// Each segment is halved down to 1 cm towards the first part that meets one, each part
+    /// checked exactly, so a wall thinner than any step is still found.
+    pub fn path_conflict(&self, points: &[(f64, f64)], radius: f64) -> Option<Conflict> {
+        if let [only] = points {
+            return self.disc_conflict(*only, radius);
+        }
+        points
+            .windows(2)
+            .find_map(|pair| self.first_on_segment(pair[0], pair[1], radius, 0))
+    }
+
+    fn first_on_segment(
+        &self,
+        a: (f64, f64),
+        b: (f64, f64),
+        radius: f64,
+        depth: u32,
+    ) -> Option<Conflict> {
+        let segment = Line::new(Coord { x: a.0, y: a.1 }, Coord { x: b.0, y: b.1 });
+        let zone = self.segment_meets(&segment, radius)?;
+        let mid = ((a.0 + b.0) / 2.0, (a.1 + b.1) / 2.0);
+        if (b.0 - a.0).hypot(b.1 - a.1) <= PLACE_STEP_M || depth >= MAX_HALVINGS {
+            return self
+                .disc_conflict(a, radius)
+                .or_else(|| self.disc_conflict(b, radius))
+                .or_else(|| {
+                    let clearance = zone.clearance(Coord { x: mid.0, y: mid.1 });
+                    Some(conflict(zone, mid, clearance))
+                });
+        }
+        self.first_on_segment(a, mid, radius, depth + 1)
+            .or_else(|| self.first_on_segment(mid, b, radius, depth + 1))
+    }
+
+    /// A zone a disc swept along `segment` meets, if any (exact).
+    fn segment_meets(&self, segment: &Line<f64>, radius: f64) -> Option<&LocalZone> {
+        let obstacle = self
+            .zones
+            .iter()
+            .filter(|z| z.kind != ZoneKind::Boundary)
+            .find(|z| z.segment_distance(segment) < radius);
+        if obstacle.is_some() {
+            return obstacle;
+        }
+        // Inside one boundary for the whole segment: its start inside, and no ring of it
+        // within the radius.
+        let mut boundaries = self
+            .zones
+            .iter()
+            .filter(|z| z.kind == ZoneKind::Boundary)
+            .peekable();
+        boundaries.peek()?;
+        let inside_one = boundaries.any(|z| match &z.shape {
+            LocalShape::Polygon(p) => {
+                p.contains(&segment.start)
+                    && std::iter::once(p.exterior())
+                        .chain(p.interiors())
+                        .all(|ring| Euclidean.distance(segment, ring) >= radius)
+            }
+            _ => false,
+        });
+        if inside_one {
+            None
+        } else {
+            self.best_boundary(segment.start).map(|(z, _)| z)
+        }
+    }
+
+    /// The boundary the point is deepest inside, and its clearance (negative outside all).
+    fn best_boundary(&self, c: Coord<f64>) -> Option<(&LocalZone, f64)> {
+        self.zones
+            .iter()
+            .filter(|z| z.kind == ZoneKind::Boundary)
+            .map(|z| (z, z.clearance(c)))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+}
+
+impl LocalZone {
+    /// The signed distance of `c` from this zone's edge, positive on the side the vehicle
+    /// may be (outside a keep-out zone or a wall's line, inside a boundary), m.
+    fn clearance(&self, c: Coord<f64>) -> f64 {
+        let point = Point(c);
+        match &self.shape {
+            LocalShape::Polygon(polygon) => {
+                let edge = std::iter::once(polygon.exterior())
+                    .chain(polygon.interiors())
+                    .map(|ring| Euclidean.distance(&point, ring))
+                    .fold(f64::INFINITY, f64::min);
+                // A boundary is kept inside, a keep-out zone outside.
+                let allowed = polygon.contains(&c) == (self.kind == ZoneKind::Boundary);
+                if allowed { edge } else { -edge }
+            }
+            LocalShape::Circle { centre, radius_m } => {
+                (c.x - centre.x).hypot(c.y - centre.y) - radius_m
+            }
+            LocalShape::Line(line) => Euclidean.distance(&point, line),
+        }
+    }
+
+    /// The distance from a segment to a keep-out zone or a wall (0 when it enters one).
+    fn segment_distance(&self, segment: &Line<f64>) -> f64 {
+        match &self.shape {
+            LocalShape::Polygon(polygon) => Euclidean.distance(segment, polygon),
+            LocalShape::Circle { centre, radius_m } => {
+                Euclidean.distance(segment, *centre) - radius_m
+            }
+            LocalShape::Line(line) => Euclidean.distance(segment, line),
+        }
+    }
+}
+
+fn conflict(zone: &LocalZone, at: (f64, f64), clearance_m: f64) -> Conflict {
+    Conflict {
+        id: zone.id,
+        name: zone.name.clone(),
+        kind: zone.kind,
+        at,
+        clearance_m,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame() -> Enu {
+        Enu::new(Geodetic {
+            lat_deg: 47.3977,
+            lon_deg: 8.5456,
+            h_m: 480.0,
+        })
+    }
+
+    fn lon_lat(frame: &Enu, x: f64, y: f64) -> LonLat {
+        let g = frame.to_geodetic(&Vector3::new(x, y, 0.0));
+        [g.lon_deg, g.lat_deg]
+    }
+
+    fn rect(frame: &Enu, [x0, y0, x1, y1]: [f64; 4]) -> Shape {
+        let ring = [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)];
+        Shape::Polygon(vec![
+            ring.iter().map(|&(x, y)| lon_lat(frame, x, y)).collect(),
+        ])
+    }
+
+    /// A 40 × 30 m lawn with a 4 × 4 m pond at (10, 10), a tree of 1 m at (-10, 5) and a
+    /// wall from (5, -10) to (5, 0).
+    fn yard() -> LocalZones {
+        let f = frame();
+        let mut set = ZoneSet::default();
+        set.add(
+            "lawn",
+            ZoneKind::Boundary,
+            rect(&f, [-20.0, -15.0, 20.0, 15.0]),
+        )
+        .unwrap();
+        set.add("pond", ZoneKind::KeepOut, rect(&f, [8.0, 8.0, 12.0, 12.0]))
+            .unwrap();
+        set.add(
+            "tree",
+            ZoneKind::KeepOut,
+            Shape::Circle {
+                centre: lon_lat(&f, -10.0, 5.0),
+                radius_m: 1.0,
+            },
+        )
+        .unwrap();
+        set.add(
+            "fence",
+            ZoneKind::Wall,
+            Shape::Line(vec![lon_lat(&f, 5.0, -10.0), lon_lat(&f, 5.0, 0.0)]),
+        )
+        .unwrap();
+        LocalZones::new(&set, &f)
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-3
+    }
+
+    #[test]
+    fn a_disc_meets_the_zone_it_comes_within_its_radius_of() {
+        let zones = yard();
+        assert_eq!(zones.disc_conflict((0.0, 5.0), 0.5), None, "in the open");
+        let c = zones
+            .disc_conflict((7.6, 10.0), 0.5)
+            .expect("0.4 m from the pond");
+        assert_eq!(c.name, "pond");
+        assert!(close(c.clearance_m, 0.4), "{c:?}");
+        let inside = zones.disc_conflict((10.0, 10.0), 0.5).expect("in the pond");
+        assert!(close(inside.clearance_m, -2.0), "{inside:?}");
+        let tree = zones.disc_conflict((-10.0, 6.3), 0.5).expect("the tree");
+        assert_eq!(tree.name, "tree");
+        assert!(close(tree.clearance_m, 0.3), "{tree:?}");
+        let fence = zones.disc_conflict((5.2, -5.0), 0.5).expect("the fence");
+        assert_eq!((fence.name.as_str(), fence.kind), ("fence", ZoneKind::Wall));
+        let edge = zones
+            .disc_conflict((19.7, 0.0), 0.5)
+            .expect("the lawn's edge");
+        assert_eq!(
+            (edge.name.as_str(), edge.kind),
+            ("lawn", ZoneKind::Boundary)
+        );
+        assert!(close(edge.clearance_m, 0.3), "{edge:?}");
+        let out = zones.disc_conflict((25.0, 0.0), 0.5).expect("off the lawn");
+        assert!(close(out.clearance_m, -5.0), "{out:?}");
+        let (nearest, clearance) = zones.nearest((0.0, 5.0)).unwrap();
+        assert_eq!(nearest.name, "fence");
+        assert!(close(clearance, 50f64.sqrt()), "{clearance}");
+    }
+
+    #[test]
+    fn a_path_meets_the_first_zone_on_its_way_where_it_does() {
+        let zones = yard();
+        // Straight through the pond from the west: met 0.5 m before its west edge.
+        let c = zones
+            .path_conflict(&[(0.0, 10.0), (18.0, 10.0)], 0.5)
+            .expect("through the pond");
+        assert_eq!(c.name, "pond");
+        assert!((c.at.0 - 7.5).abs() <= 0.011 && c.at.1 == 10.0, "{c:?}");
+        // Round it, and clear of everything.
+        let round = [(0.0, 5.0), (15.0, 5.0), (15.0, 14.0)];
+        assert_eq!(zones.path_conflict(&round, 0.5), None);
+        // The last leg grazes the lawn's north edge.
+        assert!(
+            zones
+                .path_conflict(&[(15.0, 5.0), (15.0, 14.8)], 0.5)
+                .is_some_and(|c| c.name == "lawn")
+        );
+        // One long leg across the fence, met however thin the disc.
+        let across = zones
+            .path_conflict(&[(0.5, -5.0), (10_000.5, -5.0)], 0.001)
+            .expect("across the fence");
+        assert_eq!(across.name, "fence");
+        assert!((across.at.0 - 5.0).abs() < 0.011, "{across:?}");
+    }
+
+    #[test]
+    fn without_boundaries_only_the_keep_out_zones_and_walls_count() {
+        let f = frame();
+        let mut set = ZoneSet::default();
+        set.add("pond", ZoneKind::KeepOut, rect(&f, [8.0, 8.0, 12.0, 12.0]))
+            .unwrap();
+        let zones = LocalZones::new(&set, &f);
+        assert_eq!(zones.disc_conflict((1000.0, 1000.0), 1.0), None);
+        assert_eq!(
+            zones.path_conflict(&[(-500.0, 0.0), (500.0, 0.0)], 1.0),
+            None
+        );
+    }
+}
