@@ -173,3 +173,37 @@ fn bad_requests_get_error_acks() {
         assert_eq!(ack["code"], code, "{payload} → {ack}");
     }
 }
+
+#[test]
+fn a_goal_across_a_keep_out_zone_is_refused_with_an_error_ack() {
+    let broker = Mosquitto::start();
+    let acks = broker.subscribe(&[&format!("device/{SN}/goal/ack")]);
+    let dir = common::tempdir("mqtt-device-zones");
+    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
+    let zones = common::zones::yard(&plant, &dir);
+    let mut d = Proc::start(&[
+        "sim",
+        "--mqtt",
+        &broker.address(),
+        "--zones",
+        &zones.to_string_lossy(),
+    ]);
+    d.wait_log(WAIT, "MQTT subscribed");
+    d.wait_out(Duration::from_secs(30), "LOCATE_TRUE", |l| {
+        serde_json::from_str::<Value>(l).is_ok_and(|s| s["nav"]["locate"] == "LOCATE_TRUE")
+    });
+    // Straight across the pond 4 m ahead: refused before the vehicle moves.
+    let ack = ask(
+        &broker,
+        &acks,
+        "goal",
+        r#"{"msg_id": "pond", "timestamp": 1757403776, "data": {"x": 10, "y": 0, "z": 0}}"#,
+    );
+    assert_eq!(ack["msg_id"], "pond");
+    assert_eq!(ack["success"], false, "{ack}");
+    let message = ack["message"].as_str().unwrap_or_default();
+    assert!(message.contains("keep_out zone \"pond\""), "{ack}");
+    std::thread::sleep(Duration::from_millis(500));
+    let (x, y, _) = last_pose(&mut d);
+    assert!(x.hypot(y) < 0.1, "the vehicle stayed: ({x}, {y})");
+}

@@ -183,6 +183,7 @@ pub async fn run(options: MqttBenchOptions) -> crate::bench::error::Result<MqttR
             websocket: None,
             handle: None,
             ntrip: None,
+            zones: None,
         },
         std::io::sink(),
     ));

@@ -317,6 +317,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             websocket: None,
             handle: Some(handle),
             ntrip: None,
+            zones: None,
         },
         std::io::sink(),
     ));

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use super::{block_on, ensure_ros1_built, ntrip_override};
-use chassisd::config::VehicleConfig;
+use chassisd::config::{ConfigError, VehicleConfig};
 use chassisd::runtime::modes::live::{self, LiveOptions};
 
 /// Run live on the configured devices; print base_status JSON lines at 10 Hz.
@@ -32,6 +32,10 @@ pub struct Args {
     /// url.
     #[arg(long, value_name = "URL")]
     ntrip: Option<String>,
+    /// Keep the vehicle to the zones of this GeoJSON file, over the configuration's
+    /// `[zones]` file (its footprint and thresholds kept: the section is needed).
+    #[arg(long, value_name = "FILE")]
+    zones: Option<PathBuf>,
 }
 
 pub fn execute(a: Args) -> anyhow::Result<bool> {
@@ -39,6 +43,21 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
     vehicle.require_devices(&a.config)?;
     if let Some(url) = a.ntrip {
         vehicle.ntrip = Some(ntrip_override(vehicle.ntrip.take(), &url)?);
+    }
+    if let Some(file) = a.zones {
+        let Some(mut zones) = vehicle.zones.take() else {
+            return Err(ConfigError::invalid(
+                &a.config,
+                "zones",
+                "--zones needs the vehicle's outline, and the configuration has no [zones]",
+                "add [zones] with footprint = { front_m, rear_m, width_m }",
+            )
+            .into());
+        };
+        zones.file = Some(file.clone());
+        zones.geojson = None;
+        zones.load(Path::new("."), &file)?;
+        vehicle.zones = Some(zones);
     }
     if let Some(bind) = a.websocket {
         let mut w = vehicle.websocket.take().unwrap_or_default();

@@ -9,6 +9,7 @@ use super::{
 };
 use chassisd::config::ros1::Ros1Config;
 use chassisd::config::websocket::WebsocketConfig;
+use chassisd::config::zones::ZonesConfig;
 use chassisd::runtime::modes::sim::{self, SimOptions};
 use chassisd::runtime::modes::sim_fast::{self, FastOptions};
 
@@ -68,6 +69,10 @@ pub struct Args {
     /// RTK fixed only while they arrive.
     #[arg(long, value_name = "URL", conflicts_with = "fast")]
     ntrip: Option<String>,
+    /// Keep the vehicle to the zones of this GeoJSON file (boundaries, keep-out zones,
+    /// walls), with the plant's footprint.
+    #[arg(long, value_name = "FILE", conflicts_with = "fast")]
+    zones: Option<PathBuf>,
 }
 
 pub fn execute(a: Args) -> anyhow::Result<bool> {
@@ -106,6 +111,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
     }
     // The ROS1 node's publishing gets a worker of its own beside the simulation.
     let threads = if ros1.is_some() { 2 } else { 1 };
+    let footprint = plant.geometry.footprint();
     let options = SimOptions {
         plant,
         seed: a.seed,
@@ -118,6 +124,10 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         websocket,
         handle: None,
         ntrip: a.ntrip.map(|url| ntrip_override(None, &url)).transpose()?,
+        zones: a
+            .zones
+            .map(|file| ZonesConfig::from_file(&file, footprint))
+            .transpose()?,
     };
     block_on(threads, sim::run(options, std::io::stdout()))??;
     Ok(true)

@@ -133,6 +133,26 @@ fn default_resume_after_s() -> f64 {
 }
 
 impl ZonesConfig {
+    /// The section for the zones in `file`, with `footprint` and the defaults, read.
+    pub fn from_file(file: &Path, footprint: Footprint) -> Result<Self, ConfigError> {
+        let mut zones = Self {
+            file: Some(file.to_owned()),
+            geojson: None,
+            footprint,
+            manual: ManualPolicy::default(),
+            margin_m: default_margin_m(),
+            min_quality: GateQuality::default(),
+            max_sigma_m: default_max_sigma_m(),
+            max_fix_age_s: default_max_fix_age_s(),
+            max_correction_age_s: default_max_correction_age_s(),
+            resume_after_s: default_resume_after_s(),
+            set: ZoneSet::default(),
+        };
+        zones.load(Path::new("."), file)?;
+        zones.validate(file)?;
+        Ok(zones)
+    }
+
     /// Reads and checks the zones: `file`, relative to `base` (the configuration's
     /// folder), or the inline `geojson`.
     pub fn load(&mut self, base: &Path, config_file: &Path) -> Result<(), ConfigError> {
@@ -160,6 +180,12 @@ impl ZonesConfig {
             ConfigError::invalid(&source, "zones", problem, fix)
         })?;
         Ok(())
+    }
+
+    /// How far the vehicle's centre keeps from every zone at plan time: the footprint's
+    /// circumscribed radius and the margin, m.
+    pub fn clearance_m(&self) -> f64 {
+        self.footprint.radius_m() + self.margin_m
     }
 
     /// This section as a recording stores it: the zones inline, no file named.

@@ -30,6 +30,7 @@ use crate::devices::imu::{ImuDecoder, ImuStats, Mounting};
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
 use crate::vehicle::chassis::{CONTROL_PERIOD, CommandRejected};
+use crate::vehicle::zones::ZoneGuard;
 use crate::vehicle::{
     CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
 };
@@ -396,8 +397,12 @@ impl Engine {
             .collect();
         let drivetrain = Drivetrain::new(config);
         let adapters: Vec<Box<dyn Adapter>> = crate::api::ADAPTERS.iter().map(|a| a()).collect();
+        let mut vehicle = Vehicle::new(CoreConfig::from_vehicle(config));
+        if let Some(z) = &config.zones {
+            vehicle = vehicle.with_zones(ZoneGuard::new(z.set.clone(), z.clearance_m()));
+        }
         Self {
-            vehicle: Vehicle::new(CoreConfig::from_vehicle(config)),
+            vehicle,
             routes: routes(&nmea, &imu, &drivetrain, &adapters),
             adapters,
             nmea,

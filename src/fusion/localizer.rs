@@ -276,6 +276,14 @@ impl Localizer {
         self.frame.as_ref()
     }
 
+    /// Where the map frame lies on the globe, once there is a datum.
+    pub fn map_placement(&self) -> Option<MapPlacement> {
+        Some(MapPlacement {
+            frame: self.frame?,
+            map: self.map,
+        })
+    }
+
     /// Sets the datum unless one is set (the first valid position).
     pub fn offer_datum(&mut self, datum: Geodetic) -> bool {
         if self.frame.is_some() {
@@ -633,6 +641,28 @@ impl Localizer {
         self.map = MapFrame::default();
         self.filter
             .set_pose((x, y, wrap(yaw)), (0.05, 1f64.to_radians()));
+    }
+}
+
+/// Where the map frame lies on the globe: the datum's ENU frame, and the map frame in it
+/// (INIT_POSITION moves and turns it). Equal placements put every position at the same
+/// map point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapPlacement {
+    frame: Enu,
+    map: MapFrame,
+}
+
+impl MapPlacement {
+    /// A WGS84 position's map coordinates (x, y), m.
+    pub fn place(&self, lat_deg: f64, lon_deg: f64) -> (f64, f64) {
+        let enu = self.frame.to_enu(&Geodetic {
+            lat_deg,
+            lon_deg,
+            h_m: self.frame.datum().h_m,
+        });
+        let (x, y, _) = self.map.pose_of(enu.x, enu.y, 0.0);
+        (x, y)
     }
 }
 

@@ -19,6 +19,7 @@ use crate::config::chassis::ProfileRef;
 use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
 use crate::config::ntrip::NtripConfig;
+use crate::config::zones::ZonesConfig;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::bms::profile::{BmsProfile, CurrentAboveOffset, DalyProfile};
 use crate::devices::canopen::NodeId;
@@ -308,6 +309,17 @@ pub fn sources(plant: &PlantConfig) -> Vec<SourceMeta> {
     ]
 }
 
+/// Configuration sections a simulated session adds to the plant's own.
+#[derive(Debug, Clone, Default)]
+pub struct Sections {
+    /// The MQTT broker and dialects.
+    pub mqtt: Option<MqttConfig>,
+    /// RTK corrections from a caster.
+    pub ntrip: Option<NtripConfig>,
+    /// The zones, read.
+    pub zones: Option<ZonesConfig>,
+}
+
 /// The plant and the engine, stepped together.
 pub struct Lockstep {
     vehicle: SimVehicle,
@@ -337,27 +349,37 @@ impl Lockstep {
         mqtt: Option<MqttConfig>,
         trajectories: Box<dyn TrajectoryStore>,
     ) -> Result<Self, ConfigError> {
-        Self::with_links(plant, seed, start, mqtt, None, trajectories)
+        let sections = Sections {
+            mqtt,
+            ..Sections::default()
+        };
+        Self::with_sections(plant, seed, start, sections, trajectories)
     }
 
-    /// [`Lockstep::with_mqtt`], with RTK corrections from the caster of `ntrip`: the
-    /// simulated receiver then holds RTK only while they arrive.
-    pub fn with_links(
+    /// [`Lockstep::new`], with `sections` added to the plant's configuration: the dialects
+    /// of `mqtt`, RTK corrections from the caster of `ntrip` (the simulated receiver then
+    /// holds RTK only while they arrive), the zones of `zones`; trajectories kept in
+    /// `trajectories`.
+    pub fn with_sections(
         plant: PlantConfig,
         seed: u64,
         start: Timestamp,
-        mqtt: Option<MqttConfig>,
-        ntrip: Option<NtripConfig>,
+        sections: Sections,
         trajectories: Box<dyn TrajectoryStore>,
     ) -> Result<Self, ConfigError> {
         let mut config = vehicle_config(&plant)?;
-        if let Some(m) = mqtt {
-            m.validate(Path::new(SIM_CONFIG_NAME))?;
+        let file = Path::new(SIM_CONFIG_NAME);
+        if let Some(m) = sections.mqtt {
+            m.validate(file)?;
             config.mqtt = Some(m);
         }
-        if let Some(n) = ntrip {
-            n.validate(Path::new(SIM_CONFIG_NAME))?;
+        if let Some(n) = sections.ntrip {
+            n.validate(file)?;
             config.ntrip = Some(n);
+        }
+        if let Some(z) = sections.zones {
+            z.validate(file)?;
+            config.zones = Some(z);
         }
         let decoders = [
             (GNSS_SOURCE.to_owned(), Decoder::Nmea),

@@ -28,6 +28,7 @@ use super::gnss_error::{GnssErrorProcess, GnssFaults};
 use super::nmea_out::{self, Epoch};
 use crate::config::chassis::{Wheel, WheelRadius};
 use crate::config::imu::ImuProtocol;
+use crate::config::zones::Footprint;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
@@ -168,6 +169,21 @@ pub struct Geometry {
     pub gear_ratio: f64,
     /// GNSS antenna in the vehicle frame (x forward, y left), m.
     pub antenna: [f64; 2],
+    /// The vehicle's outline about the axle, for zones (default: a box round the wheels).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub footprint: Option<Footprint>,
+}
+
+impl Geometry {
+    /// The outline: the one given, or a box 10 cm beyond the wheels on every side.
+    pub fn footprint(&self) -> Footprint {
+        let reach = self.wheel_radius_m.left.max(self.wheel_radius_m.right) + 0.1;
+        self.footprint.unwrap_or(Footprint {
+            front_m: reach,
+            rear_m: reach,
+            width_m: self.track_m + 0.2,
+        })
+    }
 }
 
 /// `[motors]`

@@ -147,6 +147,24 @@ pub enum CommandRejected {
         /// Its unit.
         unit: &'static str,
     },
+    /// The motion's way meets a zone (map frame, m).
+    #[error("the way meets the {kind} zone {name:?} at ({x:.2}, {y:.2}) m")]
+    Zone {
+        /// The zone's kind (`boundary`, `keep_out`, `wall`).
+        kind: &'static str,
+        /// Its name.
+        name: String,
+        /// Where the way first comes too close, x (m).
+        x: f64,
+        /// And y (m).
+        y: f64,
+    },
+    /// Zones are configured, but the vehicle is not placed on them yet.
+    #[error(
+        "zones are configured and the vehicle is not located on them: a motion needs a \
+         datum and a position (LOCATE_TRUE) to be checked against them"
+    )]
+    ZonesUnplaced,
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,

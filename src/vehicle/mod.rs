@@ -6,6 +6,7 @@ pub mod corrections;
 pub mod feedback;
 pub mod safety;
 pub mod status;
+pub mod zones;
 
 use std::time::Duration;
 
@@ -148,6 +149,14 @@ impl CoreConfig {
             .max_position_radius_m;
         core
     }
+}
+
+/// What a motion's way is, from where the vehicle stands.
+enum Way {
+    /// Straight to each point in turn (map frame).
+    Through(Vec<(f64, f64)>),
+    /// A straight move along the heading, or a turn on the spot.
+    Move(MoveKind),
 }
 
 /// The key of the goal reach, named in refusals.
@@ -423,6 +432,8 @@ pub struct Vehicle {
     blade_running: bool,
     /// RTK corrections, when a correction source is configured.
     corrections: Option<corrections::Corrections>,
+    /// The zones motions are checked against, when configured.
+    zones: Option<zones::ZoneGuard>,
 }
 
 impl Vehicle {
@@ -461,7 +472,14 @@ impl Vehicle {
             corrections: config
                 .corrections_stale_after
                 .map(corrections::Corrections::new),
+            zones: None,
         }
+    }
+
+    /// The core, checking every motion's way against `zones` before it starts.
+    pub fn with_zones(mut self, zones: zones::ZoneGuard) -> Self {
+        self.zones = Some(zones);
+        self
     }
 
     /// The `odom` frame's pose (wheels and gyro), once the drives have reported.
@@ -806,6 +824,9 @@ impl Vehicle {
             MoveKind::Straight { distance_m } => distance_m.is_finite(),
             MoveKind::Turn { angle_rad } => angle_rad.is_finite(),
         };
+        if finite {
+            self.check_way(t, Way::Move(kind))?;
+        }
         self.start_motion(t, finite, |motion, view| Ok(motion.start(t, kind, view)))
             .map(|_| ())
     }
@@ -818,6 +839,9 @@ impl Vehicle {
         tag: Option<MotionTag>,
     ) -> Result<MotionId, CommandRejected> {
         let finite = goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite();
+        if finite {
+            self.check_way(t, Way::Through(vec![(goal.x, goal.y)]))?;
+        }
         let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
             within_reach(view, &[(goal.x, goal.y)], reach.map(|r| r.goal_m), GOAL_KEY)?;
@@ -859,6 +883,9 @@ impl Vehicle {
             && !points.is_empty()
             && points.iter().all(|(x, y)| x.is_finite() && y.is_finite());
         let speed = path.speed;
+        if finite {
+            self.check_way(t, Way::Through(points.clone()))?;
+        }
         let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
             within_reach(view, &points, reach.map(|r| r.path_m), PATH_KEY)?;
@@ -923,6 +950,19 @@ impl Vehicle {
             if let Some(view) = &view {
                 within_reach(view, points, limit, key)?;
             }
+        }
+        // The paths one after the other, from where the vehicle stands (the dock is left
+        // out: it often lies on a boundary).
+        let way: Vec<(f64, f64)> = steps
+            .iter()
+            .flat_map(|step| match step {
+                MissionStep::MoveTo(p) | MissionStep::Coverage(p) => p.as_slice(),
+                _ => &[],
+            })
+            .copied()
+            .collect();
+        if !way.is_empty() {
+            self.check_way(t, Way::Through(way))?;
         }
         for (i, step) in steps.iter().enumerate() {
             let problem = match step {
@@ -1087,6 +1127,34 @@ impl Vehicle {
             return Err(CommandRejected::NoOdometry);
         };
         start(motion, &view)
+    }
+
+    /// Refuses a motion whose way meets a zone (when zones are configured): the way from
+    /// where the vehicle stands in the map frame.
+    fn check_way(&mut self, t: Timestamp, way: Way) -> Result<(), CommandRejected> {
+        if self.zones.is_none() {
+            return Ok(());
+        }
+        let here = self
+            .pose_view(t)
+            .and_then(|v| Some((v.map_xy?, v.map_yaw?)));
+        let placement = self.localizer.map_placement();
+        let Some(zones) = &mut self.zones else {
+            return Ok(());
+        };
+        let Some(((x, y), yaw)) = here else {
+            return Err(CommandRejected::ZonesUnplaced);
+        };
+        let points = match way {
+            Way::Through(points) => std::iter::once((x, y)).chain(points).collect(),
+            Way::Move(MoveKind::Straight { distance_m }) => vec![
+                (x, y),
+                (x + distance_m * yaw.cos(), y + distance_m * yaw.sin()),
+            ],
+            // On the spot: the footprint's disc where it stands.
+            Way::Move(MoveKind::Turn { .. }) => vec![(x, y)],
+        };
+        zones.check_way(placement, &points)
     }
 
     /// How far a motion may lead, when the vehicle has drives.

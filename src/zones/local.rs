@@ -1,12 +1,10 @@
-//! Zones placed in a map frame (east, north, m, of a datum's ENU frame) and the questions the
-//! checks ask of them: how far a disc (the vehicle's footprint grown by a margin) stands
+//! Zones placed in a map frame (x, y, m: a datum's ENU frame, moved and turned as the map
+//! frame is) and the questions the checks ask of them: how far a disc (the vehicle's footprint grown by a margin) stands
 //! from each zone, and where a path swept by that disc first meets one.
 
 use geo::{Contains, Coord, Distance, Euclidean, Line, LineString, Point, Polygon};
-use nalgebra::Vector3;
 
 use super::{LonLat, Shape, ZoneKind, ZoneSet};
-use crate::fusion::geodesy::{Enu, Geodetic};
 
 /// One zone in the map frame.
 #[derive(Debug, Clone)]
@@ -55,15 +53,11 @@ const PLACE_STEP_M: f64 = 0.01;
 const MAX_HALVINGS: u32 = 40;
 
 impl LocalZones {
-    /// `set` in the ENU frame of `frame`'s datum.
-    pub fn new(set: &ZoneSet, frame: &Enu) -> Self {
+    /// `set` in the frame where `place` puts a position (latitude, longitude in degrees).
+    pub fn new(set: &ZoneSet, place: impl Fn(f64, f64) -> (f64, f64)) -> Self {
         let local = |p: &LonLat| {
-            let v: Vector3<f64> = frame.to_enu(&Geodetic {
-                lat_deg: p[1],
-                lon_deg: p[0],
-                h_m: frame.datum().h_m,
-            });
-            Coord { x: v.x, y: v.y }
+            let (x, y) = place(p[1], p[0]);
+            Coord { x, y }
         };
         let line = |points: &[LonLat]| LineString::new(points.iter().map(local).collect());
         let zones = set
@@ -257,6 +251,8 @@ fn conflict(zone: &LocalZone, at: (f64, f64), clearance_m: f64) -> Conflict {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fusion::geodesy::{Enu, Geodetic};
+    use nalgebra::Vector3;
 
     fn frame() -> Enu {
         Enu::new(Geodetic {
@@ -306,7 +302,18 @@ mod tests {
             Shape::Line(vec![lon_lat(&f, 5.0, -10.0), lon_lat(&f, 5.0, 0.0)]),
         )
         .unwrap();
-        LocalZones::new(&set, &f)
+        in_frame(&set, &f)
+    }
+
+    fn in_frame(set: &ZoneSet, f: &Enu) -> LocalZones {
+        LocalZones::new(set, |lat_deg, lon_deg| {
+            let p = f.to_enu(&Geodetic {
+                lat_deg,
+                lon_deg,
+                h_m: f.datum().h_m,
+            });
+            (p.x, p.y)
+        })
     }
 
     fn close(a: f64, b: f64) -> bool {
@@ -376,7 +383,7 @@ mod tests {
         let mut set = ZoneSet::default();
         set.add("pond", ZoneKind::KeepOut, rect(&f, [8.0, 8.0, 12.0, 12.0]))
             .unwrap();
-        let zones = LocalZones::new(&set, &f);
+        let zones = in_frame(&set, &f);
         assert_eq!(zones.disc_conflict((1000.0, 1000.0), 1.0), None);
         assert_eq!(
             zones.path_conflict(&[(-500.0, 0.0), (500.0, 0.0)], 1.0),

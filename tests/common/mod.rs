@@ -10,6 +10,7 @@ pub mod process;
 pub mod pty;
 pub mod spec;
 pub mod ws;
+pub mod zones;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

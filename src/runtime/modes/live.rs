@@ -114,7 +114,8 @@ async fn run_marked(
     if let Some(z) = &options.config.zones {
         tracing::warn!(
             zones = z.set.zones().len(),
-            "zones read and checked, but not enforced yet: the vehicle does not keep to them"
+            "zones: every motion's way is checked against them before it starts; the run-time \
+             stop at a zone and the GNSS gate are not built yet"
         );
     }
     // The broker first: its process takes a moment to start on a slow PC, and nothing that

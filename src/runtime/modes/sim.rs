@@ -26,7 +26,7 @@ use crate::runtime::modes::live::read_commands;
 use crate::runtime::recorder::Recorder;
 use crate::runtime::status_out::StatusOut;
 use crate::runtime::trajectory_writer;
-use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
+use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sections, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
@@ -72,6 +72,8 @@ pub struct SimOptions {
     /// RTK corrections from a caster (`--ntrip URL`): the simulated receiver then holds
     /// RTK fixed only while they arrive.
     pub ntrip: Option<crate::config::ntrip::NtripConfig>,
+    /// The zones the vehicle keeps to (`--zones FILE`).
+    pub zones: Option<crate::config::zones::ZonesConfig>,
 }
 
 /// Faults a benchmark injects into a running simulation; each holds while set.
@@ -187,14 +189,13 @@ async fn run_marked(
         snapshot,
         writer,
     } = trajectory_writer::open(&config, Box::new(MemoryStore::default()))?;
-    let mut sim = Lockstep::with_links(
-        options.plant.clone(),
-        options.seed,
-        start,
-        options.mqtt.clone(),
-        options.ntrip.clone(),
-        store,
-    )?;
+    let sections = Sections {
+        mqtt: options.mqtt.clone(),
+        ntrip: options.ntrip.clone(),
+        zones: options.zones.clone(),
+    };
+    let mut sim =
+        Lockstep::with_sections(options.plant.clone(), options.seed, start, sections, store)?;
     let mut sources = lockstep::sources(&options.plant);
     if options.ntrip.is_some() {
         sources.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));

@@ -1,0 +1,126 @@
+//! Plan-time zone checks through the whole engine on the simulated mower: a goal, a move, a
+//! path and a mission whose way (the footprint's disc and the margin, swept along it) meets
+//! a keep-out zone, a wall or the boundary is refused before it starts, naming the zone and
+//! the place; a way clear of them all starts.
+
+mod common;
+
+use chassisd::api::trajectory::MemoryStore;
+use chassisd::config::zones::ZonesConfig;
+use chassisd::sim::lockstep::{Lockstep, Sections};
+use chassisd::sim::plant::PlantConfig;
+use chassisd::vehicle::Localization;
+use common::lockstep::{START, SimRun};
+
+/// The built-in mower with the zones, booted, nothing run yet.
+fn mower_with_zones(name: &str) -> SimRun {
+    let plant = PlantConfig::builtin().expect("plant");
+    let dir = common::tempdir(name);
+    let file = common::zones::yard(&plant, &dir);
+    let zones = ZonesConfig::from_file(&file, plant.geometry.footprint()).expect("zones");
+    let sections = Sections {
+        zones: Some(zones),
+        ..Sections::default()
+    };
+    let sim = Lockstep::with_sections(plant, 3, START, sections, Box::new(MemoryStore::default()))
+        .expect("sim");
+    SimRun::on(sim)
+}
+
+/// [`mower_with_zones`], standing until located.
+fn mower_in_the_yard(name: &str) -> SimRun {
+    let mut v = mower_with_zones(name);
+    for _ in 0..30 {
+        v.run(1.0);
+        if v.status().localization == Localization::Good {
+            return v;
+        }
+    }
+    panic!("never located");
+}
+
+/// The x of "at (x, y) m" in a refusal.
+fn place_x(refusal: &str) -> f64 {
+    let at = refusal.split(" at (").nth(1).expect("a place");
+    at.split(',')
+        .next()
+        .and_then(|x| x.parse().ok())
+        .expect("x")
+}
+
+#[test]
+fn a_way_into_a_zone_is_refused_naming_it_and_a_clear_one_starts() {
+    let mut v = mower_in_the_yard("zones-plan");
+    let radius = 0.45f64.hypot(0.275) + 0.1;
+
+    // Straight through the pond: met one disc's radius before its west edge.
+    let refused = v
+        .send("goal", r#"{"x": 10, "y": 0, "yaw": 0}"#)
+        .unwrap_err();
+    assert!(refused.contains("keep_out zone \"pond\""), "{refused}");
+    let x = place_x(&refused);
+    assert!((x - (4.0 - radius)).abs() < 0.1, "{refused}");
+    let refused = v
+        .send("set_navi_cmd", r#"{"cmd": "1", "distance": 500}"#)
+        .unwrap_err();
+    assert!(refused.contains("\"pond\""), "{refused}");
+    let refused = v
+        .send("follow_path", r#"{"path": [2, 0, 8, 0], "speed": 0.5}"#)
+        .unwrap_err();
+    assert!(refused.contains("\"pond\""), "{refused}");
+    let mission = r#"[{"action": "COVERAGE", "parameters": {"path": [1, 2, 1, 0, 8, 0]}}]"#;
+    let refused = v.send("mission", mission).unwrap_err();
+    assert!(refused.contains("\"pond\""), "{refused}");
+
+    // Backwards into the fence, north past the tree, south off the lawn.
+    let refused = v
+        .send("set_navi_cmd", r#"{"cmd": "2", "distance": 400}"#)
+        .unwrap_err();
+    assert!(refused.contains("wall zone \"fence\""), "{refused}");
+    let refused = v
+        .send("follow_path", r#"{"path": [1, 3, 1, 8], "speed": 0.5}"#)
+        .unwrap_err();
+    assert!(refused.contains("\"tree\""), "{refused}");
+    let refused = v
+        .send("goal", r#"{"x": 0, "y": -12, "yaw": 0}"#)
+        .unwrap_err();
+    assert!(refused.contains("boundary zone \"lawn\""), "{refused}");
+
+    // Clear ways start and end where they should: a turn on the spot and back, then a goal
+    // 2 m ahead, short of the pond.
+    for (topic, request) in [
+        ("set_navi_cmd", r#"{"cmd": "3", "distance": 90}"#),
+        ("set_navi_cmd", r#"{"cmd": "4", "distance": 90}"#),
+        ("goal", r#"{"x": 2, "y": 0, "yaw": 0}"#),
+    ] {
+        v.send(topic, request).expect("a clear way starts");
+        v.run_under(common::lockstep::FIXED, 30.0, true);
+        let result = v.result();
+        assert!(
+            matches!(result.outcome, chassisd::control::Outcome::Succeeded),
+            "{request}: {result:?}"
+        );
+    }
+    let (x, _) = v.truth_xy();
+    assert!(
+        (x - 2.0).abs() < 0.2 && x < 4.0 - 0.45,
+        "at the goal, short of the pond: {x}"
+    );
+}
+
+#[test]
+fn with_zones_a_vehicle_not_yet_located_does_not_move_by_itself() {
+    let mut v = mower_with_zones("zones-unplaced");
+    v.run_under(
+        chassisd::sim::plant::GnssCondition {
+            quality: None,
+            offset: (0.0, 0.0),
+        },
+        3.0,
+        false,
+    );
+    let refused = v
+        .send("set_navi_cmd", r#"{"cmd": "1", "distance": 50}"#)
+        .unwrap_err();
+    assert!(refused.contains("not located on them"), "{refused}");
+}
