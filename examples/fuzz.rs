@@ -40,12 +40,15 @@ use chassisd::devices::imu::ImuDecoder;
 use chassisd::devices::imu::{hipnuc::HiPnuc, witmotion::WitMotion};
 use chassisd::engine::EngineOutput;
 use chassisd::engine::drivetrain::Drivetrain;
+use chassisd::fusion::geodesy::{Enu, Geodetic};
 use chassisd::record::meta::Meta;
 use chassisd::record::reader::parse_line;
 use chassisd::record::{Payload, Record, RecordingReader, SourceKind};
 use chassisd::sim::lockstep::{Lockstep, Sink, vehicle_config};
 use chassisd::sim::plant::{GnssCondition, PlantConfig};
 use chassisd::time::Timestamp;
+use chassisd::zones::ZoneSet;
+use chassisd::zones::local::LocalZones;
 
 #[path = "../tests/common/spec.rs"]
 mod spec;
@@ -207,6 +210,28 @@ fn targets() -> Vec<Target> {
             runner: ros1::runner,
         },
         Target {
+            name: "zones",
+            about: "zones files (GeoJSON): the checks, writing back, placing and the distance queries",
+            seeds: zones_seeds,
+            tokens: &[
+                b"\"Polygon\"",
+                b"\"Point\"",
+                b"\"LineString\"",
+                b"\"keep_out\"",
+                b"\"boundary\"",
+                b"\"wall\"",
+                b"\"radius_m\"",
+                b"\"id\"",
+                b"[[",
+                b"]]",
+                b"-180.0",
+                b"90",
+                b"1e308",
+            ],
+            structured: Some(mutate_json_document),
+            runner: zones_runner,
+        },
+        Target {
             name: "rtcm",
             about: "RTCM 3 framer (CRC-24Q, resynchronisation), every byte accounted for",
             seeds: rtcm_seeds,
@@ -241,6 +266,71 @@ fn targets() -> Vec<Target> {
             runner: ntrip_runner,
         },
     ]
+}
+
+fn zones_seeds() -> Vec<Vec<u8>> {
+    let mut seeds: Vec<Vec<u8>> = std::fs::read(repo().join("devices/zones.example.geojson"))
+        .into_iter()
+        .collect();
+    // One feature of each shape alone, and a polygon with a hole.
+    seeds.push(
+        br#"{"type": "Feature", "properties": {"kind": "keep_out", "radius_m": 2},
+        "geometry": {"type": "Point", "coordinates": [8.5456, 47.3977]}}"#
+            .to_vec(),
+    );
+    seeds.push(
+        br#"{"type": "FeatureCollection", "features": [{"type": "Feature", "id": 9,
+        "properties": {"kind": "boundary", "name": "ring"}, "geometry": {"type": "Polygon",
+        "coordinates": [[[8.5450, 47.3970], [8.5470, 47.3970], [8.5470, 47.3985],
+        [8.5450, 47.3985], [8.5450, 47.3970]], [[8.5455, 47.3975], [8.5458, 47.3975],
+        [8.5458, 47.3977], [8.5455, 47.3975]]]}}, {"type": "Feature", "properties":
+        {"kind": "wall"}, "geometry": {"type": "LineString", "coordinates": [[8.5461,
+        47.3972], [8.5461, 47.3982], [8.5466, 47.3982]]}}]}"#
+            .to_vec(),
+    );
+    seeds
+}
+
+fn zones_runner() -> Runner {
+    let datum = Geodetic {
+        lat_deg: 47.397742,
+        lon_deg: 8.545594,
+        h_m: 488.0,
+    };
+    let frame = Enu::new(datum);
+    Box::new(move |input| {
+        let text = String::from_utf8_lossy(input);
+        match ZoneSet::from_geojson(&text) {
+            Ok(set) => {
+                // What a map frame and the plan-time check do with zones that load.
+                let local = LocalZones::new(&set, |lat_deg, lon_deg| {
+                    let p = frame.to_enu(&Geodetic {
+                        lat_deg,
+                        lon_deg,
+                        h_m: datum.h_m,
+                    });
+                    (p.x, p.y)
+                });
+                let disc = local.disc_conflict((0.0, 0.0), 0.6).is_some();
+                let way = [(0.0, 0.0), (40.0, 10.0), (-30.0, -5.0), (1e7, 0.0)];
+                let path = local.path_conflict(&way, 0.6).is_some();
+                // Zones that load write back to the same zones.
+                let again = ZoneSet::from_geojson(&set.to_geojson());
+                assert_eq!(
+                    again.as_ref(),
+                    Ok(&set),
+                    "zones written back read differently"
+                );
+                signature(&[
+                    1,
+                    set.zones().len() as u64,
+                    u64::from(disc),
+                    u64::from(path),
+                ])
+            }
+            Err(e) => signature(&[0, std::mem::discriminant(&e).hash_u64()]),
+        }
+    })
 }
 
 /// Slices of the shared RTCM 3 streams.

@@ -70,6 +70,10 @@ pub struct MotionConfig {
     /// driven straight, unplanned.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub task_max_approach_m: Option<f64>,
+    /// A trajectory task or COVERAGE path that strays further than this from its path
+    /// stops with the reason, m (default 0.3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_cross_track_m: Option<f64>,
     /// A goal (and each point of a MOVE_TO_POSITION) may lie at most this far from the
     /// vehicle, m (default 100, as a `set_navi_cmd` move).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -111,6 +115,7 @@ impl MotionConfig {
                 min_gnss: self.task_min_gnss.unwrap_or(MinGnss::RtkFixed),
                 gnss_wait_s: self.task_gnss_wait_s.unwrap_or(120.0),
                 max_approach_m: self.task_max_approach_m.unwrap_or(5.0),
+                max_cross_track_m: self.max_cross_track_m.unwrap_or(0.3),
             },
             reach: Reach {
                 goal_m: self.max_goal_distance_m.unwrap_or(100.0),
@@ -221,6 +226,12 @@ impl MotionConfig {
                 "task_max_approach_m",
                 self.task_max_approach_m,
                 0.0..=1000.0,
+                "m",
+            ),
+            (
+                "max_cross_track_m",
+                self.max_cross_track_m,
+                0.05..=10.0,
                 "m",
             ),
             (

@@ -416,6 +416,7 @@ pub(crate) mod tests {
                 min_gnss: crate::control::settings::MinGnss::RtkFixed,
                 gnss_wait_s: 5.0,
                 max_approach_m: 5.0,
+                max_cross_track_m: 0.3,
             },
             reach: crate::control::settings::Reach {
                 goal_m: 100.0,

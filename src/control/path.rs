@@ -13,7 +13,7 @@
 //! - At the start, at each corner and after a pause it turns on the spot to the path first.
 //! - It needs the vehicle located and the GNSS fix at the configured quality. Below that it
 //!   waits at rest and goes on when the quality is back, failing after the configured wait;
-//!   lost localisation or leaving the path by [`OFF_PATH_ABORT_M`] ends it.
+//!   lost localisation or leaving the path by more than `motion.max_cross_track_m` ends it.
 //! - It reports the cross-track error: its RMS and maximum over the drive.
 
 use super::moves::{RelativeMove, Step, led_speed, planning_limits, turn_on_the_spot};
@@ -38,8 +38,6 @@ const TURN_FIRST_RAD: f64 = 0.5;
 const RETURN_RAD: f64 = 1.0;
 /// The speed halves at this cross-track error, m.
 const SLOW_OFF_PATH_M: f64 = 0.3;
-/// Further off the path than this ends the task, m.
-pub const OFF_PATH_ABORT_M: f64 = 1.0;
 /// Turns on the spot end within this, rad (the path law takes out the rest).
 const TURN_TOLERANCE_RAD: f64 = 0.02;
 /// The nearest sample is searched this many samples back ...
@@ -416,11 +414,12 @@ impl PathFollow {
         self.sum_sq += here.e * here.e;
         self.samples += 1;
         self.max_abs = self.max_abs.max(here.e.abs());
-        if here.e.abs() > OFF_PATH_ABORT_M {
+        let limit_m = self.settings.task.max_cross_track_m;
+        if here.e.abs() > limit_m {
             return Step::Done(
                 Outcome::Aborted(AbortReason::OffPath {
                     off_m: here.e.abs(),
-                    limit_m: OFF_PATH_ABORT_M,
+                    limit_m,
                 }),
                 self.left_m,
             );
@@ -696,6 +695,31 @@ mod tests {
             r.outcome
         );
         assert!((r.took - 7.0).abs() < 0.1, "{}", r.took);
+    }
+
+    #[test]
+    fn a_task_that_strays_beyond_the_cross_track_limit_stops_with_the_reason() {
+        let s = settings();
+        let line = [(0.0, 0.0), (6.0, 0.0)];
+        let t0 = Timestamp::from_micros(0);
+        let at = |y: f64| OdomPose {
+            x: 1.0,
+            y,
+            ..OdomPose::default()
+        };
+        for (off, stops) in [(0.25, false), (0.35, true), (-0.35, true)] {
+            let start = view(OdomPose::default(), t0, MinGnss::RtkFixed);
+            let mut f = PathFollow::new(t0, &line, 0.5, &start, &s).expect("starts");
+            let t = Timestamp::from_micros(10_000);
+            let step = f.step(t, &view(at(off), t, MinGnss::RtkFixed), 0.1);
+            match step {
+                Step::Done(Outcome::Aborted(AbortReason::OffPath { off_m, limit_m }), _) => {
+                    assert!(stops, "{off} m off stopped it");
+                    assert!((off_m - off.abs()).abs() < 1e-6 && limit_m == 0.3);
+                }
+                other => assert!(!stops, "{off} m off went on: {other:?}"),
+            }
+        }
     }
 
     #[test]

@@ -61,6 +61,8 @@ pub struct TaskSettings {
     pub gnss_wait_s: f64,
     /// How far its first point may be, m.
     pub max_approach_m: f64,
+    /// Further from the path than this ends the task, m.
+    pub max_cross_track_m: f64,
 }
 
 /// How far from the vehicle a motion may lead.

@@ -111,13 +111,7 @@ async fn run_marked(
         .config
         .require_devices(std::path::Path::new("the configuration"))?;
     log_calibration(&options.config);
-    if let Some(z) = &options.config.zones {
-        tracing::warn!(
-            zones = z.set.zones().len(),
-            "zones: every motion's way is checked against them before it starts; the run-time \
-             stop at a zone and the GNSS gate are not built yet"
-        );
-    }
+    super::log_zones(&options.config);
     // The broker first: its process takes a moment to start on a slow PC, and nothing that
     // keeps time (the drives' set-up) should be waiting meanwhile.
     let embedded = match &options.config.mqtt {

@@ -8,6 +8,17 @@ pub mod live;
 pub mod sim;
 pub mod sim_fast;
 
+/// Says what the zones do, and what they do not do yet.
+fn log_zones(config: &crate::config::VehicleConfig) {
+    if let Some(z) = &config.zones {
+        tracing::warn!(
+            zones = z.set.zones().len(),
+            "zones: every motion's way is checked against them before it starts; the run-time \
+             stop at a zone and the GNSS gate are not built yet"
+        );
+    }
+}
+
 use crate::engine::EngineOutput;
 use crate::runtime::links::{mqtt, ros1, websocket};
 

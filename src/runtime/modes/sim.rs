@@ -229,6 +229,7 @@ async fn run_marked(
         }
         None => None,
     };
+    super::log_zones(sim.config());
     heap::spawn();
     let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
     let mqtt = match &options.mqtt {
