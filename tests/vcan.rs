@@ -117,6 +117,12 @@ impl Rig {
         }
     }
 
+    /// `kill -9` on the daemon: gone without a word on the bus.
+    fn kill_daemon(&mut self) {
+        let pid = nix::unistd::Pid::from_raw(self.daemon.child.id() as i32);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGKILL).expect("kill -9");
+    }
+
     /// The simulator's state.
     fn report(&mut self) -> Value {
         report_of(&mut self.sim)
@@ -291,16 +297,27 @@ fn drive_json(report: &Value, drive: &str) -> Value {
 
 /// Waits until both simulated drives have stopped their motors by themselves; returns when.
 fn wait_drives_stopped(rig: &mut Rig, since: Instant) -> Duration {
+    wait_report(rig, since, "the drives kept going", |report| {
+        ["left", "right"].iter().all(|d| {
+            let a = axis(report, d);
+            a["state"] != "operation enabled" && a["target"] == 0
+        })
+    })
+}
+
+/// Polls the simulator's report until `done` holds; how long that took since `since`.
+fn wait_report(
+    rig: &mut Rig,
+    since: Instant,
+    what: &str,
+    done: impl Fn(&Value) -> bool,
+) -> Duration {
     loop {
         let report = rig.report();
-        let stopped = ["left", "right"].iter().all(|d| {
-            let a = axis(&report, d);
-            a["state"] != "operation enabled" && a["target"] == 0
-        });
-        if stopped {
+        if done(&report) {
             return since.elapsed();
         }
-        assert!(since.elapsed() < WAIT, "the drives kept going: {report}");
+        assert!(since.elapsed() < WAIT, "{what}: {report}");
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -313,8 +330,7 @@ fn killed_daemon_the_drives_stop_by_themselves() {
     rig.wait_enabled();
     rig.drive(0.3, 0.0, Duration::from_secs(1));
     assert_eq!(axis(&rig.report(), "left")["state"], "operation enabled");
-    let pid = nix::unistd::Pid::from_raw(rig.daemon.child.id() as i32);
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGKILL).expect("kill -9");
+    rig.kill_daemon();
     let killed = Instant::now();
     let took = wait_drives_stopped(&mut rig, killed);
     eprintln!("drives stopped {took:?} after kill -9 (consumer time 250 ms)");
@@ -587,14 +603,9 @@ fn estop_config(dir: &Path) -> PathBuf {
 
 /// Waits until the simulated cutter switch's relay is `on`; how long that took.
 fn wait_cutter(rig: &mut Rig, on: bool, since: Instant) -> Duration {
-    loop {
-        let report = rig.report();
-        if report["cutter"]["on"] == on {
-            return since.elapsed();
-        }
-        assert!(since.elapsed() < WAIT, "cutter never {on}: {report}");
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_report(rig, since, &format!("cutter never {on}"), |report| {
+        report["cutter"]["on"] == on
+    })
 }
 
 #[test]
@@ -614,8 +625,7 @@ fn killed_daemon_a_repeated_cutter_switch_opens_by_its_keep_alive() {
     // The repeats hold it on well past the module's keep-alive (three repeats).
     std::thread::sleep(Duration::from_millis(1000));
     assert_eq!(rig.report()["cutter"]["on"], true, "held on by the repeats");
-    let pid = nix::unistd::Pid::from_raw(rig.daemon.child.id() as i32);
-    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGKILL).expect("kill -9");
+    rig.kill_daemon();
     let took = wait_cutter(&mut rig, false, Instant::now());
     eprintln!("cutter relay opened {took:?} after kill -9 (keep-alive 300 ms)");
     // Keep-alive 300 ms plus the VM's scheduling and the report's round trip.

@@ -60,31 +60,40 @@ fn a_way_into_a_zone_is_refused_naming_it_and_a_clear_one_starts() {
     assert!(refused.contains("keep_out zone \"pond\""), "{refused}");
     let x = place_x(&refused);
     assert!((x - (4.0 - radius)).abs() < 0.1, "{refused}");
-    let refused = v
-        .send("set_navi_cmd", r#"{"cmd": "1", "distance": 500}"#)
-        .unwrap_err();
-    assert!(refused.contains("\"pond\""), "{refused}");
-    let refused = v
-        .send("follow_path", r#"{"path": [2, 0, 8, 0], "speed": 0.5}"#)
-        .unwrap_err();
-    assert!(refused.contains("\"pond\""), "{refused}");
     let mission = r#"[{"action": "COVERAGE", "parameters": {"path": [1, 2, 1, 0, 8, 0]}}]"#;
-    let refused = v.send("mission", mission).unwrap_err();
-    assert!(refused.contains("\"pond\""), "{refused}");
-
-    // Backwards into the fence, north past the tree, south off the lawn.
-    let refused = v
-        .send("set_navi_cmd", r#"{"cmd": "2", "distance": 400}"#)
-        .unwrap_err();
-    assert!(refused.contains("wall zone \"fence\""), "{refused}");
-    let refused = v
-        .send("follow_path", r#"{"path": [1, 3, 1, 8], "speed": 0.5}"#)
-        .unwrap_err();
-    assert!(refused.contains("\"tree\""), "{refused}");
-    let refused = v
-        .send("goal", r#"{"x": 0, "y": -12, "yaw": 0}"#)
-        .unwrap_err();
-    assert!(refused.contains("boundary zone \"lawn\""), "{refused}");
+    // Each kind of motion: into the pond ahead, backwards into the fence, north past the
+    // tree, south off the lawn.
+    for (topic, request, zone) in [
+        (
+            "set_navi_cmd",
+            r#"{"cmd": "1", "distance": 500}"#,
+            "keep_out zone \"pond\"",
+        ),
+        (
+            "follow_path",
+            r#"{"path": [2, 0, 8, 0], "speed": 0.5}"#,
+            "keep_out zone \"pond\"",
+        ),
+        ("mission", mission, "keep_out zone \"pond\""),
+        (
+            "set_navi_cmd",
+            r#"{"cmd": "2", "distance": 400}"#,
+            "wall zone \"fence\"",
+        ),
+        (
+            "follow_path",
+            r#"{"path": [1, 3, 1, 8], "speed": 0.5}"#,
+            "keep_out zone \"tree\"",
+        ),
+        (
+            "goal",
+            r#"{"x": 0, "y": -12, "yaw": 0}"#,
+            "boundary zone \"lawn\"",
+        ),
+    ] {
+        let refused = v.send(topic, request).unwrap_err();
+        assert!(refused.contains(zone), "{topic} {request}: {refused}");
+    }
 
     // Clear ways start and end where they should: a turn on the spot and back, then a goal
     // 2 m ahead, short of the pond.

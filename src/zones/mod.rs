@@ -235,11 +235,6 @@ impl ZoneSet {
         &self.zones
     }
 
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.zones.is_empty()
-    }
-
     /// Adds a zone after checking it; its id.
     pub fn add(&mut self, name: &str, kind: ZoneKind, shape: Shape) -> Result<u32, ZonesError> {
         let index = self.zones.len();
@@ -346,15 +341,10 @@ fn zone_of(feature: &Feature) -> Result<(Option<u32>, Zone), FeatureError> {
     check_shape(kind, &shape).map_err(fail)?;
     let name = match given_name {
         Some(n) => n,
-        None => match &feature.id {
-            Some(Id::String(s)) => s.clone(),
-            _ => format!(
-                "{} {}",
-                kind.name(),
-                id.map_or(String::new(), |i| i.to_string())
-            )
-            .trim_end()
-            .to_owned(),
+        None => match (&feature.id, id) {
+            (Some(Id::String(s)), _) => s.clone(),
+            (_, Some(id)) => format!("{} {id}", kind.name()),
+            (_, None) => kind.name().to_owned(),
         },
     };
     check_name(&name).map_err(|e| (Some(name.clone()), e.0, e.1))?;

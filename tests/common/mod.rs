@@ -17,14 +17,20 @@ use std::process::{Command, Output};
 
 /// `chassisd replay PATH`, which must succeed.
 pub fn replay(path: &Path) -> Output {
+    replay_with(&[], path)
+}
+
+/// `chassisd replay OPTIONS PATH`, which must succeed.
+fn replay_with(options: &[&str], path: &Path) -> Output {
     let out = Command::new(chassisd())
         .arg("replay")
+        .args(options)
         .arg(path)
         .output()
         .expect("chassisd runs");
     assert!(
         out.status.success(),
-        "replay failed: {}",
+        "replay {options:?} failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     out
@@ -99,18 +105,7 @@ pub fn tempdir(name: &str) -> PathBuf {
 
 /// `chassisd replay --lenient PATH`, which must succeed (transmissions may differ).
 pub fn replay_lenient(path: &Path) -> Output {
-    let out = Command::new(chassisd())
-        .arg("replay")
-        .arg("--lenient")
-        .arg(path)
-        .output()
-        .expect("chassisd runs");
-    assert!(
-        out.status.success(),
-        "replay --lenient failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
+    replay_with(&["--lenient"], path)
 }
 
 /// A recording's records through the library's engine, built from the configuration the

@@ -29,19 +29,20 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
         name: "/wheel_speeds",
         msg_type: "std_msgs/Float64MultiArray",
         every: 1,
-        build: wheel_speeds,
+        build: |status, _| wheel_speeds(status),
     },
     StatusTopic {
         name: "/drive_mode",
         msg_type: "std_msgs/String",
         every: 10,
-        build: drive_mode,
+        build: |status, _| drive_mode(status),
     },
 ];
 
 /// `/wheel_speeds`: the left and the right wheel's measured surface speed, m/s (forward
-/// positive), at 10 Hz; nothing without a drive train.
-fn wheel_speeds(status: &VehicleStatus, _seq: u32) -> Option<Value> {
+/// positive), at 10 Hz; nothing without a drive train. The rosbridge server publishes the
+/// same message (std_msgs keeps its fields in ROS 2).
+pub fn wheel_speeds(status: &VehicleStatus) -> Option<Value> {
     let odometry = status.chassis.as_ref()?.odometry;
     Some(json!({
         "layout": {
@@ -53,17 +54,13 @@ fn wheel_speeds(status: &VehicleStatus, _seq: u32) -> Option<Value> {
 }
 
 /// `/drive_mode`: who may drive, `manual` (velocity commands) or `navigation` (autonomous
-/// moves only), at 1 Hz; nothing without a drive train.
-fn drive_mode(status: &VehicleStatus, _seq: u32) -> Option<Value> {
-    Some(json!({ "data": mode_name(status.mode?) }))
-}
-
-/// A drive mode's name on the ROS topics.
-pub fn mode_name(mode: DriveMode) -> &'static str {
-    match mode {
+/// moves only), at 1 Hz; nothing without a drive train. Rosbridge publishes it too.
+pub fn drive_mode(status: &VehicleStatus) -> Option<Value> {
+    let mode = match status.mode? {
         DriveMode::Manual => "manual",
         DriveMode::Navigation => "navigation",
-    }
+    };
+    Some(json!({ "data": mode }))
 }
 
 /// The topics due at the `tick`th status tick (counted from 1).
@@ -80,10 +77,7 @@ mod tests {
     #[test]
     fn wheel_speeds_are_left_then_right() {
         let mut status = VehicleStatus::default();
-        assert!(
-            wheel_speeds(&status, 1).is_none(),
-            "no drive train, no speeds"
-        );
+        assert!(wheel_speeds(&status).is_none(), "no drive train, no speeds");
         status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
             odometry: crate::vehicle::chassis::WheelOdometry {
                 left_mps: 0.25,
@@ -92,7 +86,7 @@ mod tests {
             },
             ..Default::default()
         });
-        let msg = wheel_speeds(&status, 1).unwrap();
+        let msg = wheel_speeds(&status).unwrap();
         assert_eq!(msg["data"], json!([0.25, 0.5]));
         assert_eq!(msg["layout"]["dim"][0]["size"], 2);
         assert_eq!(due(1).count(), 1);
@@ -102,10 +96,10 @@ mod tests {
     #[test]
     fn the_drive_mode_is_named() {
         let mut status = VehicleStatus::default();
-        assert!(drive_mode(&status, 1).is_none(), "no drive train, no mode");
+        assert!(drive_mode(&status).is_none(), "no drive train, no mode");
         status.mode = Some(DriveMode::Navigation);
-        assert_eq!(drive_mode(&status, 1), Some(json!({"data": "navigation"})));
+        assert_eq!(drive_mode(&status), Some(json!({"data": "navigation"})));
         status.mode = Some(DriveMode::Manual);
-        assert_eq!(drive_mode(&status, 1), Some(json!({"data": "manual"})));
+        assert_eq!(drive_mode(&status), Some(json!({"data": "manual"})));
     }
 }

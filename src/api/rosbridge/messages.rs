@@ -7,7 +7,6 @@
 use serde_json::{Value, json};
 
 use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
-use crate::api::ros1::published::mode_name;
 use crate::api::ros1::{ros_time, yaw_quaternion};
 use crate::api::rtk::status::{locate_name, navigation_name};
 use crate::devices::gnss::FixQuality;
@@ -354,25 +353,6 @@ pub fn path(t: Timestamp, points: &[(f64, f64)]) -> Value {
     json!({"header": header(t, MAP_FRAME), "poses": poses})
 }
 
-/// `/wheel_speeds` (std_msgs/Float64MultiArray): the left and the right wheel's measured
-/// surface speed, m/s (forward positive); nothing without a drive train.
-pub fn wheel_speeds(status: &VehicleStatus) -> Option<Value> {
-    let odometry = status.chassis.as_ref()?.odometry;
-    Some(json!({
-        "layout": {
-            "dim": [{"label": "left_right", "size": 2, "stride": 2}],
-            "data_offset": 0,
-        },
-        "data": [odometry.left_mps, odometry.right_mps],
-    }))
-}
-
-/// `/drive_mode` (std_msgs/String): who may drive, `manual` or `navigation`; nothing
-/// without a drive train.
-pub fn drive_mode(status: &VehicleStatus) -> Option<Value> {
-    Some(json!({ "data": mode_name(status.mode?) }))
-}
-
 /// The goal (x, y in m, yaw in rad, map frame) of a `/goal_pose` message
 /// (geometry_msgs/PoseStamped): its frame must be `map` (or empty, taken as `map`), its
 /// orientation a rotation about z.
@@ -459,32 +439,6 @@ mod tests {
                 .unwrap_or_default()
                 .contains("not connected")
         );
-    }
-
-    #[test]
-    fn wheel_speeds_are_left_then_right() {
-        let mut status = VehicleStatus::default();
-        assert!(wheel_speeds(&status).is_none(), "no drive train, no speeds");
-        status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
-            odometry: crate::vehicle::chassis::WheelOdometry {
-                left_mps: -0.1,
-                right_mps: 0.3,
-                ..Default::default()
-            },
-            ..Default::default()
-        });
-        let msg = wheel_speeds(&status).unwrap();
-        assert_eq!(msg["data"], json!([-0.1, 0.3]));
-        assert_eq!(msg["layout"]["dim"][0]["label"], "left_right");
-    }
-
-    #[test]
-    fn the_drive_mode_is_named() {
-        use crate::vehicle::chassis::DriveMode;
-        let mut status = VehicleStatus::default();
-        assert!(drive_mode(&status).is_none(), "no drive train, no mode");
-        status.mode = Some(DriveMode::Navigation);
-        assert_eq!(drive_mode(&status), Some(json!({"data": "navigation"})));
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The topics the server publishes from the status ticks, each with its rate and its
-//! message (JSON of its ROS 2 type, [`super::messages`]). The server publishes them by this
+//! message (JSON of its ROS 2 type, [`super::messages`]; where the ROS1 node publishes the
+//! same std_msgs message, the ROS1 adapter's). The server publishes them by this
 //! table, so a new one is a line here, its entry in [`super::topics::TOPICS`] and its
 //! message.
 
@@ -7,6 +8,7 @@ use serde_json::Value;
 
 use super::messages;
 use super::topics::{BATTERY_STATE, DIAGNOSTICS, DRIVE_MODE, POSE, TF, WHEEL_SPEEDS};
+use crate::api::ros1::published as ros1;
 use crate::vehicle::VehicleStatus;
 
 /// One topic published from the status ticks.
@@ -35,7 +37,7 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
     StatusTopic {
         name: WHEEL_SPEEDS,
         every: 1,
-        build: messages::wheel_speeds,
+        build: ros1::wheel_speeds,
     },
     StatusTopic {
         name: BATTERY_STATE,
@@ -50,7 +52,7 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
     StatusTopic {
         name: DRIVE_MODE,
         every: 10,
-        build: messages::drive_mode,
+        build: ros1::drive_mode,
     },
 ];
 
@@ -79,5 +81,46 @@ mod tests {
         }
         assert_eq!(due(1).count(), 3);
         assert_eq!(due(10).count(), 6);
+    }
+
+    /// The topic's message for `status`.
+    fn message(name: &str, status: &VehicleStatus) -> Option<Value> {
+        let topic = STATUS_TOPICS.iter().find(|t| t.name == name)?;
+        (topic.build)(status)
+    }
+
+    #[test]
+    fn wheel_speeds_are_left_then_right() {
+        let mut status = VehicleStatus::default();
+        assert!(
+            message(WHEEL_SPEEDS, &status).is_none(),
+            "no drive train, no speeds"
+        );
+        status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
+            odometry: crate::vehicle::chassis::WheelOdometry {
+                left_mps: -0.1,
+                right_mps: 0.3,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let msg = message(WHEEL_SPEEDS, &status).unwrap();
+        assert_eq!(msg["data"], serde_json::json!([-0.1, 0.3]));
+        assert_eq!(msg["layout"]["dim"][0]["label"], "left_right");
+    }
+
+    #[test]
+    fn the_drive_mode_is_named() {
+        use crate::vehicle::chassis::DriveMode;
+        let mut status = VehicleStatus::default();
+        assert!(
+            message(DRIVE_MODE, &status).is_none(),
+            "no drive train, no mode"
+        );
+        status.mode = Some(DriveMode::Navigation);
+        assert_eq!(
+            message(DRIVE_MODE, &status),
+            Some(serde_json::json!({"data": "navigation"}))
+        );
     }
 }
