@@ -5,39 +5,7 @@
 
 mod common;
 
-use chassisd::api::trajectory::MemoryStore;
-use chassisd::config::zones::ZonesConfig;
-use chassisd::sim::lockstep::{Lockstep, Sections};
-use chassisd::sim::plant::PlantConfig;
-use chassisd::vehicle::Localization;
-use common::lockstep::{START, SimRun};
-
-/// The built-in mower with the zones, booted, nothing run yet.
-fn mower_with_zones(name: &str) -> SimRun {
-    let plant = PlantConfig::builtin().expect("plant");
-    let dir = common::tempdir(name);
-    let file = common::zones::yard(&plant, &dir);
-    let zones = ZonesConfig::from_file(&file, plant.geometry.footprint()).expect("zones");
-    let sections = Sections {
-        zones: Some(zones),
-        ..Sections::default()
-    };
-    let sim = Lockstep::with_sections(plant, 3, START, sections, Box::new(MemoryStore::default()))
-        .expect("sim");
-    SimRun::on(sim)
-}
-
-/// [`mower_with_zones`], standing until located.
-fn mower_in_the_yard(name: &str) -> SimRun {
-    let mut v = mower_with_zones(name);
-    for _ in 0..30 {
-        v.run(1.0);
-        if v.status().localization == Localization::Good {
-            return v;
-        }
-    }
-    panic!("never located");
-}
+use common::zones::{mower, mower_in_the_yard};
 
 /// The x of "at (x, y) m" in a refusal.
 fn place_x(refusal: &str) -> f64 {
@@ -50,7 +18,7 @@ fn place_x(refusal: &str) -> f64 {
 
 #[test]
 fn a_way_into_a_zone_is_refused_naming_it_and_a_clear_one_starts() {
-    let mut v = mower_in_the_yard("zones-plan");
+    let mut v = mower_in_the_yard("zones-plan", |_| {});
     let radius = 0.45f64.hypot(0.275) + 0.1;
 
     // Straight through the pond: met one disc's radius before its west edge.
@@ -119,7 +87,7 @@ fn a_way_into_a_zone_is_refused_naming_it_and_a_clear_one_starts() {
 
 #[test]
 fn with_zones_a_vehicle_not_yet_located_does_not_move_by_itself() {
-    let mut v = mower_with_zones("zones-unplaced");
+    let mut v = mower("zones-unplaced", |_| {});
     v.run_under(
         chassisd::sim::plant::GnssCondition {
             quality: None,

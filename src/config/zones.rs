@@ -27,7 +27,8 @@ pub struct ZonesConfig {
     /// In manual mode, a zone ahead stops the vehicle (`stop`) or is only reported (`warn`).
     #[serde(default)]
     pub manual: ManualPolicy,
-    /// Room kept beyond the footprint, the position's σ and the stopping distance, m.
+    /// At plan time, room kept beyond the footprint: what the position's σ and the braking
+    /// way take at run time, m.
     #[serde(default = "default_margin_m")]
     pub margin_m: f64,
     /// The least fix quality for autonomous motion and the cutter.
@@ -180,12 +181,6 @@ impl ZonesConfig {
             ConfigError::invalid(&source, "zones", problem, fix)
         })?;
         Ok(())
-    }
-
-    /// How far the vehicle's centre keeps from every zone at plan time: the footprint's
-    /// circumscribed radius and the margin, m.
-    pub fn clearance_m(&self) -> f64 {
-        self.footprint.radius_m() + self.margin_m
     }
 
     /// This section as a recording stores it: the zones inline, no file named.

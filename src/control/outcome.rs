@@ -156,6 +156,8 @@ pub enum AbortReason {
     SafetyStop(String),
     /// The drive train refused the motion's command: its refusal, described.
     DrivesRefused(String),
+    /// The GNSS gate closed under a goal or a move, which cannot hold: why, described.
+    GnssGate(String),
     /// A mission's step could not start: the refusal, described.
     StepNotStarted(String),
     /// A mission's charging step found no dock in the configuration.
@@ -214,6 +216,7 @@ impl fmt::Display for AbortReason {
             Self::NoOdometry => f.write_str("no odometry"),
             Self::SafetyStop(cause) => write!(f, "safety stop: {cause}"),
             Self::DrivesRefused(why) => f.write_str(why),
+            Self::GnssGate(why) => write!(f, "the GNSS gate closed: {why}"),
             Self::StepNotStarted(why) => write!(f, "a step could not start: {why}"),
             Self::NoDock => f.write_str("no dock is configured (mission.dock)"),
             Self::NotCharging { timeout_s } => write!(

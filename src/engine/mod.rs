@@ -30,6 +30,8 @@ use crate::devices::imu::{ImuDecoder, ImuStats, Mounting};
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
 use crate::vehicle::chassis::{CONTROL_PERIOD, CommandRejected};
+use crate::vehicle::envelope::Envelope;
+use crate::vehicle::gate::GateConfig;
 use crate::vehicle::zones::ZoneGuard;
 use crate::vehicle::{
     CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
@@ -399,7 +401,9 @@ impl Engine {
         let adapters: Vec<Box<dyn Adapter>> = crate::api::ADAPTERS.iter().map(|a| a()).collect();
         let mut vehicle = Vehicle::new(CoreConfig::from_vehicle(config));
         if let Some(z) = &config.zones {
-            vehicle = vehicle.with_zones(ZoneGuard::new(z.set.clone(), z.clearance_m()));
+            let guard = ZoneGuard::new(z.set.clone(), z.footprint.radius_m(), z.margin_m);
+            let gate = GateConfig::from_zones(z, config.ntrip.is_some());
+            vehicle = vehicle.with_envelope(Envelope::new(guard, gate, z.manual));
         }
         Self {
             vehicle,

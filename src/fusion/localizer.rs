@@ -654,6 +654,14 @@ pub struct MapPlacement {
 }
 
 impl MapPlacement {
+    /// The datum's ENU frame, unmoved: what the map frame is before INIT_POSITION.
+    pub fn at_datum(datum: Geodetic) -> Self {
+        Self {
+            frame: Enu::new(datum),
+            map: MapFrame::default(),
+        }
+    }
+
     /// A WGS84 position's map coordinates (x, y), m.
     pub fn place(&self, lat_deg: f64, lon_deg: f64) -> (f64, f64) {
         let enu = self.frame.to_enu(&Geodetic {

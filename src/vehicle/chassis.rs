@@ -165,6 +165,9 @@ pub enum CommandRejected {
          datum and a position (LOCATE_TRUE) to be checked against them"
     )]
     ZonesUnplaced,
+    /// The GNSS gate is closed: autonomous work waits for a good fix.
+    #[error("the GNSS gate is closed ({0}): autonomous work waits for a good fix")]
+    GnssGate(super::gate::GateReason),
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
     NavigationMode,
@@ -427,6 +430,41 @@ impl Chassis {
             // Armed takes any command.
             let _ = self.safety.autonomous(t, 0.0, 0.0);
         }
+    }
+
+    /// Whether the command in force came from a closed-loop move (not an operator).
+    pub fn is_autonomous(&self) -> bool {
+        self.autonomous
+    }
+
+    /// The speeds (m/s, rad/s) the vehicle must be able to brake from at `t`: what the
+    /// wheels measure, and what the drives will be sent next (a move's command, which may
+    /// lead the drives; an operator's, a control period's acceleration beyond what they are
+    /// sent now; zero without one).
+    pub fn speeds_ahead(&self, t: Timestamp) -> [(f64, f64); 2] {
+        let status = self.status(t);
+        let (v, w) = self.setpoint;
+        let dt = CONTROL_PERIOD.as_secs_f64();
+        let next = match self.safety.command_in_force(t) {
+            None => (0.0, 0.0),
+            Some(command) if self.autonomous => command,
+            Some((cv, cw)) => (
+                approach(v, cv, self.config.max_accel_mps2 * dt),
+                approach(w, cw, self.config.max_yaw_accel_rps2 * dt),
+            ),
+        };
+        [(status.vx, status.wz), next]
+    }
+
+    /// The zone in the braking way for the next tick, as the core judged it: a cause of a
+    /// latched stop while it lasts.
+    pub fn zone_ahead(&mut self, zone: Option<(&'static str, String)>) {
+        self.safety.zone_ahead(zone);
+    }
+
+    /// The deceleration the drives are taken to brake at, at least, m/s².
+    pub fn braking_decel(&self) -> f64 {
+        self.config.max_decel_mps2
     }
 
     /// Whether the drives are ready to take a move: configured, reachable, not latched.

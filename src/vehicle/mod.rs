@@ -3,7 +3,9 @@
 
 pub mod chassis;
 pub mod corrections;
+pub mod envelope;
 pub mod feedback;
+pub mod gate;
 pub mod safety;
 pub mod status;
 pub mod zones;
@@ -432,8 +434,8 @@ pub struct Vehicle {
     blade_running: bool,
     /// RTK corrections, when a correction source is configured.
     corrections: Option<corrections::Corrections>,
-    /// The zones motions are checked against, when configured.
-    zones: Option<zones::ZoneGuard>,
+    /// The zones and the GNSS gate, when zones are configured.
+    envelope: Option<envelope::Envelope>,
 }
 
 impl Vehicle {
@@ -472,13 +474,14 @@ impl Vehicle {
             corrections: config
                 .corrections_stale_after
                 .map(corrections::Corrections::new),
-            zones: None,
+            envelope: None,
         }
     }
 
-    /// The core, checking every motion's way against `zones` before it starts.
-    pub fn with_zones(mut self, zones: zones::ZoneGuard) -> Self {
-        self.zones = Some(zones);
+    /// The core, keeping to the zones and the GNSS gate of `envelope`: every motion's way is
+    /// checked before it starts, the braking way every control tick.
+    pub fn with_envelope(mut self, envelope: envelope::Envelope) -> Self {
+        self.envelope = Some(envelope);
         self
     }
 
@@ -742,13 +745,17 @@ impl Vehicle {
     /// velocity, and the drive train decides what reaches the wheels. A stop that latches
     /// during this tick ends the move at the next.
     fn control_tick(&mut self, t: Timestamp) -> Vec<Output> {
+        if self.chassis.is_none() {
+            return Vec::new();
+        }
+        let mut out = Vec::new();
+        self.gate_tick(t, &mut out);
         // Only a move needs the pose (two filter predictions).
         let moving = self.motion.as_ref().is_some_and(Motion::is_active);
         let view = if moving { self.pose_view(t) } else { None };
         let Some(chassis) = &mut self.chassis else {
-            return Vec::new();
+            return out;
         };
-        let mut out = Vec::new();
         let mut results = Vec::new();
         if let Some(motion) = &mut self.motion {
             // A task the operator paused waits under the operator's stop; any other stop
@@ -785,6 +792,9 @@ impl Vehicle {
             }
             out.extend(motion.take_events().into_iter().map(Output::Event));
             results = motion.take_results();
+        }
+        if let Some(envelope) = &mut self.envelope {
+            envelope::zone_tick(envelope, &self.localizer, chassis, t, &mut out);
         }
         out.insert(0, Output::Wheels(chassis.tick(t)));
         self.mission_tick(t, &results, &mut out);
@@ -905,6 +915,7 @@ impl Vehicle {
         if !task && !mission {
             return Err(CommandRejected::NothingPaused);
         }
+        self.gate_may_start()?;
         self.with_chassis(|c| c.reset(t))?;
         if task {
             let view = self.pose_view(t).ok_or(CommandRejected::NoOdometry)?;
@@ -1019,7 +1030,7 @@ impl Vehicle {
             Some(_) => self.cutter_on = false,
             None => {}
         }
-        let run = self.cutter_on && armed;
+        let run = self.cutter_on && armed && self.gate_lets_blade_run();
         if run != self.blade_running {
             self.blade_running = run;
             out.push(Output::Cutter(run));
@@ -1129,17 +1140,17 @@ impl Vehicle {
         start(motion, &view)
     }
 
-    /// Refuses a motion whose way meets a zone (when zones are configured): the way from
-    /// where the vehicle stands in the map frame.
+    /// Refuses a motion whose way meets a zone, or any while the GNSS gate is closed (when
+    /// zones are configured): the way from where the vehicle stands in the map frame.
     fn check_way(&mut self, t: Timestamp, way: Way) -> Result<(), CommandRejected> {
-        if self.zones.is_none() {
+        if self.envelope.is_none() {
             return Ok(());
         }
         let here = self
             .pose_view(t)
             .and_then(|v| Some((v.map_xy?, v.map_yaw?)));
         let placement = self.localizer.map_placement();
-        let Some(zones) = &mut self.zones else {
+        let Some(envelope) = &mut self.envelope else {
             return Ok(());
         };
         let Some(((x, y), yaw)) = here else {
@@ -1154,7 +1165,9 @@ impl Vehicle {
             // On the spot: the footprint's disc where it stands.
             Way::Move(MoveKind::Turn { .. }) => vec![(x, y)],
         };
-        zones.check_way(placement, &points)
+        // The way first: it is the request's own fault, the gate only the moment's.
+        envelope.guard().check_way(placement, &points)?;
+        envelope.may_start()
     }
 
     /// How far a motion may lead, when the vehicle has drives.

@@ -18,8 +18,9 @@
 //! | Resetting | a cause, or the reset failed or timed out | Latched |
 //!
 //! A cause is a condition that holds on its own: a drive fault, a CAN interface down, a lost
-//! control link, an e-stop input pressed or silent, the software e-stop engaged. An operator
-//! stop latches without a lasting cause.
+//! control link, an e-stop input pressed or silent, the software e-stop engaged, a zone in
+//! the braking way (which the core judges each tick, and which clears once the vehicle
+//! stands or turns away). An operator stop latches without a lasting cause.
 
 use std::fmt;
 use std::time::Duration;
@@ -84,6 +85,13 @@ pub enum Cause {
     SoftwareEStop,
     /// An operator asked for a stop (PAUSE, /navi_stop).
     Operator,
+    /// The vehicle's braking way (its footprint grown by the position's σ) meets a zone.
+    Zone {
+        /// The zone's kind (`boundary`, `keep_out`, `wall`).
+        kind: &'static str,
+        /// Its name.
+        name: String,
+    },
     /// A fault reset did not clear a drive's fault.
     ResetFailed {
         /// The drive's name.
@@ -111,6 +119,9 @@ impl fmt::Display for Cause {
             }
             Self::SoftwareEStop => write!(f, "software emergency stop engaged"),
             Self::Operator => write!(f, "stopped by the operator"),
+            Self::Zone { kind, name } => {
+                write!(f, "the {kind} zone {name:?} is in the braking way")
+            }
             Self::ResetFailed { name, fault } => {
                 write!(f, "{name}: fault reset failed, still {fault}")
             }
@@ -212,6 +223,8 @@ pub struct Safety {
     not_running: Option<String>,
     /// Whether any drive was carrying out a fault reset at the last tick.
     drives_resetting: bool,
+    /// The zone in the braking way, as the core found it for the next tick.
+    zone: Option<Cause>,
 }
 
 impl Safety {
@@ -233,6 +246,7 @@ impl Safety {
             drive_faults: Vec::new(),
             not_running: None,
             drives_resetting: false,
+            zone: None,
         }
     }
 
@@ -266,6 +280,22 @@ impl Safety {
         self.active
             .iter()
             .any(|c| matches!(c, Cause::EStop { .. } | Cause::SoftwareEStop))
+    }
+
+    /// The velocity command in force at `t` (m/s, rad/s): the last one, while fresh and
+    /// followed (armed).
+    pub fn command_in_force(&self, t: Timestamp) -> Option<(f64, f64)> {
+        let armed = self.state == State::Armed;
+        self.command
+            .filter(|_| armed && self.command_fresh(t))
+            .map(|(_, v, w)| (v, w))
+    }
+
+    /// The zone in the vehicle's braking way, judged for the next tick (`None`: none). It is
+    /// a cause like the others: it latches, and a deliberate act re-arms only once it is
+    /// gone.
+    pub fn zone_ahead(&mut self, zone: Option<(&'static str, String)>) {
+        self.zone = zone.map(|(kind, name)| Cause::Zone { kind, name });
     }
 
     /// Whether the last velocity command is younger than the timeout at `t`.
@@ -404,6 +434,9 @@ impl Safety {
         }
         if self.software_estop {
             causes.push(Cause::SoftwareEStop);
+        }
+        if let Some(zone) = &self.zone {
+            causes.push(zone.clone());
         }
         if feedback.bus_down {
             causes.push(Cause::BusDown);

@@ -13,8 +13,9 @@ fn log_zones(config: &crate::config::VehicleConfig) {
     if let Some(z) = &config.zones {
         tracing::warn!(
             zones = z.set.zones().len(),
-            "zones: every motion's way is checked against them before it starts; the run-time \
-             stop at a zone and the GNSS gate are not built yet"
+            "zones: every motion's way is checked before it starts and the braking way every \
+             tick, and autonomous work waits on the GNSS gate; edits over ROS1 and the \
+             WebSocket are not built yet"
         );
     }
 }

@@ -1,0 +1,241 @@
+//! The safety envelope of autonomous work, as the core runs it each control tick:
+//! - the GNSS gate ([`super::gate`]): while it is closed, autonomous motion pauses at rest
+//!   (a path task or a mission holds; a goal or a move, which cannot hold, ends), the blade
+//!   stops in the same tick, and nothing autonomous starts; when it opens again, what it
+//!   paused goes on by itself;
+//! - the zones at run time ([`super::zones`]): a braking way into a zone is a cause for the
+//!   supervisor, which latches the stop with it; in manual mode `zones.manual = "warn"`
+//!   only reports it.
+
+use super::chassis::{CONTROL_PERIOD, Chassis, CommandRejected};
+use super::gate::{Gate, GateChange, GateConfig, GateReason, GateSignals, horizontal_sigma};
+use super::safety::Cause;
+use super::zones::{Braking, ZoneGuard};
+use super::{Output, Vehicle};
+use crate::config::zones::ManualPolicy;
+use crate::control::Outcome;
+use crate::control::outcome::AbortReason;
+use crate::fusion::localizer::Localizer;
+use crate::time::Timestamp;
+
+/// The pose the run-time check uses is at most this old, in control periods.
+const POSE_AGE_PERIODS: f64 = 1.0;
+
+/// The zones and the gate, and what they hold.
+#[derive(Debug, Clone)]
+pub struct Envelope {
+    guard: ZoneGuard,
+    gate: Gate,
+    manual: ManualPolicy,
+    /// The gate paused a task or a mission, to go on when it opens.
+    paused: bool,
+    /// The zone last reported to a manual driver under `warn`, while it stays ahead.
+    warned: Option<String>,
+}
+
+impl Envelope {
+    /// The zones of `guard`, the gate of `gate` and the manual policy.
+    pub fn new(guard: ZoneGuard, gate: GateConfig, manual: ManualPolicy) -> Self {
+        Self {
+            guard,
+            gate: Gate::new(gate),
+            manual,
+            paused: false,
+            warned: None,
+        }
+    }
+
+    /// The zones.
+    pub fn guard(&mut self) -> &mut ZoneGuard {
+        &mut self.guard
+    }
+
+    /// Why the gate is closed, when it is.
+    pub fn gate_closed(&self) -> Option<&GateReason> {
+        self.gate.closed()
+    }
+
+    /// Refuses autonomous work while the gate is closed.
+    pub fn may_start(&self) -> Result<(), CommandRejected> {
+        match self.gate.closed() {
+            Some(reason) => Err(CommandRejected::GnssGate(reason.clone())),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Vehicle {
+    /// The gate's signals at `t`: the ones the status shows.
+    fn gate_signals(&self, t: Timestamp) -> GateSignals {
+        let position = self.gnss_fix.as_ref().and_then(|f| f.position);
+        GateSignals {
+            quality: self.fresh_fix_quality(t),
+            fix_age: position.map(|p| t.saturating_since(p.rx)),
+            sigma_m: self.localizer.published(t).map(|p| {
+                let [xx, xy, yy, _] = p.map_covariance;
+                horizontal_sigma(xx, xy, yy)
+            }),
+            correction_age: self.correction_age(t),
+        }
+    }
+
+    /// The gate's part of a control tick, before any motion steps: pauses the work when it
+    /// closes, and goes on with it when it opens.
+    pub(super) fn gate_tick(&mut self, t: Timestamp, out: &mut Vec<Output>) {
+        if self.envelope.is_none() {
+            return;
+        }
+        let signals = self.gate_signals(t);
+        let Some(envelope) = &mut self.envelope else {
+            return;
+        };
+        match envelope.gate.update(t, &signals) {
+            Some(GateChange::Closed(reason)) => {
+                out.push(Output::Event(format!(
+                    "GNSS gate closed: {reason}; autonomous motion and the blade pause"
+                )));
+                self.pause_for_gate(t, &reason);
+            }
+            Some(GateChange::Opened) => {
+                out.push(Output::Event(
+                    "GNSS gate open: the fix has been good for zones.resume_after_s".into(),
+                ));
+                self.resume_after_gate(t);
+            }
+            None => {}
+        }
+    }
+
+    /// Holds what runs: a task or a mission pauses at rest; a goal or a move ends (a
+    /// mission's step starts again when the gate opens).
+    fn pause_for_gate(&mut self, t: Timestamp, reason: &GateReason) {
+        let mission = self.mission.is_some();
+        if let Some(m) = &mut self.mission {
+            m.pause();
+        }
+        let held = self.motion.as_mut().is_some_and(|m| m.pause(t));
+        if !held {
+            if let Some(m) = &mut self.mission {
+                m.restart_step();
+            }
+            self.end_motion(
+                t,
+                Outcome::Aborted(AbortReason::GnssGate(reason.to_string())),
+            );
+        }
+        if let Some(envelope) = &mut self.envelope {
+            envelope.paused = held || mission;
+        }
+    }
+
+    /// Goes on with what the gate paused, unless a stop latched meanwhile (the operator's
+    /// CONTINUE, or a reset and a new start, go on from there).
+    fn resume_after_gate(&mut self, t: Timestamp) {
+        let Some(envelope) = &mut self.envelope else {
+            return;
+        };
+        if !std::mem::take(&mut envelope.paused) {
+            return;
+        }
+        if self
+            .chassis
+            .as_ref()
+            .is_some_and(|c| c.safety().latched().is_some())
+        {
+            return;
+        }
+        if let Some(view) = self.pose_view(t)
+            && let Some(m) = &mut self.motion
+        {
+            m.resume(t, &view);
+        }
+        if let Some(m) = &mut self.mission {
+            m.resume();
+        }
+    }
+
+    /// Whether the gate lets the blade run now (always, without zones).
+    pub(super) fn gate_lets_blade_run(&self) -> bool {
+        self.envelope
+            .as_ref()
+            .is_none_or(|e| e.gate_closed().is_none())
+    }
+
+    /// Refuses autonomous work while the gate is closed (without zones, nothing to refuse).
+    pub(super) fn gate_may_start(&self) -> Result<(), CommandRejected> {
+        self.envelope.as_ref().map_or(Ok(()), Envelope::may_start)
+    }
+}
+
+/// The run-time zone check of a control tick, just before the supervisor's tick: the
+/// braking ways from the map pose, at the speeds the wheels measure and are about to be
+/// sent, with the footprint grown by the position's σ. What it finds becomes the
+/// supervisor's zone cause; under `zones.manual = "warn"` a manual driver is told instead.
+pub(super) fn zone_tick(
+    envelope: &mut Envelope,
+    localizer: &Localizer,
+    chassis: &mut Chassis,
+    t: Timestamp,
+    out: &mut Vec<Output>,
+) {
+    let (Some(placement), Some(pose)) = (localizer.map_placement(), localizer.published(t)) else {
+        // Not placed: no way can be checked. Autonomous work is held by the gate; a manual
+        // driver drives on what they see.
+        chassis.zone_ahead(None);
+        return;
+    };
+    let [xx, xy, yy, _] = pose.map_covariance;
+    let sigma = horizontal_sigma(xx, xy, yy);
+    let braking = Braking {
+        reaction_s: (POSE_AGE_PERIODS + 1.0) * CONTROL_PERIOD.as_secs_f64()
+            + chassis.response_time(),
+        decel_mps2: chassis.braking_decel(),
+    };
+    let ways: Vec<_> = chassis
+        .speeds_ahead(t)
+        .iter()
+        .map(|&(v, w)| braking.way(pose.map_pose, v, w))
+        .collect();
+    let conflict = envelope.guard.check_ahead(placement, &ways, sigma);
+    let manual = !chassis.is_autonomous();
+    let zone = match conflict {
+        Some(c) if manual && envelope.manual == ManualPolicy::Warn => {
+            if envelope.warned.as_deref() != Some(c.name.as_str()) {
+                out.push(Output::Event(format!(
+                    "the {} zone {:?} is in the braking way at ({:.2}, {:.2}) m; driving on \
+                     (zones.manual = \"warn\")",
+                    c.kind.name(),
+                    c.name,
+                    c.at.0,
+                    c.at.1
+                )));
+                envelope.warned = Some(c.name);
+            }
+            None
+        }
+        Some(c) => {
+            envelope.warned = None;
+            // Said once, when it latches: the supervisor's cause carries no place.
+            let latched_for_it = matches!(
+                chassis.safety().latched(),
+                Some(Cause::Zone { name, .. }) if *name == c.name
+            );
+            if !latched_for_it {
+                out.push(Output::Event(format!(
+                    "stopping: the {} zone {:?} is in the braking way at ({:.2}, {:.2}) m \
+                     (σ {sigma:.3} m)",
+                    c.kind.name(),
+                    c.name,
+                    c.at.0,
+                    c.at.1
+                )));
+            }
+            Some((c.kind.name(), c.name))
+        }
+        None => {
+            envelope.warned = None;
+            None
+        }
+    };
+    chassis.zone_ahead(zone);
+}
