@@ -1,7 +1,8 @@
 //! Plan-time zone checks through the whole engine on the simulated mower: a goal, a move, a
-//! path and a mission whose way (the footprint's disc and the margin, swept along it) meets
-//! a keep-out zone, a wall or the boundary is refused before it starts, naming the zone and
-//! the place; a way clear of them all starts.
+//! path and a mission whose way (the footprint's disc and the margin, or the braking way at
+//! the motion's speed when that is more, swept along it) meets a keep-out zone, a wall or
+//! the boundary is refused before it starts, naming the zone and the place; a way clear of
+//! them all starts.
 
 mod common;
 
@@ -21,13 +22,20 @@ fn a_way_into_a_zone_is_refused_naming_it_and_a_clear_one_starts() {
     let mut v = mower_in_the_yard("zones-plan", |_| {});
     let radius = 0.45f64.hypot(0.275) + 0.1;
 
-    // Straight through the pond: met one disc's radius before its west edge.
+    // Slowly straight through the pond (σ and the braking way within the margin): met one
+    // disc's radius before its west edge.
+    let refused = v
+        .send("follow_path", r#"{"path": [0, 0, 10, 0], "speed": 0.2}"#)
+        .unwrap_err();
+    assert!(refused.contains("keep_out zone \"pond\""), "{refused}");
+    let x = place_x(&refused);
+    assert!((x - (4.0 - radius)).abs() < 0.03, "{refused}");
+    // A goal cruises faster: the braking way at its speed is kept too, so it is met sooner.
     let refused = v
         .send("goal", r#"{"x": 10, "y": 0, "yaw": 0}"#)
         .unwrap_err();
     assert!(refused.contains("keep_out zone \"pond\""), "{refused}");
-    let x = place_x(&refused);
-    assert!((x - (4.0 - radius)).abs() < 0.1, "{refused}");
+    assert!(place_x(&refused) < x - 0.05, "{refused}");
     let mission = r#"[{"action": "COVERAGE", "parameters": {"path": [1, 2, 1, 0, 8, 0]}}]"#;
     // Each kind of motion: into the pond ahead, backwards into the fence, north past the
     // tree, south off the lawn.

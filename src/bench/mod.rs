@@ -2,6 +2,7 @@
 //! micro-benchmarks under `benches/`.
 
 pub mod control;
+pub mod envelope;
 pub mod error;
 pub mod fusion;
 pub mod gnss_fit;

@@ -78,6 +78,28 @@ enum BenchCommand {
         #[arg(long, value_name = "FILE")]
         calibration: Option<PathBuf>,
     },
+    /// The safety envelope on the simulated vehicle against its truth: randomised
+    /// approaches towards keep-out zones and walls (manual and autonomous, with RTK-float
+    /// jumps), the blade at every gate closing, a covering mission under clean RTK, and
+    /// plans through zones. A table, then a JSON line with "pass"; exits with status 1 when
+    /// a target is missed.
+    Envelope {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed (each approach draws its own from it).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Randomised approaches.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        approaches: u32,
+        /// The covering mission's length.
+        #[arg(long, default_value = "30", value_parser = minutes_arg)]
+        minutes: Duration,
+        /// Plans through zones (and as many clear of them).
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+        plans: u32,
+    },
     /// Time plain-log replay against gpsd's gpsdecode on real receiver logs repeated to a
     /// size (all concatenated, then each receiver alone), with peak memory; the last line
     /// is JSON with "pass". Exits with status 1 when a target is missed.
@@ -177,6 +199,24 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             let mut plant = load_plant(plant)?;
             plant.calibration = load_calibration(calibration.as_deref())?;
             let report = chassisd::bench::control::run(&plant, seed)?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
+        BenchCommand::Envelope {
+            plant,
+            seed,
+            approaches,
+            minutes,
+            plans,
+        } => {
+            let plant = load_plant(plant)?;
+            let options = chassisd::bench::envelope::EnvelopeOptions {
+                approaches,
+                coverage_s: minutes.as_secs_f64(),
+                plans,
+            };
+            let report = chassisd::bench::envelope::run(&plant, seed, options)?;
             print!("{}", report.table());
             println!("{}", report.json());
             Ok(report.pass)

@@ -154,6 +154,24 @@ impl ZonesConfig {
         Ok(zones)
     }
 
+    /// The section for `set`, inline, with `footprint` and the defaults (what a simulated
+    /// session builds its zones into).
+    pub fn of_set(set: ZoneSet, footprint: Footprint) -> Self {
+        Self {
+            file: None,
+            geojson: Some(set.to_geojson()),
+            footprint,
+            manual: ManualPolicy::default(),
+            margin_m: default_margin_m(),
+            min_quality: GateQuality::default(),
+            max_sigma_m: default_max_sigma_m(),
+            max_fix_age_s: default_max_fix_age_s(),
+            max_correction_age_s: default_max_correction_age_s(),
+            resume_after_s: default_resume_after_s(),
+            set,
+        }
+    }
+
     /// Reads and checks the zones: `file`, relative to `base` (the configuration's
     /// folder), or the inline `geojson`.
     pub fn load(&mut self, base: &Path, config_file: &Path) -> Result<(), ConfigError> {

@@ -71,10 +71,7 @@ impl Vehicle {
         GateSignals {
             quality: self.fresh_fix_quality(t),
             fix_age: position.map(|p| t.saturating_since(p.rx)),
-            sigma_m: self.localizer.published(t).map(|p| {
-                let [xx, xy, yy, _] = p.map_covariance;
-                horizontal_sigma(xx, xy, yy)
-            }),
+            sigma_m: map_sigma(&self.localizer, t),
             correction_age: self.correction_age(t),
         }
     }
@@ -167,6 +164,24 @@ impl Vehicle {
     }
 }
 
+/// How the drives brake, as the zone checks take it: from the decision (the pose's age and
+/// a control period, and the drives' learnt response) at the chassis's deceleration limit.
+pub(super) fn braking(chassis: &Chassis) -> Braking {
+    Braking {
+        reaction_s: (POSE_AGE_PERIODS + 1.0) * CONTROL_PERIOD.as_secs_f64()
+            + chassis.response_time(),
+        decel_mps2: chassis.braking_decel(),
+    }
+}
+
+/// The map pose's horizontal σ at `t`, m (`None` while not placed).
+pub(super) fn map_sigma(localizer: &Localizer, t: Timestamp) -> Option<f64> {
+    localizer.published(t).map(|p| {
+        let [xx, xy, yy, _] = p.map_covariance;
+        horizontal_sigma(xx, xy, yy)
+    })
+}
+
 /// The run-time zone check of a control tick, just before the supervisor's tick: the
 /// braking ways from the map pose, at the speeds the wheels measure and are about to be
 /// sent, with the footprint grown by the position's σ. What it finds becomes the
@@ -186,11 +201,7 @@ pub(super) fn zone_tick(
     };
     let [xx, xy, yy, _] = pose.map_covariance;
     let sigma = horizontal_sigma(xx, xy, yy);
-    let braking = Braking {
-        reaction_s: (POSE_AGE_PERIODS + 1.0) * CONTROL_PERIOD.as_secs_f64()
-            + chassis.response_time(),
-        decel_mps2: chassis.braking_decel(),
-    };
+    let braking = braking(chassis);
     let ways: Vec<_> = chassis
         .speeds_ahead(t)
         .iter()

@@ -155,8 +155,8 @@ impl CoreConfig {
 
 /// What a motion's way is, from where the vehicle stands.
 enum Way {
-    /// Straight to each point in turn (map frame).
-    Through(Vec<(f64, f64)>),
+    /// Straight to each point in turn (map frame), at a speed (m/s).
+    Through(Vec<(f64, f64)>, f64),
     /// A straight move along the heading, or a turn on the spot.
     Move(MoveKind),
 }
@@ -850,7 +850,7 @@ impl Vehicle {
     ) -> Result<MotionId, CommandRejected> {
         let finite = goal.x.is_finite() && goal.y.is_finite() && goal.yaw.is_finite();
         if finite {
-            self.check_way(t, Way::Through(vec![(goal.x, goal.y)]))?;
+            self.check_way(t, Way::Through(vec![(goal.x, goal.y)], self.cruise_mps()))?;
         }
         let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
@@ -894,7 +894,7 @@ impl Vehicle {
             && points.iter().all(|(x, y)| x.is_finite() && y.is_finite());
         let speed = path.speed;
         if finite {
-            self.check_way(t, Way::Through(points.clone()))?;
+            self.check_way(t, Way::Through(points.clone(), speed))?;
         }
         let reach = self.reach();
         self.start_motion(t, finite, |motion, view| {
@@ -973,7 +973,7 @@ impl Vehicle {
             .copied()
             .collect();
         if !way.is_empty() {
-            self.check_way(t, Way::Through(way))?;
+            self.check_way(t, Way::Through(way, self.config.mission.speed_mps))?;
         }
         for (i, step) in steps.iter().enumerate() {
             let problem = match step {
@@ -1150,6 +1150,16 @@ impl Vehicle {
             .pose_view(t)
             .and_then(|v| Some((v.map_xy?, v.map_yaw?)));
         let placement = self.localizer.map_placement();
+        let speed = match &way {
+            Way::Through(_, speed) => *speed,
+            Way::Move(MoveKind::Straight { .. }) => self.cruise_mps(),
+            Way::Move(MoveKind::Turn { .. }) => 0.0,
+        };
+        // What the run-time check will take at that speed: σ and the braking way.
+        let run_time = match (&self.chassis, envelope::map_sigma(&self.localizer, t)) {
+            (Some(chassis), Some(sigma)) => sigma + envelope::braking(chassis).distance(speed),
+            _ => 0.0,
+        };
         let Some(envelope) = &mut self.envelope else {
             return Ok(());
         };
@@ -1157,7 +1167,7 @@ impl Vehicle {
             return Err(CommandRejected::ZonesUnplaced);
         };
         let points = match way {
-            Way::Through(points) => std::iter::once((x, y)).chain(points).collect(),
+            Way::Through(points, _) => std::iter::once((x, y)).chain(points).collect(),
             Way::Move(MoveKind::Straight { distance_m }) => vec![
                 (x, y),
                 (x + distance_m * yaw.cos(), y + distance_m * yaw.sin()),
@@ -1166,8 +1176,13 @@ impl Vehicle {
             Way::Move(MoveKind::Turn { .. }) => vec![(x, y)],
         };
         // The way first: it is the request's own fault, the gate only the moment's.
-        envelope.guard().check_way(placement, &points)?;
+        envelope.guard().check_way(placement, &points, run_time)?;
         envelope.may_start()
+    }
+
+    /// The speed goals and straight moves cruise at, m/s (0 without drives).
+    fn cruise_mps(&self) -> f64 {
+        self.config.motion.map_or(0.0, |m| m.linear.speed)
     }
 
     /// How far a motion may lead, when the vehicle has drives.

@@ -4,8 +4,9 @@
 //! - at run time, every control tick, the footprint's disc grown by the position's σ is
 //!   swept along the way the vehicle would cover if it braked now (from the speed the
 //!   wheels measure, and from the speed it is about to be sent): a way into a zone stops it.
-//!   The plan's margin is the room that σ and the braking take, so a planned way does not
-//!   trip the run-time check.
+//!   At plan time the way is kept the larger of the margin and what the run-time check
+//!   will take at the motion's speed (σ and the braking way), so a planned way does not trip
+//!   it.
 
 use super::chassis::CommandRejected;
 use crate::fusion::localizer::MapPlacement;
@@ -59,17 +60,20 @@ impl ZoneGuard {
     }
 
     /// Refuses the way through `points` (map frame, from where the vehicle stands) where
-    /// it first meets a zone. Without a placement (no datum yet) nothing can be checked, so
-    /// the way is refused.
+    /// it first meets a zone, kept the larger of the margin and `run_time_m` (what the
+    /// run-time check will take: the position's σ and the braking way at the motion's
+    /// speed) beyond the footprint. Without a placement (no datum yet) nothing can be
+    /// checked, so the way is refused.
     pub fn check_way(
         &mut self,
         placement: Option<MapPlacement>,
         points: &[(f64, f64)],
+        run_time_m: f64,
     ) -> Result<(), CommandRejected> {
         let Some(placement) = placement else {
             return Err(CommandRejected::ZonesUnplaced);
         };
-        let radius = self.footprint_m + self.margin_m;
+        let radius = self.footprint_m + self.margin_m.max(run_time_m);
         match self.local(placement).path_conflict(points, radius) {
             None => Ok(()),
             Some(c) => Err(CommandRejected::Zone {
@@ -93,6 +97,13 @@ pub struct Braking {
 }
 
 impl Braking {
+    /// The distance covered braking from `speed` (m/s) to rest: the reaction's and the
+    /// braking's, m.
+    pub fn distance(&self, speed: f64) -> f64 {
+        let speed = speed.abs();
+        speed * self.reaction_s + speed * speed / (2.0 * self.decel_mps2)
+    }
+
     /// The way a vehicle at `pose` (x, y, yaw in the map frame) covers braking from `v`
     /// (m/s) and `w` (rad/s) to rest: the arc of its curvature over the reaction's distance
     /// and the braking distance, as points every [`WAY_STEP_M`] or less.
@@ -102,7 +113,7 @@ impl Braking {
         if !speed.is_finite() || speed < STANDING_MPS || !w.is_finite() {
             return vec![(x, y)];
         }
-        let distance = speed * self.reaction_s + speed * speed / (2.0 * self.decel_mps2);
+        let distance = self.distance(speed);
         let steps = (distance / WAY_STEP_M).ceil().clamp(1.0, 1000.0) as usize;
         let ds = distance / steps as f64;
         // Turning per metre travelled, and which way along the heading it travels.
