@@ -417,7 +417,12 @@ fn the_simulated_receiver_holds_rtk_fixed_only_while_corrections_arrive() {
                 seen.push((started.elapsed().as_secs_f64(), q));
             }
         }
-        if seen.iter().map(|(_, q)| *q).collect::<Vec<_>>().ends_with(&[4, 5, 2]) {
+        if seen
+            .iter()
+            .map(|(_, q)| *q)
+            .collect::<Vec<_>>()
+            .ends_with(&[4, 5, 2])
+        {
             break;
         }
         std::thread::sleep(Duration::from_millis(100));

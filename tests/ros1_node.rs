@@ -342,6 +342,83 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
 }
 
 #[test]
+fn set_shape_adds_a_wall_that_refuses_a_move_through_it_and_the_file_keeps_it() {
+    let master = Master::start();
+    let dir = common::tempdir("ros1-zones");
+    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
+    let zones = common::zones::yard(&plant, &dir);
+    let mut p = sim_with(&master, &["--zones", zones.to_str().expect("UTF-8 path")]);
+    p.wait_log(Duration::from_secs(40), "GNSS gate open");
+    let call = |request: &[&str]| {
+        let mut args = vec!["rosservice", "call"];
+        args.extend_from_slice(request);
+        ros(&master, &args, Duration::from_secs(10))
+    };
+    // A wall across the way 2 m ahead: made (62), written to the zones file.
+    let added = call(&[
+        "/set_shape",
+        "{type: 'lines', points: [{x: 2, y: -2, z: 0}, {x: 2, y: 2, z: 0}], radius: 0, closed: false}",
+    ]);
+    assert!(text(&added).contains("success: True"), "{}", text(&added));
+    echo_until(
+        &master,
+        "/androidmsg_virtualmapstatus",
+        Duration::from_secs(10),
+        |o| o.contains("data: 62"),
+    );
+    p.wait_log(Duration::from_secs(5), "zones written");
+    let written = std::fs::read_to_string(&zones).expect("zones file");
+    assert!(written.contains("virtual wall"), "{written}");
+    // The id it took is the next after the yard's four.
+    let set = chassisd::zones::ZoneSet::from_geojson(&written).expect("the file reads back");
+    assert_eq!(set.zones().len(), 5);
+    let wall = set
+        .zones()
+        .iter()
+        .find(|z| z.name == "virtual wall")
+        .expect("the wall");
+    assert_eq!(wall.id, 5);
+
+    // A move through it is refused, naming it.
+    let refused = call(&["/set_navi_cmd", "{cmd: '1', distance: 300}"]);
+    assert!(!refused.status.success());
+    assert!(
+        text(&refused).contains("wall zone \"virtual wall\""),
+        "{}",
+        text(&refused)
+    );
+    // A region that is not closed is refused (63), and changes nothing.
+    let open = call(&[
+        "/set_region",
+        "{type: 'lines', points: [{x: 8, y: 3, z: 0}, {x: 9, y: 3, z: 0}, {x: 9, y: 4, z: 0}], closed: false}",
+    ]);
+    assert!(text(&open).contains("success: False"), "{}", text(&open));
+    echo_until(
+        &master,
+        "/androidmsg_virtualmapstatus",
+        Duration::from_secs(10),
+        |o| o.contains("data: 63"),
+    );
+    // Removed by its id: the way is clear again, and the file no longer holds it.
+    let removed = call(&["/set_shape", "{shapeId: 5}"]);
+    assert!(
+        text(&removed).contains("success: True"),
+        "{}",
+        text(&removed)
+    );
+    let moved = call(&["/set_navi_cmd", "{cmd: '1', distance: 50}"]);
+    assert!(moved.status.success(), "{}", text(&moved));
+    let (_, log) = interrupt(p);
+    let written = std::fs::read_to_string(&zones).expect("zones file");
+    assert!(
+        !written.contains("virtual wall"),
+        "{written}\n{}",
+        log.join("\n")
+    );
+    assert!(written.contains("pond"), "{written}");
+}
+
+#[test]
 fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
     let master = Master::start();
     let recording = common::tempdir("ros1-move").join("rec");
@@ -633,6 +710,8 @@ fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
         service::<map_msgs::AboutRobot>(),
         service::<map_msgs::RobotSsh>(),
         service::<map_msgs::SetWifi>(),
+        service::<map_msgs::SetShape>(),
+        service::<map_msgs::SetRegion>(),
     ];
     // Debian's classes for the standard types; genpy's from the repository's map_msgs.
     let script = "import importlib, sys\n\

@@ -6,6 +6,7 @@
 
 mod common;
 
+use common::lockstep::SimRun;
 use common::zones::{mower, mower_in_the_yard};
 
 /// The x of "at (x, y) m" in a refusal.
@@ -108,4 +109,49 @@ fn with_zones_a_vehicle_not_yet_located_does_not_move_by_itself() {
         .send("set_navi_cmd", r#"{"cmd": "1", "distance": 50}"#)
         .unwrap_err();
     assert!(refused.contains("not located on them"), "{refused}");
+}
+
+/// A `/set_shape` request as the ROS1 node records it.
+fn set_shape(v: &mut SimRun, id: u64, msg: &str) -> Result<(), String> {
+    v.sink.answers.clear();
+    let payload = chassisd::record::Payload::Command {
+        topic: "/set_shape".into(),
+        payload: bytes::Bytes::from(format!(r#"{{"id": {id}, "msg": {msg}}}"#)),
+    };
+    v.sim.input("ros1", payload, &mut v.sink);
+    v.sink.answers.pop().expect("an answer")
+}
+
+#[test]
+fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
+    let mut v = mower_in_the_yard("zones-edit", |_| {});
+    let ahead = r#"{"path": [0, 0, 3, 0], "speed": 0.3}"#;
+    let wall = r#"{"type": "lines", "shapeId": 0, "points": [{"x": 2, "y": -2, "z": 0},
+        {"x": 2, "y": 2, "z": 0}], "radius": 0, "closed": false}"#;
+    set_shape(&mut v, 1, wall).expect("the wall is added");
+    assert!(
+        v.sink
+            .events
+            .iter()
+            .any(|e| e == "zones: wall zone \"virtual wall\" added (id 5)"),
+        "{:?}",
+        v.sink.events
+    );
+    let refused = v.send("follow_path", ahead).unwrap_err();
+    assert!(refused.contains("wall zone \"virtual wall\""), "{refused}");
+    let x = place_x(&refused);
+    assert!(
+        (x - (2.0 - 0.45f64.hypot(0.275) - 0.1)).abs() < 0.03,
+        "{refused}"
+    );
+    // An id nobody has is refused, and changes nothing.
+    let none = r#"{"type": "", "shapeId": 99, "points": [], "radius": 0, "closed": false}"#;
+    assert!(
+        set_shape(&mut v, 2, none)
+            .unwrap_err()
+            .contains("no zone has id 99")
+    );
+    let remove = r#"{"type": "", "shapeId": 5, "points": [], "radius": 0, "closed": false}"#;
+    set_shape(&mut v, 3, remove).expect("removed");
+    v.send("follow_path", ahead).expect("clear again");
 }

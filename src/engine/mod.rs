@@ -119,6 +119,8 @@ pub enum EngineOutput {
     },
     /// A notable change: a drive set up and running, a drive fault raised or cleared.
     Event(String),
+    /// The zones changed (an edit): all of them as GeoJSON, for the zones file.
+    ZonesChanged(String),
     /// A message for the MQTT broker (a dialect's report or reply).
     Publish(Publish),
     /// A closed-loop motion ended (also announced as an event).
@@ -307,18 +309,33 @@ struct CorrectionsRelay {
 struct CoreAt<'a> {
     vehicle: &'a mut Vehicle,
     t: Timestamp,
+    /// What a command put out beside its answer (a log event, the zones changed), for the
+    /// engine's outputs once the adapter is done.
+    aside: Vec<EngineOutput>,
+}
+
+impl<'a> CoreAt<'a> {
+    fn new(vehicle: &'a mut Vehicle, t: Timestamp) -> Self {
+        Self {
+            vehicle,
+            t,
+            aside: Vec::new(),
+        }
+    }
 }
 
 impl CoreAccess for CoreAt<'_> {
     fn command(&mut self, command: crate::vehicle::Command) -> Result<(), CommandRejected> {
-        self.vehicle
-            .handle(self.t, Input::Command(command))
-            .into_iter()
-            .find_map(|o| match o {
-                Output::CommandResult(r) => Some(r),
-                _ => None,
-            })
-            .unwrap_or(Ok(()))
+        let mut result = Ok(());
+        for output in self.vehicle.handle(self.t, Input::Command(command)) {
+            match output {
+                Output::CommandResult(r) => result = r,
+                Output::Event(event) => self.aside.push(EngineOutput::Event(event)),
+                Output::ZonesChanged(text) => self.aside.push(EngineOutput::ZonesChanged(text)),
+                _ => {}
+            }
+        }
+        result
     }
 }
 
@@ -560,16 +577,14 @@ impl Engine {
             (Some(Route::Adapter(id)), Payload::Command { topic, payload }) => {
                 self.stats.commands += 1;
                 let adapter = adapter_mut(&mut self.dialects, &mut self.adapters, id);
-                let mut core = CoreAt {
-                    vehicle: &mut self.vehicle,
-                    t,
-                };
+                let mut core = CoreAt::new(&mut self.vehicle, t);
                 let mut replies = Vec::new();
                 match adapter.on_request(t, topic, payload, &mut core, &mut replies) {
                     Handled::Taken => {}
                     Handled::Refused => self.stats.commands_rejected += 1,
                     Handled::NotOwned => self.stats.commands_without_dialect += 1,
                 }
+                out.append(&mut core.aside);
                 emit_replies(&record.source, replies, out);
             }
             (Some(Route::Process), Payload::Command { topic, .. }) if topic == "shutdown" => {
@@ -724,14 +739,12 @@ impl Engine {
                     }
                     if let Output::Status(s) = output {
                         self.announce_stop_reason(&s, out);
-                        let mut core = CoreAt {
-                            vehicle: &mut self.vehicle,
-                            t: tick,
-                        };
+                        let mut core = CoreAt::new(&mut self.vehicle, tick);
                         let reports =
                             from_every_adapter(&mut self.dialects, &mut self.adapters, |a, r| {
                                 a.on_status(&s, &mut core, r)
                             });
+                        out.append(&mut core.aside);
                         out.push(EngineOutput::Status(s));
                         out.extend(reports);
                         self.stats.ticks += 1;
@@ -764,6 +777,7 @@ impl Engine {
                 match output {
                     Output::Wheels(command) => self.drivetrain.command(t, &command),
                     Output::Event(event) => out.push(EngineOutput::Event(event)),
+                    Output::ZonesChanged(text) => out.push(EngineOutput::ZonesChanged(text)),
                     Output::MotionEnded(result) => {
                         out.extend(from_every_adapter(
                             &mut self.dialects,

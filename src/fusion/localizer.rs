@@ -662,6 +662,14 @@ impl MapPlacement {
         }
     }
 
+    /// The WGS84 position (latitude, longitude, degrees) of map coordinates (x, y), m: the
+    /// inverse of [`MapPlacement::place`].
+    pub fn geodetic(&self, x: f64, y: f64) -> (f64, f64) {
+        let (ex, ey) = self.map.enu_of(x, y);
+        let g = self.frame.to_geodetic(&Vector3::new(ex, ey, 0.0));
+        (g.lat_deg, g.lon_deg)
+    }
+
     /// A WGS84 position's map coordinates (x, y), m.
     pub fn place(&self, lat_deg: f64, lon_deg: f64) -> (f64, f64) {
         let enu = self.frame.to_enu(&Geodetic {
@@ -690,6 +698,12 @@ impl MapFrame {
             origin: (ex - (c * x - s * y), ey - (s * x + c * y)),
             rotation,
         }
+    }
+
+    /// The ENU position of map coordinates (x, y).
+    fn enu_of(&self, x: f64, y: f64) -> (f64, f64) {
+        let (s, c) = self.rotation.sin_cos();
+        (self.origin.0 + c * x - s * y, self.origin.1 + s * x + c * y)
     }
 
     /// An ENU pose in this frame.

@@ -24,3 +24,4 @@ pub mod recorder;
 pub mod status_out;
 pub mod stderr;
 pub mod trajectory_writer;
+pub mod zones_writer;

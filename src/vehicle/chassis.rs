@@ -165,6 +165,9 @@ pub enum CommandRejected {
          datum and a position (LOCATE_TRUE) to be checked against them"
     )]
     ZonesUnplaced,
+    /// An edit of the zones cannot be made: why.
+    #[error("the zones are not changed: {0}")]
+    ZoneEdit(String),
     /// The GNSS gate is closed: autonomous work waits for a good fix.
     #[error("the GNSS gate is closed ({0}): autonomous work waits for a good fix")]
     GnssGate(super::gate::GateReason),
@@ -182,7 +185,10 @@ impl CommandRejected {
     pub fn is_bad_value(&self) -> bool {
         matches!(
             self,
-            Self::NotFinite | Self::BeyondLimit { .. } | Self::OutOfRange { .. }
+            Self::NotFinite
+                | Self::BeyondLimit { .. }
+                | Self::OutOfRange { .. }
+                | Self::ZoneEdit(_)
         )
     }
 }

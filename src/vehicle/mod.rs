@@ -311,6 +311,8 @@ pub enum Command {
     ControlHeartbeat,
     /// Switch who may drive (SWITCH_MODE).
     SetMode(DriveMode),
+    /// Add or remove a zone (ROS1 `/set_shape`, `/set_region`).
+    EditZones(zones::ZoneEdit),
     /// A closed-loop distance or angle move (`set_navi_cmd` 1–4), replacing the one under
     /// way.
     Move(MoveKind),
@@ -394,6 +396,8 @@ pub enum Output {
     MotionEnded(MotionResult),
     /// Switch the cutter on (true) or off.
     Cutter(bool),
+    /// The zones changed: all of them as GeoJSON, to be written back to the zones file.
+    ZonesChanged(String),
     /// A mission's progress, for the requester.
     Mission {
         /// Who asked for the mission.
@@ -667,6 +671,7 @@ impl Vehicle {
                 });
                 vec![Output::CommandResult(result)]
             }
+            Input::Command(Command::EditZones(edit)) => self.edit_zones(&edit),
             Input::Command(Command::Reset) => {
                 let result = self.with_chassis(|c| c.reset(t));
                 vec![Output::CommandResult(result)]
@@ -1178,6 +1183,30 @@ impl Vehicle {
         // The way first: it is the request's own fault, the gate only the moment's.
         envelope.guard().check_way(placement, &points, run_time)?;
         envelope.may_start()
+    }
+
+    /// Adds or removes a zone; the zones written back when they changed.
+    fn edit_zones(&mut self, edit: &zones::ZoneEdit) -> Vec<Output> {
+        let placement = self.localizer.map_placement();
+        let result = match &mut self.envelope {
+            None => Err(CommandRejected::ZoneEdit(
+                "no zones are configured ([zones] in the configuration, or --zones FILE)".into(),
+            )),
+            Some(envelope) => envelope.guard().edit(placement, edit),
+        };
+        let mut out = Vec::new();
+        if let (Ok(id), Some(envelope)) = (&result, &mut self.envelope) {
+            let what = match edit {
+                zones::ZoneEdit::Add { name, kind, .. } => {
+                    format!("{} zone {name:?} added", kind.name())
+                }
+                zones::ZoneEdit::Remove(_) => "zone removed".to_owned(),
+            };
+            out.push(Output::Event(format!("zones: {what} (id {id})")));
+            out.push(Output::ZonesChanged(envelope.guard().set().to_geojson()));
+        }
+        out.push(Output::CommandResult(result.map(|_| ())));
+        out
     }
 
     /// The speed goals and straight moves cruise at, m/s (0 without drives).

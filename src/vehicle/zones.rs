@@ -10,8 +10,35 @@
 
 use super::chassis::CommandRejected;
 use crate::fusion::localizer::MapPlacement;
-use crate::zones::ZoneSet;
 use crate::zones::local::{Conflict, LocalZones};
+use crate::zones::{LonLat, Shape, ZoneKind, ZoneSet};
+
+/// A shape in the map frame (m), as an edit gives it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MapShape {
+    /// A polygon's corners (closed here when the last does not repeat the first).
+    Polygon(Vec<(f64, f64)>),
+    /// A circle: its centre and radius, m.
+    Circle((f64, f64), f64),
+    /// A line through these points (closed when the last repeats the first).
+    Line(Vec<(f64, f64)>),
+}
+
+/// An edit of the zones at run time (ROS1 `/set_shape`, `/set_region`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ZoneEdit {
+    /// Add a zone.
+    Add {
+        /// Its name.
+        name: String,
+        /// What it asks.
+        kind: ZoneKind,
+        /// Where, in the map frame.
+        shape: MapShape,
+    },
+    /// Remove the zone of this id.
+    Remove(u32),
+}
 
 /// A braking way is drawn in steps of at most this, m.
 const WAY_STEP_M: f64 = 0.1;
@@ -42,6 +69,56 @@ impl ZoneGuard {
             margin_m,
             placed: None,
         }
+    }
+
+    /// The zones.
+    pub fn set(&self) -> &ZoneSet {
+        &self.set
+    }
+
+    /// Applies `edit` (map coordinates placed on WGS84 by `placement`): the id of the zone
+    /// added or removed. A zone that cannot be is refused with the reason, the set unchanged.
+    pub fn edit(
+        &mut self,
+        placement: Option<MapPlacement>,
+        edit: &ZoneEdit,
+    ) -> Result<u32, CommandRejected> {
+        let id = match edit {
+            ZoneEdit::Remove(id) => {
+                self.set
+                    .remove(*id)
+                    .ok_or_else(|| CommandRejected::ZoneEdit(format!("no zone has id {id}")))?;
+                *id
+            }
+            ZoneEdit::Add { name, kind, shape } => {
+                let placement = placement.ok_or(CommandRejected::ZonesUnplaced)?;
+                let at = |&(x, y): &(f64, f64)| -> LonLat {
+                    let (lat, lon) = placement.geodetic(x, y);
+                    [lon, lat]
+                };
+                let shape = match shape {
+                    MapShape::Polygon(corners) => {
+                        let mut ring: Vec<LonLat> = corners.iter().map(at).collect();
+                        if let (Some(first), Some(last)) = (corners.first(), corners.last())
+                            && first != last
+                        {
+                            ring.push(at(first));
+                        }
+                        Shape::Polygon(vec![ring])
+                    }
+                    MapShape::Circle(centre, radius_m) => Shape::Circle {
+                        centre: at(centre),
+                        radius_m: *radius_m,
+                    },
+                    MapShape::Line(points) => Shape::Line(points.iter().map(at).collect()),
+                };
+                self.set
+                    .add(name, *kind, shape)
+                    .map_err(|e| CommandRejected::ZoneEdit(e.to_string()))?
+            }
+        };
+        self.placed = None;
+        Ok(id)
     }
 
     /// The zones in the map frame as `placement` puts it (placed again when it moved).

@@ -10,6 +10,8 @@ use crate::api::legacy;
 use crate::api::requests::{self, Twist};
 use crate::control::MotionTag;
 use crate::vehicle::Command;
+use crate::vehicle::zones::{MapShape, ZoneEdit};
+use crate::zones::ZoneKind;
 
 /// `/cmd_vel`'s name.
 pub const CMD_VEL: &str = "/cmd_vel";
@@ -19,6 +21,10 @@ pub const NAVI_STOP: &str = "/navi_stop";
 pub const AUTOCHARGE: &str = "/autocharge";
 /// `/set_navi_cmd`'s name.
 pub const SET_NAVI_CMD: &str = "/set_navi_cmd";
+/// `/set_shape`'s name.
+pub const SET_SHAPE: &str = "/set_shape";
+/// `/set_region`'s name.
+pub const SET_REGION: &str = "/set_region";
 
 /// A request of the node.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,6 +48,66 @@ pub enum Ros1Request {
         /// cm or degrees.
         distance: i64,
     },
+    /// `/set_shape` (map_msgs/SetShape): a virtual wall added (no `shapeId`) or removed.
+    SetShape(ShapeRequest),
+    /// `/set_region` (map_msgs/SetRegion): a special region added (no `shapeId`) or removed.
+    SetRegion(RegionRequest),
+}
+
+/// geometry_msgs/Point as JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Point {
+    /// m.
+    pub x: f64,
+    /// m.
+    pub y: f64,
+    /// m (not used: zones are flat).
+    pub z: f64,
+}
+
+/// map_msgs/SetShape's request as JSON.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeRequest {
+    /// `lines` or `circle`.
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// The shape to remove; 0 (no id) adds one.
+    #[serde(rename = "shapeId")]
+    pub shape_id: i64,
+    /// The points (map frame).
+    pub points: Vec<Point>,
+    /// A circle's radius, m.
+    pub radius: f32,
+    /// Lines joined last to first.
+    pub closed: bool,
+}
+
+/// map_msgs/SetRegion's request as JSON.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegionRequest {
+    /// `lines` only.
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// The region to remove; 0 (no id) adds one.
+    #[serde(rename = "shapeId")]
+    pub shape_id: i64,
+    /// The outline (map frame).
+    pub points: Vec<Point>,
+    /// The route across the region (kept by the navigation stack; chassisd plans none).
+    pub points2: Vec<Point>,
+    /// Waiting points at the route's start.
+    #[serde(rename = "startPointWaits")]
+    pub start_waits: Vec<Point>,
+    /// Waiting points at the route's end.
+    #[serde(rename = "endPointWaits")]
+    pub end_waits: Vec<Point>,
+    /// Not used by regions.
+    pub radius: f32,
+    /// Must be true: a region is a closed outline.
+    pub closed: bool,
 }
 
 /// std_msgs/Int16 as JSON.
@@ -83,6 +149,8 @@ impl Ros1Request {
             Self::NaviStop => NAVI_STOP,
             Self::Autocharge => AUTOCHARGE,
             Self::SetNaviCmd { .. } => SET_NAVI_CMD,
+            Self::SetShape(_) => SET_SHAPE,
+            Self::SetRegion(_) => SET_REGION,
         }
     }
 
@@ -98,8 +166,13 @@ impl Ros1Request {
             Self::Autocharge => true,
             // Command 5 is the stop; every other one taken is a move.
             Self::SetNaviCmd { cmd, .. } => cmd != "5",
-            Self::CmdVel { .. } | Self::NaviStop => false,
+            Self::CmdVel { .. } | Self::NaviStop | Self::SetShape(_) | Self::SetRegion(_) => false,
         }
+    }
+
+    /// Whether it edits the zones (answered on `/androidmsg_virtualmapstatus`).
+    pub fn edits_zones(&self) -> bool {
+        matches!(self, Self::SetShape(_) | Self::SetRegion(_))
     }
 
     /// Whether it is the charging action.
@@ -122,6 +195,8 @@ impl Ros1Request {
                     distance: *distance,
                 },
             ),
+            Self::SetShape(m) => adapter::encode_request(id, m),
+            Self::SetRegion(m) => adapter::encode_request(id, m),
         }
     }
 }
@@ -151,9 +226,96 @@ pub fn decode(topic: &str, payload: &[u8]) -> (Option<u64>, Result<Command, Stri
             });
             (id, command)
         }
+        SET_SHAPE => {
+            let (id, m) = adapter::decode_request::<ShapeRequest>(topic, payload);
+            (id, m.and_then(|m| shape_edit(&m)).map(Command::EditZones))
+        }
+        SET_REGION => {
+            let (id, m) = adapter::decode_request::<RegionRequest>(topic, payload);
+            (id, m.and_then(|m| region_edit(&m)).map(Command::EditZones))
+        }
         _ => (None, Err(format!("unknown topic {topic:?}"))),
     };
     (id, command.map(tagged))
+}
+
+/// The zone a shape id names, when it names one (0 is no id: an addition).
+fn removal(service: &str, shape_id: i64) -> Result<Option<ZoneEdit>, String> {
+    match shape_id {
+        0 => Ok(None),
+        id => u32::try_from(id)
+            .map(|id| Some(ZoneEdit::Remove(id)))
+            .map_err(|_| format!("{service}: shapeId {id} names no zone (ids are 1 to 2^32 - 1)")),
+    }
+}
+
+/// The points in the map frame, each a finite number.
+fn plane(service: &str, points: &[Point]) -> Result<Vec<(f64, f64)>, String> {
+    points
+        .iter()
+        .map(|p| {
+            if p.x.is_finite() && p.y.is_finite() {
+                Ok((p.x, p.y))
+            } else {
+                Err(format!("{service}: a point is not a finite number"))
+            }
+        })
+        .collect()
+}
+
+/// `/set_shape`: a wall along `lines` (joined last to first when `closed`), or a keep-out
+/// circle round the first point; with a `shapeId`, that zone's removal.
+fn shape_edit(m: &ShapeRequest) -> Result<ZoneEdit, String> {
+    if let Some(removal) = removal(SET_SHAPE, m.shape_id)? {
+        return Ok(removal);
+    }
+    let mut points = plane(SET_SHAPE, &m.points)?;
+    match m.kind.as_str() {
+        "lines" => {
+            if m.closed
+                && let Some(&first) = points.first()
+            {
+                points.push(first);
+            }
+            Ok(ZoneEdit::Add {
+                name: "virtual wall".into(),
+                kind: ZoneKind::Wall,
+                shape: MapShape::Line(points),
+            })
+        }
+        "circle" => match points.first() {
+            Some(&centre) => Ok(ZoneEdit::Add {
+                name: "virtual circle".into(),
+                kind: ZoneKind::KeepOut,
+                shape: MapShape::Circle(centre, f64::from(m.radius)),
+            }),
+            None => Err(format!(
+                "{SET_SHAPE}: a circle needs its centre as the first point"
+            )),
+        },
+        other => Err(format!(
+            "{SET_SHAPE}: type must be lines or circle, not {:?}",
+            other.chars().take(40).collect::<String>()
+        )),
+    }
+}
+
+/// `/set_region`: a closed outline the vehicle keeps out of (the route across it is the
+/// navigation stack's); with a `shapeId`, that zone's removal.
+fn region_edit(m: &RegionRequest) -> Result<ZoneEdit, String> {
+    if let Some(removal) = removal(SET_REGION, m.shape_id)? {
+        return Ok(removal);
+    }
+    if m.kind != "lines" || !m.closed {
+        return Err(format!(
+            "{SET_REGION}: a region is type lines with closed true (the spec allows no other)"
+        ));
+    }
+    Ok(ZoneEdit::Add {
+        name: "special region".into(),
+        kind: ZoneKind::KeepOut,
+        shape: MapShape::Polygon(plane(SET_REGION, &m.points)?),
+    })
 }
 
 /// The node's tag on a mission or goal it asked for, so it can tell that mission's end.
@@ -250,6 +412,97 @@ mod tests {
                 .unwrap_err()
                 .contains("unknown topic")
         );
+    }
+
+    fn shape(kind: &str, shape_id: i64, points: &[(f64, f64)], closed: bool) -> Ros1Request {
+        Ros1Request::SetShape(ShapeRequest {
+            kind: kind.into(),
+            shape_id,
+            points: points
+                .iter()
+                .map(|&(x, y)| Point { x, y, z: 0.0 })
+                .collect(),
+            radius: 1.5,
+            closed,
+        })
+    }
+
+    #[test]
+    fn set_shape_adds_walls_and_circles_and_removes_by_id() {
+        let wall = shape("lines", 0, &[(0.0, 0.0), (2.0, 0.0), (2.0, 2.0)], true);
+        assert!(wall.edits_zones() && wall.awaits_answer() && !wall.starts_motion());
+        let (id, edit) = round_trip(&wall, Some(3));
+        assert_eq!(id, Some(3));
+        let Ok(Command::EditZones(ZoneEdit::Add {
+            kind, shape: line, ..
+        })) = edit
+        else {
+            panic!("{edit:?}");
+        };
+        assert_eq!(kind, ZoneKind::Wall);
+        // Closed: joined back to its first point.
+        assert_eq!(
+            line,
+            MapShape::Line(vec![(0.0, 0.0), (2.0, 0.0), (2.0, 2.0), (0.0, 0.0)])
+        );
+        let (_, circle) = round_trip(&shape("circle", 0, &[(4.0, 1.0)], false), Some(4));
+        assert!(matches!(
+            circle,
+            Ok(Command::EditZones(ZoneEdit::Add {
+                kind: ZoneKind::KeepOut,
+                shape: MapShape::Circle((4.0, 1.0), 1.5),
+                ..
+            }))
+        ));
+        let (_, removal) = round_trip(&shape("lines", 7, &[], false), Some(5));
+        assert_eq!(removal, Ok(Command::EditZones(ZoneEdit::Remove(7))));
+        let region = Ros1Request::SetRegion(RegionRequest {
+            kind: "lines".into(),
+            shape_id: 0,
+            points: [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)]
+                .iter()
+                .map(|&(x, y)| Point { x, y, z: 0.0 })
+                .collect(),
+            points2: Vec::new(),
+            start_waits: Vec::new(),
+            end_waits: Vec::new(),
+            radius: 0.0,
+            closed: true,
+        });
+        assert!(matches!(
+            round_trip(&region, Some(6)).1,
+            Ok(Command::EditZones(ZoneEdit::Add {
+                kind: ZoneKind::KeepOut,
+                shape: MapShape::Polygon(_),
+                ..
+            }))
+        ));
+    }
+
+    #[test]
+    fn bad_zone_edits_are_refused_with_the_reason() {
+        for (request, says) in [
+            (shape("square", 0, &[(0.0, 0.0)], false), "lines or circle"),
+            (shape("circle", 0, &[], false), "centre"),
+            // A NaN is null in the record, which is no number.
+            (shape("lines", 0, &[(f64::NAN, 0.0)], false), "expected f64"),
+            (shape("lines", -1, &[], false), "names no zone"),
+            (shape("lines", 1 << 40, &[], false), "names no zone"),
+        ] {
+            let refused = round_trip(&request, Some(1)).1.unwrap_err();
+            assert!(refused.contains(says), "{refused}");
+        }
+        let open = br#"{"id":2,"msg":{"type":"lines","shapeId":0,"points":[],"points2":[],
+            "startPointWaits":[],"endPointWaits":[],"radius":0,"closed":false}}"#;
+        assert!(
+            decode(SET_REGION, open)
+                .1
+                .unwrap_err()
+                .contains("closed true")
+        );
+        let extra = br#"{"id":3,"msg":{"type":"lines","shapeId":0,"points":[],"radius":0,
+            "closed":false,"colour":"red"}}"#;
+        assert!(decode(SET_SHAPE, extra).1.is_err());
     }
 
     #[test]

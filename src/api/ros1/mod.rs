@@ -11,7 +11,10 @@
 //!   without latching (the spec excepts continuous velocity control);
 //! - `/autocharge` 1 is a mission of one CHARGING step: to the configured dock, then until the
 //!   BMS reports charging;
-//! - `/set_navi_cmd` is a move (or cmd 5, the stop) with the request's fields.
+//! - `/set_navi_cmd` is a move (or cmd 5, the stop) with the request's fields;
+//! - `/set_shape` and `/set_region` add a wall, a keep-out circle or a keep-out polygon to the
+//!   zones (map frame), or remove one by its `shapeId`; each answer also goes out on
+//!   `/androidmsg_virtualmapstatus` (62 made, 63 refused).
 //!
 //! The interface definitions the node is built from are in `interfaces/`, one folder per
 //! package: the standard ones field for field as ROS defines them, and the spec's own

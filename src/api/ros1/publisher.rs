@@ -178,6 +178,13 @@ impl Publishing {
         push_codes(codes, out);
     }
 
+    /// An edit of the zones was answered (made or refused).
+    pub fn on_zone_edit(&mut self, made: bool, out: &mut Messages) {
+        let mut codes = Vec::new();
+        self.status.on_zone_edit(made, &mut codes);
+        push_codes(codes, out);
+    }
+
     /// The latched codes as they stand, for a new registration.
     pub fn latched(&self, out: &mut Messages) {
         push_codes(self.status.current(), out);

@@ -79,17 +79,20 @@ pub enum Topic {
     Navigation,
     /// `/power_report`.
     Power,
+    /// `/androidmsg_virtualmapstatus`: an edit of the virtual walls and regions.
+    VirtualMap,
 }
 
 impl Topic {
     /// Every topic, in the order of the spec.
-    pub const ALL: [Topic; 6] = [
+    pub const ALL: [Topic; 7] = [
         Topic::Init,
         Topic::Emergency,
         Topic::Charge,
         Topic::Power,
         Topic::Location,
         Topic::Navigation,
+        Topic::VirtualMap,
     ];
 
     /// Its ROS name.
@@ -101,6 +104,7 @@ impl Topic {
             Topic::Location => "/androidmsg_locationstatus",
             Topic::Navigation => "/androidmsg_navigationstatus",
             Topic::Power => "/power_report",
+            Topic::VirtualMap => "/androidmsg_virtualmapstatus",
         }
     }
 }
@@ -120,6 +124,11 @@ pub fn navigation_code(outcome: &Outcome) -> i16 {
     }
 }
 
+/// `/androidmsg_virtualmapstatus`: the edit was made.
+pub const VIRTUAL_MAP_MADE: i16 = 62;
+/// `/androidmsg_virtualmapstatus`: the edit was refused.
+pub const VIRTUAL_MAP_REFUSED: i16 = 63;
+
 /// The charging action's state, as far as the node asked for it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Action {
@@ -136,7 +145,7 @@ enum Action {
 /// The status topics' codes, published on change.
 #[derive(Debug, Clone)]
 pub struct StatusTopics {
-    last: [Option<i16>; 6],
+    last: [Option<i16>; 7],
     action: Action,
     /// The battery was last seen charging (to tell "charged full" from "never charged").
     was_charging: bool,
@@ -147,7 +156,7 @@ pub struct StatusTopics {
 impl Default for StatusTopics {
     fn default() -> Self {
         Self {
-            last: [None; 6],
+            last: [None; 7],
             action: Action::None,
             was_charging: false,
             navigation: None,
@@ -185,6 +194,18 @@ impl StatusTopics {
                 code.map(|c| (*topic, c))
             })
             .collect()
+    }
+
+    /// An edit of the virtual walls or regions was answered: 62 made, 63 refused (each
+    /// edit gets its code, the same as the last or not).
+    pub fn on_zone_edit(&mut self, made: bool, out: &mut Vec<(Topic, i16)>) {
+        let code = if made {
+            VIRTUAL_MAP_MADE
+        } else {
+            VIRTUAL_MAP_REFUSED
+        };
+        self.last[Self::index(Topic::VirtualMap)] = Some(code);
+        out.push((Topic::VirtualMap, code));
     }
 
     /// The node's own motion request was accepted; `charging` when it is `/autocharge`.

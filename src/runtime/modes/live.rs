@@ -112,6 +112,7 @@ async fn run_marked(
         .require_devices(std::path::Path::new("the configuration"))?;
     log_calibration(&options.config);
     super::log_zones(&options.config);
+    let zones = super::zones_writer(&options.config);
     // The broker first: its process takes a moment to start on a slow PC, and nothing that
     // keeps time (the drives' set-up) should be waiting meanwhile.
     let embedded = match &options.config.mqtt {
@@ -318,7 +319,12 @@ async fn run_marked(
             &mut outputs,
             t,
             (&can_tx, &serial_tx),
-            (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
+            (
+                mqtt.as_ref(),
+                ros1.as_mut(),
+                websocket.as_mut(),
+                zones.as_ref(),
+            ),
             recorder.as_mut(),
             &mut out,
         );
@@ -369,7 +375,12 @@ async fn run_marked(
         &mut outputs,
         end,
         (&can_tx, &serial_tx),
-        (mqtt.as_ref(), ros1.as_mut(), websocket.as_mut()),
+        (
+            mqtt.as_ref(),
+            ros1.as_mut(),
+            websocket.as_mut(),
+            zones.as_ref(),
+        ),
         recorder.as_mut(),
         &mut out,
     );
@@ -410,10 +421,11 @@ fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
     (can_tx, serial_tx): (&BTreeMap<String, CanTx>, &BTreeMap<String, SerialTx>),
-    (mqtt, mut ros1, mut websocket): (
+    (mqtt, mut ros1, mut websocket, zones): (
         Option<&MqttSender>,
         Option<&mut Ros1Link>,
         Option<&mut crate::runtime::links::websocket::WebsocketLink>,
+        Option<&crate::runtime::zones_writer::ZonesWriter>,
     ),
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
@@ -425,6 +437,7 @@ fn dispatch(
             mqtt,
             ros1.as_deref_mut(),
             websocket.as_deref_mut(),
+            zones,
         ) else {
             continue;
         };

@@ -14,14 +14,27 @@ fn log_zones(config: &crate::config::VehicleConfig) {
         tracing::warn!(
             zones = z.set.zones().len(),
             "zones: every motion's way is checked before it starts and the braking way every \
-             tick, and autonomous work waits on the GNSS gate; edits over ROS1 and the \
-             WebSocket are not built yet"
+             tick, autonomous work waits on the GNSS gate, and ROS1 /set_shape and /set_region \
+             edit them; the zones over the WebSocket and on the live page are not built yet"
         );
     }
 }
 
 use crate::engine::EngineOutput;
 use crate::runtime::links::{mqtt, ros1, websocket};
+use crate::runtime::zones_writer::ZonesWriter;
+
+/// The writer of the zones file, when the configuration names one.
+fn zones_writer(config: &crate::config::VehicleConfig) -> Option<ZonesWriter> {
+    let file = config.zones.as_ref()?.file.clone()?;
+    match ZonesWriter::start(file) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            tracing::error!(error = %e, "cannot start the zones writer: edits are not kept");
+            None
+        }
+    }
+}
 
 /// Handles the engine outputs that go the same way in live mode and in the simulation:
 /// what the WebSocket server sees of them, what the ROS1 node publishes to it, messages to
@@ -32,6 +45,7 @@ pub(crate) fn forward_common(
     mqtt: Option<&mqtt::MqttSender>,
     ros1: Option<&mut ros1::Ros1Link>,
     websocket: Option<&mut websocket::WebsocketLink>,
+    zones: Option<&ZonesWriter>,
 ) -> Option<EngineOutput> {
     if let Some(link) = websocket {
         link.see(&output);
@@ -47,6 +61,10 @@ pub(crate) fn forward_common(
             }
         }
         EngineOutput::Event(event) => tracing::info!("{event}"),
+        EngineOutput::ZonesChanged(text) => match zones {
+            Some(writer) => writer.write(text),
+            None => tracing::warn!("the zones changed, but they have no file to be written to"),
+        },
         EngineOutput::CommandResult {
             source,
             topic,

@@ -138,6 +138,7 @@ struct Output {
     mqtt: Option<MqttSender>,
     ros1: Option<Ros1Link>,
     websocket: Option<crate::runtime::links::websocket::WebsocketLink>,
+    zones: Option<crate::runtime::zones_writer::ZonesWriter>,
 }
 
 impl Sink for Output {
@@ -154,6 +155,7 @@ impl Sink for Output {
             self.mqtt.as_ref(),
             self.ros1.as_mut(),
             self.websocket.as_mut(),
+            self.zones.as_ref(),
         ) {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
@@ -288,6 +290,7 @@ async fn run_marked(
         mqtt,
         ros1,
         websocket,
+        zones: super::zones_writer(sim.config()),
     };
     let corrections = match &options.ntrip {
         Some(n) => Some(crate::runtime::links::ntrip::spawn(n, clock, tx.clone())?),

@@ -14,7 +14,7 @@ use tokio::task::JoinSet;
 use super::messages::{self, geometry_msgs, map_msgs, std_msgs};
 use super::{Answer, Feed, Ros1Queues};
 use crate::api::ros1;
-use crate::api::ros1::adapter::Ros1Request;
+use crate::api::ros1::adapter::{Point, RegionRequest, Ros1Request, ShapeRequest};
 use crate::api::ros1::messages::ImuNoise;
 use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::ros1::publisher::{self, Advertised, Messages, Publishing};
@@ -62,6 +62,8 @@ struct Pending {
     starts_motion: bool,
     /// Whether it is the charging action.
     charging: bool,
+    /// Whether it edits the zones (answered on `/androidmsg_virtualmapstatus`).
+    edits_zones: bool,
     /// When it went to the engine.
     sent: Instant,
 }
@@ -121,6 +123,7 @@ impl Requests {
                 waiter,
                 starts_motion: request.starts_motion(),
                 charging: request.is_charging(),
+                edits_zones: request.edits_zones(),
                 sent: Instant::now(),
             };
             waiting.by_id.insert(id, entry);
@@ -397,6 +400,13 @@ async fn answer_pending(
             graph.publish(codes).await;
         }
     }
+    if entry.edits_zones {
+        let mut codes = Vec::new();
+        state.publishing.on_zone_edit(answer.is_ok(), &mut codes);
+        if let Some(graph) = graph {
+            graph.publish(codes).await;
+        }
+    }
     if let Some(waiter) = entry.waiter {
         // A caller that timed out is gone; its answer goes nowhere.
         let _ = waiter.try_send(answer);
@@ -437,6 +447,31 @@ async fn still_registered(
         }
         Err(roslibrust::ros1::RosMasterError::MasterError(_)) => Registration::Forgotten,
         Err(_) => Registration::MasterAway,
+    }
+}
+
+/// The points of a ROS request as the adapter records them.
+fn points(points: &[geometry_msgs::Point]) -> Vec<Point> {
+    points
+        .iter()
+        .map(|p| Point {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        })
+        .collect()
+}
+
+/// Hands a zone edit to the engine: whether it was made (a refusal is logged with its
+/// reason; the status code goes out on `/androidmsg_virtualmapstatus` with the answer).
+fn zone_edit_made(requests: &Requests, request: Ros1Request) -> bool {
+    let name = request.name();
+    match requests.call(request) {
+        Ok(()) => true,
+        Err(reason) => {
+            tracing::warn!(%reason, "{name} refused");
+            false
+        }
     }
 }
 
@@ -499,6 +534,47 @@ async fn build(
                     // roslibrust's service callbacks answer with its ServiceError,
                     // which is an anyhow::Error.
                     anyhow::anyhow!(reason)
+                })
+            },
+        )
+        .await?,
+    );
+    let r = requests.clone();
+    services.push(
+        node.advertise_service::<map_msgs::SetShape, _>(
+            "/set_shape",
+            move |request: map_msgs::SetShapeRequest| {
+                let request = Ros1Request::SetShape(ShapeRequest {
+                    kind: request.r#type,
+                    shape_id: request.r#shapeId,
+                    points: points(&request.points),
+                    radius: request.radius,
+                    closed: request.closed,
+                });
+                Ok(map_msgs::SetShapeResponse {
+                    success: zone_edit_made(&r, request),
+                })
+            },
+        )
+        .await?,
+    );
+    let r = requests.clone();
+    services.push(
+        node.advertise_service::<map_msgs::SetRegion, _>(
+            "/set_region",
+            move |request: map_msgs::SetRegionRequest| {
+                let request = Ros1Request::SetRegion(RegionRequest {
+                    kind: request.r#type,
+                    shape_id: request.r#shapeId,
+                    points: points(&request.points),
+                    points2: points(&request.points2),
+                    start_waits: points(&request.r#startPointWaits),
+                    end_waits: points(&request.r#endPointWaits),
+                    radius: request.radius,
+                    closed: request.closed,
+                });
+                Ok(map_msgs::SetRegionResponse {
+                    success: zone_edit_made(&r, request),
                 })
             },
         )
