@@ -2,8 +2,8 @@
 //! tests/install-deps into target/test-venv) talking to `chassisd sim --websocket`. The
 //! client script, tests/websocket/client.py, prints what it saw as JSON; these tests judge
 //! it. A second, raw client that subscribes and never reads checks that a slow client
-//! delays no one. Each test has its own simulated vehicle on its own port, so they run side
-//! by side.
+//! delays no one. A jog over it towards a keep-out zone (`sim --zones`) stops short of the
+//! zone. Each test has its own simulated vehicle on its own port, so they run side by side.
 
 mod common;
 
@@ -168,6 +168,47 @@ fn cmd_vel_moves_the_vehicle_it_stops_when_publishing_ends_and_the_session_repla
     assert!(replay.stdout == live, "replay differs from the live output");
     let commands = std::fs::read_to_string(dir.join("websocket.log")).expect("websocket.log");
     assert!(commands.lines().count() >= 15, "{commands}");
+}
+
+#[test]
+fn a_jog_towards_a_keep_out_zone_over_the_websocket_stops_short_of_it() {
+    let port = free_port();
+    let dir = common::tempdir("websocket-zones");
+    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
+    let zones = common::zones::yard(&plant, &dir);
+    let bind = format!("127.0.0.1:{port}");
+    let mut sim = Proc::start(&[
+        "sim".as_ref(),
+        "--no-mqtt".as_ref(),
+        "--websocket".as_ref(),
+        bind.as_ref(),
+        "--zones".as_ref(),
+        zones.as_os_str(),
+    ]);
+    sim.wait_log(Duration::from_secs(40), "GNSS gate open");
+    // 0.5 m/s for 12 s would take the mower 6 m east, through the pond 4 m ahead.
+    let seen = client(port, &["cmd_vel", "0.5", "12"]);
+    assert!(number(&seen, "/max_during") > 0.4, "{seen}");
+    let log = sim.stop_log();
+    assert!(
+        log.iter()
+            .any(|l| l.contains("stopping: the keep_out zone \"pond\"")),
+        "{}",
+        log.join("\n")
+    );
+    // The simulator's truth in its closing line: short of the pond's west edge (x = 4 m),
+    // front edge 0.45 m ahead of the axle.
+    let summary = log
+        .iter()
+        .find(|l| l.contains("from the start"))
+        .unwrap_or_else(|| panic!("no summary in {log:?}"));
+    let x: f64 = summary
+        .split("ending (")
+        .nth(1)
+        .and_then(|s| s.split(',').next())
+        .and_then(|x| x.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no end in {summary}"));
+    assert!(x + 0.45 < 4.0 && x > 2.5, "ended at x = {x}: {summary}");
 }
 
 #[test]
