@@ -8,27 +8,17 @@ mod common;
 use chassisd::sim::lockstep::Lockstep;
 use chassisd::sim::plant::PlantConfig;
 use common::lockstep::{START, SimRun};
+use std::ffi::OsString;
 use std::path::Path;
-use std::process::Command;
 
 /// Runs `bench control` on `plant` with `seed`; its JSON summary, after checking it passed.
 fn bench(plant: &Path, seed: u64) -> serde_json::Value {
-    let out = Command::new(common::chassisd())
-        .args(["bench", "control", "--plant"])
-        .arg(plant)
-        .args(["--seed", &seed.to_string()])
-        .output()
-        .expect("chassisd runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let last = stdout.lines().last().unwrap_or_default();
-    let summary: serde_json::Value = serde_json::from_str(last).expect("last line is JSON");
-    assert!(
-        summary["pass"] == true && out.status.success(),
-        "targets missed on {} seed {seed}:\n{stdout}\n{}",
-        plant.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    summary
+    let mut args: Vec<OsString> = ["bench", "control", "--seed", &seed.to_string()]
+        .iter()
+        .map(OsString::from)
+        .collect();
+    args.extend(["--plant".into(), plant.into()]);
+    common::passing_bench(&args, &format!("{} seed {seed}", plant.display()))
 }
 
 /// The figures of every distance move: (truth error, unseen slip, scored error), m.

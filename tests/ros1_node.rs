@@ -487,23 +487,11 @@ fn set_navi_cmd_drives_50_cm_and_reports_its_start_and_end() {
     // The simulator's truth, in the closing line: the move against the target of
     // `bench control` (5 mm + 0.5 % of the distance).
     let (live, log) = interrupt(p);
-    let summary = log
-        .iter()
-        .find(|l| l.contains("from the start"))
-        .unwrap_or_else(|| panic!("no summary in {log:?}"));
-    let inside = summary
-        .split("ending (")
-        .nth(1)
-        .and_then(|s| s.split(')').next())
-        .expect("ending (x, y)");
-    let xy: Vec<f64> = inside
-        .split(',')
-        .map(|v| v.trim().parse().expect("a number"))
-        .collect();
-    let moved = xy[0].hypot(xy[1]);
+    let (x, y) = common::truth_end(&log);
+    let moved = x.hypot(y);
     assert!(
         (moved - 0.5).abs() <= 0.005 + 0.005 * 0.5,
-        "drove {moved} m for 50 cm: {summary}"
+        "drove {moved} m for 50 cm, ending at ({x}, {y})"
     );
 
     // The node's requests are in the recording, which replays to the live output, move and

@@ -198,17 +198,8 @@ fn a_jog_towards_a_keep_out_zone_over_the_websocket_stops_short_of_it() {
     );
     // The simulator's truth in its closing line: short of the pond's west edge (x = 4 m),
     // front edge 0.45 m ahead of the axle.
-    let summary = log
-        .iter()
-        .find(|l| l.contains("from the start"))
-        .unwrap_or_else(|| panic!("no summary in {log:?}"));
-    let x: f64 = summary
-        .split("ending (")
-        .nth(1)
-        .and_then(|s| s.split(',').next())
-        .and_then(|x| x.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no end in {summary}"));
-    assert!(x + 0.45 < 4.0 && x > 2.5, "ended at x = {x}: {summary}");
+    let (x, _) = common::truth_end(&log);
+    assert!(x + 0.45 < 4.0 && x > 2.5, "ended at x = {x}");
 }
 
 #[test]

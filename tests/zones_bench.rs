@@ -5,29 +5,29 @@
 
 mod common;
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Runs the shortened benchmark on `plant` with `seed`; its JSON summary, after checking
 /// it passed.
 fn bench(plant: &Path, seed: u64) -> serde_json::Value {
-    let out = Command::new(common::chassisd())
-        .args(["bench", "envelope", "--plant"])
-        .arg(plant)
-        .args(["--seed", &seed.to_string()])
-        .args(["--approaches", "100", "--minutes", "5", "--plans", "30"])
-        .output()
-        .expect("chassisd runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let last = stdout.lines().last().unwrap_or_default();
-    let summary: serde_json::Value = serde_json::from_str(last).expect("last line is JSON");
-    assert!(
-        summary["pass"] == true && out.status.success(),
-        "targets missed on {} seed {seed}:\n{stdout}\n{}",
-        plant.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    summary
+    let mut args: Vec<OsString> = [
+        "bench",
+        "envelope",
+        "--seed",
+        &seed.to_string(),
+        "--approaches",
+        "100",
+        "--minutes",
+        "5",
+        "--plans",
+        "30",
+    ]
+    .iter()
+    .map(OsString::from)
+    .collect();
+    args.extend(["--plant".into(), plant.into()]);
+    common::passing_bench(&args, &format!("{} seed {seed}", plant.display()))
 }
 
 fn shipped(name: &str) -> PathBuf {

@@ -14,7 +14,7 @@ use chassisd::sim::lockstep::PLANT_STEP;
 use chassisd::sim::plant::PlantConfig;
 use common::lockstep::{FIXED, SimRun};
 use common::zones::{TestZone, in_zones, write_zones};
-use geo::{Coord, Intersects, Line, LineString, Polygon};
+use geo::{Coord, Intersects, Line, Polygon};
 use proptest::prelude::*;
 
 /// One thing the operator or a client does, then lets run.
@@ -94,24 +94,8 @@ fn plant_file(name: &str) -> PathBuf {
 
 /// The true outline at the true pose.
 fn footprint(v: &SimRun, plant: &PlantConfig) -> Polygon<f64> {
-    let f = plant.geometry.footprint();
     let t = v.sim.vehicle().truth();
-    let (s, c) = t.yaw.sin_cos();
-    let at = |fx: f64, fy: f64| Coord {
-        x: t.x + c * fx - s * fy,
-        y: t.y + s * fx + c * fy,
-    };
-    let half = f.width_m / 2.0;
-    Polygon::new(
-        LineString::new(vec![
-            at(f.front_m, half),
-            at(-f.rear_m, half),
-            at(-f.rear_m, -half),
-            at(f.front_m, -half),
-            at(f.front_m, half),
-        ]),
-        Vec::new(),
-    )
+    plant.geometry.footprint().outline_at(t.x, t.y, t.yaw)
 }
 
 /// A zone as the footprint must never meet it.

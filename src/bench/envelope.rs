@@ -446,24 +446,8 @@ impl Zones {
 
 /// The plant's true outline.
 fn outline(sim: &Lockstep, plant: &PlantConfig) -> Polygon<f64> {
-    let f = plant.geometry.footprint();
     let t = sim.vehicle().truth();
-    let (s, c) = t.yaw.sin_cos();
-    let at = |fx: f64, fy: f64| Coord {
-        x: t.x + c * fx - s * fy,
-        y: t.y + s * fx + c * fy,
-    };
-    let half = f.width_m / 2.0;
-    Polygon::new(
-        LineString::new(vec![
-            at(f.front_m, half),
-            at(-f.rear_m, half),
-            at(-f.rear_m, -half),
-            at(f.front_m, -half),
-            at(f.front_m, half),
-        ]),
-        Vec::new(),
-    )
+    plant.geometry.footprint().outline_at(t.x, t.y, t.yaw)
 }
 
 /// Whether the plant has a blade.

@@ -69,6 +69,26 @@ impl Footprint {
     pub fn radius_m(&self) -> f64 {
         self.front_m.max(self.rear_m).hypot(self.width_m / 2.0)
     }
+
+    /// The outline with `base_link` at (x, y) heading `yaw` (rad), as a closed polygon.
+    pub fn outline_at(&self, x: f64, y: f64, yaw: f64) -> geo::Polygon<f64> {
+        let (s, c) = yaw.sin_cos();
+        let at = |fx: f64, fy: f64| geo::Coord {
+            x: x + c * fx - s * fy,
+            y: y + s * fx + c * fy,
+        };
+        let half = self.width_m / 2.0;
+        geo::Polygon::new(
+            geo::LineString::new(vec![
+                at(self.front_m, half),
+                at(-self.rear_m, half),
+                at(-self.rear_m, -half),
+                at(self.front_m, -half),
+                at(self.front_m, half),
+            ]),
+            Vec::new(),
+        )
+    }
 }
 
 /// What a zone ahead does in manual mode.
@@ -139,15 +159,7 @@ impl ZonesConfig {
         let mut zones = Self {
             file: Some(file.to_owned()),
             geojson: None,
-            footprint,
-            manual: ManualPolicy::default(),
-            margin_m: default_margin_m(),
-            min_quality: GateQuality::default(),
-            max_sigma_m: default_max_sigma_m(),
-            max_fix_age_s: default_max_fix_age_s(),
-            max_correction_age_s: default_max_correction_age_s(),
-            resume_after_s: default_resume_after_s(),
-            set: ZoneSet::default(),
+            ..Self::of_set(ZoneSet::default(), footprint)
         };
         zones.load(Path::new("."), file)?;
         zones.validate(file)?;

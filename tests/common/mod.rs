@@ -227,3 +227,38 @@ pub fn sample_at(samples: &[Vec<f64>], t: f64) -> &[f64] {
     let i = samples.partition_point(|s| s[0] <= t);
     &samples[i.saturating_sub(1)]
 }
+
+/// Runs `chassisd ARGS` (a `bench`), checks that its last line is JSON with `"pass": true`
+/// and that it exited 0 (else fails naming `what`, with its output); that JSON.
+pub fn passing_bench<S: AsRef<std::ffi::OsStr>>(args: &[S], what: &str) -> serde_json::Value {
+    let out = std::process::Command::new(chassisd())
+        .args(args)
+        .output()
+        .expect("chassisd runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let last = stdout.lines().last().unwrap_or_default();
+    let summary: serde_json::Value = serde_json::from_str(last).expect("last line is JSON");
+    assert!(
+        summary["pass"] == true && out.status.success(),
+        "targets missed on {what}:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    summary
+}
+
+/// Where the simulated vehicle truly ended (x, y, m), from `chassisd sim`'s closing log line.
+pub fn truth_end(log: &[String]) -> (f64, f64) {
+    let summary = log
+        .iter()
+        .find(|l| l.contains("from the start"))
+        .unwrap_or_else(|| panic!("no summary in {log:?}"));
+    let xy: Vec<f64> = summary
+        .split("ending (")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .unwrap_or_else(|| panic!("no ending (x, y) in {summary}"))
+        .split(',')
+        .map(|v| v.trim().parse().expect("a number"))
+        .collect();
+    (xy[0], xy[1])
+}
