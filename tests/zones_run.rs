@@ -3,6 +3,8 @@
 //! - a manual jog towards the pond stops short of it and latches with the zone; a zero
 //!   command re-arms, driving on towards it stops again before it can reach it, backing
 //!   away drives;
+//! - the status shows the zones in the map frame and the vehicle's margin (σ and the
+//!   braking way) against its clearance from the nearest zone, as it approaches;
 //! - under `zones.manual = "warn"` the jog drives on and the driver is told once;
 //! - the gate: a float fix stops the blade in the same control tick and holds a mission at
 //!   rest; it goes on by itself after `zones.resume_after_s` of RTK fixed, and a flickering
@@ -38,6 +40,69 @@ fn jog(v: &mut SimRun, speed: f64, seconds: f64) -> (f64, Result<(), String>) {
         farthest = farthest.max(v.truth_xy().0);
     }
     (farthest, answer)
+}
+
+#[test]
+fn the_status_shows_the_zones_and_the_margin_against_the_clearance() {
+    let mut v = mower_in_the_yard("zones-status", |_| {});
+    // The next status, after the tick the gate opened in.
+    v.run(0.2);
+    let at_rest = v.status().envelope.clone().expect("zones configured");
+    assert!(at_rest.gate_closed.is_none());
+    let zones = at_rest.zones.clone().expect("placed");
+    let names: Vec<&str> = zones.iter().map(|z| z.name.as_str()).collect();
+    assert_eq!(names, ["lawn", "pond", "fence", "tree"]);
+    // The pond's outline in the map frame: its west edge at x = 4 m.
+    let pond_x = zones[1].lines[0]
+        .iter()
+        .map(|p| p.0)
+        .fold(f64::INFINITY, f64::min);
+    assert!((pond_x - POND_X).abs() < 0.01, "{pond_x}");
+    // At rest the margin is σ alone.
+    let sigma = at_rest.sigma_m.expect("placed");
+    assert!(sigma > 0.0 && sigma < 0.1, "{sigma}");
+    assert_eq!(at_rest.margin_m(), Some(sigma + at_rest.braking_m));
+    assert!(at_rest.braking_m < 1e-3, "{at_rest:?}");
+    // Nearest at the start: the fence 3 m west, less the footprint.
+    let nearest = at_rest.nearest.clone().expect("zones");
+    assert_eq!(nearest.name, "fence");
+    assert!(
+        (nearest.clearance_m - (3.0 - at_rest.footprint_m)).abs() < 0.1,
+        "{nearest:?}"
+    );
+    // The same zones, not drawn again, while nothing changes.
+    v.run(1.0);
+    let later = v.status().envelope.clone().expect("zones");
+    assert!(std::sync::Arc::ptr_eq(
+        &zones,
+        &later.zones.expect("placed")
+    ));
+
+    // Driving east: the braking way joins the margin, and the pond comes nearest.
+    let mut moving = None;
+    for _ in 0..120 {
+        v.send("cmd_vel", r#"{"linear": {"x": 0.5}, "angular": {"z": 0}}"#)
+            .ok();
+        v.run(0.1);
+        let e = v.status().envelope.clone().expect("zones");
+        if v.speed() > 0.45 && moving.is_none() {
+            moving = Some(e);
+        }
+    }
+    let moving = moving.expect("reached 0.45 m/s");
+    // At 0.45 m/s: the reaction's way and 0.05 m braking at the mower's 2 m/s².
+    assert!(moving.braking_m > 0.05, "{moving:?}");
+    assert!(
+        moving.margin_m().expect("placed") > at_rest.margin_m().expect("placed") + 0.05,
+        "{moving:?}"
+    );
+    // Stopped short of the pond: the footprint outside it, the pond nearest and within
+    // what a way towards it would need.
+    let stopped = v.status().envelope.clone().expect("zones");
+    let pond = stopped.nearest.clone().expect("zones");
+    assert_eq!(pond.name, "pond");
+    assert!(pond.clearance_m > 0.0, "{stopped:?}");
+    assert!(pond.clearance_m < 0.6, "{stopped:?}");
 }
 
 #[test]

@@ -7,16 +7,19 @@
 //!   supervisor, which latches the stop with it; in manual mode `zones.manual = "warn"`
 //!   only reports it.
 
+use std::sync::Arc;
+
 use super::chassis::{CONTROL_PERIOD, Chassis, CommandRejected};
 use super::gate::{Gate, GateChange, GateConfig, GateReason, GateSignals, horizontal_sigma};
 use super::safety::Cause;
-use super::zones::{Braking, ZoneGuard};
+use super::zones::{Braking, NearestZone, ZoneGuard};
 use super::{Output, Vehicle};
 use crate::config::zones::ManualPolicy;
 use crate::control::Outcome;
 use crate::control::outcome::AbortReason;
 use crate::fusion::localizer::Localizer;
 use crate::time::Timestamp;
+use crate::zones::local::ZoneOutline;
 
 /// The pose the run-time check uses is at most this old, in control periods.
 const POSE_AGE_PERIODS: f64 = 1.0;
@@ -33,7 +36,59 @@ pub struct Envelope {
     warned: Option<String>,
 }
 
+/// The envelope as a status shows it, when zones are configured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvelopeStatus {
+    /// Why the GNSS gate is closed; `None` while it is open.
+    pub gate_closed: Option<GateReason>,
+    /// The zones in the map frame, once it is placed: the same `Arc` until they change.
+    pub zones: Option<Arc<[ZoneOutline]>>,
+    /// The zone nearest the footprint, once placed.
+    pub nearest: Option<NearestZone>,
+    /// The footprint's circumscribed radius, m.
+    pub footprint_m: f64,
+    /// The map position's horizontal σ, m (once placed).
+    pub sigma_m: Option<f64>,
+    /// The braking way at the measured speed, m (0 without drives).
+    pub braking_m: f64,
+}
+
+impl EnvelopeStatus {
+    /// What the run-time check keeps beyond the footprint now: σ and the braking way, m.
+    pub fn margin_m(&self) -> Option<f64> {
+        self.sigma_m.map(|sigma| sigma + self.braking_m)
+    }
+}
+
 impl Envelope {
+    /// The status at `t`: the gate, the zones, and how near the vehicle stands to them
+    /// against what it keeps.
+    pub fn status(
+        &mut self,
+        localizer: &Localizer,
+        chassis: Option<&Chassis>,
+        t: Timestamp,
+    ) -> EnvelopeStatus {
+        let placed = localizer.map_placement().zip(localizer.published(t));
+        let speed = chassis.map_or(0.0, |c| {
+            c.speeds_ahead(t)
+                .iter()
+                .map(|(v, _)| v.abs())
+                .fold(0.0, f64::max)
+        });
+        EnvelopeStatus {
+            gate_closed: self.gate.closed().cloned(),
+            zones: placed.map(|(placement, _)| self.guard.outlines(placement)),
+            nearest: placed.and_then(|(placement, pose)| {
+                let (x, y, _) = pose.map_pose;
+                self.guard.nearest(placement, (x, y))
+            }),
+            footprint_m: self.guard.footprint_m(),
+            sigma_m: map_sigma(localizer, t),
+            braking_m: chassis.map_or(0.0, |c| braking(c).distance(speed)),
+        }
+    }
+
     /// The zones of `guard`, the gate of `gate` and the manual policy.
     pub fn new(guard: ZoneGuard, gate: GateConfig, manual: ManualPolicy) -> Self {
         Self {

@@ -1288,6 +1288,10 @@ impl Vehicle {
             host: self.host,
             mode: self.chassis.as_ref().map(Chassis::mode),
             corrections: None,
+            envelope: self
+                .envelope
+                .as_mut()
+                .map(|e| e.status(&self.localizer, self.chassis.as_ref(), t)),
         }
     }
 

@@ -43,6 +43,8 @@ pub struct VehicleStatus {
     pub mode: Option<DriveMode>,
     /// RTK corrections; `None` without a correction source.
     pub corrections: Option<super::corrections::CorrectionsStatus>,
+    /// The zones and the GNSS gate; `None` without zones.
+    pub envelope: Option<super::envelope::EnvelopeStatus>,
 }
 
 /// The frame tree of REP-105 at one time: the map pose is `map_to_odom` composed with

@@ -8,9 +8,11 @@
 //!   will take at the motion's speed (σ and the braking way), so a planned way does not trip
 //!   it.
 
+use std::sync::Arc;
+
 use super::chassis::CommandRejected;
 use crate::fusion::localizer::MapPlacement;
-use crate::zones::local::{Conflict, LocalZones};
+use crate::zones::local::{Conflict, LocalZones, ZoneOutline};
 use crate::zones::{LonLat, Shape, ZoneKind, ZoneSet};
 
 /// A shape in the map frame (m), as an edit gives it.
@@ -57,6 +59,19 @@ pub struct ZoneGuard {
     margin_m: f64,
     /// The zones in the map frame, and where that frame lay when they were placed.
     placed: Option<(MapPlacement, LocalZones)>,
+    /// Their outlines, drawn from `placed` when a client first asks.
+    outlines: Option<Arc<[ZoneOutline]>>,
+}
+
+/// The zone nearest the vehicle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearestZone {
+    /// Its name.
+    pub name: String,
+    /// What it asks.
+    pub kind: ZoneKind,
+    /// From the footprint's edge to the zone's, on the allowed side (negative: into it), m.
+    pub clearance_m: f64,
 }
 
 impl ZoneGuard {
@@ -68,7 +83,40 @@ impl ZoneGuard {
             footprint_m,
             margin_m,
             placed: None,
+            outlines: None,
         }
+    }
+
+    /// The footprint's circumscribed radius, m.
+    pub fn footprint_m(&self) -> f64 {
+        self.footprint_m
+    }
+
+    /// The zones' outlines in the map frame as `placement` puts it: the same `Arc` until an
+    /// edit or a move of the frame, so a client redraws them only then.
+    pub fn outlines(&mut self, placement: MapPlacement) -> Arc<[ZoneOutline]> {
+        self.local(placement);
+        let placed = &self.placed;
+        self.outlines
+            .get_or_insert_with(|| {
+                placed
+                    .as_ref()
+                    .map_or_else(Vec::new, |(_, zones)| zones.outlines())
+                    .into()
+            })
+            .clone()
+    }
+
+    /// The zone nearest the footprint at `p` (map frame), if there are zones.
+    pub fn nearest(&mut self, placement: MapPlacement, p: (f64, f64)) -> Option<NearestZone> {
+        let footprint_m = self.footprint_m;
+        self.local(placement)
+            .nearest(p)
+            .map(|(zone, clearance)| NearestZone {
+                name: zone.name.clone(),
+                kind: zone.kind,
+                clearance_m: clearance - footprint_m,
+            })
     }
 
     /// The zones.
@@ -118,6 +166,7 @@ impl ZoneGuard {
             }
         };
         self.placed = None;
+        self.outlines = None;
         Ok(id)
     }
 
@@ -125,6 +174,7 @@ impl ZoneGuard {
     fn local(&mut self, placement: MapPlacement) -> &LocalZones {
         if self.placed.as_ref().is_some_and(|(p, _)| *p != placement) {
             self.placed = None;
+            self.outlines = None;
         }
         let set = &self.set;
         let (_, local) = self.placed.get_or_insert_with(|| {

@@ -47,11 +47,28 @@ pub struct Conflict {
     pub clearance_m: f64,
 }
 
+/// A zone as drawn in the map frame: its lines (a polygon's rings and a circle's, closed by
+/// repeating their first point; a wall's points as they are).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZoneOutline {
+    /// Its id in its set.
+    pub id: u32,
+    /// Its name.
+    pub name: String,
+    /// What it asks.
+    pub kind: ZoneKind,
+    /// Its lines (east, north, m).
+    pub lines: Vec<Vec<(f64, f64)>>,
+}
+
 /// A set of zones in one map frame.
 #[derive(Debug, Clone, Default)]
 pub struct LocalZones {
     zones: Vec<LocalZone>,
 }
+
+/// A circle is drawn as this many chords: within 0.3 % of its radius.
+const CIRCLE_CHORDS: usize = 48;
 
 /// How finely a path's conflict is placed, m.
 const PLACE_STEP_M: f64 = 0.01;
@@ -93,6 +110,34 @@ impl LocalZones {
             })
             .collect();
         Self { zones }
+    }
+
+    /// Every zone's outline, for a client to draw.
+    pub fn outlines(&self) -> Vec<ZoneOutline> {
+        let points = |l: &LineString<f64>| l.coords().map(|c| (c.x, c.y)).collect();
+        self.zones
+            .iter()
+            .map(|z| ZoneOutline {
+                id: z.id,
+                name: z.name.clone(),
+                kind: z.kind,
+                lines: match &z.shape {
+                    LocalShape::Polygon(p) => std::iter::once(p.exterior())
+                        .chain(p.interiors())
+                        .map(points)
+                        .collect(),
+                    LocalShape::Circle { centre, radius_m } => vec![
+                        (0..=CIRCLE_CHORDS)
+                            .map(|i| {
+                                let a = std::f64::consts::TAU * i as f64 / CIRCLE_CHORDS as f64;
+                                (centre.x + radius_m * a.cos(), centre.y + radius_m * a.sin())
+                            })
+                            .collect(),
+                    ],
+                    LocalShape::Line(l) => vec![points(l)],
+                },
+            })
+            .collect()
     }
 
     /// The disc of `radius` m at `p` against every zone: the first it meets (the one with
@@ -352,6 +397,34 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-3
+    }
+
+    #[test]
+    fn outlines_close_rings_and_circles_and_keep_walls_open() {
+        let outlines = yard().outlines();
+        let names: Vec<_> = outlines.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["lawn", "pond", "tree", "fence"]);
+        let pond = &outlines[1].lines;
+        assert_eq!(pond.len(), 1);
+        assert_eq!(pond[0].len(), 5);
+        assert!(close(pond[0][0].0, pond[0][4].0) && close(pond[0][0].1, pond[0][4].1));
+        assert!(
+            close(pond[0][0].0, 8.0) && close(pond[0][0].1, 8.0),
+            "{pond:?}"
+        );
+        let tree = &outlines[2].lines[0];
+        assert_eq!(tree.len(), CIRCLE_CHORDS + 1);
+        assert!(
+            tree.iter()
+                .all(|&(x, y)| close((x + 10.0).hypot(y - 5.0), 1.0)),
+            "{tree:?}"
+        );
+        let fence = &outlines[3].lines[0];
+        assert_eq!(fence.len(), 2);
+        assert!(
+            close(fence[1].0, 5.0) && close(fence[1].1, 0.0),
+            "{fence:?}"
+        );
     }
 
     #[test]

@@ -370,12 +370,7 @@ mod tests {
             odom: None,
             frames: None,
             localization: Localization::Good,
-            navigation: Navigation::Idle,
-            plan: None,
-            obstacle_stop: false,
-            host: None,
-            mode: None,
-            corrections: None,
+            ..Default::default()
         }
     }
 

@@ -23,7 +23,7 @@ pub const ODOM_FRAME: &str = "odom";
 /// The vehicle's frame.
 pub const BASE_FRAME: &str = "base_link";
 
-fn header(t: Timestamp, frame: &str) -> Value {
+pub(super) fn header(t: Timestamp, frame: &str) -> Value {
     let (sec, nanosec) = ros_time(t);
     json!({"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame})
 }
@@ -159,7 +159,7 @@ const OK: u8 = 0;
 const WARN: u8 = 1;
 const ERROR: u8 = 2;
 
-fn diagnostic(level: u8, name: &str, message: &str, values: &[(&str, String)]) -> Value {
+pub(super) fn diagnostic(level: u8, name: &str, message: &str, values: &[(&str, String)]) -> Value {
     json!({
         "level": level,
         "name": format!("chassisd: {name}"),
@@ -257,6 +257,9 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
     }
     if let Some(c) = &status.corrections {
         all.push(corrections_diagnostic(c));
+    }
+    if let Some(e) = &status.envelope {
+        all.push(super::envelope::status(e));
     }
     if let Some(b) = &status.battery {
         let level = if b.stale || b.reading.alarms != 0 {

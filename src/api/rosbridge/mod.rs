@@ -3,6 +3,7 @@
 //! and the ROS messages as JSON. Moving them is `runtime::links::websocket`'s job.
 
 pub mod adapter;
+pub mod envelope;
 pub mod messages;
 pub mod ops;
 pub mod published;

@@ -7,7 +7,9 @@
 use serde_json::Value;
 
 use super::messages;
-use super::topics::{BATTERY_STATE, DIAGNOSTICS, DRIVE_MODE, POSE, TF, WHEEL_SPEEDS};
+use super::topics::{
+    BATTERY_STATE, DIAGNOSTICS, DRIVE_MODE, POSE, SAFETY_ENVELOPE, TF, WHEEL_SPEEDS,
+};
 use crate::api::ros1::published as ros1;
 use crate::vehicle::VehicleStatus;
 
@@ -38,6 +40,11 @@ pub const STATUS_TOPICS: &[StatusTopic] = &[
         name: WHEEL_SPEEDS,
         every: 1,
         build: ros1::wheel_speeds,
+    },
+    StatusTopic {
+        name: SAFETY_ENVELOPE,
+        every: 1,
+        build: |status| status.envelope.as_ref().map(super::envelope::status),
     },
     StatusTopic {
         name: BATTERY_STATE,
@@ -79,8 +86,8 @@ mod tests {
                 t.name
             );
         }
-        assert_eq!(due(1).count(), 3);
-        assert_eq!(due(10).count(), 6);
+        assert_eq!(due(1).count(), 4);
+        assert_eq!(due(10).count(), 7);
     }
 
     /// The topic's message for `status`.

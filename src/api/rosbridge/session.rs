@@ -11,7 +11,7 @@ use serde_json::{Value, json};
 
 use super::adapter;
 use super::ops::{self, ClientOp, Level};
-use super::topics::{self, Flow, PLAN};
+use super::topics::{self, Flow, LATCHED};
 
 /// Subscriptions one client may hold on one topic.
 pub const MAX_SUBSCRIPTIONS: usize = 16;
@@ -38,9 +38,9 @@ pub enum Action {
     Answer(String),
     /// The connection closes (after what is queued).
     Close,
-    /// The client subscribed to [`PLAN`]: the path under way goes to it at once (a path
-    /// matters until it changes).
-    SubscribedToPlan,
+    /// The client subscribed to this one of [`LATCHED`]: its last message goes to it at
+    /// once.
+    SubscribedToLatched(&'static str),
     /// A message for the engine on `name` (a topic clients publish, its check passed), as
     /// the client named it in `topic`, with the operation's `id`.
     Publish {
@@ -199,7 +199,9 @@ impl Session {
                                 Err(reason) => {
                                     refuse(op_id.as_deref(), &format!("subscribe: {reason}"))
                                 }
-                                Ok(()) if t.name == PLAN => vec![Action::SubscribedToPlan],
+                                Ok(()) if LATCHED.contains(&t.name) => {
+                                    vec![Action::SubscribedToLatched(t.name)]
+                                }
                                 Ok(()) => Vec::new(),
                             }
                         }
@@ -493,7 +495,15 @@ mod tests {
         let mut s = Session::new(true);
         let now = Instant::now();
         let plan = r#"{"op":"subscribe","topic":"/plan"}"#;
-        assert_eq!(op(&mut s, plan, now), [Action::SubscribedToPlan]);
+        assert_eq!(
+            op(&mut s, plan, now),
+            [Action::SubscribedToLatched("/plan")]
+        );
+        let zones = r#"{"op":"subscribe","topic":"/zones"}"#;
+        assert_eq!(
+            op(&mut s, zones, now),
+            [Action::SubscribedToLatched("/zones")]
+        );
         assert!(s.wants("/plan", now));
         let wrong_type = r#"{"op":"subscribe","topic":"/pose","type":"std_msgs/String"}"#;
         assert!(is_error(

@@ -37,6 +37,10 @@ pub const WHEEL_SPEEDS: &str = "/wheel_speeds";
 pub const DRIVE_MODE: &str = "/drive_mode";
 /// The path of the move under way.
 pub const PLAN: &str = "/plan";
+/// The zones, as markers (latched: sent to a new subscriber at once, then on change).
+pub const ZONES: &str = "/zones";
+/// The gate and the vehicle's margin from the nearest zone.
+pub const SAFETY_ENVELOPE: &str = "/safety_envelope";
 /// The engine's events.
 pub const ROSOUT: &str = "/rosout";
 /// A goal to drive to.
@@ -87,6 +91,16 @@ pub const TOPICS: &[Topic] = &[
         flow: Flow::Published(0.0),
     },
     Topic {
+        name: ZONES,
+        msg_type: "visualization_msgs/msg/MarkerArray",
+        flow: Flow::Published(0.0),
+    },
+    Topic {
+        name: SAFETY_ENVELOPE,
+        msg_type: "diagnostic_msgs/msg/DiagnosticStatus",
+        flow: Flow::Published(10.0),
+    },
+    Topic {
         name: ROSOUT,
         msg_type: "rcl_interfaces/msg/Log",
         flow: Flow::Published(0.0),
@@ -102,6 +116,10 @@ pub const TOPICS: &[Topic] = &[
         flow: Flow::Subscribed,
     },
 ];
+
+/// The topics whose last message goes to a new subscriber at once (what matters until it
+/// changes: the path under way, the zones).
+pub const LATCHED: &[&str] = &[PLAN, ZONES];
 
 /// The topic called `name`.
 pub fn find(name: &str) -> Option<&'static Topic> {

@@ -30,7 +30,7 @@ use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, Level};
 use crate::api::rosbridge::session::{Action, token_matches};
 use crate::api::rosbridge::topics;
-use crate::api::rosbridge::{SOURCE, adapter, messages, published};
+use crate::api::rosbridge::{SOURCE, adapter, envelope, messages, published};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
@@ -39,6 +39,7 @@ use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::CommandRate;
 use crate::time::Timestamp;
 use crate::vehicle::VehicleStatus;
+use crate::zones::local::ZoneOutline;
 
 /// Feed items waiting for the server task before the newest are dropped (some 2 s).
 const FEED_QUEUE: usize = 256;
@@ -171,7 +172,8 @@ pub fn start(
         odometry: OdometryUncertainty::new(noise),
         status_ticks: 0,
         plan: None,
-        plan_text: None,
+        zones: None,
+        latched: BTreeMap::new(),
         token: config.token.clone(),
         clock,
         records,
@@ -384,10 +386,12 @@ struct Server {
     last_request: u64,
     odometry: OdometryUncertainty,
     status_ticks: u64,
-    /// The motion whose path `/plan` last carried, and that message (sent to a new
-    /// subscriber at once: a path matters until it changes).
+    /// The motion whose path `/plan` last carried.
     plan: Option<Option<crate::control::MotionId>>,
-    plan_text: Option<String>,
+    /// The zones `/zones` last carried.
+    zones: Option<Option<Arc<[ZoneOutline]>>>,
+    /// The last message of each latched topic, sent to a new subscriber at once.
+    latched: BTreeMap<&'static str, String>,
     token: Option<String>,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
@@ -430,6 +434,17 @@ impl Server {
         }
     }
 
+    /// Publishes `msg` on the latched `topic` to every subscriber, and keeps it for the
+    /// next ones.
+    fn latch(&mut self, topic: &'static str, msg: &Value) {
+        let text = ops::publish(topic, msg);
+        let now = Instant::now();
+        for client in self.clients.values_mut() {
+            client.offer(topic, &text, now);
+        }
+        self.latched.insert(topic, text);
+    }
+
     fn on_feed(&mut self, item: Feed) {
         match item {
             Feed::Status(status) => {
@@ -441,12 +456,17 @@ impl Server {
                 if self.plan != Some(plan) {
                     self.plan = Some(plan);
                     let points = status.plan.as_ref().map_or(&[][..], |p| &p.points[..]);
-                    let text = ops::publish(topics::PLAN, &messages::path(status.time, points));
-                    let now = Instant::now();
-                    for client in self.clients.values_mut() {
-                        client.offer(topics::PLAN, &text, now);
-                    }
-                    self.plan_text = Some(text);
+                    self.latch(topics::PLAN, &messages::path(status.time, points));
+                }
+                let zones = status.envelope.as_ref().and_then(|e| e.zones.clone());
+                let same = |last: &Option<Arc<[ZoneOutline]>>| match (last, &zones) {
+                    (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                    (a, b) => a.is_none() && b.is_none(),
+                };
+                if !self.zones.as_ref().is_some_and(same) {
+                    let outlines = zones.as_deref().unwrap_or(&[]);
+                    self.latch(topics::ZONES, &envelope::zones(status.time, outlines));
+                    self.zones = Some(zones);
                 }
             }
             Feed::Odom(t, pose) => {
@@ -486,9 +506,9 @@ impl Server {
                 Action::Status(level, text) => client.status(level, text),
                 Action::Answer(text) => client.answer(text),
                 Action::Close => client.queue.close(),
-                Action::SubscribedToPlan => {
-                    if let Some(text) = &self.plan_text {
-                        client.offer(topics::PLAN, text, now);
+                Action::SubscribedToLatched(topic) => {
+                    if let Some(text) = self.latched.get(topic) {
+                        client.offer(topic, text, now);
                     }
                 }
                 Action::Publish {
