@@ -341,13 +341,47 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
     );
 }
 
+/// The zones on the WebSocket server at `port` as a new `/zones` subscriber gets them:
+/// each marker's kind, id and name (the DELETEALL left out).
+fn zone_markers(port: u16) -> Vec<(String, u64, String)> {
+    let (mut ws, code) = common::ws::handshake(port, "/", "127.0.0.1", None);
+    assert_eq!(code, 101);
+    common::ws::send_text(&mut ws, r#"{"op": "subscribe", "topic": "/zones"}"#).expect("subscribe");
+    let message = common::ws::next_json(&mut ws).expect("the latched zones");
+    message["msg"]["markers"]
+        .as_array()
+        .expect("markers")
+        .iter()
+        .filter(|m| m["action"] == 0)
+        .map(|m| {
+            let text = |k: &str| m[k].as_str().unwrap_or_default().to_owned();
+            (
+                text("ns"),
+                m["id"].as_u64().unwrap_or(u64::MAX),
+                text("text"),
+            )
+        })
+        .collect()
+}
+
 #[test]
-fn set_shape_adds_a_wall_that_refuses_a_move_through_it_and_the_file_keeps_it() {
+fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_websocket_clients_see_it()
+ {
     let master = Master::start();
     let dir = common::tempdir("ros1-zones");
     let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
     let zones = common::zones::yard(&plant, &dir);
-    let mut p = sim_with(&master, &["--zones", zones.to_str().expect("UTF-8 path")]);
+    let port = common::mqtt::free_port();
+    let bind = format!("127.0.0.1:{port}");
+    let mut p = sim_with(
+        &master,
+        &[
+            "--zones",
+            zones.to_str().expect("UTF-8 path"),
+            "--websocket",
+            &bind,
+        ],
+    );
     p.wait_log(Duration::from_secs(40), "GNSS gate open");
     let call = |request: &[&str]| {
         let mut args = vec!["rosservice", "call"];
@@ -378,6 +412,12 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_and_the_file_keeps_it() 
         .find(|z| z.name == "virtual wall")
         .expect("the wall");
     assert_eq!(wall.id, 5);
+    // A WebSocket client sees it on /zones, as a wall with its id and name.
+    let drawn = zone_markers(port);
+    assert!(
+        drawn.contains(&("wall".to_owned(), 5, "virtual wall".to_owned())),
+        "{drawn:?}"
+    );
 
     // A move through it is refused, naming it.
     let refused = call(&["/set_navi_cmd", "{cmd: '1', distance: 300}"]);
@@ -408,6 +448,9 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_and_the_file_keeps_it() 
     );
     let moved = call(&["/set_navi_cmd", "{cmd: '1', distance: 50}"]);
     assert!(moved.status.success(), "{}", text(&moved));
+    let drawn = zone_markers(port);
+    assert!(drawn.iter().all(|(_, id, _)| *id != 5), "{drawn:?}");
+    assert_eq!(drawn.len(), 4, "{drawn:?}");
     let (_, log) = interrupt(p);
     let written = std::fs::read_to_string(&zones).expect("zones file");
     assert!(

@@ -3,7 +3,7 @@
 //! client script, tests/websocket/client.py, prints what it saw as JSON; these tests judge
 //! it. A second, raw client that subscribes and never reads checks that a slow client
 //! delays no one. A jog over it towards a keep-out zone (`sim --zones`) stops short of the
-//! zone. Each test has its own simulated vehicle on its own port, so they run side by side.
+//! zone, with the zones on `/zones` and the vehicle's margin on `/safety_envelope`. Each test has its own simulated vehicle on its own port, so they run side by side.
 
 mod common;
 
@@ -187,8 +187,41 @@ fn a_jog_towards_a_keep_out_zone_over_the_websocket_stops_short_of_it() {
     ]);
     sim.wait_log(Duration::from_secs(40), "GNSS gate open");
     // 0.5 m/s for 12 s would take the mower 6 m east, through the pond 4 m ahead.
-    let seen = client(port, &["cmd_vel", "0.5", "12"]);
-    assert!(number(&seen, "/max_during") > 0.4, "{seen}");
+    let seen = client(port, &["zones_jog", "0.5", "12"]);
+    assert!(number(&seen, "/jog/max_during") > 0.4, "{seen}");
+    // /zones, latched: every zone of the file as a marker after a DELETEALL, in `map`.
+    let markers = seen["markers"].as_array().expect("markers");
+    assert_eq!(markers[0]["action"], 3, "{seen}");
+    let named: Vec<(&str, &str)> = markers[1..]
+        .iter()
+        .map(|m| (m["ns"].as_str().unwrap(), m["text"].as_str().unwrap()))
+        .collect();
+    assert_eq!(
+        named,
+        [
+            ("boundary", "lawn"),
+            ("keep_out", "pond"),
+            ("wall", "fence"),
+            ("keep_out", "tree")
+        ]
+    );
+    let pond_west = markers[2]["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["x"].as_f64().unwrap())
+        .fold(f64::INFINITY, f64::min);
+    assert!((pond_west - 4.0).abs() < 0.01, "{pond_west}");
+    assert!(markers.iter().all(|m| m["frame"] == "map"));
+    // /safety_envelope at 10 Hz: the gate open, the margin grows with the speed, and the
+    // vehicle ends nearest the pond, outside it.
+    assert!(number(&seen, "/envelope_count") > 100.0, "{seen}");
+    assert_eq!(seen["first"]["gate"], "open", "{seen}");
+    assert_eq!(seen["first"]["level"], 0, "{seen}");
+    let at_rest: f64 = seen["first"]["margin_m"].as_str().unwrap().parse().unwrap();
+    assert!(number(&seen, "/max_margin") > at_rest + 0.05, "{seen}");
+    assert_eq!(seen["last"]["nearest_zone"], "pond", "{seen}");
+    assert!(number(&seen, "/min_clearance") > 0.0, "{seen}");
     let log = sim.stop_log();
     assert!(
         log.iter()
@@ -300,21 +333,20 @@ fn with_a_token_nothing_is_served_before_it_is_presented() {
     daemon.stop();
 }
 
-#[test]
-fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal() {
+/// Drives the live page of the daemon on `port` in headless Chromium with
+/// tests/websocket/page.py (`mode`: its extra arguments); what it saw.
+fn live_page(port: u16, dir: &std::path::Path, mode: &[&str]) -> Value {
     let chromium = std::path::Path::new("/usr/bin/chromium");
     assert!(
         chromium.exists(),
         "tests/install-deps installs Debian's chromium"
     );
-    let port = free_port();
-    let sim = sim(port);
-    let dir = common::tempdir("websocket-page");
     let out = Command::new(python())
         .arg(common::repo().join("tests/websocket/page.py"))
         .arg(chromium)
         .arg(port.to_string())
-        .arg(&dir)
+        .arg(dir)
+        .args(mode)
         .output()
         .expect("the page driver runs");
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -323,8 +355,16 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
         "{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let seen: Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
-        .unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {stdout}"))
+}
+
+#[test]
+fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal() {
+    let port = free_port();
+    let sim = sim(port);
+    let dir = common::tempdir("websocket-page");
+    let seen = live_page(port, &dir, &[]);
     // Nothing but the daemon: the page, roslibjs, the WebSocket.
     let requests: Vec<&str> = seen["requests"]
         .as_array()
@@ -372,6 +412,77 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
     assert_eq!(seen["gnss"], "fix", "{seen}");
     assert!(number(&seen, "/battery") > 40.0, "{seen}");
     drop(sim);
+}
+
+#[test]
+fn the_live_page_draws_the_zones_and_the_margin_and_a_jog_on_it_stops_short_of_the_pond() {
+    let port = free_port();
+    let dir = common::tempdir("websocket-page-zones");
+    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
+    let zones = common::zones::yard(&plant, &dir);
+    let bind = format!("127.0.0.1:{port}");
+    let mut sim = Proc::start(&[
+        "sim".as_ref(),
+        "--no-mqtt".as_ref(),
+        "--websocket".as_ref(),
+        bind.as_ref(),
+        "--zones".as_ref(),
+        zones.as_os_str(),
+    ]);
+    sim.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let seen = live_page(port, &dir, &["zones"]);
+    let kinds: Vec<(&str, &str)> = seen["zones"]
+        .as_array()
+        .expect("zones")
+        .iter()
+        .map(|z| (z["kind"].as_str().unwrap(), z["name"].as_str().unwrap()))
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("boundary", "lawn"),
+            ("keep_out", "pond"),
+            ("wall", "fence"),
+            ("keep_out", "tree")
+        ]
+    );
+    // The pond is filled red on the plot; beside it the plot is white.
+    let rgba = |key: &str| -> Vec<u64> {
+        seen[key]
+            .as_array()
+            .unwrap_or_else(|| panic!("{key}: {seen}"))
+            .iter()
+            .map(|c| c.as_u64().unwrap())
+            .collect()
+    };
+    let (inside, beside) = (rgba("inside"), rgba("beside"));
+    assert!(inside[0] > inside[1] + 20 && inside[3] > 0, "{inside:?}");
+    assert!(beside[0] == beside[1] || beside[3] == 0, "{beside:?}");
+    // The margin: σ at rest, more while moving; it stopped nearest the pond, outside it.
+    let margin = |key: &str| number(&seen, &format!("/{key}/margin"));
+    assert!(margin("moving") > margin("at_rest") + 0.03, "{seen}");
+    assert_eq!(seen["stopped"]["nearest"], "pond", "{seen}");
+    let clearance = number(&seen, "/stopped/clearance");
+    assert!(clearance > 0.0 && clearance < 0.6, "{seen}");
+    let panel = seen["panel"].as_str().unwrap_or_default();
+    assert!(
+        panel.contains("gate open") && panel.contains("\"pond\""),
+        "{panel}"
+    );
+    assert!(
+        seen["margin_text"]
+            .as_str()
+            .unwrap_or_default()
+            .starts_with("margin "),
+        "{seen}"
+    );
+    assert!(
+        seen["drives"].as_str().unwrap_or_default().contains("pond"),
+        "the stop's reason on the page: {seen}"
+    );
+    let log = sim.stop_log();
+    let (x, _) = common::truth_end(&log);
+    assert!(x + 0.45 < 4.0 && x > 2.5, "ended at x = {x}");
 }
 
 #[test]

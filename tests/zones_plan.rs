@@ -137,6 +137,17 @@ fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
         "{:?}",
         v.sink.events
     );
+    // The status draws it from the next tick (what /zones publishes), where it was put.
+    v.run(0.2);
+    let drawn = v
+        .status()
+        .envelope
+        .clone()
+        .and_then(|e| e.zones)
+        .expect("placed");
+    let added = drawn.iter().find(|z| z.id == 5).expect("the wall drawn");
+    let xs: Vec<f64> = added.lines[0].iter().map(|p| p.0).collect();
+    assert!(xs.iter().all(|x| (x - 2.0).abs() < 1e-3), "{added:?}");
     let refused = v.send("follow_path", ahead).unwrap_err();
     assert!(refused.contains("wall zone \"virtual wall\""), "{refused}");
     let x = place_x(&refused);
@@ -153,5 +164,13 @@ fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
     );
     let remove = r#"{"type": "", "shapeId": 5, "points": [], "radius": 0, "closed": false}"#;
     set_shape(&mut v, 3, remove).expect("removed");
+    v.run(0.2);
+    let drawn = v
+        .status()
+        .envelope
+        .clone()
+        .and_then(|e| e.zones)
+        .expect("placed");
+    assert!(drawn.iter().all(|z| z.id != 5), "no longer drawn");
     v.send("follow_path", ahead).expect("clear again");
 }

@@ -160,6 +160,33 @@ def cmd_vel(ros, _statuses, speed="0.3", seconds="2"):
     return {"max_during": max(during, default=0.0), "after": after[-1] if after else None}
 
 
+def envelope_values(m):
+    return {v["key"]: v["value"] for v in m["values"]}
+
+
+def zones_jog(ros, statuses, speed="0.5", seconds="12"):
+    """/zones as a late subscriber gets it, and /safety_envelope through a jog."""
+    zones = latest(ros, "/zones", "visualization_msgs/MarkerArray")
+    envelopes = []
+    env = roslibpy.Topic(ros, "/safety_envelope", "diagnostic_msgs/DiagnosticStatus")
+    env.subscribe(lambda m: envelopes.append({"level": m["level"], "message": m["message"], **envelope_values(m)}))
+    time.sleep(1.0)
+    first = envelopes[-1] if envelopes else None
+    jog = cmd_vel(ros, statuses, speed, seconds)
+    env.unsubscribe()
+    metres = lambda key: [float(e[key]) for e in envelopes if e[key] != "unknown"]
+    return {
+        "markers": [{"ns": m["ns"], "id": m["id"], "action": m["action"], "text": m.get("text", ""),
+                     "frame": m["header"]["frame_id"], "points": m.get("points", [])} for m in zones["markers"]],
+        "first": first,
+        "last": envelopes[-1] if envelopes else None,
+        "envelope_count": len(envelopes),
+        "max_margin": max(metres("margin_m"), default=None),
+        "min_clearance": min(metres("clearance_m"), default=None),
+        "jog": jog,
+    }
+
+
 def refusals(ros, statuses):
     roslibpy.Topic(ros, "/map", "nav_msgs/OccupancyGrid").subscribe(lambda m: None)
     roslibpy.Topic(ros, "/scan", "sensor_msgs/LaserScan").subscribe(lambda m: None)

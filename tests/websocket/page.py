@@ -1,13 +1,17 @@
 """Drives chassisd's live page in headless Chromium over the DevTools protocol, for
 tests/websocket.rs.
 
-    page.py CHROMIUM DAEMON_PORT OUT_DIR
+    page.py CHROMIUM DAEMON_PORT OUT_DIR [zones]
 
 Loads http://127.0.0.1:DAEMON_PORT/ with every other host unresolvable, waits for the page
 to connect, takes a screenshot, holds the jog pad's forward button for 2 s, takes another,
 clicks the plot to set a goal, waits for the vehicle to reach it, releases a held button by
 taking the focus away, and prints one JSON object with what it saw, with every request the
 page made (the DevTools Network domain: documents, scripts, WebSockets).
+
+With `zones` (a daemon run with tests/common/zones.rs's yard): waits for the zones and the
+safety envelope, reads the plot's pixels inside the pond and beside it, then holds forward
+towards the pond until the vehicle stops, and prints what the page showed.
 """
 
 import base64
@@ -123,8 +127,56 @@ def run(page, port, out):
     }), flush=True)
 
 
+def pixel(page, x, y):
+    """The plot's colour (RGBA) at map point (x, y)."""
+    return page.js("(() => { const [px, py] = window.chassisdPage.toCanvas(%f, %f); "
+                   "return Array.from(document.getElementById('plot').getContext('2d')"
+                   ".getImageData(Math.round(px), Math.round(py), 1, 1).data); })()" % (x, y))
+
+
+def run_zones(page, port, out):
+    page.call("Page.enable")
+    page.call("Network.enable")
+    page.call("Page.navigate", url="http://127.0.0.1:%d/" % port)
+    page.wait("window.chassisdPage && window.chassisdPage.connected && window.chassisdPage.pose !== null", 20, "the page to connect")
+    page.wait("window.chassisdPage.zones.length === 4 && window.chassisdPage.envelope && window.chassisdPage.envelope.gate === 'open'", 30, "the zones and an open gate")
+    zones = page.js("window.chassisdPage.zones.map((z) => ({kind: z.kind, name: z.name, points: z.points.length}))")
+    at_rest = page.js("window.chassisdPage.envelope")
+    page.js("draw()")
+    inside, beside = pixel(page, 5.5, 0.5), pixel(page, 5.5, 3.5)
+    page.screenshot(os.path.join(out, "page-zones.png"))
+
+    # Hold forward (0.3 m/s) towards the pond, 4 m ahead, until the vehicle has stopped.
+    forward = page.js("(() => { const r = document.querySelector('#jog button[data-v=\"1\"]').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; })()")
+    page.mouse("mouseMoved", *forward)
+    page.mouse("mousePressed", *forward)
+    page.wait("window.chassisdPage.odom && window.chassisdPage.odom.v > 0.25", 5, "the jog to start")
+    moving = page.js("window.chassisdPage.envelope")
+    page.wait("window.chassisdPage.odom && Math.abs(window.chassisdPage.odom.v) < 0.005", 30, "the vehicle to stop before the pond")
+    time.sleep(1.0)
+    stopped = page.js("window.chassisdPage.envelope")
+    pose = page.js("window.chassisdPage.pose")
+    # The latched stop's reason, while the button is still held (a release re-arms).
+    try:
+        page.wait("document.getElementById('drives').textContent.includes('pond')", 5, "the stop's reason")
+    except RuntimeError:
+        pass
+    drives = page.js("document.getElementById('drives').textContent")
+    page.mouse("mouseReleased", *forward)
+    page.js("draw()")
+    page.screenshot(os.path.join(out, "page-zones-stopped.png"))
+    print(json.dumps({
+        "zones": zones, "at_rest": at_rest, "moving": moving, "stopped": stopped, "pose": pose,
+        "inside": inside, "beside": beside,
+        "panel": page.js("document.getElementById('envelope').textContent"),
+        "margin_text": page.js("document.getElementById('margin').textContent"),
+        "drives": drives,
+    }), flush=True)
+
+
 def main():
     chromium, port, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+    zones = sys.argv[4:] == ["zones"]
     profile = tempfile.mkdtemp(prefix="chassisd-page-")
     browser = subprocess.Popen([
         chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
@@ -143,7 +195,7 @@ def main():
         targets = json.load(urllib.request.urlopen("http://127.0.0.1:%s/json/list" % debug_port))
         url = [t for t in targets if t["type"] == "page"][0]["webSocketDebuggerUrl"]
         with connect(url, max_size=None) as ws:
-            run(Page(ws), port, out)
+            (run_zones if zones else run)(Page(ws), port, out)
     finally:
         browser.terminate()
         browser.wait(timeout=10)

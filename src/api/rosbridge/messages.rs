@@ -233,9 +233,10 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
             | status_bits::ESTOP
             | status_bits::BUS_DOWN
             | status_bits::CONTROL_LINK_LOST;
+        // A latched stop (a zone, an obstacle, a watchdog) is a warning until it re-arms.
         let level = if c.status_bits & stopped != 0 {
             ERROR
-        } else if c.ok {
+        } else if c.ok && c.stop_reason.is_none() {
             OK
         } else {
             WARN
@@ -399,6 +400,50 @@ pub fn goal_from_pose_stamped(msg: &Value) -> Result<(f64, f64, f64), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The diagnostic status of `name` in `status`'s `/diagnostics`.
+    fn part(status: &VehicleStatus, name: &str) -> Option<Value> {
+        diagnostics(status)["status"]
+            .as_array()?
+            .iter()
+            .find(|d| d["name"] == format!("chassisd: {name}"))
+            .cloned()
+    }
+
+    #[test]
+    fn a_latched_stop_is_a_warning_with_its_reason_and_the_envelope_has_its_own_status() {
+        use crate::vehicle::chassis::ChassisStatus;
+        let mut status = VehicleStatus {
+            chassis: Some(ChassisStatus {
+                ok: true,
+                ..Default::default()
+            }),
+            ..Default::default()
+        };
+        assert_eq!(part(&status, "drive train").unwrap()["level"], OK);
+        let reason = "the keep_out zone \"pond\" is in the braking way";
+        if let Some(c) = &mut status.chassis {
+            c.stop_reason = Some(reason.into());
+        }
+        let drives = part(&status, "drive train").unwrap();
+        assert_eq!(
+            (drives["level"].clone(), drives["message"].clone()),
+            (json!(WARN), json!(reason))
+        );
+        assert!(
+            part(&status, "safety envelope").is_none(),
+            "none without zones"
+        );
+        status.envelope = Some(crate::vehicle::envelope::EnvelopeStatus {
+            gate_closed: None,
+            zones: None,
+            nearest: None,
+            footprint_m: 0.5,
+            sigma_m: None,
+            braking_m: 0.0,
+        });
+        assert_eq!(part(&status, "safety envelope").unwrap()["level"], WARN);
+    }
 
     #[test]
     fn the_corrections_age_is_a_diagnostic_of_its_own() {

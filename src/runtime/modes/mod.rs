@@ -8,14 +8,14 @@ pub mod live;
 pub mod sim;
 pub mod sim_fast;
 
-/// Says what the zones do, and what they do not do yet.
+/// Says what the zones do, once at start.
 fn log_zones(config: &crate::config::VehicleConfig) {
     if let Some(z) = &config.zones {
-        tracing::warn!(
+        tracing::info!(
             zones = z.set.zones().len(),
             "zones: every motion's way is checked before it starts and the braking way every \
-             tick, autonomous work waits on the GNSS gate, and ROS1 /set_shape and /set_region \
-             edit them; the zones over the WebSocket and on the live page are not built yet"
+             tick, autonomous work waits on the GNSS gate; ROS1 /set_shape and /set_region \
+             edit them, the WebSocket's /zones and /safety_envelope and the live page show them"
         );
     }
 }
