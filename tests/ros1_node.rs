@@ -161,7 +161,10 @@ fn echo_until(master: &Master, topic: &str, wait: Duration, want: impl Fn(&str) 
 /// `chassisd sim --no-mqtt --ros-master URI [MORE]`, once the node is registered.
 fn sim_with(master: &Master, more: &[&str]) -> Proc {
     let uri = master.uri();
-    let mut args = vec!["sim", "--no-mqtt", "--ros-master", uri.as_str()];
+    let mut args = vec!["sim", "--ros-master", uri.as_str()];
+    if !more.contains(&"--mqtt") {
+        args.push("--no-mqtt");
+    }
     args.extend_from_slice(more);
     let mut p = Proc::start(&args);
     p.wait_log(Duration::from_secs(30), "ROS1 node registered");
@@ -365,7 +368,7 @@ fn zone_markers(port: u16) -> Vec<(String, u64, String)> {
 }
 
 #[test]
-fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_websocket_clients_see_it()
+fn set_shape_adds_a_wall_that_refuses_a_task_and_a_move_through_it_the_file_keeps_it_and_websocket_clients_see_it()
  {
     let master = Master::start();
     let dir = common::tempdir("ros1-zones");
@@ -373,6 +376,8 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_we
     let zones = common::zones::yard(&plant, &dir);
     let port = common::mqtt::free_port();
     let bind = format!("127.0.0.1:{port}");
+    let broker = common::mqtt::Mosquitto::start();
+    let feedback = broker.subscribe(&["feedback"]);
     let mut p = sim_with(
         &master,
         &[
@@ -380,6 +385,8 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_we
             zones.to_str().expect("UTF-8 path"),
             "--websocket",
             &bind,
+            "--mqtt",
+            &broker.address(),
         ],
     );
     p.wait_log(Duration::from_secs(40), "GNSS gate open");
@@ -419,6 +426,40 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_we
         "{drawn:?}"
     );
 
+    // A task through it, started over MQTT (rtk dialect), is refused naming it: a path
+    // from 0.5 m to 2.8 m east (short of the pond), saved first.
+    let frame = chassisd::fusion::geodesy::Enu::new(plant.datum());
+    let points: Vec<serde_json::Value> = (5..=28)
+        .map(|i| {
+            let x = f64::from(i) * 0.1;
+            let g = frame.to_geodetic(&nalgebra::Vector3::new(x, 0.0, 0.0));
+            serde_json::json!({"longitude": g.lon_deg, "latitude": g.lat_deg, "angle": 0,
+                               "x": x, "y": 0, "yaw": 0})
+        })
+        .collect();
+    let save = serde_json::json!({"cmd_type": "trajectory_control", "cmd": "save_trajectory",
+                                  "data": {"name": "across", "data": points}});
+    let ask = |payload: &str| {
+        feedback.clear();
+        broker.publish("mqtt_control", payload);
+        let (_, body) = feedback
+            .next(Duration::from_secs(10))
+            .unwrap_or_else(|| panic!("no answer to {payload}"));
+        serde_json::from_str::<serde_json::Value>(&body).expect("JSON")
+    };
+    assert_eq!(ask(&save.to_string())["cmd"], "save_trajectory_success");
+    let start =
+        r#"{"cmd_type":"task_control","cmd":"start_task","name":"across","id":0,"speed":0.3}"#;
+    let refused = ask(start);
+    assert_eq!(refused["cmd"], "start_task_failse", "{refused}");
+    assert!(
+        refused["message"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("wall zone \"virtual wall\""),
+        "{refused}"
+    );
+
     // A move through it is refused, naming it.
     let refused = call(&["/set_navi_cmd", "{cmd: '1', distance: 300}"]);
     assert!(!refused.status.success());
@@ -445,6 +486,12 @@ fn set_shape_adds_a_wall_that_refuses_a_move_through_it_the_file_keeps_it_and_we
         text(&removed).contains("success: True"),
         "{}",
         text(&removed)
+    );
+    let started = ask(start);
+    assert_eq!(started["cmd"], "start_task_success", "{started}");
+    assert_eq!(
+        ask(r#"{"cmd_type":"task_control","cmd":"cancel_task"}"#)["cmd"],
+        "cancel_task_success"
     );
     let moved = call(&["/set_navi_cmd", "{cmd: '1', distance: 50}"]);
     assert!(moved.status.success(), "{}", text(&moved));

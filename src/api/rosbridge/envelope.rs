@@ -5,7 +5,8 @@
 
 use serde_json::{Value, json};
 
-use super::messages::{MAP_FRAME, diagnostic, header};
+use super::parts::{OK, WARN, diagnostic, header};
+use crate::api::ros1::MAP_FRAME;
 use crate::time::Timestamp;
 use crate::vehicle::envelope::EnvelopeStatus;
 use crate::zones::ZoneKind;
@@ -71,9 +72,6 @@ pub fn zones(t: Timestamp, outlines: &[ZoneOutline]) -> Value {
     });
     json!({"markers": std::iter::once(clear).chain(markers).collect::<Vec<_>>()})
 }
-
-const OK: u8 = 0;
-const WARN: u8 = 1;
 
 /// The envelope's diagnostic status (`/safety_envelope`, and in `/diagnostics`): OK while
 /// the gate is open and the nearest zone lies beyond the margin; WARN while the gate is

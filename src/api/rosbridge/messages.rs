@@ -6,6 +6,7 @@
 
 use serde_json::{Value, json};
 
+use super::parts::{ERROR, OK, WARN, diagnostic, header};
 use crate::api::ros1::odometry::{OdometryCovariance, UNMEASURED};
 use crate::api::ros1::{ros_time, yaw_quaternion};
 use crate::api::rtk::status::{locate_name, navigation_name};
@@ -16,17 +17,7 @@ use crate::vehicle::chassis::status_bits;
 use crate::vehicle::corrections::CorrectionsStatus;
 use crate::vehicle::{Localization, Navigation, VehicleStatus};
 
-/// The fused pose's frame.
-pub const MAP_FRAME: &str = "map";
-/// The wheel odometry's frame.
-pub const ODOM_FRAME: &str = "odom";
-/// The vehicle's frame.
-pub const BASE_FRAME: &str = "base_link";
-
-pub(super) fn header(t: Timestamp, frame: &str) -> Value {
-    let (sec, nanosec) = ros_time(t);
-    json!({"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame})
-}
+pub use crate::api::ros1::{BASE_FRAME, MAP_FRAME, ODOM_FRAME};
 
 fn planar_pose(x: f64, y: f64, yaw: f64) -> Value {
     let [qx, qy, qz, qw] = yaw_quaternion(yaw);
@@ -152,24 +143,6 @@ pub fn battery_state(status: &VehicleStatus) -> Option<Value> {
         "location": "",
         "serial_number": "",
     }))
-}
-
-/// diagnostic_msgs/DiagnosticStatus levels.
-const OK: u8 = 0;
-const WARN: u8 = 1;
-const ERROR: u8 = 2;
-
-pub(super) fn diagnostic(level: u8, name: &str, message: &str, values: &[(&str, String)]) -> Value {
-    json!({
-        "level": level,
-        "name": format!("chassisd: {name}"),
-        "message": message,
-        "hardware_id": "",
-        "values": values
-            .iter()
-            .map(|(k, v)| json!({"key": k, "value": v}))
-            .collect::<Vec<_>>(),
-    })
 }
 
 /// The RTK corrections' status: their age is what the safety envelope gates on.

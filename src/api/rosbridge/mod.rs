@@ -6,6 +6,7 @@ pub mod adapter;
 pub mod envelope;
 pub mod messages;
 pub mod ops;
+pub mod parts;
 pub mod published;
 pub mod session;
 pub mod topics;
