@@ -1073,10 +1073,16 @@ fn calibrate_drive_moves_only_with_yes_and_a_safety_stop_abandons_the_pattern() 
         if left_m > 0.3 {
             break;
         }
-        assert!(
-            started.elapsed() < Duration::from_secs(60),
-            "the pattern never drove"
-        );
+        let ended = driving.child.try_wait().expect("status");
+        if ended.is_some() || started.elapsed() > Duration::from_secs(60) {
+            // What the calibration and the drives were doing, for the failure to say.
+            driving.log_count("");
+            panic!(
+                "the pattern never drove (calibrate {ended:?})\ncalibrate: {}\ndrives: {}",
+                driving.log.join("\n"),
+                report_of(&mut sim)
+            );
+        }
         std::thread::sleep(Duration::from_millis(200));
     }
     // ...until a drive's heartbeat stops: the pattern is abandoned and the drives stop.

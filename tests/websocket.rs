@@ -34,6 +34,22 @@ fn sim(port: u16) -> Proc {
     sim
 }
 
+/// `chassisd sim --no-mqtt --websocket 127.0.0.1:PORT --zones` with the yard of
+/// tests/common/zones.rs written in `dir` (the pond's west edge 4 m ahead), started.
+fn sim_in_the_yard(port: u16, dir: &std::path::Path) -> Proc {
+    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
+    let zones = common::zones::yard(&plant, dir);
+    let bind = format!("127.0.0.1:{port}");
+    Proc::start(&[
+        "sim".as_ref(),
+        "--no-mqtt".as_ref(),
+        "--websocket".as_ref(),
+        bind.as_ref(),
+        "--zones".as_ref(),
+        zones.as_os_str(),
+    ])
+}
+
 /// Runs one check of the client script against the server on `port`.
 fn client(port: u16, check: &[&str]) -> Value {
     let out = Command::new(python())
@@ -174,17 +190,7 @@ fn cmd_vel_moves_the_vehicle_it_stops_when_publishing_ends_and_the_session_repla
 fn a_jog_towards_a_keep_out_zone_over_the_websocket_stops_short_of_it() {
     let port = free_port();
     let dir = common::tempdir("websocket-zones");
-    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
-    let zones = common::zones::yard(&plant, &dir);
-    let bind = format!("127.0.0.1:{port}");
-    let mut sim = Proc::start(&[
-        "sim".as_ref(),
-        "--no-mqtt".as_ref(),
-        "--websocket".as_ref(),
-        bind.as_ref(),
-        "--zones".as_ref(),
-        zones.as_os_str(),
-    ]);
+    let mut sim = sim_in_the_yard(port, &dir);
     sim.wait_log(Duration::from_secs(40), "GNSS gate open");
     // 0.5 m/s for 12 s would take the mower 6 m east, through the pond 4 m ahead.
     let seen = client(port, &["zones_jog", "0.5", "12"]);
@@ -418,17 +424,7 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
 fn the_live_page_draws_the_zones_and_the_margin_and_a_jog_on_it_stops_short_of_the_pond() {
     let port = free_port();
     let dir = common::tempdir("websocket-page-zones");
-    let plant = chassisd::sim::plant::PlantConfig::builtin().expect("plant");
-    let zones = common::zones::yard(&plant, &dir);
-    let bind = format!("127.0.0.1:{port}");
-    let mut sim = Proc::start(&[
-        "sim".as_ref(),
-        "--no-mqtt".as_ref(),
-        "--websocket".as_ref(),
-        bind.as_ref(),
-        "--zones".as_ref(),
-        zones.as_os_str(),
-    ]);
+    let mut sim = sim_in_the_yard(port, &dir);
     sim.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
     let seen = live_page(port, &dir, &["zones"]);
     let kinds: Vec<(&str, &str)> = seen["zones"]

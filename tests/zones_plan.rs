@@ -122,6 +122,16 @@ fn set_shape(v: &mut SimRun, id: u64, msg: &str) -> Result<(), String> {
     v.sink.answers.pop().expect("an answer")
 }
 
+/// The zones the status draws (what `/zones` publishes) at the next status tick.
+fn drawn_next_tick(v: &mut SimRun) -> std::sync::Arc<[chassisd::zones::local::ZoneOutline]> {
+    v.run(0.2);
+    v.status()
+        .envelope
+        .clone()
+        .and_then(|e| e.zones)
+        .expect("placed")
+}
+
 #[test]
 fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
     let mut v = mower_in_the_yard("zones-edit", |_| {});
@@ -138,13 +148,7 @@ fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
         v.sink.events
     );
     // The status draws it from the next tick (what /zones publishes), where it was put.
-    v.run(0.2);
-    let drawn = v
-        .status()
-        .envelope
-        .clone()
-        .and_then(|e| e.zones)
-        .expect("placed");
+    let drawn = drawn_next_tick(&mut v);
     let added = drawn.iter().find(|z| z.id == 5).expect("the wall drawn");
     let xs: Vec<f64> = added.lines[0].iter().map(|p| p.0).collect();
     assert!(xs.iter().all(|x| (x - 2.0).abs() < 1e-3), "{added:?}");
@@ -164,13 +168,7 @@ fn a_wall_added_at_run_time_refuses_a_way_through_it_until_it_is_removed() {
     );
     let remove = r#"{"type": "", "shapeId": 5, "points": [], "radius": 0, "closed": false}"#;
     set_shape(&mut v, 3, remove).expect("removed");
-    v.run(0.2);
-    let drawn = v
-        .status()
-        .envelope
-        .clone()
-        .and_then(|e| e.zones)
-        .expect("placed");
+    let drawn = drawn_next_tick(&mut v);
     assert!(drawn.iter().all(|z| z.id != 5), "no longer drawn");
     v.send("follow_path", ahead).expect("clear again");
 }

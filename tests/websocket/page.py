@@ -73,11 +73,16 @@ def pose(page):
     return page.js("window.chassisdPage.pose")
 
 
-def run(page, port, out):
+def open_page(page, port):
+    """Loads the daemon's page and waits for it to connect and show a pose."""
     page.call("Page.enable")
     page.call("Network.enable")
     page.call("Page.navigate", url="http://127.0.0.1:%d/" % port)
     page.wait("window.chassisdPage && window.chassisdPage.connected && window.chassisdPage.pose !== null", 20, "the page to connect")
+
+
+def run(page, port, out):
+    open_page(page, port)
     page.wait("Object.keys(window.chassisdPage.diagnostics).length >= 4", 10, "the diagnostics")
     start = pose(page)
     page.screenshot(os.path.join(out, "page-start.png"))
@@ -135,10 +140,7 @@ def pixel(page, x, y):
 
 
 def run_zones(page, port, out):
-    page.call("Page.enable")
-    page.call("Network.enable")
-    page.call("Page.navigate", url="http://127.0.0.1:%d/" % port)
-    page.wait("window.chassisdPage && window.chassisdPage.connected && window.chassisdPage.pose !== null", 20, "the page to connect")
+    open_page(page, port)
     page.wait("window.chassisdPage.zones.length === 4 && window.chassisdPage.envelope && window.chassisdPage.envelope.gate === 'open'", 30, "the zones and an open gate")
     zones = page.js("window.chassisdPage.zones.map((z) => ({kind: z.kind, name: z.name, points: z.points.length}))")
     at_rest = page.js("window.chassisdPage.envelope")
