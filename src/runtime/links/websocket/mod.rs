@@ -30,7 +30,7 @@ use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, Level};
 use crate::api::rosbridge::session::{Action, token_matches};
 use crate::api::rosbridge::topics;
-use crate::api::rosbridge::{SOURCE, adapter, envelope, messages, published};
+use crate::api::rosbridge::{SOURCE, adapter, messages, published};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
@@ -39,7 +39,6 @@ use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::CommandRate;
 use crate::time::Timestamp;
 use crate::vehicle::VehicleStatus;
-use crate::zones::local::ZoneOutline;
 
 /// Feed items waiting for the server task before the newest are dropped (some 2 s).
 const FEED_QUEUE: usize = 256;
@@ -171,8 +170,7 @@ pub fn start(
         last_request: 0,
         odometry: OdometryUncertainty::new(noise),
         status_ticks: 0,
-        plan: None,
-        zones: None,
+        latches: published::Latches::default(),
         latched: BTreeMap::new(),
         token: config.token.clone(),
         clock,
@@ -386,10 +384,8 @@ struct Server {
     last_request: u64,
     odometry: OdometryUncertainty,
     status_ticks: u64,
-    /// The motion whose path `/plan` last carried.
-    plan: Option<Option<crate::control::MotionId>>,
-    /// The zones `/zones` last carried.
-    zones: Option<Option<Arc<[ZoneOutline]>>>,
+    /// What the latched topics last carried.
+    latches: published::Latches,
     /// The last message of each latched topic, sent to a new subscriber at once.
     latched: BTreeMap<&'static str, String>,
     token: Option<String>,
@@ -452,21 +448,8 @@ impl Server {
                 for topic in published::due(self.status_ticks) {
                     self.publish(topic.name, || (topic.build)(&status));
                 }
-                let plan = status.plan.as_ref().map(|p| p.id);
-                if self.plan != Some(plan) {
-                    self.plan = Some(plan);
-                    let points = status.plan.as_ref().map_or(&[][..], |p| &p.points[..]);
-                    self.latch(topics::PLAN, &messages::path(status.time, points));
-                }
-                let zones = status.envelope.as_ref().and_then(|e| e.zones.clone());
-                let same = |last: &Option<Arc<[ZoneOutline]>>| match (last, &zones) {
-                    (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-                    (a, b) => a.is_none() && b.is_none(),
-                };
-                if !self.zones.as_ref().is_some_and(same) {
-                    let outlines = zones.as_deref().unwrap_or(&[]);
-                    self.latch(topics::ZONES, &envelope::zones(status.time, outlines));
-                    self.zones = Some(zones);
+                for (topic, msg) in self.latches.changed(&status) {
+                    self.latch(topic, &msg);
                 }
             }
             Feed::Odom(t, pose) => {
