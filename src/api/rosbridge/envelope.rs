@@ -90,7 +90,7 @@ pub fn status(e: &EnvelopeStatus) -> Value {
     };
     let place = match (&e.nearest, margin) {
         (Some(n), Some(m)) => format!(
-            "{:.2} m from the {} zone {:?}, keeping {m:.2} m",
+            "{:.2} m from the {} zone {:?}, keeping {m:.3} m",
             n.clearance_m,
             n.kind.name(),
             n.name
@@ -239,7 +239,7 @@ mod tests {
         assert_eq!(msg["name"], "chassisd: safety envelope");
         assert_eq!(
             msg["message"],
-            "gate open; 1.50 m from the keep_out zone \"pond\", keeping 0.32 m"
+            "gate open; 1.50 m from the keep_out zone \"pond\", keeping 0.320 m"
         );
         assert_eq!(value(&msg, "margin_m"), "0.320");
         assert_eq!(value(&msg, "clearance_m"), "1.500");
