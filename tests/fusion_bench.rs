@@ -8,8 +8,6 @@
 
 mod common;
 
-use std::process::Command;
-
 /// Every receiver rate docs/fusion.md's sweep reports ...
 const RATES_HZ: [&str; 5] = ["1", "2", "5", "10", "20"];
 /// ... and the ones CI runs (the ends and the middle), to keep the suite inside its time
@@ -18,19 +16,19 @@ const CI_RATES_HZ: [&str; 3] = ["1", "5", "20"];
 const ANTENNAS: [&str; 2] = ["1", "2"];
 
 fn bench(plant: &str, rate: &str, antennas: &str) -> serde_json::Value {
-    let out = Command::new(common::chassisd())
-        .args(["bench", "fusion", "--plant"])
-        .arg(common::repo().join("devices").join(plant))
-        .args(["--gnss-rate", rate, "--antennas", antennas])
-        .output()
-        .expect("chassisd runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let last = stdout.lines().last().unwrap_or_default();
-    let summary: serde_json::Value = serde_json::from_str(last).expect("last line is JSON");
-    assert!(
-        summary["pass"] == true && out.status.success(),
-        "targets missed on {plant} at {rate} Hz with {antennas} antenna(s):\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+    let plant_file = common::repo().join("devices").join(plant);
+    let summary = common::passing_bench(
+        &[
+            "bench".as_ref(),
+            "fusion".as_ref(),
+            "--plant".as_ref(),
+            plant_file.as_os_str(),
+            "--gnss-rate".as_ref(),
+            rate.as_ref(),
+            "--antennas".as_ref(),
+            antennas.as_ref(),
+        ],
+        &format!("{plant} at {rate} Hz with {antennas} antenna(s)"),
     );
     let (position, heading) = (
         nees_range(&summary, "nees_position"),

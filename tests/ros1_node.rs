@@ -395,17 +395,23 @@ fn set_shape_adds_a_wall_that_refuses_a_task_and_a_move_through_it_the_file_keep
         args.extend_from_slice(request);
         ros(&master, &args, Duration::from_secs(10))
     };
+    // An edit's answer (`success: True` or `False`) and its code on the status topic.
+    let edit = |service: &str, request: &str, answer: &str, code: &str| {
+        let out = call(&[service, request]);
+        assert!(text(&out).contains(answer), "{}", text(&out));
+        echo_until(
+            &master,
+            "/androidmsg_virtualmapstatus",
+            Duration::from_secs(10),
+            |o| o.contains(code),
+        );
+    };
     // A wall across the way 2 m ahead: made (62), written to the zones file.
-    let added = call(&[
+    edit(
         "/set_shape",
         "{type: 'lines', points: [{x: 2, y: -2, z: 0}, {x: 2, y: 2, z: 0}], radius: 0, closed: false}",
-    ]);
-    assert!(text(&added).contains("success: True"), "{}", text(&added));
-    echo_until(
-        &master,
-        "/androidmsg_virtualmapstatus",
-        Duration::from_secs(10),
-        |o| o.contains("data: 62"),
+        "success: True",
+        "data: 62",
     );
     p.wait_log(Duration::from_secs(5), "zones written");
     let written = std::fs::read_to_string(&zones).expect("zones file");
@@ -469,16 +475,11 @@ fn set_shape_adds_a_wall_that_refuses_a_task_and_a_move_through_it_the_file_keep
         text(&refused)
     );
     // A region that is not closed is refused (63), and changes nothing.
-    let open = call(&[
+    edit(
         "/set_region",
         "{type: 'lines', points: [{x: 8, y: 3, z: 0}, {x: 9, y: 3, z: 0}, {x: 9, y: 4, z: 0}], closed: false}",
-    ]);
-    assert!(text(&open).contains("success: False"), "{}", text(&open));
-    echo_until(
-        &master,
-        "/androidmsg_virtualmapstatus",
-        Duration::from_secs(10),
-        |o| o.contains("data: 63"),
+        "success: False",
+        "data: 63",
     );
     // Removed by its id: the way is clear again, and the file no longer holds it.
     let removed = call(&["/set_shape", "{shapeId: 5}"]);
