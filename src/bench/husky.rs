@@ -5,10 +5,9 @@
 //! against the odom frame's dead reckoning from the same moment, the whole run's distance to
 //! the fixes, the parked pose, and wild fixes put on every fix of a window.
 
-use std::collections::HashMap;
 use std::path::Path;
 
-use crate::bench::error::{BenchError, invalid, missing};
+use crate::bench::error::BenchError;
 use serde::Serialize;
 
 use crate::fusion::geodesy::{Enu, Geodetic};
@@ -46,44 +45,7 @@ pub struct HuskyData {
     inputs: Vec<(f64, Input)>,
 }
 
-/// Reads one CSV with a header row: the named columns of every row (the shared data's robot
-/// recordings).
-pub fn columns(path: &Path, names: &[&str]) -> crate::bench::error::Result<Vec<Vec<f64>>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(invalid(format!("cannot read {}", path.display())))?;
-    let mut lines = text.lines();
-    let header: HashMap<&str, usize> = lines
-        .next()
-        .ok_or_else(missing("empty file"))?
-        .split(',')
-        .enumerate()
-        .map(|(i, h)| (h, i))
-        .collect();
-    let index: Vec<usize> = names
-        .iter()
-        .map(|n| {
-            header
-                .get(n)
-                .copied()
-                .ok_or_else(missing(format!("{}: no column {n}", path.display())))
-        })
-        .collect::<crate::bench::error::Result<_>>()?;
-    lines
-        .filter(|l| !l.is_empty())
-        .map(|l| {
-            let cells: Vec<&str> = l.split(',').collect();
-            index
-                .iter()
-                .map(|&i| {
-                    cells
-                        .get(i)
-                        .and_then(|c| c.parse::<f64>().ok())
-                        .ok_or_else(missing(format!("{}: bad row {l}", path.display())))
-                })
-                .collect()
-        })
-        .collect()
-}
+pub use crate::bench::real::data::columns;
 
 impl HuskyData {
     /// Loads `dir` (gps.csv, odom.csv, imu.csv). The IMU is mounted roll +90°, yaw −90°: the

@@ -9,6 +9,7 @@ pub mod gnss_fit;
 pub mod husky;
 pub mod mosquitto;
 pub mod mqtt;
+pub mod real;
 pub mod replay;
 pub mod soak;
 

@@ -39,6 +39,19 @@ enum BenchCommand {
         #[arg(long)]
         plant: Option<PathBuf>,
     },
+    /// Every real vehicle's recording of ../shared/data/ekf (the Husky, with and without a
+    /// course; the comma2k19 car; the Jackal) turned into a chassisd recording and replayed
+    /// through the whole core: one table of each figure beside its target and the naive dead
+    /// reckoning's; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Real {
+        /// The shared data's ekf/ folder.
+        #[arg(long, default_value = "../shared/data/ekf")]
+        data: PathBuf,
+        /// Replays run on this many threads.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+        jobs: u32,
+    },
     /// Score the fusion filter on scripted drives of the simulated vehicle against its
     /// truth; the last line is a JSON object with every figure and "pass". Exits with
     /// status 1 when a target is missed.
@@ -173,6 +186,16 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
                 serde_json::json!({ "filter": report, "gnss_errors": fit })
             );
             Ok(true)
+        }
+        BenchCommand::Real { data, jobs } => {
+            let table = chassisd::bench::real::run(&data, jobs as usize)?;
+            print!("{table}");
+            let pass = table.pass();
+            println!(
+                "{}",
+                serde_json::json!({ "figures": table.figures, "pass": pass })
+            );
+            Ok(pass)
         }
         BenchCommand::Fusion {
             plant,
