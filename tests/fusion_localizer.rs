@@ -69,6 +69,7 @@ fn drive(seconds: f64, drift: f64, rtk: bool, headings: bool) -> (Localizer, Vec
                     Measurement::Heading {
                         yaw: sigma * noise(k + 3),
                         sigma,
+                        trust,
                     },
                 );
             }
@@ -122,6 +123,7 @@ fn without_wheels_the_fixes_place_the_vehicle_until_they_stop() {
             Measurement::Heading {
                 yaw: std::f64::consts::FRAC_PI_2,
                 sigma: 0.01,
+                trust: Trust::OverWheels,
             },
         );
         l.add(

@@ -153,6 +153,20 @@ fn shared_logs_replay_to_status_lines() {
         );
         assert_eq!(out.stdout, replay(&log).stdout, "{}", log.display());
     }
+    // A receiver that sends only binary protocols (u-blox UBX) is refused, saying why.
+    for log in common::shared_binary_gnss_logs() {
+        let out = Command::new(common::chassisd())
+            .arg("replay")
+            .arg(&log)
+            .output()
+            .expect("chassisd runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains("no sentence with a UTC time"),
+            "{}: {stderr}",
+            log.display()
+        );
+    }
 }
 
 #[test]

@@ -59,6 +59,8 @@ pub struct ReplayReport {
     pub tenth_peak_bytes: Option<u64>,
     /// Why gpsdecode was not compared, if it was not.
     pub gpsdecode_missing: Option<String>,
+    /// Logs left out: their receivers send no NMEA position (binary protocols only).
+    pub skipped: Vec<String>,
     /// The targets met.
     pub pass: bool,
 }
@@ -68,12 +70,12 @@ pub fn run(
     options: &ReplayBenchOptions,
     chassisd: &Path,
 ) -> crate::bench::error::Result<ReplayReport> {
-    let logs = receiver_logs(&options.data)?;
+    let (logs, skipped) = receiver_logs(&options.data)?;
     let dir = std::env::temp_dir().join(format!("chassisd-bench-replay-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(invalid(format!("creating {}", dir.display())))?;
     let result = run_in(options, chassisd, &logs, &dir);
     let _ = std::fs::remove_dir_all(&dir);
-    result
+    result.map(|r| ReplayReport { skipped, ..r })
 }
 
 fn run_in(
@@ -123,12 +125,14 @@ fn run_in(
         inputs: figures,
         tenth_peak_bytes,
         gpsdecode_missing,
+        skipped: Vec::new(),
         pass: fast_enough && flat,
     })
 }
 
-/// The `*.log` files in `dir`, sorted.
-fn receiver_logs(dir: &Path) -> crate::bench::error::Result<Vec<PathBuf>> {
+/// The `*.log` files in `dir` whose receivers send NMEA positions, sorted, and the names of
+/// the others (binary protocols only, which chassisd does not decode yet).
+fn receiver_logs(dir: &Path) -> crate::bench::error::Result<(Vec<PathBuf>, Vec<String>)> {
     let mut logs: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(invalid(format!(
             "reading the receiver logs in {}",
@@ -138,13 +142,36 @@ fn receiver_logs(dir: &Path) -> crate::bench::error::Result<Vec<PathBuf>> {
         .filter(|p| p.extension().is_some_and(|e| e == "log"))
         .collect();
     logs.sort();
-    if logs.is_empty() {
+    let mut skipped = Vec::new();
+    let mut nmea = Vec::new();
+    for log in logs {
+        let bytes = std::fs::read(&log).map_err(invalid(format!("reading {}", log.display())))?;
+        if sends_nmea_positions(&bytes) {
+            nmea.push(log);
+        } else {
+            skipped.push(format!(
+                "{}: no NMEA position (a binary protocol only)",
+                log.display()
+            ));
+        }
+    }
+    if nmea.is_empty() {
         return Err(BenchError::Failed(format!(
-            "no *.log receiver logs in {}",
+            "no *.log receiver logs with NMEA positions in {}",
             dir.display()
         )));
     }
-    Ok(logs)
+    Ok((nmea, skipped))
+}
+
+/// Whether a log holds an NMEA position sentence (GGA, RMC or GNS).
+fn sends_nmea_positions(bytes: &[u8]) -> bool {
+    bytes.split(|b| *b == b'\n').any(|line| {
+        line.len() > 7
+            && line[0] == b'$'
+            && line[1..3].iter().all(u8::is_ascii_uppercase)
+            && [&b"GGA,"[..], b"RMC,", b"GNS,"].contains(&&line[3..7])
+    })
 }
 
 /// Writes `parts` one after the other, over and over, until `size` bytes are reached;
@@ -273,6 +300,9 @@ impl ReplayReport {
         ));
         if let Some(why) = &self.gpsdecode_missing {
             out.push_str(&format!("no comparison: {why}\n"));
+        }
+        for skipped in &self.skipped {
+            out.push_str(&format!("left out: {skipped}\n"));
         }
         out
     }

@@ -35,13 +35,16 @@ pub struct LocalizationConfig {
     /// and single fixes.
     #[serde(default = "default_correlated_fraction")]
     pub gnss_correlated_fraction: f64,
-    /// The same for RTK-fixed fixes (multipath); `gnss_correlated_fraction` when not given,
-    /// so a configuration from before the key behaves as it did.
-    #[serde(default)]
-    pub rtk_correlated_fraction: Option<f64>,
-    /// That part's correlation time, s.
+    /// The same for RTK-fixed fixes (multipath): RTK errors are centimetres and mostly white.
+    #[serde(default = "default_rtk_correlated_fraction")]
+    pub rtk_correlated_fraction: f64,
+    /// That part's correlation time while the antenna stands, s.
     #[serde(default = "default_correlation_time_s")]
     pub gnss_correlation_time_s: f64,
+    /// That part's correlation distance, m: it decorrelates as the antenna moves
+    /// (multipath, and the corrections' errors with the satellites' geometry).
+    #[serde(default = "default_correlation_distance_m")]
+    pub gnss_correlation_distance_m: f64,
     /// The receiver's velocity accuracy, 1σ per axis, m/s (its datasheet's figure). NMEA
     /// carries none; without it a typical figure per fix quality is used.
     #[serde(default)]
@@ -92,8 +95,14 @@ fn default_relocate_after_s() -> f64 {
 fn default_correlated_fraction() -> f64 {
     0.95
 }
+fn default_rtk_correlated_fraction() -> f64 {
+    0.3
+}
 fn default_correlation_time_s() -> f64 {
     60.0
+}
+fn default_correlation_distance_m() -> f64 {
+    20.0
 }
 fn default_gyro_noise() -> f64 {
     0.003
@@ -133,8 +142,9 @@ impl Default for LocalizationConfig {
             heading_sigma_deg: default_heading_sigma(),
             relocate_after_s: default_relocate_after_s(),
             gnss_correlated_fraction: default_correlated_fraction(),
-            rtk_correlated_fraction: None,
+            rtk_correlated_fraction: default_rtk_correlated_fraction(),
             gnss_correlation_time_s: default_correlation_time_s(),
+            gnss_correlation_distance_m: default_correlation_distance_m(),
             gnss_velocity_sigma_mps: None,
             gyro_noise_rps: default_gyro_noise(),
             heading_walk: default_heading_walk(),
@@ -203,21 +213,26 @@ impl LocalizationConfig {
             0.0..=0.95,
             "",
         )?;
-        if let Some(f) = self.rtk_correlated_fraction {
-            check_range(
-                file,
-                "localization.rtk_correlated_fraction",
-                f,
-                0.0..=0.95,
-                "",
-            )?;
-        }
+        check_range(
+            file,
+            "localization.rtk_correlated_fraction",
+            self.rtk_correlated_fraction,
+            0.0..=0.95,
+            "",
+        )?;
         check_range(
             file,
             "localization.gnss_correlation_time_s",
             self.gnss_correlation_time_s,
             1.0..=3600.0,
             "s",
+        )?;
+        check_range(
+            file,
+            "localization.gnss_correlation_distance_m",
+            self.gnss_correlation_distance_m,
+            0.1..=100_000.0,
+            "m",
         )?;
         if let Some(v) = self.gnss_velocity_sigma_mps {
             check_range(
@@ -297,14 +312,13 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         heading_sigma_rad: l.heading_sigma_deg.to_radians(),
         relocate_after: Duration::from_secs_f64(l.relocate_after_s),
         gnss_correlated_fraction: l.gnss_correlated_fraction,
-        rtk_correlated_fraction: l
-            .rtk_correlated_fraction
-            .unwrap_or(l.gnss_correlated_fraction),
+        rtk_correlated_fraction: l.rtk_correlated_fraction,
         gnss_velocity_sigma_mps: l.gnss_velocity_sigma_mps,
         gyro_sigma: l.gyro_noise_rps,
         ..LocalizerConfig::default()
     };
     c.gnss_correlation = Duration::from_secs_f64(l.gnss_correlation_time_s);
+    c.gnss_correlation_m = l.gnss_correlation_distance_m;
     c.heading_walk = l.heading_walk;
     c.gyro_bias_walk = l.gyro_bias_walk;
     c.wheel_slip = l.wheel_slip_m2_per_m;

@@ -24,8 +24,8 @@ use crate::time::Timestamp;
 pub const WINDOW: Duration = Duration::from_secs(30);
 /// The samples must span this long.
 pub const MIN_SPAN: Duration = Duration::from_secs(10);
-/// And be this many.
-pub const MIN_SAMPLES: usize = 20;
+/// And be this many (RTK directions come every other fix at 1 Hz and walking pace).
+pub const MIN_SAMPLES: usize = 10;
 /// The samples' spread about the line, in units of their σ, at most.
 pub const MAX_REDUCED_CHI2: f64 = 2.0;
 /// The slope over its 1σ, at least.

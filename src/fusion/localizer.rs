@@ -10,6 +10,7 @@ use std::time::Duration;
 
 use nalgebra::Vector3;
 
+use super::course::{self, CourseNoise};
 use super::geodesy::{Enu, Geodetic};
 use super::gnss_only::GnssOnly;
 use super::gyro_drift::{Drift, GyroDrift};
@@ -58,8 +59,10 @@ pub struct LocalizerConfig {
     pub gnss_correlated_fraction: f64,
     /// The same for RTK-fixed fixes.
     pub rtk_correlated_fraction: f64,
-    /// Its correlation time.
+    /// Its correlation time (standing).
     pub gnss_correlation: Duration,
+    /// Its correlation distance (moving), m.
+    pub gnss_correlation_m: f64,
     /// The odom heading's random walk while moving, rad/√s (the gyro's angle random walk).
     pub heading_walk: f64,
     /// The gyro bias's random walk, rad/s per √s (it leaves what a standstill taught).
@@ -92,6 +95,7 @@ impl Default for LocalizerConfig {
             gnss_correlated_fraction: map.gnss_correlated_fraction,
             rtk_correlated_fraction: map.rtk_correlated_fraction,
             gnss_correlation: Duration::from_secs_f64(map.gnss_correlation_s),
+            gnss_correlation_m: map.gnss_correlation_m,
             heading_walk: map.yaw_per_s.sqrt(),
             gyro_bias_walk: map.bias_walk,
             odom_error: (map.along_per_m, map.across_per_m, map.yaw_per_rad),
@@ -108,6 +112,7 @@ impl LocalizerConfig {
             gnss_correlated_fraction: self.gnss_correlated_fraction,
             rtk_correlated_fraction: self.rtk_correlated_fraction,
             gnss_correlation_s: self.gnss_correlation.as_secs_f64(),
+            gnss_correlation_m: self.gnss_correlation_m,
             relocate_after: self.relocate_after,
             yaw_per_s: self.heading_walk * self.heading_walk,
             bias_walk: self.gyro_bias_walk,
@@ -138,13 +143,21 @@ pub enum Measurement {
         yaw: f64,
         /// 1σ, rad.
         sigma: f64,
+        /// The quality of the epoch it came with: only a heading of an RTK-fixed epoch may
+        /// teach the odom frame's gyro bias.
+        trust: Trust,
     },
     /// Course over ground: the direction the antenna moves, as an ENU angle (rad).
     Course {
         /// Direction of the antenna's velocity, rad.
         yaw: f64,
-        /// 1σ, rad.
-        sigma: f64,
+        /// The receiver's speed over ground, m/s.
+        speed: f64,
+        /// The receiver's stated velocity noise, 1σ per axis, m/s.
+        speed_sigma: f64,
+        /// The quality of the epoch it came with: only a course of an RTK-fixed epoch,
+        /// driving straight and fast enough, may teach the odom frame's gyro bias.
+        trust: Trust,
     },
 }
 
@@ -201,10 +214,12 @@ pub struct Localizer {
     /// Latest heading seen before the filter started, to start with.
     last_heading: Option<(Timestamp, f64, f64)>,
     /// Headings rejected without a break: first time and count.
-    heading_rejections: Option<(Timestamp, u32)>,
+    heading_rejections: Option<RejectedHeadings>,
     scale: WheelScale,
-    /// The odom heading's drift against GNSS headings.
+    /// The odom heading's drift against RTK-grade headings: what may correct the bias.
     drift: GyroDrift,
+    /// The same against every heading and course: what widens the map heading.
+    drift_seen: GyroDrift,
     /// When the gyro's bias was last learnt (a standstill) or corrected.
     bias_since: Option<Timestamp>,
     /// A proven drift, until the core corrects the gyro's bias by it.
@@ -215,6 +230,8 @@ pub struct Localizer {
     map: MapFrame,
     /// The pose while no odom pose ever came (a vehicle without wheels).
     gnss_only: GnssOnly,
+    /// The courses' scatter against the gyro.
+    course_noise: CourseNoise,
     /// What happened that an operator should read in the log, until taken.
     events: Vec<String>,
 }
@@ -230,6 +247,67 @@ struct RtkAnchor {
     antenna: (f64, f64),
 }
 
+/// Headings the gate rejected without a break, as rotations of the odom frame.
+#[derive(Debug, Clone, PartialEq)]
+struct RejectedHeadings {
+    since: Timestamp,
+    /// Rotation (rad) and 1σ of each, the latest [`MAX_REJECTIONS_KEPT`].
+    rotations: Vec<(f64, f64)>,
+}
+
+/// Rejected headings kept.
+const MAX_REJECTIONS_KEPT: usize = 16;
+
+impl RejectedHeadings {
+    fn push(&mut self, rotation: f64, sigma: f64) {
+        if self.rotations.len() >= MAX_REJECTIONS_KEPT {
+            self.rotations.remove(0);
+        }
+        self.rotations.push((rotation, sigma));
+    }
+
+    /// The circular mean of the rotations and the 1σ of one of them, averaged.
+    fn mean(&self) -> (f64, f64) {
+        let (s, c) = self
+            .rotations
+            .iter()
+            .fold((0.0, 0.0), |(s, c), (r, _)| (s + r.sin(), c + r.cos()));
+        let sigma =
+            self.rotations.iter().map(|(_, s)| s).sum::<f64>() / self.rotations.len().max(1) as f64;
+        (s.atan2(c), sigma)
+    }
+
+    /// Whether a rotation with 1σ `sigma` agrees with the run's within 3σ of both.
+    fn agrees(&self, rotation: f64, sigma: f64) -> bool {
+        let (mean, run_sigma) = self.mean();
+        wrap(rotation - mean).abs() <= 3.0 * sigma.hypot(run_sigma)
+    }
+}
+
+/// What a heading may teach the dead reckoning besides the map pose's heading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Teaches {
+    /// The odom heading's drift (the gyro's bias error): a dual-antenna heading of an
+    /// RTK-fixed epoch.
+    Drift,
+    /// Nothing: a course, or a heading of a lesser epoch.
+    Nothing,
+}
+
+impl Teaches {
+    fn of(trust: Trust) -> Self {
+        match trust {
+            Trust::OverWheels => Self::Drift,
+            Trust::UnderWheels => Self::Nothing,
+        }
+    }
+}
+
+/// A course over ground is never trusted beyond this, rad (1°) ...
+const MIN_COURSE_SIGMA: f64 = 0.017_453_292_519_943_295;
+/// ... and not used when less certain than this (15°).
+const MAX_COURSE_SIGMA: f64 = 0.261_799_387_799_494_4;
+
 /// How uncertain a heading's time is (the receiver's output timing and the latency's jitter;
 /// the gyro's samples' transport), s.
 const HEADING_TIME_SIGMA_S: f64 = 0.02;
@@ -243,7 +321,7 @@ const RTK_DIRECTION_SIGMA_RAD: f64 = 0.01;
 const DRIFT_CONFIDENCE: f64 = 2.0;
 
 /// Headings rejected this many times (over `relocate_after`) replace the heading.
-const MIN_REJECTIONS_TO_RELOCATE: u32 = 3;
+const MIN_REJECTIONS_TO_RELOCATE: usize = 3;
 
 impl Localizer {
     /// A localiser with nothing known.
@@ -257,11 +335,13 @@ impl Localizer {
             heading_rejections: None,
             scale: WheelScale::new(config.wheel_slip),
             drift: GyroDrift::default(),
+            drift_seen: GyroDrift::default(),
             bias_since: None,
             bias_correction: None,
             rtk_from: None,
             map: MapFrame::default(),
             gnss_only: GnssOnly::default(),
+            course_noise: CourseNoise::default(),
             events: Vec::new(),
         }
     }
@@ -450,21 +530,67 @@ impl Localizer {
                     self.filter.heading(yaw, hs);
                 }
             }
-            Measurement::Heading { yaw, sigma } => {
+            Measurement::Heading { yaw, sigma, trust } => {
                 self.gnss_only.heading(yaw, sigma);
-                self.heading(t, yaw, sigma);
+                self.heading(t, yaw, sigma, Teaches::of(trust));
             }
-            Measurement::Course { yaw, sigma } => {
-                let Some((_, o)) = self.odom else {
-                    // Without wheels, forward or back is unknown: the course is taken as
-                    // the heading.
-                    self.gnss_only.heading(yaw, sigma);
-                    return;
-                };
-                if let Some(heading) = self.filter.heading_of_course(yaw, o.v, o.w) {
-                    self.heading(t, heading, sigma);
-                }
+            Measurement::Course {
+                yaw,
+                speed,
+                speed_sigma,
+                trust,
+            } => self.course(t, yaw, speed, speed_sigma, trust),
+        }
+    }
+
+    /// A course over ground at `t`: the heading it shows, as surely as its noise against
+    /// the gyro and the turn rate allow ([`super::course`]).
+    fn course(&mut self, t: Timestamp, yaw: f64, speed: f64, speed_sigma: f64, trust: Trust) {
+        let Some((_, latest)) = self.odom else {
+            // Without wheels, forward or back is unknown: the course is taken as the
+            // heading.
+            let sigma = speed_sigma.atan2(speed.abs()).max(MIN_COURSE_SIGMA);
+            if sigma <= MAX_COURSE_SIGMA {
+                self.gnss_only.heading(yaw, sigma);
             }
+            return;
+        };
+        let then = self.filter.odom_pose_at(t).unwrap_or(latest);
+        let before = |s: f64| {
+            Timestamp::from_nanos(
+                t.as_nanos()
+                    .saturating_sub(Duration::from_secs_f64(s).as_nanos() as u64),
+            )
+        };
+        let turn = self
+            .filter
+            .max_turn_rate(before(course::LAG_S), t)
+            .max(then.w.abs());
+        // Free of what makes a course differ from the heading: no turn for long enough that
+        // the receiver's lag and smoothing, the lever arm and sideslip are all zero.
+        let straight = self
+            .filter
+            .max_turn_rate(before(course::STRAIGHT_FOR_S), t)
+            .max(then.w.abs())
+            <= course::STRAIGHT_RPS;
+        let Some(heading) = self.filter.heading_of_course(yaw, then.v, then.w) else {
+            return;
+        };
+        self.course_noise.observe(t, heading, then.yaw, speed, turn);
+        let sigma = self
+            .course_noise
+            .sigma(speed_sigma, speed, turn)
+            .max(MIN_COURSE_SIGMA);
+        if sigma <= MAX_COURSE_SIGMA {
+            // A course is the antenna's direction of motion, late and smoothed by the
+            // receiver: in a turn it is not the body's heading, so only an RTK-fixed
+            // epoch's course, straight and fast, teaches the gyro's bias.
+            let teaches = if straight && sigma <= course::TEACHING_SIGMA {
+                Teaches::of(trust)
+            } else {
+                Teaches::Nothing
+            };
+            self.heading(t, heading, sigma, teaches);
         }
     }
 
@@ -478,7 +604,7 @@ impl Localizer {
     /// since (a fix arrives after its epoch), then applied when it passes the gate; a run of
     /// rejections as long as a relocation means the heading is wrong (a bad start, a slip on
     /// the spot), and the measured one replaces it.
-    fn heading(&mut self, t: Timestamp, yaw: f64, sigma: f64) {
+    fn heading(&mut self, t: Timestamp, yaw: f64, sigma: f64, teaches: Teaches) {
         let (turned, rate) = match (self.odom, self.filter.odom_pose_at(t)) {
             (Some((_, now)), Some(then)) => (wrap(now.yaw - then.yaw), then.w),
             _ => (0.0, 0.0),
@@ -494,18 +620,33 @@ impl Localizer {
         if self.filter.heading(yaw, sigma) {
             self.heading_rejections = None;
             if let Some(then) = self.filter.odom_pose_at(t) {
-                self.observe_drift(t, measured, sigma, then.yaw);
+                self.observe_drift(t, measured, sigma, then.yaw, teaches);
             }
             return;
         }
-        let (since, count) = self.heading_rejections.map_or((t, 1), |(s, n)| (s, n + 1));
-        self.heading_rejections = Some((since, count));
-        if count >= MIN_REJECTIONS_TO_RELOCATE
-            && t.saturating_since(since) >= self.config.relocate_after
+        // The rejected heading as a rotation of the odom frame: rejections that agree with
+        // each other for a relocation's time show the heading wrong; scattered ones (a noisy
+        // course) show nothing.
+        let now_yaw = self.odom.map_or(0.0, |(_, o)| o.yaw);
+        let rotation = wrap(yaw - now_yaw);
+        let run = self
+            .heading_rejections
+            .take()
+            .filter(|run| run.agrees(rotation, sigma))
+            .unwrap_or(RejectedHeadings {
+                since: t,
+                rotations: Vec::new(),
+            });
+        let mut run = run;
+        run.push(rotation, sigma);
+        if run.rotations.len() >= MIN_REJECTIONS_TO_RELOCATE
+            && t.saturating_since(run.since) >= self.config.relocate_after
         {
-            self.filter.reset_heading(yaw, sigma);
-            self.heading_rejections = None;
+            let (mean, mean_sigma) = run.mean();
+            self.filter.reset_heading(wrap(now_yaw + mean), mean_sigma);
+            return;
         }
+        self.heading_rejections = Some(run);
     }
 
     /// The direction between two RTK fixes far apart against their σ, against the odom
@@ -534,13 +675,33 @@ impl Localizer {
             return;
         }
         self.rtk_from = Some(here);
-        self.observe_drift(t, gy.atan2(gx), direction_sigma, oy.atan2(ox));
+        self.observe_drift(
+            t,
+            gy.atan2(gx),
+            direction_sigma,
+            oy.atan2(ox),
+            Teaches::Drift,
+        );
     }
 
-    fn observe_drift(&mut self, t: Timestamp, heading: f64, sigma: f64, odom_yaw: f64) {
-        self.drift.observe(t, heading, sigma, odom_yaw);
+    /// A heading (rad, 1σ) measured at `t`, the odom yaw then: what the odom heading's
+    /// drift is seen to be widens the map heading's uncertainty, whatever measured it; only
+    /// an RTK-grade heading may prove it and correct the gyro's bias.
+    fn observe_drift(
+        &mut self,
+        t: Timestamp,
+        heading: f64,
+        sigma: f64,
+        odom_yaw: f64,
+        teaches: Teaches,
+    ) {
+        self.drift_seen.observe(t, heading, sigma, odom_yaw);
+        if teaches == Teaches::Drift {
+            self.drift.observe(t, heading, sigma, odom_yaw);
+        }
         if let Some(drift) = self.drift.proven() {
             self.drift.restart();
+            self.drift_seen.restart();
             self.events.push(format!(
                 "gyro bias corrected by {:+.5} rad/s: the odom heading drifted so against GNSS \
                  (1σ {:.5} rad/s over {} headings in {:.0} s)",
@@ -554,7 +715,7 @@ impl Localizer {
             let since = self
                 .bias_since
                 .map_or(drift.span, |s| t.saturating_since(s).max(drift.span));
-            let moved = drift.rate.abs();
+            let moved = (drift.rate.abs() - DRIFT_CONFIDENCE * drift.sigma).max(0.0);
             self.filter
                 .set_bias_walk(moved * moved / since.as_secs_f64().max(1.0));
             self.filter.reset_drift(drift.sigma);
@@ -563,16 +724,17 @@ impl Localizer {
         }
         // Only a fit over enough headings and time says anything of the drift (a few courses
         // while accelerating make any slope).
-        let fit = self.drift.fit().filter(|_| {
-            self.drift.len() >= super::gyro_drift::MIN_SAMPLES
-                && self.drift.span() >= super::gyro_drift::MIN_SPAN
+        let seen = &self.drift_seen;
+        let fit = seen.fit().filter(|_| {
+            seen.len() >= super::gyro_drift::MIN_SAMPLES
+                && seen.span() >= super::gyro_drift::MIN_SPAN
         });
+        let span = seen.span().as_secs_f64();
         let walk = fit.map_or(0.0, |(slope, sigma, chi2)| {
-            // A line that explains the headings bounds the drift rate itself, at the rate it
-            // has at most with 97.7 % confidence.
+            // A line that explains the headings bounds the drift rate itself: the consider
+            // state's mean stays zero, so its variance is at most the rate's mean square.
             if chi2 <= super::gyro_drift::MAX_REDUCED_CHI2 {
-                let most = slope.abs() + DRIFT_CONFIDENCE * sigma;
-                self.filter.bound_drift(most * most);
+                self.filter.bound_drift(slope * slope + sigma * sigma);
             }
             // Until it is proven, the drift widens the heading as it goes (a random walk of
             // r²·T per second matches the drift's r·t at horizon T, the time it has run
@@ -580,7 +742,7 @@ impl Localizer {
             // than a bias can drift.
             let rate = (slope.abs() - DRIFT_CONFIDENCE * sigma)
                 .clamp(0.0, super::gyro_drift::MAX_DRIFT_RPS);
-            rate * rate * self.drift.span().as_secs_f64()
+            rate * rate * span
         });
         self.filter.set_heading_drift(walk);
     }
@@ -588,6 +750,7 @@ impl Localizer {
     /// The odom heading's drift starts afresh: a standstill taught the gyro its bias at `t`.
     fn restart_drift(&mut self, t: Timestamp) {
         self.drift.restart();
+        self.drift_seen.restart();
         self.bias_since = Some(t);
         self.filter.set_heading_drift(0.0);
         self.filter.set_bias_walk(0.0);

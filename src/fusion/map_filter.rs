@@ -30,7 +30,7 @@ use super::odometry::OdomPose;
 use super::planar::{largest_sigma, wrap};
 use crate::time::Timestamp;
 
-const N: usize = 6;
+const N: usize = 7;
 const X: usize = 0;
 const Y: usize = 1;
 const YAW: usize = 2;
@@ -41,9 +41,31 @@ const GN: usize = 4;
 /// moves exactly as the odom pose does); its variance makes the heading's uncertainty grow as
 /// a bias error turns it, with the correlation that implies.
 const DRIFT: usize = 5;
+/// The wheels' scale error: the true distance is (1 + it) times the odom frame's. Tyres'
+/// radii change with pressure, load and wear and slip with the ground, by percents, and at
+/// speed that is metres a minute; GNSS shows it over the distance driven.
+const SCALE: usize = 6;
+/// The scale error's 1σ before anything has shown it.
+const SCALE_SIGMA: f64 = 0.03;
+/// How fast the scale error may change, 1σ per √m driven (the ground changes).
+const SCALE_WALK: f64 = 1e-3;
+/// A scale error beyond this is no tyre's: a wrong radius in the configuration.
+const MAX_SCALE_ERROR: f64 = 0.2;
 
 type State = SVector<f64, N>;
 type Cov = SMatrix<f64, N, N>;
+
+/// What the wheels' scale stays through a new start of the pose.
+trait KeepsScale {
+    fn with_scale(self, scale: f64) -> Self;
+}
+
+impl KeepsScale for State {
+    fn with_scale(mut self, scale: f64) -> Self {
+        self[SCALE] = scale;
+        self
+    }
+}
 
 /// χ² gate, 2 degrees of freedom, 99.9 %.
 const GATE_2: f64 = 13.82;
@@ -109,14 +131,25 @@ pub struct MapFilterConfig {
     pub gnss_correlated_fraction: f64,
     /// The same for RTK-fixed fixes (multipath).
     pub rtk_correlated_fraction: f64,
-    /// That part's correlation time, s.
+    /// That part's correlation time, s: how long it lasts while the antenna stands.
     pub gnss_correlation_s: f64,
+    /// That part's correlation distance, m: multipath and the corrections' errors
+    /// decorrelate as the antenna moves, so it lasts `exp(-dt/time - ds/distance)`.
+    pub gnss_correlation_m: f64,
     /// Fixes disagreeing with the filter for this long (and at least [`MIN_RUN`] of them,
     /// agreeing with each other) mean the vehicle is elsewhere, whatever their quality.
     pub relocate_after: Duration,
 }
 
 impl MapFilterConfig {
+    /// How much of the slow error is left after `dt` seconds and `ds` metres of the
+    /// antenna's travel.
+    pub fn slow_correlation(&self, dt: f64, ds: f64) -> f64 {
+        (-dt.max(0.0) / self.gnss_correlation_s.max(1e-3)
+            - ds.max(0.0) / self.gnss_correlation_m.max(1e-3))
+        .exp()
+    }
+
     /// The slow fraction of a fix's error, by how far it is trusted (RTK fixed or not).
     pub fn slow_fraction(&self, trust: Trust) -> f64 {
         match trust {
@@ -136,8 +169,9 @@ impl Default for MapFilterConfig {
             yaw_per_s: 2e-5,
             bias_walk: 2e-5,
             gnss_correlated_fraction: 0.95,
-            rtk_correlated_fraction: 0.95,
+            rtk_correlated_fraction: 0.3,
             gnss_correlation_s: 60.0,
+            gnss_correlation_m: 20.0,
             relocate_after: Duration::from_secs(3),
         }
     }
@@ -234,7 +268,11 @@ impl MapFilter {
         Self {
             config,
             x: State::zeros(),
-            p: Cov::zeros(),
+            p: {
+                let mut p = Cov::zeros();
+                p[(SCALE, SCALE)] = SCALE_SIGMA * SCALE_SIGMA;
+                p
+            },
             started: false,
             odom: None,
             history: VecDeque::new(),
@@ -354,6 +392,7 @@ impl MapFilter {
     fn fresh_covariance(&self) -> Cov {
         let mut p = Cov::zeros();
         p[(DRIFT, DRIFT)] = self.p[(DRIFT, DRIFT)];
+        p[(SCALE, SCALE)] = self.p[(SCALE, SCALE)];
         p
     }
 
@@ -401,15 +440,21 @@ impl MapFilter {
             return;
         }
         let (s, c) = self.x[YAW].sin_cos();
-        self.x[X] += c * fwd - s * left;
-        self.x[Y] += s * fwd + c * left;
+        // The increment in the map frame, as the odom frame measured it.
+        let (mx, my) = (c * fwd - s * left, s * fwd + c * left);
+        let k = 1.0 + self.x[SCALE];
+        self.x[X] += k * mx;
+        self.x[Y] += k * my;
         self.x[YAW] = wrap(self.x[YAW] + turn);
         let mut f = Cov::identity();
-        f[(X, YAW)] = -(s * fwd + c * left);
-        f[(Y, YAW)] = c * fwd - s * left;
+        f[(X, YAW)] = -k * my;
+        f[(Y, YAW)] = k * mx;
+        f[(X, SCALE)] = mx;
+        f[(Y, SCALE)] = my;
         f[(YAW, DRIFT)] = dt;
         let mut q = Cov::zeros();
         q[(DRIFT, DRIFT)] = self.config.bias_walk.powi(2).max(self.shown_bias_walk) * dt;
+        q[(SCALE, SCALE)] = SCALE_WALK * SCALE_WALK * ds;
         let along = self.config.along_per_m * ds;
         let across = self.config.across_per_m * ds;
         // Along and across the direction of the increment, in the map frame.
@@ -425,11 +470,17 @@ impl MapFilter {
         // `decay_gnss_error` at each fix).
     }
 
-    fn decay_gnss_error(&mut self, dt: f64, sigma: (f64, f64)) {
-        if dt <= 0.0 {
+    /// The white part of a fix's variance (per axis, the larger), m².
+    fn white_var(&self, fix: &Fix) -> f64 {
+        let slow = self.config.slow_fraction(fix.trust);
+        (1.0 - slow * slow).max(0.0) * fix.sigma.0.max(fix.sigma.1).powi(2)
+    }
+
+    fn decay_gnss_error(&mut self, dt: f64, ds: f64, sigma: (f64, f64)) {
+        if dt <= 0.0 && ds <= 0.0 {
             return;
         }
-        let phi = (-dt / self.config.gnss_correlation_s.max(1e-3)).exp();
+        let phi = self.config.slow_correlation(dt, ds);
         let mut f = Cov::identity();
         f[(GE, GE)] = phi;
         f[(GN, GN)] = phi;
@@ -477,11 +528,28 @@ impl MapFilter {
         })
     }
 
+    /// The fastest turn rate of the odom poses kept from `from` to `to`, rad/s (0 with
+    /// none there).
+    pub fn max_turn_rate(&self, from: Timestamp, to: Timestamp) -> f64 {
+        let start = self.history.partition_point(|(t, _)| *t < from);
+        self.history
+            .range(start..)
+            .take_while(|(t, _)| *t <= to)
+            .map(|(_, o)| o.w.abs())
+            .fold(0.0, f64::max)
+    }
+
     /// The antenna's position in the odom frame at odom pose `o`.
     fn antenna_in_odom(&self, o: &OdomPose) -> (f64, f64) {
         let (ax, ay) = self.config.antenna;
         let (s, c) = o.yaw.sin_cos();
         (o.x + c * ax - s * ay, o.y + s * ax + c * ay)
+    }
+
+    /// How far the antenna moved between two fixes' times, m (along the odom frame).
+    fn travelled(&self, a: &Placed, b: &Placed) -> f64 {
+        let (pa, pb) = (self.antenna_in_odom(&a.odom), self.antenna_in_odom(&b.odom));
+        (pb.0 - pa.0).hypot(pb.1 - pa.1)
     }
 
     /// Whether fix `b` agrees with fix `a`: their displacement matches the odom frame's.
@@ -492,9 +560,8 @@ impl MapFilter {
         let (fx, fy) = (b.fix.en.0 - a.fix.en.0, b.fix.en.1 - a.fix.en.1);
         let dist = ox.hypot(oy);
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
-        let white = |p: &Placed| (1.0 - self.config.slow_fraction(p.fix.trust).powi(2)).max(0.0);
-        let fix_var = white(a) * a.fix.sigma.0.max(a.fix.sigma.1).powi(2)
-            + white(b) * b.fix.sigma.0.max(b.fix.sigma.1).powi(2)
+        let fix_var = self.white_var(&a.fix)
+            + self.white_var(&b.fix)
             // The slow part moves little between neighbours, but it moves.
             + self.slow_change_var(a, b);
         let slip_var = (SLIP_FRACTION * dist).powi(2);
@@ -516,7 +583,7 @@ impl MapFilter {
 
     fn slow_change_var(&self, a: &Placed, b: &Placed) -> f64 {
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
-        let phi = (-dt / self.config.gnss_correlation_s.max(1e-3)).exp();
+        let phi = self.config.slow_correlation(dt, self.travelled(a, b));
         let sa = self.config.slow_fraction(a.fix.trust) * a.fix.sigma.0.max(a.fix.sigma.1);
         let sb = self.config.slow_fraction(b.fix.trust) * b.fix.sigma.0.max(b.fix.sigma.1);
         sa * sa + sb * sb - 2.0 * phi * sa * sb
@@ -613,6 +680,7 @@ impl MapFilter {
         if let Some(previous) = previous {
             self.decay_gnss_error(
                 p.fix.t.saturating_since(previous.fix.t).as_secs_f64(),
+                self.travelled(&previous, &p),
                 slow_sigma,
             );
         }
@@ -642,7 +710,7 @@ impl MapFilter {
         // fix is carried to now along the odom path as it is.
         let (nx, ny) = (now.x - p.odom.x, now.y - p.odom.y);
         let (s0, c0) = p.odom.yaw.sin_cos();
-        self.x = State::zeros();
+        self.x = State::zeros().with_scale(self.x[SCALE]);
         self.x[X] = p.fix.en.0 - (c0 * ax - s0 * ay) + nx;
         self.x[Y] = p.fix.en.1 - (s0 * ax + c0 * ay) + ny;
         self.x[YAW] = now.yaw;
@@ -736,12 +804,19 @@ impl MapFilter {
         let Some((_, now)) = self.odom else {
             return;
         };
-        // The fix's antenna in the vehicle frame of now: back along the odom increment.
+        // The fix's antenna in the vehicle frame of now: back along the odom increment (as
+        // long as the wheels' scale makes it), then out along the lever arm.
         let (sn, cn) = now.yaw.sin_cos();
-        let (ao_x, ao_y) = self.antenna_in_odom(&p.odom);
-        let (dx, dy) = (ao_x - now.x, ao_y - now.y);
-        let v = (cn * dx + sn * dy, -sn * dx + cn * dy);
-        let travelled = (p.odom.x - now.x).hypot(p.odom.y - now.y);
+        let (dx, dy) = (p.odom.x - now.x, p.odom.y - now.y);
+        let back = (cn * dx + sn * dy, -sn * dx + cn * dy);
+        let (ax, ay) = self.config.antenna;
+        let (sl, cl) = wrap(p.odom.yaw - now.yaw).sin_cos();
+        let k = 1.0 + self.x[SCALE];
+        let v = (
+            k * back.0 + cl * ax - sl * ay,
+            k * back.1 + sl * ax + cl * ay,
+        );
+        let travelled = dx.hypot(dy);
         let (s, c) = self.x[YAW].sin_cos();
         let hx = SVector::<f64, 2>::new(
             self.x[X] + c * v.0 - s * v.1 + self.x[GE],
@@ -754,6 +829,8 @@ impl MapFilter {
         h[(1, YAW)] = c * v.0 - s * v.1;
         h[(0, GE)] = 1.0;
         h[(1, GN)] = 1.0;
+        h[(0, SCALE)] = c * back.0 - s * back.1;
+        h[(1, SCALE)] = s * back.0 + c * back.1;
         let white = (1.0 - slow * slow).max(0.0);
         // The odom increment back to the fix carries its own uncertainty.
         let back = self.config.along_per_m * travelled;
@@ -763,7 +840,9 @@ impl MapFilter {
         let z = SVector::<f64, 2>::new(p.fix.en.0, p.fix.en.1);
         let y = z - hx;
         let heading_known = self.yaw_sigma() <= HEADING_KNOWN_RAD;
-        let kept: &[usize] = if heading_known { &[] } else { &[YAW] };
+        // Until the heading is known, the fixes place the vehicle but say nothing of the
+        // heading or of the wheels' scale along it.
+        let kept: &[usize] = if heading_known { &[] } else { &[YAW, SCALE] };
         let s_mat = h * self.p * h.transpose() + r;
         let nis = s_mat
             .try_inverse()
@@ -823,6 +902,7 @@ impl MapFilter {
         }
         self.x += k * y;
         self.x[YAW] = wrap(self.x[YAW]);
+        self.x[SCALE] = self.x[SCALE].clamp(-MAX_SCALE_ERROR, MAX_SCALE_ERROR);
         let i_kh = Cov::identity() - k * h;
         self.p = i_kh * self.p * i_kh.transpose() + k * r * k.transpose();
         self.p = (self.p + self.p.transpose()) * 0.5;
@@ -875,7 +955,7 @@ impl MapFilter {
     /// Places the map pose by hand (x, y in m, yaw in rad, with their 1σ), forgetting the
     /// fixes held or fitted so far.
     pub fn set_pose(&mut self, pose: (f64, f64, f64), sigma: (f64, f64)) {
-        self.x = State::zeros();
+        self.x = State::zeros().with_scale(self.x[SCALE]);
         self.x[X] = pose.0;
         self.x[Y] = pose.1;
         self.x[YAW] = wrap(pose.2);

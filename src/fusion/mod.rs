@@ -1,6 +1,8 @@
 //! Localisation: geodesy, the `odom` frame's dead reckoning, the map filter over it and its
 //! estimators.
 
+pub mod course;
+pub mod epoch_clock;
 pub mod geodesy;
 pub mod gnss_only;
 pub mod gyro_drift;

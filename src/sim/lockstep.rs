@@ -92,11 +92,12 @@ impl OdomError {
 
     fn of(plant: &PlantConfig) -> Self {
         let slip = &plant.slip;
-        // Random slip, redrawn every 100 ms on each wheel: a random walk in distance.
+        // Random slip, redrawn every 100 ms on each wheel: a random walk in distance. The
+        // systematic slip is a scale the map filter estimates; what its estimate leaves grows
+        // with the distance, not its root: matched over the span at a tenth of the slip.
         let random = slip.sigma.powi(2) / 2.0 * 0.1 * Self::SPEED_MPS;
-        // Systematic slip grows with the distance, not its root: matched over the span.
         let systematic =
-            ((slip.bias[0] + slip.bias[1]) / 2.0).powi(2) * Self::SPEED_MPS * Self::SPAN_S;
+            (0.1 * (slip.bias[0] + slip.bias[1]) / 2.0).powi(2) * Self::SPEED_MPS * Self::SPAN_S;
         // The gyro's white noise is its angle random walk; its bias's walk is configured as
         // such (`gyro_bias_walk`).
         let imu = &plant.imu;

@@ -27,6 +27,7 @@ use crate::devices::bms::ChargeState;
 use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
+use crate::fusion::epoch_clock::EpochClock;
 use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
@@ -42,10 +43,15 @@ pub use status::{
     PoseCovariance, PoseReport, VehicleStatus,
 };
 
-/// A course over ground is never trusted beyond this, degrees ...
-const MIN_COURSE_SIGMA_DEG: f64 = 1.0;
-/// ... and not used when less certain than this.
-const MAX_COURSE_SIGMA_DEG: f64 = 15.0;
+/// How far an epoch of `quality` is trusted: RTK fixed is believed over the wheels (and only
+/// it may teach the dead reckoning); a lesser fix's step is its own error.
+fn trust_of(quality: FixQuality) -> Trust {
+    if quality == FixQuality::RtkFixed {
+        Trust::OverWheels
+    } else {
+        Trust::UnderWheels
+    }
+}
 
 /// A receiver's typical speed accuracy (1σ, m/s) at a fix quality, when the configuration
 /// gives none: NMEA carries none. Speed comes from Doppler, which RTK does not sharpen;
@@ -425,6 +431,8 @@ pub struct Vehicle {
     odometry: Option<Odometry>,
     /// Receive times of the GNSS data already given to the localiser.
     fed_gnss: (Option<Timestamp>, Option<Timestamp>, Option<Timestamp>),
+    /// The GNSS epochs' arrivals against their UTC stamps.
+    epoch_clock: EpochClock,
     /// The host's load, when sampled.
     host: Option<HostUsage>,
     /// Closed-loop moves; `None` without drives.
@@ -470,6 +478,7 @@ impl Vehicle {
                 .chassis
                 .map(|c| Odometry::new(c.track_m, config.localizer.gyro_bias_walk)),
             fed_gnss: (None, None, None),
+            epoch_clock: EpochClock::default(),
             host: None,
             motion: config.motion.map(Motion::new),
             mission: None,
@@ -1348,7 +1357,15 @@ impl Vehicle {
     /// Gives the localiser what is new in the fix: heading, course, position.
     fn feed_gnss(&mut self, fix: &GnssFix) {
         let latency = self.localizer.config().gnss_latency;
+        if let Some(p) = fix.position
+            && self.fed_gnss.2 != Some(p.rx)
+        {
+            self.epoch_clock.observe(p.rx, fix.utc);
+        }
+        // The epoch's time: its arrival without the link's jitter, less the latency.
+        let clock = self.epoch_clock;
         let at = |rx: Timestamp| {
+            let rx = clock.steady(rx, fix.utc);
             Timestamp::from_nanos(rx.as_nanos().saturating_sub(latency.as_nanos() as u64))
         };
         if let Some(h) = fix.heading_deg
@@ -1361,6 +1378,7 @@ impl Vehicle {
                 Measurement::Heading {
                     yaw: yaw_of_heading_deg(h.value - self.config.heading_offset_deg),
                     sigma,
+                    trust: trust_of(fix.quality),
                 },
             );
         }
@@ -1370,25 +1388,23 @@ impl Vehicle {
             self.fed_gnss.1 = Some(v.rx);
             let speed = v.value.speed_mps;
             // The course's 1σ follows from the receiver's speed accuracy at this fix
-            // quality; a course too uncertain to help (slow, or a poor fix) is not used.
+            // quality, or its scatter when larger; the localiser models the antenna's motion
+            // (turning, reversing) and drops a course too uncertain to help.
             let speed_sigma = self
                 .localizer
                 .config()
                 .gnss_velocity_sigma_mps
                 .unwrap_or_else(|| typical_speed_sigma(fix.quality));
-            let sigma = speed_sigma
-                .atan2(speed)
-                .max(MIN_COURSE_SIGMA_DEG.to_radians());
             if let Some(course) = v.value.course_deg
                 && speed >= self.localizer.config().cog_min_speed_mps
-                && sigma <= MAX_COURSE_SIGMA_DEG.to_radians()
             {
-                // The localiser models the antenna's motion (turning, reversing).
                 self.localizer.add(
                     at(v.rx),
                     Measurement::Course {
                         yaw: yaw_of_heading_deg(course),
-                        sigma,
+                        speed,
+                        speed_sigma,
+                        trust: trust_of(fix.quality),
                     },
                 );
             }
@@ -1439,12 +1455,7 @@ impl Vehicle {
             Measurement::Position {
                 en: (enu.x, enu.y),
                 sigma,
-                // RTK fixed is believed over the wheels; a lesser fix's step is its own error.
-                trust: if fix.quality == FixQuality::RtkFixed {
-                    Trust::OverWheels
-                } else {
-                    Trust::UnderWheels
-                },
+                trust: trust_of(fix.quality),
             },
         );
     }

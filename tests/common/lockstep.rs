@@ -137,17 +137,3 @@ impl SimRun {
         self.sink.status.as_deref().expect("a status")
     }
 }
-
-/// Writes everything the simulation records into a recording folder.
-pub struct Recorder {
-    /// The folder's writer.
-    pub writer: chassisd::record::RecordingWriter,
-}
-
-impl Sink for Recorder {
-    fn record(&mut self, record: &Record) {
-        self.writer.write(record).expect("recording written");
-    }
-
-    fn output(&mut self, _: EngineOutput) {}
-}

@@ -66,17 +66,43 @@ pub fn shared_gnss_dir() -> PathBuf {
     dir
 }
 
-/// Every `*.log` with a gpsd `.log.chk` beside it.
-pub fn shared_gnss_logs() -> Vec<PathBuf> {
+/// The shared receiver logs with gpsd's decoding beside them (`X.log` with `X.log.chk`),
+/// sorted; `nmea` picks those whose receiver sends NMEA positions (a GGA, RMC or GNS
+/// sentence), or those that hold none (binary protocols only: u-blox UBX, which issue 49
+/// brings). The Unicore capture, one sentence of each kind rather than a log, has no `.chk`.
+fn shared_logs_with_chk(nmea: bool) -> Vec<PathBuf> {
     let dir = shared_gnss_dir();
     let mut logs: Vec<PathBuf> = std::fs::read_dir(&dir)
         .expect("readable shared data folder")
         .map(|e| e.expect("directory entry").path())
         .filter(|p| p.extension().is_some_and(|e| e == "log"))
+        .filter(|p| p.with_extension("log.chk").is_file())
+        .filter(|p| sends_nmea_positions(p) == nmea)
         .collect();
     logs.sort();
-    assert!(!logs.is_empty(), "no *.log files in {}", dir.display());
+    assert!(!logs.is_empty(), "no such *.log files in {}", dir.display());
     logs
+}
+
+/// Whether a log holds an NMEA position sentence.
+fn sends_nmea_positions(log: &Path) -> bool {
+    let bytes = std::fs::read(log).expect("readable log");
+    bytes.split(|b| *b == b'\n').any(|line| {
+        line.len() > 7
+            && line[0] == b'$'
+            && line[1..3].iter().all(u8::is_ascii_uppercase)
+            && [&b"GGA,"[..], b"RMC,", b"GNS,"].contains(&&line[3..7])
+    })
+}
+
+/// The shared receiver logs whose receivers send NMEA, with gpsd's decoding beside them.
+pub fn shared_gnss_logs() -> Vec<PathBuf> {
+    shared_logs_with_chk(true)
+}
+
+/// The shared receiver logs in binary protocols only, with gpsd's decoding beside them.
+pub fn shared_binary_gnss_logs() -> Vec<PathBuf> {
+    shared_logs_with_chk(false)
 }
 
 /// Path of the chassisd binary under test.
@@ -201,31 +227,6 @@ pub fn rss_with_children_kb(pid: u32) -> u64 {
             .filter_map(|p| p.parse().ok())
             .map(rss)
             .sum::<u64>()
-}
-
-/// Columns `names` of a CSV file with a header row (the shared data's robot recordings).
-pub fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
-    chassisd::bench::husky::columns(path, names).expect("shared data file")
-}
-
-/// A robot's wheel odometry yaw rate over its gyro's: least squares over the samples turning
-/// faster than 0.2 rad/s (`odom` rows t, vx, wz; `gyro` rows t, yaw rate).
-pub fn wheel_to_gyro_ratio(odom: &[Vec<f64>], gyro: &[Vec<f64>]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for o in odom {
-        let g = sample_at(gyro, o[0])[1];
-        if g.abs() > 0.2 {
-            num += o[2] * g;
-            den += g * g;
-        }
-    }
-    num / den
-}
-
-/// The last sample at or before `t` (samples sorted by their first column).
-pub fn sample_at(samples: &[Vec<f64>], t: f64) -> &[f64] {
-    let i = samples.partition_point(|s| s[0] <= t);
-    &samples[i.saturating_sub(1)]
 }
 
 /// Runs `chassisd ARGS` (a `bench`), checks that its last line is JSON with `"pass": true`

@@ -68,7 +68,7 @@ impl std::fmt::Display for Table {
         writeln!(f, "|---|---|---|---|---|---|")?;
         for x in &self.figures {
             let value = |v: f64| match x.unit {
-                "m" if v.abs() < 0.01 && v != 0.0 => format!("{v:.1e} m"),
+                "m" | "rad" if v.abs() < 0.01 && v != 0.0 => format!("{v:.1e} {}", x.unit),
                 "m" => format!("{v:.3} m"),
                 unit => format!("{v:.1} {unit}"),
             };
