@@ -230,6 +230,7 @@ pub fn run(data: &HuskyData, config: MapFilterConfig, variant: Variant) -> Run {
                     en: (e, n),
                     sigma: (DGPS_SIGMA_M, DGPS_SIGMA_M),
                     trust: Trust::UnderWheels,
+                    corrected: true,
                 });
             }
         }

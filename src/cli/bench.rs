@@ -51,6 +51,10 @@ enum BenchCommand {
         /// Replays run on this many threads.
         #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
         jobs: u32,
+        /// Write each vehicle's whole run as CSV into this folder (time, map pose, heading
+        /// 1σ, the scored point and its truth), to plot.
+        #[arg(long)]
+        trace: Option<PathBuf>,
     },
     /// Score the fusion filter on scripted drives of the simulated vehicle against its
     /// truth; the last line is a JSON object with every figure and "pass". Exits with
@@ -187,8 +191,12 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             );
             Ok(true)
         }
-        BenchCommand::Real { data, jobs } => {
-            let table = chassisd::bench::real::run(&data, jobs as usize)?;
+        BenchCommand::Real { data, jobs, trace } => {
+            let options = chassisd::bench::real::Options {
+                workers: jobs as usize,
+                trace,
+            };
+            let table = chassisd::bench::real::run(&data, &options)?;
             print!("{table}");
             let pass = table.pass();
             println!(

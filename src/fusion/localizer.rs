@@ -136,6 +136,8 @@ pub enum Measurement {
         sigma: (f64, f64),
         /// RTK (over the wheels) or not.
         trust: Trust,
+        /// Whether differential corrections shaped it ([`Fix::corrected`]).
+        corrected: bool,
     },
     /// Dual-antenna heading as ENU yaw, rad.
     Heading {
@@ -502,7 +504,12 @@ impl Localizer {
                     self.restart_drift(t);
                 }
             }
-            Measurement::Position { en, sigma, trust } => {
+            Measurement::Position {
+                en,
+                sigma,
+                trust,
+                corrected,
+            } => {
                 self.gnss_only.fix(t, en, sigma);
                 let started = self.filter.is_started();
                 let outcome = self.filter.fix(Fix {
@@ -510,6 +517,7 @@ impl Localizer {
                     en,
                     sigma,
                     trust,
+                    corrected,
                 });
                 if outcome == FixOutcome::Taken
                     && let Some(o) = self.filter.odom_pose_at(t)

@@ -142,12 +142,15 @@ pub struct MapFilterConfig {
 }
 
 impl MapFilterConfig {
-    /// How much of the slow error is left after `dt` seconds and `ds` metres of the
-    /// antenna's travel.
-    pub fn slow_correlation(&self, dt: f64, ds: f64) -> f64 {
-        (-dt.max(0.0) / self.gnss_correlation_s.max(1e-3)
-            - ds.max(0.0) / self.gnss_correlation_m.max(1e-3))
-        .exp()
+    /// How much of the slow error is left after `dt` seconds and, for a corrected fix, `ds`
+    /// metres of the antenna's travel.
+    pub fn slow_correlation(&self, dt: f64, ds: f64, corrected: bool) -> f64 {
+        let moved = if corrected {
+            ds.max(0.0) / self.gnss_correlation_m.max(1e-3)
+        } else {
+            0.0
+        };
+        (-dt.max(0.0) / self.gnss_correlation_s.max(1e-3) - moved).exp()
     }
 
     /// The slow fraction of a fix's error, by how far it is trusted (RTK fixed or not).
@@ -188,6 +191,11 @@ pub struct Fix {
     pub sigma: (f64, f64),
     /// How far it is trusted over the wheels.
     pub trust: Trust,
+    /// Whether differential corrections shaped it (DGPS/SBAS, RTK): what is left of its slow
+    /// error is their residuals and multipath, which change as the antenna moves. An
+    /// uncorrected fix's slow error is the atmosphere's and the satellites' orbits and
+    /// clocks, which only time changes.
+    pub corrected: bool,
 }
 
 /// What became of a fix.
@@ -476,11 +484,11 @@ impl MapFilter {
         (1.0 - slow * slow).max(0.0) * fix.sigma.0.max(fix.sigma.1).powi(2)
     }
 
-    fn decay_gnss_error(&mut self, dt: f64, ds: f64, sigma: (f64, f64)) {
+    fn decay_gnss_error(&mut self, dt: f64, ds: f64, sigma: (f64, f64), corrected: bool) {
         if dt <= 0.0 && ds <= 0.0 {
             return;
         }
-        let phi = self.config.slow_correlation(dt, ds);
+        let phi = self.config.slow_correlation(dt, ds, corrected);
         let mut f = Cov::identity();
         f[(GE, GE)] = phi;
         f[(GN, GN)] = phi;
@@ -583,7 +591,11 @@ impl MapFilter {
 
     fn slow_change_var(&self, a: &Placed, b: &Placed) -> f64 {
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
-        let phi = self.config.slow_correlation(dt, self.travelled(a, b));
+        let phi = self.config.slow_correlation(
+            dt,
+            self.travelled(a, b),
+            a.fix.corrected && b.fix.corrected,
+        );
         let sa = self.config.slow_fraction(a.fix.trust) * a.fix.sigma.0.max(a.fix.sigma.1);
         let sb = self.config.slow_fraction(b.fix.trust) * b.fix.sigma.0.max(b.fix.sigma.1);
         sa * sa + sb * sb - 2.0 * phi * sa * sb
@@ -682,6 +694,7 @@ impl MapFilter {
                 p.fix.t.saturating_since(previous.fix.t).as_secs_f64(),
                 self.travelled(&previous, &p),
                 slow_sigma,
+                p.fix.corrected,
             );
         }
         if self.yaw_sigma() > FIT_YAW_SIGMA {
@@ -1108,6 +1121,7 @@ mod tests {
             en,
             sigma: (0.02, 0.02),
             trust: Trust::OverWheels,
+            corrected: true,
         }
     }
 
@@ -1295,6 +1309,7 @@ mod tests {
                 en: truth,
                 sigma: (50.0, 50.0),
                 trust: Trust::UnderWheels,
+                corrected: true,
             })
         });
         let (odom, fixes) = f.memory();

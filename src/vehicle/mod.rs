@@ -1456,6 +1456,10 @@ impl Vehicle {
                 en: (enu.x, enu.y),
                 sigma,
                 trust: trust_of(fix.quality),
+                corrected: matches!(
+                    fix.quality,
+                    FixQuality::Dgps | FixQuality::RtkFloat | FixQuality::RtkFixed
+                ),
             },
         );
     }

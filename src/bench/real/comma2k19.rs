@@ -25,7 +25,7 @@ use crate::sim::plant::{ForcedMotion, PlantConfig};
 
 use super::data::{columns, sample_at};
 use super::recording::{self, Epoch, Forced, Tick, at, distance};
-use super::{Figure, Scratch, parallel};
+use super::{Figure, Options, Scratch, parallel};
 
 /// The rear track, m (the README).
 const TRACK_M: f64 = 1.57;
@@ -311,7 +311,8 @@ impl Data {
 }
 
 /// The figures of `dir`.
-pub fn figures(dir: &Path, workers: usize) -> Result<Vec<Figure>> {
+pub fn figures(dir: &Path, options: &Options) -> Result<Vec<Figure>> {
+    let workers = options.workers;
     let data = Data::load(dir)?;
     let forced = data.forced()?;
     let scratch = Scratch::new("comma")?;
@@ -319,6 +320,15 @@ pub fn figures(dir: &Path, workers: usize) -> Result<Vec<Figure>> {
     recording::write(scratch.path(), &forced, &clean)?;
     let dir = scratch.path();
     let full = recording::replay(dir, &clean)?;
+    if let Some(path) = options.trace_file("comma2k19-rav4") {
+        recording::write_trace(
+            &path,
+            &full,
+            at(data.first_fix_s()),
+            (ANTENNA_X_M, 0.0),
+            |t| data.reference_at(data.s_of(t)),
+        )?;
+    }
     let figure = |name: String, value: f64, target: f64, naive: Option<f64>| Figure {
         vehicle: "comma2k19-rav4".into(),
         name,

@@ -21,7 +21,7 @@ use crate::time::Timestamp;
 
 use super::data::{columns, sample_at, wheel_to_gyro_ratio};
 use super::recording::{self, Epoch, Forced, Tick, at, distance, tick_at};
-use super::{Figure, Scratch, parallel};
+use super::{Figure, Options, Scratch, parallel};
 use crate::fusion::planar::wrap;
 
 /// The Husky's track, m (the data's README): the controller's separation.
@@ -252,7 +252,8 @@ pub fn write_recording(dir: &Path, course: Course, out: &Path) -> Result<Vec<Rec
 }
 
 /// The figures of `dir` with `course`.
-pub fn figures(dir: &Path, course: Course, workers: usize) -> Result<Vec<Figure>> {
+pub fn figures(dir: &Path, course: Course, options: &Options) -> Result<Vec<Figure>> {
+    let workers = options.workers;
     let data = Data::load(dir)?;
     let vehicle = match course {
         Course::None => "husky-test1",
@@ -265,6 +266,15 @@ pub fn figures(dir: &Path, course: Course, workers: usize) -> Result<Vec<Figure>
         return Err(BenchError::Failed("husky-test1: no fixes".into()));
     };
     let full = recording::replay(dir, &clean)?;
+    if let Some(path) = options.trace_file(vehicle) {
+        // Scored against the latest fix.
+        let fixes: Vec<(Timestamp, (f64, f64))> =
+            data.fixes.iter().map(|f| (at(f.s), f.en)).collect();
+        recording::write_trace(&path, &full, data.after_first(0.0), (0.0, 0.0), |t| {
+            let i = fixes.partition_point(|(ft, _)| *ft <= t);
+            fixes.get(i.checked_sub(1)?).map(|(_, en)| *en)
+        })?;
+    }
     let figure = |name: String, value: f64, target: f64, naive: Option<f64>, unit| Figure {
         vehicle: vehicle.into(),
         name,

@@ -139,8 +139,26 @@ pub fn parallel<T: Send>(workers: usize, jobs: Vec<Box<dyn FnOnce() -> T + Send 
     results.into_iter().map(|(_, r)| r).collect()
 }
 
-/// Every vehicle of `data` (the shared data's `ekf/` folder), on `workers` threads.
-pub fn run(data: &Path, workers: usize) -> Result<Table> {
+/// How `bench real` runs.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// Replays run on this many threads.
+    pub workers: usize,
+    /// Each vehicle's whole run is written here as CSV (`<vehicle>.csv`), when given.
+    pub trace: Option<PathBuf>,
+}
+
+impl Options {
+    /// Where the trace of `name` goes, if traces are wanted.
+    pub fn trace_file(&self, name: &str) -> Option<PathBuf> {
+        self.trace
+            .as_ref()
+            .map(|dir| dir.join(format!("{}.csv", name.replace([' ', ','], "_"))))
+    }
+}
+
+/// Every vehicle of `data` (the shared data's `ekf/` folder).
+pub fn run(data: &Path, options: &Options) -> Result<Table> {
     let folder = |name: &str| {
         let dir = data.join(name);
         if dir.is_dir() {
@@ -153,19 +171,22 @@ pub fn run(data: &Path, workers: usize) -> Result<Table> {
         }
     };
     let mut table = Table::default();
+    if let Some(dir) = &options.trace {
+        std::fs::create_dir_all(dir).map_err(invalid(format!("creating {}", dir.display())))?;
+    }
     table.figures.extend(husky_test1::figures(
         &folder("husky-test1")?,
         husky_test1::Course::None,
-        workers,
+        options,
     )?);
     table.figures.extend(husky_test1::figures(
         &folder("husky-test1")?,
         husky_test1::Course::FromFixes,
-        workers,
+        options,
     )?);
     table
         .figures
-        .extend(comma2k19::figures(&folder("comma2k19-rav4")?, workers)?);
+        .extend(comma2k19::figures(&folder("comma2k19-rav4")?, options)?);
     table
         .figures
         .extend(jackal_test2::figures(&folder("jackal-test2")?)?);

@@ -229,6 +229,33 @@ pub fn replay(dir: &Path, gnss: &[Record]) -> Result<Vec<Tick>> {
     Ok(ticks)
 }
 
+/// Writes every tenth tick of a run as CSV at `path`: the time (s from `from`), the map pose
+/// (x, y, yaw), its heading's 1σ, the point the run is scored at (`point` of the pose) and
+/// what it is scored against (`truth` at the tick), for a person to plot.
+pub fn write_trace(
+    path: &Path,
+    ticks: &[Tick],
+    from: Timestamp,
+    point: (f64, f64),
+    truth: impl Fn(Timestamp) -> Option<(f64, f64)>,
+) -> Result<()> {
+    let mut text = String::from("t_s,x,y,yaw,yaw_sigma,point_x,point_y,truth_x,truth_y\n");
+    for k in ticks.iter().step_by(10) {
+        let (Some((x, y, yaw)), Some(p)) = (k.map, k.point(point)) else {
+            continue;
+        };
+        let s = (k.t.as_micros() as f64 - from.as_micros() as f64) * 1e-6;
+        let (tx, ty) = truth(k.t).unwrap_or((f64::NAN, f64::NAN));
+        text += &format!(
+            "{s:.3},{x:.4},{y:.4},{yaw:.6},{:.6},{:.4},{:.4},{tx:.4},{ty:.4}\n",
+            k.yaw_sigma.unwrap_or(f64::NAN),
+            p.0,
+            p.1
+        );
+    }
+    std::fs::write(path, text).map_err(invalid(format!("writing {}", path.display())))
+}
+
 /// The last tick at or before `t` (the first when `t` is earlier).
 pub fn tick_at(ticks: &[Tick], t: Timestamp) -> Option<&Tick> {
     let i = ticks.partition_point(|k| k.t <= t);
