@@ -60,6 +60,7 @@ fn drive(seconds: f64, drift: f64, rtk: bool, headings: bool) -> (Localizer, Vec
                     en,
                     sigma: (sigma, sigma),
                     trust,
+                    corrected: true,
                 },
             );
             if headings {
@@ -132,6 +133,7 @@ fn without_wheels_the_fixes_place_the_vehicle_until_they_stop() {
                 en: (3.0, 4.0 + s),
                 sigma: (0.02, 0.02),
                 trust: Trust::OverWheels,
+                corrected: true,
             },
         );
     }
