@@ -120,7 +120,7 @@ fn plant_errors(plant: &PlantConfig, dt: f64, seed: u64) -> Vec<(f64, f64, f64)>
     let mut process = GnssErrorProcess::new(
         dt,
         g.correlated_fraction,
-        g.correlation_time_s,
+        (g.correlation_time_s, g.correlation_distance_m),
         faults,
         seed,
     );
@@ -130,6 +130,8 @@ fn plant_errors(plant: &PlantConfig, dt: f64, seed: u64) -> Vec<(f64, f64, f64)>
         .map(|i| {
             let e = process.epoch(
                 FixQuality::Dgps,
+                // The Husky's pace: about 1 m/s.
+                dt,
                 |q| plant.sigma(q),
                 |s| normal(&mut rng, s),
             );

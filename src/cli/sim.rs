@@ -78,7 +78,12 @@ pub struct Args {
 pub fn execute(a: Args) -> anyhow::Result<bool> {
     let mut plant = load_plant(a.plant)?;
     plant.calibration = load_calibration(a.calibration.as_deref())?;
-    let scenario = a.scenario.map(|name| find_scenario(&name)).transpose()?;
+    // Driven at the plant's own speed (a car drives the laps at ten times a mower's).
+    let scenario = a
+        .scenario
+        .map(|name| find_scenario(&name))
+        .transpose()?
+        .map(|s| s.at_speed(plant.drive.scenario_speed));
     if a.fast {
         let options = FastOptions {
             plant,

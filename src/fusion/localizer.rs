@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use nalgebra::Vector3;
 
-use super::course::{self, CourseNoise};
+use super::course::{self, CourseLag, CourseNoise};
 use super::geodesy::{Enu, Geodetic};
 use super::gnss_only::GnssOnly;
 use super::gyro_drift::{Drift, GyroDrift};
@@ -234,6 +234,8 @@ pub struct Localizer {
     gnss_only: GnssOnly,
     /// The courses' scatter against the gyro.
     course_noise: CourseNoise,
+    /// The courses' lag against the gyro.
+    course_lag: CourseLag,
     /// What happened that an operator should read in the log, until taken.
     events: Vec<String>,
 }
@@ -344,6 +346,7 @@ impl Localizer {
             map: MapFrame::default(),
             gnss_only: GnssOnly::default(),
             course_noise: CourseNoise::default(),
+            course_lag: CourseLag::default(),
             events: Vec::new(),
         }
     }
@@ -585,10 +588,17 @@ impl Localizer {
             return;
         };
         self.course_noise.observe(t, heading, then.yaw, speed, turn);
-        let sigma = self
+        self.course_lag.observe(t, heading, then.yaw, then.w);
+        // Late by the lag the turns showed: the heading has turned on since.
+        let lag = self.course_lag.correction(then.w);
+        let heading = wrap(heading + lag.add);
+        let noise = self
             .course_noise
-            .sigma(speed_sigma, speed, turn)
+            .sigma(speed_sigma, speed)
             .max(MIN_COURSE_SIGMA);
+        let Some(sigma) = lag.sigma(noise, turn) else {
+            return;
+        };
         if sigma <= MAX_COURSE_SIGMA {
             // A course is the antenna's direction of motion, late and smoothed by the
             // receiver: in a turn it is not the body's heading, so only an RTK-fixed

@@ -93,7 +93,7 @@ const MAX_HELD: usize = 256;
 /// (2 degrees of freedom, 99.99 %) ...
 const AGREE_GATE: f64 = 18.4;
 /// ... where the wheels may have slipped by this fraction of the distance between them ...
-const SLIP_FRACTION: f64 = 0.3;
+const SLIP_FRACTION: f64 = 0.1;
 /// ... and the odom frame's heading may have turned by this much per second between them, rad
 /// (an unknown gyro bias).
 const AGREE_YAW_RATE: f64 = 0.01;
@@ -563,6 +563,12 @@ impl MapFilter {
     /// Whether fix `b` agrees with fix `a`: their displacement matches the odom frame's.
     /// With the heading unknown only the lengths are compared.
     fn agree(&self, a: &Placed, b: &Placed) -> bool {
+        self.disagreement(a, b) <= 1.0
+    }
+
+    /// How far fix `b` is from agreeing with fix `a`: the squared distance between their
+    /// displacement and the odom frame's, over the agreement's gate (at most 1: they agree).
+    fn disagreement(&self, a: &Placed, b: &Placed) -> f64 {
         let (pa, pb) = (self.antenna_in_odom(&a.odom), self.antenna_in_odom(&b.odom));
         let (ox, oy) = (pb.0 - pa.0, pb.1 - pa.1);
         let (fx, fy) = (b.fix.en.0 - a.fix.en.0, b.fix.en.1 - a.fix.en.1);
@@ -581,11 +587,11 @@ impl MapFilter {
             let (mx, my) = (c * ox - s * oy, s * ox + c * oy);
             let var = fix_var + slip_var + turn_var + (self.yaw_sigma() * dist).powi(2);
             let d2 = ((fx - mx).powi(2) + (fy - my).powi(2)) / var;
-            d2 <= AGREE_GATE
+            d2 / AGREE_GATE
         } else {
             let var = fix_var + slip_var + turn_var;
             let d = fx.hypot(fy) - dist;
-            d * d / var <= AGREE_GATE / 2.0
+            d * d / var / (AGREE_GATE / 2.0)
         }
     }
 
@@ -611,11 +617,17 @@ impl MapFilter {
             return FixOutcome::NoOdom;
         };
         let placed = Placed { fix, odom };
-        // Continues the accepted run?
-        if self
+        // Continues the accepted run? Not when it agrees better with a run held since: the
+        // accepted run's last fix may lie seconds back, where the wheels' slip allows much,
+        // and a jump that lasts would creep in through that allowance.
+        let from_accepted = self
             .last_accepted
-            .is_some_and(|last| self.agree(&last, &placed))
-        {
+            .map_or(f64::INFINITY, |last| self.disagreement(&last, &placed));
+        let from_held = self
+            .held
+            .last()
+            .map_or(f64::INFINITY, |last| self.disagreement(last, &placed));
+        if from_accepted <= 1.0 && from_accepted <= from_held {
             self.drop_held();
             self.take(placed);
             return FixOutcome::Taken;
@@ -624,7 +636,7 @@ impl MapFilter {
         // agrees with the first starts a new run (the old one is dropped); a lone stray is
         // dropped when the next fix disagrees with it, so one wild fix never breaks a run.
         match self.held.last().copied() {
-            Some(last_held) if self.agree(&last_held, &placed) => {
+            Some(_) if from_held <= 1.0 => {
                 if self.stray.take().is_some() {
                     self.stats.dropped += 1;
                 }

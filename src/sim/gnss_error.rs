@@ -78,6 +78,11 @@ pub struct GnssFaults {
     pub wild_per_hour: f64,
     /// How far off, m: uniform between the two.
     pub wild_m: [f64; 2],
+    /// How late the receiver's velocity (speed and course) is beyond its latency, s: a
+    /// plain receiver's Doppler filter or position differences lag the motion by 0.1–0.5 s.
+    pub velocity_lag_s: f64,
+    /// Its smoothing of the velocity, time constant s (0: none).
+    pub velocity_smoothing_s: f64,
 }
 
 /// One epoch's error.
@@ -98,6 +103,8 @@ pub struct GnssErrorProcess {
     dt: f64,
     correlated_fraction: PerQuality,
     correlation_time_s: f64,
+    /// The slow part of corrected fixes (DGPS, RTK) decorrelates over this distance too, m.
+    correlation_distance_m: Option<f64>,
     faults: GnssFaults,
     /// The slow part, unit variance per axis.
     slow: (f64, f64),
@@ -113,7 +120,7 @@ impl GnssErrorProcess {
     pub fn new(
         dt: f64,
         correlated_fraction: PerQuality,
-        correlation_time_s: f64,
+        (correlation_time_s, correlation_distance_m): (f64, Option<f64>),
         faults: GnssFaults,
         seed: u64,
     ) -> Self {
@@ -121,6 +128,7 @@ impl GnssErrorProcess {
             dt,
             correlated_fraction,
             correlation_time_s,
+            correlation_distance_m,
             faults,
             slow: (0.0, 0.0),
             smoothed: (0.0, 0.0),
@@ -130,17 +138,29 @@ impl GnssErrorProcess {
         }
     }
 
-    /// The next epoch's error at `quality`, whose σ per axis `sigma_of` gives. `noise` draws
-    /// a normal number of a σ from the plant's generator (the slow and white parts).
+    /// The next epoch's error at `quality`, whose σ per axis `sigma_of` gives, the antenna
+    /// having moved `moved_m` since the last. `noise` draws a normal number of a σ from the
+    /// plant's generator (the slow and white parts).
     pub fn epoch(
         &mut self,
         quality: FixQuality,
+        moved_m: f64,
         sigma_of: impl Fn(FixQuality) -> f64,
         mut noise: impl FnMut(f64) -> f64,
     ) -> EpochError {
         let quality = self.quality(quality);
         let sigma = sigma_of(quality);
-        let phi = (-self.dt / self.correlation_time_s).exp();
+        // Corrections' residuals and multipath change as the antenna moves; an uncorrected
+        // fix's atmosphere and orbits only with time.
+        let corrected = matches!(
+            quality,
+            FixQuality::Dgps | FixQuality::RtkFloat | FixQuality::RtkFixed
+        );
+        let by_distance = match self.correlation_distance_m {
+            Some(d) if corrected && d > 0.0 => moved_m.max(0.0) / d,
+            _ => 0.0,
+        };
+        let phi = (-self.dt / self.correlation_time_s - by_distance).exp();
         let drive = (1.0 - phi * phi).sqrt();
         self.slow = (
             phi * self.slow.0 + noise(drive),
@@ -244,10 +264,10 @@ mod tests {
     }
 
     fn run(faults: GnssFaults, quality: FixQuality, epochs: usize) -> Vec<EpochError> {
-        let mut p = GnssErrorProcess::new(0.4, PerQuality::All(0.99), 20.0, faults, 7);
+        let mut p = GnssErrorProcess::new(0.4, PerQuality::All(0.99), (20.0, None), faults, 7);
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         (0..epochs)
-            .map(|_| p.epoch(quality, sigma_of, |s| normal(&mut rng, s)))
+            .map(|_| p.epoch(quality, 0.0, sigma_of, |s| normal(&mut rng, s)))
             .collect()
     }
 

@@ -16,6 +16,7 @@ use super::scenario::Scenario;
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::chassis::ProfileRef;
+use crate::config::localization::LocalizationConfig;
 use crate::config::mission::{CutterConfig, MissionConfig};
 use crate::config::mqtt::MqttConfig;
 use crate::config::ntrip::NtripConfig;
@@ -85,19 +86,18 @@ struct OdomError {
 }
 
 impl OdomError {
-    /// The speed and the span the random walks are matched at: the scenarios' laps, and an
-    /// outage of 30 s.
-    const SPEED_MPS: f64 = 1.0;
+    /// The span the random walks are matched at (an outage of 30 s), at the scenarios' speed
+    /// (the laps', times the plant's scenario speed).
     const SPAN_S: f64 = 30.0;
 
     fn of(plant: &PlantConfig) -> Self {
+        let speed = plant.drive.scenario_speed.clamp(0.1, 100.0);
         let slip = &plant.slip;
         // Random slip, redrawn every 100 ms on each wheel: a random walk in distance. The
         // systematic slip is a scale the map filter estimates; what its estimate leaves grows
         // with the distance, not its root: matched over the span at a tenth of the slip.
-        let random = slip.sigma.powi(2) / 2.0 * 0.1 * Self::SPEED_MPS;
-        let systematic =
-            (0.1 * (slip.bias[0] + slip.bias[1]) / 2.0).powi(2) * Self::SPEED_MPS * Self::SPAN_S;
+        let random = slip.sigma.powi(2) / 2.0 * 0.1 * speed;
+        let systematic = (0.1 * (slip.bias[0] + slip.bias[1]) / 2.0).powi(2) * speed * Self::SPAN_S;
         // The gyro's white noise is its angle random walk; its bias's walk is configured as
         // such (`gyro_bias_walk`).
         let imu = &plant.imu;
@@ -146,6 +146,7 @@ heading_sigma_deg = {heading_sigma}
 gnss_correlated_fraction = {correlated}
 rtk_correlated_fraction = {rtk_correlated}
 gnss_correlation_time_s = {correlation_time}
+gnss_correlation_distance_m = {correlation_distance}
 gnss_velocity_sigma_mps = {velocity_sigma}
 gyro_noise_rps = {gyro_noise}
 heading_walk = {heading_walk}
@@ -162,10 +163,10 @@ protocol = "{imu}"
 [chassis]
 wheel_radius_m = {radius}
 track_m = {track}
-max_speed_mps = 1.5
-max_yaw_rate_rps = 1.5
-max_accel_mps2 = 1.0
-max_decel_mps2 = 1.5
+max_speed_mps = {max_speed}
+max_yaw_rate_rps = {max_yaw_rate}
+max_accel_mps2 = {max_accel}
+max_decel_mps2 = {max_decel}
 max_yaw_accel_rps2 = 3.0
 cmd_timeout_s = 0.5
 
@@ -210,6 +211,14 @@ wheels = ["right"]
             .at(FixQuality::RtkFixed)
             .min(0.95),
         correlation_time = plant.gnss.correlation_time_s.clamp(1.0, 3600.0),
+        // A receiver fitted by time alone (the Husky's) leaves chassisd its default: an
+        // integrator does not know how their fixes decorrelate as the antenna moves, and
+        // assuming it faster than it is costs less than slower (docs/fusion.md).
+        correlation_distance = plant
+            .gnss
+            .correlation_distance_m
+            .unwrap_or_else(|| LocalizationConfig::default().gnss_correlation_distance_m)
+            .clamp(0.1, 100_000.0),
         velocity_sigma = plant.gnss.velocity_sigma_mps.clamp(0.001, 1.0),
         gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),
         heading_walk = odom.heading_walk.clamp(1e-5, 0.1),
@@ -224,6 +233,10 @@ wheels = ["right"]
         imu = plant.imu.protocol.name(),
         radius = format_args!("[{}, {}]", radius.left, radius.right),
         track = believed.track_m.unwrap_or(g.track_m),
+        max_speed = plant.drive.max_speed_mps,
+        max_yaw_rate = plant.drive.max_yaw_rate_rps,
+        max_accel = plant.drive.max_accel_mps2,
+        max_decel = plant.drive.max_decel_mps2,
         gear = g.gear_ratio,
         bus = SIM_BUS,
         left = LEFT_NODE.get(),

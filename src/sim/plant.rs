@@ -74,6 +74,9 @@ pub struct PlantConfig {
     pub imu: ImuModel,
     /// GNSS receiver.
     pub gnss: GnssModel,
+    /// The drive train's limits and the speed the benchmark's scenarios are driven at.
+    #[serde(default, skip_serializing_if = "DriveLimits::is_default")]
+    pub drive: DriveLimits,
     /// The charging dock, the battery and the cutter, when the vehicle has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub yard: Option<Yard>,
@@ -112,6 +115,43 @@ pub struct Configured {
 
 impl Configured {
     fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// `[drive]`: the limits the vehicle's configuration gives its drive train (`[chassis]`), and
+/// how fast the benchmark's scenarios drive it: their speeds times `scenario_speed` (a car
+/// drives the mower's laps at ten times their speed, on ten times their radius). Each left
+/// out is a mower's.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DriveLimits {
+    /// Fastest forward or backward speed, m/s.
+    pub max_speed_mps: f64,
+    /// Fastest turn, rad/s.
+    pub max_yaw_rate_rps: f64,
+    /// Acceleration, m/s².
+    pub max_accel_mps2: f64,
+    /// Braking, m/s².
+    pub max_decel_mps2: f64,
+    /// The scenarios' speeds are multiplied by this.
+    pub scenario_speed: f64,
+}
+
+impl Default for DriveLimits {
+    fn default() -> Self {
+        Self {
+            max_speed_mps: 1.5,
+            max_yaw_rate_rps: 1.5,
+            max_accel_mps2: 1.0,
+            max_decel_mps2: 1.5,
+            scenario_speed: 1.0,
+        }
+    }
+}
+
+impl DriveLimits {
+    fn is_default(&self) -> bool {
         *self == Self::default()
     }
 }
@@ -249,6 +289,11 @@ pub struct GnssModel {
     pub correlated_fraction: PerQuality,
     /// Correlation time of that part, s.
     pub correlation_time_s: f64,
+    /// The slow part of corrected fixes (DGPS, RTK float and fixed) also decorrelates over
+    /// this distance of the antenna's travel, m (multipath, the corrections' residuals);
+    /// none: by time alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correlation_distance_m: Option<f64>,
     /// Steps, RTK-float episodes, wild fixes and the receiver's smoothing.
     #[serde(default)]
     pub faults: GnssFaults,
@@ -332,6 +377,9 @@ impl PlantConfig {
             0.1..=600.0,
             "s",
         )?;
+        if let Some(d) = p.gnss.correlation_distance_m {
+            check_range(file, "gnss.correlation_distance_m", d, 0.1..=100_000.0, "m")?;
+        }
         let f = &p.gnss.faults;
         for (key, value, range, unit) in [
             ("gnss.faults.smoothing_s", f.smoothing_s, 0.0..=60.0, "s"),
@@ -456,6 +504,61 @@ pub struct SimVehicle {
     forced: Option<ForcedMotion>,
     /// RTK corrections, when the simulation has a caster (without, RTK is always possible).
     corrections: Option<super::receiver_corrections::ReceiverCorrections>,
+    /// The antenna's velocity (east, north, m/s) as the receiver's velocity filter has it,
+    /// and its recent history for a late report.
+    velocity: ReceiverVelocity,
+    /// Where the antenna was at the last epoch.
+    last_epoch_antenna: Option<(f64, f64)>,
+}
+
+/// The receiver's view of the antenna's velocity: smoothed and late.
+#[derive(Debug, Clone, Default)]
+struct ReceiverVelocity {
+    smoothed: Option<(f64, f64)>,
+    history: VecDeque<(Timestamp, (f64, f64))>,
+}
+
+impl ReceiverVelocity {
+    /// The true velocity at `t`, `dt` after the last.
+    fn step(&mut self, t: Timestamp, dt: f64, truth: (f64, f64), faults: &GnssFaults) {
+        let smoothed = match self.smoothed {
+            Some((e, n)) if faults.velocity_smoothing_s > 0.0 => {
+                let k = (dt / faults.velocity_smoothing_s).min(1.0);
+                (e + (truth.0 - e) * k, n + (truth.1 - n) * k)
+            }
+            _ => truth,
+        };
+        self.smoothed = Some(smoothed);
+        if faults.velocity_lag_s > 0.0 {
+            self.history.push_back((t, smoothed));
+            let keep = Duration::from_secs_f64(faults.velocity_lag_s + 0.1);
+            while self
+                .history
+                .front()
+                .is_some_and(|(at, _)| t.saturating_since(*at) > keep)
+            {
+                self.history.pop_front();
+            }
+        }
+    }
+
+    /// What the receiver reports at `t`.
+    fn reported(&self, t: Timestamp, faults: &GnssFaults) -> (f64, f64) {
+        let now = self.smoothed.unwrap_or_default();
+        if faults.velocity_lag_s <= 0.0 {
+            return now;
+        }
+        let then = Timestamp::from_nanos(
+            t.as_nanos()
+                .saturating_sub(Duration::from_secs_f64(faults.velocity_lag_s).as_nanos() as u64),
+        );
+        self.history
+            .iter()
+            .rev()
+            .find(|(at, _)| *at <= then)
+            .or(self.history.front())
+            .map_or(now, |(_, v)| *v)
+    }
 }
 
 /// The motor that turns a wheel: a drive among the plant's devices, its axis, and the
@@ -550,7 +653,10 @@ impl SimVehicle {
         let gnss_error = GnssErrorProcess::new(
             1.0 / plant.gnss.rate_hz,
             plant.gnss.correlated_fraction,
-            plant.gnss.correlation_time_s,
+            (
+                plant.gnss.correlation_time_s,
+                plant.gnss.correlation_distance_m,
+            ),
             plant.gnss.faults,
             seed,
         );
@@ -579,6 +685,8 @@ impl SimVehicle {
             imu_stalled: false,
             forced: None,
             corrections: None,
+            velocity: ReceiverVelocity::default(),
+            last_epoch_antenna: None,
         })
     }
 
@@ -740,6 +848,16 @@ impl SimVehicle {
         )
     }
 
+    /// The antenna's true velocity (east, north, m/s): the vehicle's, plus the turn about
+    /// the antenna's offset.
+    fn antenna_velocity(&self) -> (f64, f64) {
+        let tr = self.truth;
+        let [ax, ay] = self.plant.geometry.antenna;
+        let (along, across) = (tr.v - tr.w * ay, tr.w * ax);
+        let (s, c) = tr.yaw.sin_cos();
+        (along * c - across * s, along * s + across * c)
+    }
+
     /// The UTC time the receiver stamps on an epoch at `t`.
     pub fn utc_at(&self, t: Timestamp) -> NaiveDateTime {
         self.utc_at_zero
@@ -806,6 +924,9 @@ impl SimVehicle {
         if self.forced.is_none() {
             tr.unseen_slip_m += (sl * self.slip.0 + sr * self.slip.1) / 2.0 * dt;
         }
+        let antenna_velocity = self.antenna_velocity();
+        self.velocity
+            .step(t, dt, antenna_velocity, &self.plant.gnss.faults);
         let docked = self.docked();
         let cutting = self.cutter_on();
         // On the dock the charger feeds the pack; elsewhere the drives and the blade draw.
@@ -915,15 +1036,21 @@ impl SimVehicle {
     }
 
     fn gnss_epoch(&mut self, t: Timestamp, c: GnssCondition) -> Option<Bytes> {
+        let possible = c.quality?;
+        let antenna = self.true_antenna();
+        let moved = self
+            .last_epoch_antenna
+            .replace(antenna)
+            .map_or(0.0, |(e, n)| (antenna.0 - e).hypot(antenna.1 - n));
         let plant = &self.plant;
         let rng = &mut self.rng;
-        let possible = c.quality?;
         let (possible, correction_age) = match &self.corrections {
             Some(rc) => (rc.quality(t, possible), rc.age(t)),
             None => (possible, None),
         };
         let error = self.gnss_error.epoch(
             possible,
+            moved,
             |q| plant.sigma(q),
             |s| super::gnss_error::normal(rng, s),
         );
@@ -937,12 +1064,10 @@ impl SimVehicle {
         let p = self.frame.to_geodetic(&Vector3::new(e, n, 0.0));
         let heading = 90.0 - tr.yaw.to_degrees() + g.heading_offset_deg;
         let heading_noise = self.normal(g.heading_sigma_deg);
-        // The antenna's velocity: the vehicle's, plus the turn about the antenna's offset.
-        let [ax, ay] = self.plant.geometry.antenna;
-        let (along, across) = (tr.v - tr.w * ay, tr.w * ax);
-        let (s, co) = tr.yaw.sin_cos();
-        let ve = along * co - across * s + self.normal(g.velocity_sigma_mps);
-        let vn = along * s + across * co + self.normal(g.velocity_sigma_mps);
+        // The antenna's velocity as the receiver's filter has it, late and smoothed.
+        let (ve, vn) = self.velocity.reported(t, &g.faults);
+        let ve = ve + self.normal(g.velocity_sigma_mps);
+        let vn = vn + self.normal(g.velocity_sigma_mps);
         let utc = self.utc_at(t);
         let epoch = Epoch {
             utc,

@@ -275,6 +275,27 @@ impl Scenario {
         }
     }
 
+    /// The same drive at `speed` times its speeds (a faster vehicle): the turn rates stay,
+    /// so its curves widen by that much. The warm-up and the timing keep theirs.
+    pub fn at_speed(&self, speed: f64) -> Self {
+        let speed = if speed.is_finite() && speed > 0.0 {
+            speed
+        } else {
+            1.0
+        };
+        Self {
+            legs: self
+                .legs
+                .iter()
+                .map(|l| Leg {
+                    v: l.v * speed,
+                    ..*l
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// Total length, s.
     pub fn duration_s(&self) -> f64 {
         self.legs.iter().map(|l| l.duration_s).sum()
