@@ -132,3 +132,18 @@ fn fusion_meets_every_target_across_the_sweep_on_the_mower() {
 fn fusion_meets_every_target_across_the_sweep_on_the_delivery_robot() {
     sweep("plant.delivery.toml");
 }
+
+/// The car's single receiver at the rates it meets every target (docs/fusion.md: at 1 Hz its
+/// heading's NEES in the outage is still too low, 0.14 of 0.2).
+const CAR_RATES_HZ: [&str; 2] = ["5", "10"];
+
+#[test]
+#[cfg_attr(
+    debug_assertions,
+    ignore = "slow unoptimised: tests/run-all runs it with cargo test --release"
+)]
+fn fusion_meets_every_target_on_the_car_at_5_and_10_hz() {
+    for rate in CAR_RATES_HZ {
+        check(&bench("plant.car.toml", rate, "1"));
+    }
+}

@@ -71,6 +71,11 @@ pub struct LocalizationConfig {
     /// how many metres of RTK prove the scale.
     #[serde(default = "default_wheel_slip")]
     pub wheel_slip_m2_per_m: f64,
+    /// How fast the wheels' scale (true distance per odom distance) may change, 1σ per √m
+    /// driven: the ground changes under a mower's tyres; a car's on asphalt change with
+    /// temperature and wear only (1e-4).
+    #[serde(default = "default_wheel_scale_walk")]
+    pub wheel_scale_walk: f64,
     /// The same across the heading (sideways slip), m²/m.
     #[serde(default = "default_odom_across")]
     pub odom_across_m2_per_m: f64,
@@ -123,6 +128,10 @@ fn default_wheel_slip() -> f64 {
     // 1 cm per metre: a tyre on grass or gravel.
     1e-4
 }
+fn default_wheel_scale_walk() -> f64 {
+    // 1 % over 100 m: grass, then gravel, then wet grass.
+    1e-3
+}
 fn default_odom_across() -> f64 {
     4e-3
 }
@@ -151,6 +160,7 @@ impl Default for LocalizationConfig {
             gyro_bias_walk: default_gyro_bias_walk(),
             odom_along_m2_per_m: default_odom_along(),
             wheel_slip_m2_per_m: default_wheel_slip(),
+            wheel_scale_walk: default_wheel_scale_walk(),
             odom_across_m2_per_m: default_odom_across(),
             odom_yaw_rad2_per_rad: default_odom_yaw(),
             max_position_radius_m: default_max_position_radius_m(),
@@ -290,6 +300,13 @@ impl LocalizationConfig {
         }
         check_range(
             file,
+            "localization.wheel_scale_walk",
+            self.wheel_scale_walk,
+            0.0..=0.1,
+            "per √m",
+        )?;
+        check_range(
+            file,
             "localization.max_position_radius_m",
             self.max_position_radius_m,
             1.0..=1_000_000.0,
@@ -322,6 +339,7 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
     c.heading_walk = l.heading_walk;
     c.gyro_bias_walk = l.gyro_bias_walk;
     c.wheel_slip = l.wheel_slip_m2_per_m;
+    c.wheel_scale_walk = l.wheel_scale_walk;
     c.odom_error = (
         l.odom_along_m2_per_m,
         l.odom_across_m2_per_m,

@@ -75,6 +75,8 @@ pub struct LocalizerConfig {
     pub gnss_velocity_sigma_mps: Option<f64>,
     /// The wheels' random slip, a variance per metre driven, m²/m ([`WheelScale`]).
     pub wheel_slip: f64,
+    /// How fast the wheels' scale may change, 1σ per √m driven (the map filter's).
+    pub wheel_scale_walk: f64,
 }
 
 impl Default for LocalizerConfig {
@@ -101,6 +103,7 @@ impl Default for LocalizerConfig {
             odom_error: (map.along_per_m, map.across_per_m, map.yaw_per_rad),
             gnss_velocity_sigma_mps: None,
             wheel_slip: 1e-4,
+            wheel_scale_walk: map.scale_walk,
         }
     }
 }
@@ -116,6 +119,7 @@ impl LocalizerConfig {
             relocate_after: self.relocate_after,
             yaw_per_s: self.heading_walk * self.heading_walk,
             bias_walk: self.gyro_bias_walk,
+            scale_walk: self.wheel_scale_walk,
             along_per_m: self.odom_error.0,
             across_per_m: self.odom_error.1,
             yaw_per_rad: self.odom_error.2,

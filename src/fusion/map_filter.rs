@@ -47,8 +47,6 @@ const DRIFT: usize = 5;
 const SCALE: usize = 6;
 /// The scale error's 1σ before anything has shown it.
 const SCALE_SIGMA: f64 = 0.03;
-/// How fast the scale error may change, 1σ per √m driven (the ground changes).
-const SCALE_WALK: f64 = 1e-3;
 /// A scale error beyond this is no tyre's: a wrong radius in the configuration.
 const MAX_SCALE_ERROR: f64 = 0.2;
 
@@ -126,6 +124,9 @@ pub struct MapFilterConfig {
     /// The gyro bias's random walk, rad/s per √s: how fast the bias leaves what the last
     /// standstill taught.
     pub bias_walk: f64,
+    /// How fast the wheels' scale may change, 1σ per √m driven (the ground changes under
+    /// a mower; a car's tyres on asphalt change with temperature and wear only).
+    pub scale_walk: f64,
     /// The slowly wandering part of a fix's error, as a fraction of its 1σ (RTK float, DGPS,
     /// SBAS, single: SBAS wanders almost wholly, the Husky shows).
     pub gnss_correlated_fraction: f64,
@@ -171,6 +172,7 @@ impl Default for MapFilterConfig {
             yaw_per_rad: 4e-4,
             yaw_per_s: 2e-5,
             bias_walk: 2e-5,
+            scale_walk: 1e-3,
             gnss_correlated_fraction: 0.95,
             rtk_correlated_fraction: 0.3,
             gnss_correlation_s: 60.0,
@@ -462,7 +464,7 @@ impl MapFilter {
         f[(YAW, DRIFT)] = dt;
         let mut q = Cov::zeros();
         q[(DRIFT, DRIFT)] = self.config.bias_walk.powi(2).max(self.shown_bias_walk) * dt;
-        q[(SCALE, SCALE)] = SCALE_WALK * SCALE_WALK * ds;
+        q[(SCALE, SCALE)] = self.config.scale_walk.powi(2) * ds;
         let along = self.config.along_per_m * ds;
         let across = self.config.across_per_m * ds;
         // Along and across the direction of the increment, in the map frame.

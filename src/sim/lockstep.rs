@@ -147,6 +147,7 @@ gnss_correlated_fraction = {correlated}
 rtk_correlated_fraction = {rtk_correlated}
 gnss_correlation_time_s = {correlation_time}
 gnss_correlation_distance_m = {correlation_distance}
+wheel_scale_walk = {scale_walk}
 gnss_velocity_sigma_mps = {velocity_sigma}
 gyro_noise_rps = {gyro_noise}
 heading_walk = {heading_walk}
@@ -219,6 +220,12 @@ wheels = ["right"]
             .correlation_distance_m
             .unwrap_or_else(|| LocalizationConfig::default().gnss_correlation_distance_m)
             .clamp(0.1, 100_000.0),
+        // The same for the wheels' scale: the ground a plant names, else chassisd's default.
+        scale_walk = if plant.slip.scale_walk > 0.0 {
+            plant.slip.scale_walk
+        } else {
+            LocalizationConfig::default().wheel_scale_walk
+        },
         velocity_sigma = plant.gnss.velocity_sigma_mps.clamp(0.001, 1.0),
         gyro_noise = plant.imu.gyro_noise_rps.clamp(1e-5, 0.5),
         heading_walk = odom.heading_walk.clamp(1e-5, 0.1),

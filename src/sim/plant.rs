@@ -244,6 +244,13 @@ pub struct Slip {
     pub sigma: f64,
     /// Systematic slip of the left and right wheels, fraction (unequal tyres, soft ground).
     pub bias: [f64; 2],
+    /// The wheels' scale walks by this, 1σ per √m driven (both wheels alike; 0: it stays).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub scale_walk: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// `[imu]`
@@ -364,6 +371,13 @@ impl PlantConfig {
             "s",
         )?;
         check_range(file, "slip.sigma", p.slip.sigma, 0.0..=0.5, "")?;
+        check_range(
+            file,
+            "slip.scale_walk",
+            p.slip.scale_walk,
+            0.0..=0.01,
+            "per √m",
+        )?;
         check_range(file, "imu.rate_hz", p.imu.rate_hz, 1.0..=1000.0, "Hz")?;
         check_range(file, "gnss.rate_hz", p.gnss.rate_hz, 0.2..=50.0, "Hz")?;
         check_range(file, "gnss.latency_s", p.gnss.latency_s, 0.0..=1.0, "s")?;
@@ -492,6 +506,10 @@ pub struct SimVehicle {
     last: Option<Timestamp>,
     slip: (f64, f64),
     next_slip: Timestamp,
+    /// The wheels' walked scale ([`Slip::scale_walk`]), and the distance driven since it
+    /// last walked, m.
+    scale: f64,
+    scale_walked_m: f64,
     gyro_bias: f64,
     next_imu: Timestamp,
     next_gnss: Timestamp,
@@ -677,6 +695,8 @@ impl SimVehicle {
             last: None,
             slip: (0.0, 0.0),
             next_slip: start,
+            scale: 0.0,
+            scale_walked_m: 0.0,
             next_imu: start,
             next_gnss: start,
             gnss_error,
@@ -900,18 +920,28 @@ impl SimVehicle {
             self.next_slip = t.saturating_add(Duration::from_millis(100));
             let s = self.plant.slip.sigma;
             self.slip = (self.normal(s), self.normal(s));
+            let walk = self.plant.slip.scale_walk;
+            if walk > 0.0 {
+                let step = self.normal(walk * self.scale_walked_m.sqrt());
+                self.scale = (self.scale + step).clamp(-0.2, 0.2);
+                self.scale_walked_m = 0.0;
+            }
         }
         if self.forced.is_some() {
             // The recorded wheels are the motion; there is no slip beyond what they show.
-            self.slip = (-self.plant.slip.bias[0], -self.plant.slip.bias[1]);
+            self.slip = (
+                -self.plant.slip.bias[0] - self.scale,
+                -self.plant.slip.bias[1] - self.scale,
+            );
         }
         let (sl, sr) = self.wheel_surface_speeds();
         let bias = self.plant.slip.bias;
         let (vl, vr) = (
-            sl * (1.0 + self.slip.0 + bias[0]),
-            sr * (1.0 + self.slip.1 + bias[1]),
+            sl * (1.0 + self.slip.0 + bias[0] + self.scale),
+            sr * (1.0 + self.slip.1 + bias[1] + self.scale),
         );
         let v = (vl + vr) / 2.0;
+        self.scale_walked_m += v.abs() * dt;
         let w = (vr - vl) / self.plant.geometry.track_m;
         let tr = &mut self.truth;
         let mid_yaw = tr.yaw + w * dt / 2.0;
