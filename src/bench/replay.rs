@@ -165,7 +165,7 @@ fn receiver_logs(dir: &Path) -> crate::bench::error::Result<(Vec<PathBuf>, Vec<S
 }
 
 /// Whether a log holds an NMEA position sentence (GGA, RMC or GNS).
-fn sends_nmea_positions(bytes: &[u8]) -> bool {
+pub fn sends_nmea_positions(bytes: &[u8]) -> bool {
     bytes.split(|b| *b == b'\n').any(|line| {
         line.len() > 7
             && line[0] == b'$'

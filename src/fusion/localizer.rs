@@ -651,7 +651,7 @@ impl Localizer {
         // course) show nothing.
         let now_yaw = self.odom.map_or(0.0, |(_, o)| o.yaw);
         let rotation = wrap(yaw - now_yaw);
-        let run = self
+        let mut run = self
             .heading_rejections
             .take()
             .filter(|run| run.agrees(rotation, sigma))
@@ -659,7 +659,6 @@ impl Localizer {
                 since: t,
                 rotations: Vec::new(),
             });
-        let mut run = run;
         run.push(rotation, sigma);
         if run.rotations.len() >= MIN_REJECTIONS_TO_RELOCATE
             && t.saturating_since(run.since) >= self.config.relocate_after

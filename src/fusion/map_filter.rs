@@ -53,18 +53,6 @@ const MAX_SCALE_ERROR: f64 = 0.2;
 type State = SVector<f64, N>;
 type Cov = SMatrix<f64, N, N>;
 
-/// What the wheels' scale stays through a new start of the pose.
-trait KeepsScale {
-    fn with_scale(self, scale: f64) -> Self;
-}
-
-impl KeepsScale for State {
-    fn with_scale(mut self, scale: f64) -> Self {
-        self[SCALE] = scale;
-        self
-    }
-}
-
 /// χ² gate, 2 degrees of freedom, 99.9 %.
 const GATE_2: f64 = 13.82;
 /// χ² gate, 1 degree of freedom, 99.9 %.
@@ -398,7 +386,14 @@ impl MapFilter {
         }
     }
 
-    /// A covariance that knows nothing but the drift's variance.
+    /// A state that knows nothing but the wheels' scale (a new start of the pose keeps it).
+    fn fresh_state(&self) -> State {
+        let mut x = State::zeros();
+        x[SCALE] = self.x[SCALE];
+        x
+    }
+
+    /// A covariance that knows nothing but the drift's and the scale's variances.
     fn fresh_covariance(&self) -> Cov {
         let mut p = Cov::zeros();
         p[(DRIFT, DRIFT)] = self.p[(DRIFT, DRIFT)];
@@ -737,7 +732,7 @@ impl MapFilter {
         // fix is carried to now along the odom path as it is.
         let (nx, ny) = (now.x - p.odom.x, now.y - p.odom.y);
         let (s0, c0) = p.odom.yaw.sin_cos();
-        self.x = State::zeros().with_scale(self.x[SCALE]);
+        self.x = self.fresh_state();
         self.x[X] = p.fix.en.0 - (c0 * ax - s0 * ay) + nx;
         self.x[Y] = p.fix.en.1 - (s0 * ax + c0 * ay) + ny;
         self.x[YAW] = now.yaw;
@@ -982,7 +977,7 @@ impl MapFilter {
     /// Places the map pose by hand (x, y in m, yaw in rad, with their 1σ), forgetting the
     /// fixes held or fitted so far.
     pub fn set_pose(&mut self, pose: (f64, f64, f64), sigma: (f64, f64)) {
-        self.x = State::zeros().with_scale(self.x[SCALE]);
+        self.x = self.fresh_state();
         self.x[X] = pose.0;
         self.x[Y] = pose.1;
         self.x[YAW] = wrap(pose.2);
@@ -1203,6 +1198,42 @@ mod tests {
             (x - s * 0.3f64.cos()).hypot(y - 50.0 - s * 0.3f64.sin()) < 0.1,
             "{x} {y}"
         );
+    }
+
+    /// A car at 10 m/s with RTK fixes at 1 Hz: 10 m between fixes, where a 5 m jump must
+    /// not pass for the wheels' slip (it did when 30 % of the distance was allowed).
+    #[test]
+    fn at_road_speed_and_1_hz_a_5_m_jump_is_not_slip() {
+        let mut f = MapFilter::new(MapFilterConfig::default());
+        let yaw = 0.3f64;
+        let mut off = 0.0f64;
+        for k in 0..40 * 50u64 {
+            let ms = k * 20;
+            let d = 10.0 * ms as f64 / 1000.0;
+            f.odom(
+                at(ms),
+                OdomPose {
+                    x: d,
+                    y: 0.0,
+                    yaw: 0.0,
+                    v: 10.0,
+                    w: 0.0,
+                },
+            );
+            let truth = (d * yaw.cos(), d * yaw.sin());
+            if ms % 1000 == 0 {
+                let jump = if ms == 30_000 { (3.0, 4.0) } else { (0.0, 0.0) };
+                f.fix(rtk(ms, (truth.0 + jump.0, truth.1 + jump.1)));
+            }
+            if ms >= 30_000
+                && let Some((x, y, _)) = f.pose()
+            {
+                off = off.max((x - truth.0).hypot(y - truth.1));
+            }
+        }
+        assert!(f.yaw_sigma() < 1f64.to_radians(), "{}", f.yaw_sigma());
+        assert!(off < 0.3, "the pose followed the jump: {off} m");
+        assert_eq!(f.stats().dropped, 1);
     }
 
     #[test]

@@ -150,14 +150,8 @@ impl GnssErrorProcess {
     ) -> EpochError {
         let quality = self.quality(quality);
         let sigma = sigma_of(quality);
-        // Corrections' residuals and multipath change as the antenna moves; an uncorrected
-        // fix's atmosphere and orbits only with time.
-        let corrected = matches!(
-            quality,
-            FixQuality::Dgps | FixQuality::RtkFloat | FixQuality::RtkFixed
-        );
         let by_distance = match self.correlation_distance_m {
-            Some(d) if corrected && d > 0.0 => moved_m.max(0.0) / d,
+            Some(d) if quality.is_corrected() && d > 0.0 => moved_m.max(0.0) / d,
             _ => 0.0,
         };
         let phi = (-self.dt / self.correlation_time_s - by_distance).exp();

@@ -1456,10 +1456,7 @@ impl Vehicle {
                 en: (enu.x, enu.y),
                 sigma,
                 trust: trust_of(fix.quality),
-                corrected: matches!(
-                    fix.quality,
-                    FixQuality::Dgps | FixQuality::RtkFloat | FixQuality::RtkFixed
-                ),
+                corrected: fix.quality.is_corrected(),
             },
         );
     }

@@ -77,22 +77,14 @@ fn shared_logs_with_chk(nmea: bool) -> Vec<PathBuf> {
         .map(|e| e.expect("directory entry").path())
         .filter(|p| p.extension().is_some_and(|e| e == "log"))
         .filter(|p| p.with_extension("log.chk").is_file())
-        .filter(|p| sends_nmea_positions(p) == nmea)
+        .filter(|p| {
+            let bytes = std::fs::read(p).expect("readable log");
+            chassisd::bench::replay::sends_nmea_positions(&bytes) == nmea
+        })
         .collect();
     logs.sort();
     assert!(!logs.is_empty(), "no such *.log files in {}", dir.display());
     logs
-}
-
-/// Whether a log holds an NMEA position sentence.
-fn sends_nmea_positions(log: &Path) -> bool {
-    let bytes = std::fs::read(log).expect("readable log");
-    bytes.split(|b| *b == b'\n').any(|line| {
-        line.len() > 7
-            && line[0] == b'$'
-            && line[1..3].iter().all(u8::is_ascii_uppercase)
-            && [&b"GGA,"[..], b"RMC,", b"GNS,"].contains(&&line[3..7])
-    })
 }
 
 /// The shared receiver logs whose receivers send NMEA, with gpsd's decoding beside them.

@@ -54,6 +54,13 @@ impl FixQuality {
         )
     }
 
+    /// Whether corrections shaped this position (DGPS/SBAS, RTK): its slow error is then the
+    /// corrections' residuals and multipath, which change as the antenna moves; a single
+    /// fix's (the atmosphere, the orbits) only with time.
+    pub fn is_corrected(self) -> bool {
+        matches!(self, Self::Dgps | Self::RtkFloat | Self::RtkFixed)
+    }
+
     /// The `rtk.status` code of rtk-mqtt-protocol.md: 0 none, 1 single, 2 DGPS, 4 RTK fixed,
     /// 5 RTK float. PPS counts as single (it is not differential); dead reckoning, manual and
     /// simulated positions are not GNSS fixes and count as none.
