@@ -1,6 +1,6 @@
 //! The localiser on synthetic drives where the truth is known exactly: a gyro drift proven
-//! against GNSS headings becomes a bias correction of the right size, SBAS fixes with a step
-//! never prove one, an RTK-fixed course teaches it only after 5 s straight, and a vehicle
+//! against GNSS headings becomes a bias correction of the right size, a standstill leaves
+//! the heading as uncertain as the bias it taught, SBAS fixes with a step never prove one, an RTK-fixed course teaches it only after 5 s straight, and a vehicle
 //! without wheels is placed by its fixes and lost when they stop.
 
 use chassisd::fusion::localizer::{Localizer, LocalizerConfig, LocateState, Measurement};
@@ -93,6 +93,47 @@ fn a_drift_proven_against_headings_corrects_the_bias_by_its_size() {
     // Once corrected, nothing is proven again until it shows anew (this drive does not
     // correct its own odom frame, so it may; but never with the wrong sign).
     assert!(corrections.iter().all(|(r, _)| *r > 0.0), "{corrections:?}");
+}
+
+/// The map heading's variance after `drive` (no drift, RTK fixes and headings, 20 s), a 5 s
+/// standstill whose bias the odom frame knows to `bias_sigma` rad/s, then 60 s at 1 m/s
+/// without GNSS.
+fn heading_variance_after_a_stop(bias_sigma: f64) -> f64 {
+    let (mut l, _) = drive(20.0, 0.0, true, true);
+    let (mut ox, mut s) = (20.0, 20.0);
+    for k in 1..=6500u64 {
+        s += 0.01;
+        let moving = k > 500;
+        if moving {
+            ox += 0.01;
+        }
+        let v = if moving { 1.0 } else { 0.0 };
+        l.set_gyro_bias_sigma(Some(bias_sigma));
+        let pose = OdomPose {
+            x: ox,
+            y: 0.0,
+            yaw: 0.0,
+            v,
+            w: 0.0,
+        };
+        l.add(at(s), Measurement::Odom(pose));
+    }
+    l.published(at(s)).expect("placed").map_covariance[3]
+}
+
+#[test]
+fn a_standstill_leaves_the_heading_as_uncertain_as_the_bias_it_taught() {
+    // Over the 60 s after the stop, a bias known to 1σ 3e-3 rad/s turns the heading by up to
+    // 3e-3 · 60 = 0.18 rad (1σ) more than a bias known exactly.
+    let (sigma, span) = (3e-3, 60.0);
+    let known = heading_variance_after_a_stop(0.0);
+    let taught = heading_variance_after_a_stop(sigma);
+    let added = taught - known;
+    let expected = (sigma * span) * (sigma * span);
+    assert!(
+        (added - expected).abs() <= 0.1 * expected,
+        "{added} against {expected}"
+    );
 }
 
 #[test]

@@ -228,6 +228,8 @@ pub struct Localizer {
     drift_seen: GyroDrift,
     /// When the gyro's bias was last learnt (a standstill) or corrected.
     bias_since: Option<Timestamp>,
+    /// How well the odom frame knows the bias it turns by, 1σ rad/s, as it last said.
+    gyro_bias_sigma: Option<f64>,
     /// A proven drift, until the core corrects the gyro's bias by it.
     bias_correction: Option<Drift>,
     /// The last RTK fix a direction between two starts from.
@@ -345,6 +347,7 @@ impl Localizer {
             drift: GyroDrift::default(),
             drift_seen: GyroDrift::default(),
             bias_since: None,
+            gyro_bias_sigma: None,
             bias_correction: None,
             rtk_from: None,
             map: MapFrame::default(),
@@ -768,6 +771,12 @@ impl Localizer {
         self.filter.set_heading_drift(walk);
     }
 
+    /// The odom frame knows the gyro bias it turns by to 1σ `sigma` rad/s (`None`: it has
+    /// learnt none): a standstill restarts the odom heading's drift with that uncertainty.
+    pub fn set_gyro_bias_sigma(&mut self, sigma: Option<f64>) {
+        self.gyro_bias_sigma = sigma.filter(|s| s.is_finite() && *s >= 0.0);
+    }
+
     /// The odom heading's drift starts afresh: a standstill taught the gyro its bias at `t`.
     fn restart_drift(&mut self, t: Timestamp) {
         self.drift.restart();
@@ -775,7 +784,10 @@ impl Localizer {
         self.bias_since = Some(t);
         self.filter.set_heading_drift(0.0);
         self.filter.set_bias_walk(0.0);
-        self.filter.reset_drift(0.0);
+        // A bias known to σ leaves a drift of σ; one never learnt keeps what the filter had.
+        if let Some(sigma) = self.gyro_bias_sigma {
+            self.filter.reset_drift(sigma);
+        }
     }
 
     /// A proven drift of the odom heading, once: the gyro's bias is to be corrected by its

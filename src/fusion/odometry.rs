@@ -110,6 +110,19 @@ impl BiasBelief {
     }
 }
 
+/// A gyro reading while the wheels stand still, held until the standstill is confirmed
+/// around it: in the confirmed middle it is the bias's; at either end it may hold a turn's
+/// start or end, and turns the pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PendingRate {
+    at: Timestamp,
+    /// The reading, bias included, rad/s.
+    rate: f64,
+    /// The interval it closes, s, and the turn over it by the trapezoid rule, bias included.
+    dt: f64,
+    turn: f64,
+}
+
 /// The `odom` frame's dead reckoning.
 #[derive(Debug, Clone, Default)]
 pub struct Odometry {
@@ -135,10 +148,12 @@ pub struct Odometry {
     /// the gyro's mean over it, else the reading's time.
     yaw_rate_at: Option<Timestamp>,
     standstill: Spread,
-    /// When the current standstill began (its first still wheel reading).
-    still_since: Option<Timestamp>,
+    /// From when the current standstill's gyro readings are the bias's: [`STILL_GUARD`] after
+    /// its first still wheel reading, or that reading itself when the drives' first report
+    /// is still (no motion before it to end).
+    bias_from: Option<Timestamp>,
     /// Gyro readings of the standstill not yet confirmed by [`STILL_GUARD`] of still wheels.
-    pending_still: VecDeque<(Timestamp, f64)>,
+    pending_still: VecDeque<PendingRate>,
 }
 
 impl Odometry {
@@ -175,6 +190,19 @@ impl Odometry {
     /// The gyro bias learnt at standstill, rad/s.
     pub fn gyro_bias(&self) -> Option<f64> {
         self.bias
+    }
+
+    /// How well the bias the yaw is turned by is known at `t`, 1σ rad/s: the current
+    /// standstill's belief, else the last one's (or a GNSS correction's) aged by the bias's
+    /// walk; `None` before any.
+    pub fn gyro_bias_sigma(&self, t: Timestamp) -> Option<f64> {
+        self.bias?;
+        let belief = self
+            .still
+            .then(|| self.standstill_belief(t))
+            .flatten()
+            .or_else(|| self.bias_belief.map(|b| b.at(t, self.bias_walk)))?;
+        Some(belief.variance.sqrt())
     }
 
     /// Corrects the gyro bias by `delta` rad/s, known to 1σ `sigma`, at `t`: a drift GNSS
@@ -218,37 +246,54 @@ impl Odometry {
             Some(p) => p + (dt.min(p * LIVE_PERIODS) - p) * 0.05,
             None => dt,
         });
+        // Across a gap (a lost link) only the newest sample stands for the interval.
+        let gap = self.gyro_period.is_some_and(|p| dt > p * LIVE_PERIODS);
+        let rate = match previous {
+            Some(before) if !gap => (before + wz) / 2.0,
+            _ => wz,
+        };
         if self.still {
-            if self.pending_still.len() >= MAX_PENDING {
-                self.pending_still.pop_front();
+            if self.pending_still.len() >= MAX_PENDING
+                && let Some(oldest) = self.pending_still.pop_front()
+            {
+                self.turn_by(oldest);
             }
-            self.pending_still.push_back((t, wz));
+            self.pending_still.push_back(PendingRate {
+                at: t,
+                rate: wz,
+                dt,
+                turn: rate * dt,
+            });
             return;
         }
         if self.pose.is_some() {
-            // Across a gap (a lost link) only the newest sample stands for the interval.
-            let gap = self.gyro_period.is_some_and(|p| dt > p * LIVE_PERIODS);
-            let rate = match previous {
-                Some(before) if !gap => (before + wz) / 2.0,
-                _ => wz,
-            };
             self.gyro_turn += (rate - self.bias.unwrap_or(0.0)) * dt;
+        }
+    }
+
+    /// A held reading turns the pose after all (it was not the confirmed standstill's).
+    fn turn_by(&mut self, reading: PendingRate) {
+        if self.pose.is_some() {
+            self.gyro_turn += reading.turn - self.bias.unwrap_or(0.0) * reading.dt;
         }
     }
 
     /// The wheels still stand at `t`: the gyro readings of the standstill older than the
     /// guard are its bias's.
     fn confirm_still(&mut self, t: Timestamp) {
-        let Some(since) = self.still_since else {
+        let Some(bias_from) = self.bias_from else {
             return;
         };
-        while let Some(&(at, wz)) = self.pending_still.front() {
-            if t.saturating_since(at) < STILL_GUARD {
+        while let Some(&reading) = self.pending_still.front() {
+            if t.saturating_since(reading.at) < STILL_GUARD {
                 break;
             }
             self.pending_still.pop_front();
-            if at.saturating_since(since) >= STILL_GUARD {
-                self.standstill.add(wz);
+            if reading.at >= bias_from {
+                self.standstill.add(reading.rate);
+            } else {
+                // The standstill's first readings may hold the end of a turn.
+                self.turn_by(reading);
             }
         }
         if let Some(belief) = self.standstill_belief(t) {
@@ -284,13 +329,20 @@ impl Odometry {
         let still = vl.abs() < STILL_MPS && vr.abs() < STILL_MPS;
         if still && !self.still {
             self.standstill = Spread::default();
-            self.still_since = Some(t);
+            let after_motion = self.last_wheels.is_some();
+            self.bias_from = Some(if after_motion {
+                t.saturating_add(STILL_GUARD)
+            } else {
+                t
+            });
             self.pending_still.clear();
         } else if still {
             self.confirm_still(t);
         } else {
             // Moving again: the last readings of the standstill may hold the start of a turn.
-            self.pending_still.clear();
+            while let Some(reading) = self.pending_still.pop_front() {
+                self.turn_by(reading);
+            }
             if self.still
                 && let Some(belief) = self.standstill_belief(t)
             {
@@ -313,10 +365,12 @@ impl Odometry {
                 (before.speeds.1 + vr) / 2.0 * dt,
             ),
         };
-        let turn = if still {
-            0.0
-        } else if gyro_live {
+        // A live gyro turns the pose at either end of a standstill too (its middle's readings
+        // are the bias's and not integrated).
+        let turn = if gyro_live {
             self.gyro_turn
+        } else if still {
+            0.0
         } else {
             (dr - dl) / self.track_m
         };
@@ -388,6 +442,9 @@ mod tests {
         let p = o.pose().unwrap();
         assert_eq!((p.x, p.y, p.yaw), (0.0, 0.0, 0.0));
         assert!((o.gyro_bias().unwrap() - 0.01).abs() < 1e-4);
+        // Known to the readings' spread over their root count: 0.003 / √5980.
+        let sigma = o.gyro_bias_sigma(at(60_000)).unwrap();
+        assert!((sigma - 0.003 / 5980f64.sqrt()).abs() < 2e-6, "{sigma}");
         // Then it turns on the bias-corrected gyro: 0.5 rad/s for 1 s.
         for k in 6000..6100u64 {
             o.gyro(at(10 * k + 5), 0.51);
@@ -426,6 +483,28 @@ mod tests {
         // A stop far from it (the sensor was power-cycled): its own mean.
         stop_and_go(&mut o, t, 3000, 0.02, 0.003);
         assert!((o.gyro_bias().unwrap() - 0.02).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_turn_the_wheels_report_late_counts_whole() {
+        let mut o = Odometry::new(0.5, 2e-5);
+        // Wheels at 20 Hz, gyro at 100 Hz with a bias of 0.01 rad/s. 5 s still teach the bias;
+        // then a turn on the spot at 1 rad/s for 1.5 s, which the wheels report 100 ms late at
+        // either end; then 2 s still.
+        let (start, end) = (5_000u64, 6_500u64);
+        let late = 100;
+        for ms in (0..8_500u64).step_by(10) {
+            let turning = (start..end).contains(&ms);
+            o.gyro(at(ms + 5), 0.01 + if turning { 1.0 } else { 0.0 });
+            if ms % 50 == 0 {
+                let moving = (start + late..=end + late).contains(&ms);
+                let v = if moving { 0.125 } else { 0.0 };
+                o.wheels(at(ms), wheels((-v, v), (0.0, 0.0)));
+            }
+        }
+        let yaw = o.pose().unwrap().yaw;
+        assert!((yaw - 1.5).abs() < 0.005, "{yaw}");
+        assert!((o.gyro_bias().unwrap() - 0.01).abs() < 1e-9);
     }
 
     #[test]

@@ -591,6 +591,8 @@ impl Vehicle {
                             // The map pose stands on the odom frame: it moves by its
                             // increments (REP-105).
                             if let Some(pose) = o.pose() {
+                                self.localizer
+                                    .set_gyro_bias_sigma(o.gyro_bias_sigma(measured));
                                 self.localizer.add(measured, Measurement::Odom(pose));
                             }
                         }
