@@ -497,6 +497,17 @@ impl MapFilter {
         self.p = f * self.p * f.transpose() + q;
     }
 
+    /// The slow error may have stepped by `step` (east, north, m) beyond what its walk allows.
+    fn widen_gnss_error(&mut self, step: (f64, f64)) {
+        if !(step.0.is_finite() && step.1.is_finite()) {
+            return;
+        }
+        self.p[(GE, GE)] += step.0 * step.0;
+        self.p[(GN, GN)] += step.1 * step.1;
+        self.p[(GE, GN)] += step.0 * step.1;
+        self.p[(GN, GE)] += step.0 * step.1;
+    }
+
     fn reset_gnss_error(&mut self, sigma: (f64, f64)) {
         for g in [GE, GN] {
             self.x[g] = 0.0;
@@ -577,11 +588,7 @@ impl MapFilter {
             + self.slow_change_var(a, b);
         let slip_var = (SLIP_FRACTION * dist).powi(2);
         let turn_var = (AGREE_YAW_RATE * dt * dist).powi(2);
-        if self.started && self.yaw_sigma() <= HEADING_KNOWN_RAD {
-            // The odom displacement turned into the map frame by the correction.
-            let rot = self.map_to_odom().map_or(0.0, |(_, _, r)| r);
-            let (s, c) = rot.sin_cos();
-            let (mx, my) = (c * ox - s * oy, s * ox + c * oy);
+        if let Some((mx, my)) = self.odom_displacement_in_map(a, b) {
             let var = fix_var + slip_var + turn_var + (self.yaw_sigma() * dist).powi(2);
             let d2 = ((fx - mx).powi(2) + (fy - my).powi(2)) / var;
             d2 / AGREE_GATE
@@ -590,6 +597,26 @@ impl MapFilter {
             let d = fx.hypot(fy) - dist;
             d * d / var / (AGREE_GATE / 2.0)
         }
+    }
+
+    /// The antenna's displacement between two fixes' times as the odom frame measured it,
+    /// turned into the map frame by the correction; `None` until the heading is known.
+    fn odom_displacement_in_map(&self, a: &Placed, b: &Placed) -> Option<(f64, f64)> {
+        if !(self.started && self.yaw_sigma() <= HEADING_KNOWN_RAD) {
+            return None;
+        }
+        let (pa, pb) = (self.antenna_in_odom(&a.odom), self.antenna_in_odom(&b.odom));
+        let (ox, oy) = (pb.0 - pa.0, pb.1 - pa.1);
+        let rot = self.map_to_odom().map_or(0.0, |(_, _, r)| r);
+        let (s, c) = rot.sin_cos();
+        Some((c * ox - s * oy, s * ox + c * oy))
+    }
+
+    /// How far fix `b` stepped from fix `a` beyond the motion between them (east, north, m);
+    /// `None` until the heading is known.
+    fn step(&self, a: &Placed, b: &Placed) -> Option<(f64, f64)> {
+        let (mx, my) = self.odom_displacement_in_map(a, b)?;
+        Some((b.fix.en.0 - a.fix.en.0 - mx, b.fix.en.1 - a.fix.en.1 - my))
     }
 
     fn slow_change_var(&self, a: &Placed, b: &Placed) -> f64 {
@@ -665,6 +692,15 @@ impl MapFilter {
             && (self.last_accepted.is_none() || lasted >= self.config.relocate_after)
         {
             let run = std::mem::take(&mut self.held);
+            // A lesser receiver's run that stepped away from the accepted one and lasted: its
+            // slow error stepped (a change of satellites or corrections), and may be that far
+            // from what the filter holds of it.
+            if let (Some(last), Some(first)) = (self.last_accepted, run.first())
+                && first.fix.trust == Trust::UnderWheels
+                && let Some(step) = self.step(&last, first)
+            {
+                self.widen_gnss_error(step);
+            }
             for p in run {
                 self.take(p);
             }
@@ -1234,6 +1270,39 @@ mod tests {
         assert!(f.yaw_sigma() < 1f64.to_radians(), "{}", f.yaw_sigma());
         assert!(off < 0.3, "the pose followed the jump: {off} m");
         assert_eq!(f.stats().dropped, 1);
+    }
+
+    /// A DGPS receiver's solution steps 3 m (a change of satellites or corrections) and
+    /// stays: the step is its slow error's, which the wheels show, not a move. The stepped
+    /// fixes disagree with the accepted run, are held, and are taken once they have lasted.
+    #[test]
+    fn a_dgps_step_that_lasts_is_taken_as_the_receivers_error() {
+        // Nearly all of the receiver's error is slow (the Husky's SBAS: 99.8 %).
+        let mut f = MapFilter::new(MapFilterConfig {
+            gnss_correlated_fraction: 0.998,
+            ..MapFilterConfig::default()
+        });
+        drive(&mut f, 10, 0, |ms, truth| Some(rtk(ms, truth)));
+        let dgps = |ms: u64, en: (f64, f64)| Fix {
+            t: at(ms),
+            en,
+            sigma: (1.8, 1.8),
+            trust: Trust::UnderWheels,
+            corrected: true,
+        };
+        drive(&mut f, 20, 10_000, |ms, truth| Some(dgps(ms, truth)));
+        drive(&mut f, 4, 30_000, |ms, truth| {
+            Some(dgps(
+                ms,
+                (truth.0 - 3.0 * 0.3f64.sin(), truth.1 + 3.0 * 0.3f64.cos()),
+            ))
+        });
+        let (x, y, _) = f.pose().expect("placed");
+        let s = 33.98f64;
+        let off = (x - s * 0.3f64.cos()).hypot(y - s * 0.3f64.sin());
+        // 0.08 m; 0.18 m when the step did not widen the slow error's uncertainty.
+        assert!(off < 0.12, "the pose followed the step: {off} m");
+        assert!(f.stats().dropped == 0, "{:?}", f.stats());
     }
 
     #[test]
