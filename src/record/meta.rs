@@ -111,14 +111,14 @@ pub struct Meta {
     pub sources: Vec<SourceMeta>,
 }
 
+/// The largest `meta.toml` read, bytes (a few sources' lines; a thousand sources fit).
+const MAX_META_BYTES: u64 = 1 << 20;
+
 impl Meta {
     /// Reads and checks `dir/meta.toml`.
     pub fn load(dir: &Path) -> Result<Self, RecordError> {
         let path = dir.join(META_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|source| RecordError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let text = super::read_small(&path, MAX_META_BYTES)?;
         let meta: Meta = toml::from_str(&text).map_err(|e| RecordError::Meta {
             path: path.clone(),
             message: e.to_string(),

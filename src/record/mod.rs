@@ -49,6 +49,45 @@ pub enum Payload {
     },
 }
 
+/// Opens a recording's file for reading, refusing what is not a regular file: a FIFO would
+/// block the reader until someone writes, a device would stream without end.
+pub fn open_regular(path: &std::path::Path) -> Result<std::fs::File, RecordError> {
+    let io = |source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let kind = std::fs::metadata(path).map_err(io)?.file_type();
+    if !kind.is_file() {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a FIFO, device or folder); a recording holds plain files",
+        )));
+    }
+    std::fs::File::open(path).map_err(io)
+}
+
+/// Reads a small file of a recording (its description, its flush mark) whole, refusing one
+/// over `limit` bytes or not a regular file.
+pub fn read_small(path: &std::path::Path, limit: u64) -> Result<String, RecordError> {
+    use std::io::Read as _;
+    let io = |source| RecordError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut text = String::new();
+    open_regular(path)?
+        .take(limit + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > limit {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("over {limit} bytes, more than such a file holds"),
+        )));
+    }
+    Ok(text)
+}
+
 /// A recording that could not be opened, read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {

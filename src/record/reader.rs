@@ -23,6 +23,14 @@ use crate::vehicle::LinkState;
 
 /// How many skipped lines are kept for the report; the rest are only counted.
 const KEEP_SKIPPED: usize = 100;
+/// The longest line a recording's own files hold, bytes: an MQTT message at its 1 MiB limit
+/// as hex, with its topic and envelope. A longer line is counted and skipped as it is read,
+/// so no file's size becomes memory.
+pub const MAX_LINE: usize = 4 << 20;
+/// A skipped line's reason is cut to this many characters (a reason may quote the line).
+const MAX_REASON: usize = 200;
+/// The flush mark is one time in microseconds.
+const MAX_COVERED_BYTES: u64 = 64;
 
 /// A line that was skipped.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -87,17 +95,9 @@ impl RecordingReader {
         let meta = Meta::load(dir)?;
         let mut sources = Vec::with_capacity(meta.sources.len());
         for source in &meta.sources {
-            let path = dir.join(&source.file);
-            let file = File::open(&path).map_err(|e| RecordError::Io {
-                path: path.clone(),
-                source: e,
-            })?;
+            let file = super::open_regular(&dir.join(&source.file))?;
             if let Some(events) = &source.events {
-                let path = dir.join(events);
-                let file = File::open(&path).map_err(|e| RecordError::Io {
-                    path: path.clone(),
-                    source: e,
-                })?;
+                let file = super::open_regular(&dir.join(events))?;
                 sources.push(SourceReader::Envelope {
                     file: events.clone(),
                     kind: source.kind,
@@ -256,7 +256,7 @@ impl SourceReader {
                     Err(e) => Some(Err(SkippedLine {
                         file: file.clone(),
                         line: *line_no,
-                        reason: e.to_string(),
+                        reason: bounded_reason(e.to_string()),
                     })),
                 }
             }
@@ -267,21 +267,28 @@ impl SourceReader {
                 line_no,
                 buf,
             } => loop {
-                buf.clear();
-                match reader.read_until(b'\n', buf) {
-                    Ok(0) => return None,
-                    Ok(_) => {}
+                let read = match read_bounded_line(reader, buf, MAX_LINE) {
+                    Ok(read) => read,
                     Err(e) => {
                         tracing::warn!(file = %file, line = *line_no + 1, error = %e, "read error; source ends here");
                         return None;
                     }
-                }
+                };
                 *line_no += 1;
                 let skip = |reason: String| SkippedLine {
                     file: file.clone(),
                     line: *line_no,
-                    reason,
+                    reason: bounded_reason(reason),
                 };
+                match read {
+                    LineRead::End => return None,
+                    LineRead::Line => {}
+                    LineRead::TooLong(bytes) => {
+                        return Some(Err(skip(format!(
+                            "a line of {bytes} bytes, over the {MAX_LINE} a recording holds"
+                        ))));
+                    }
+                }
                 let Ok(line) = std::str::from_utf8(buf) else {
                     return Some(Err(skip("not UTF-8".into())));
                 };
@@ -294,15 +301,77 @@ impl SourceReader {
     }
 }
 
+/// What [`read_bounded_line`] read.
+#[derive(Debug, PartialEq, Eq)]
+enum LineRead {
+    /// The end of the file.
+    End,
+    /// A line, in the buffer.
+    Line,
+    /// A line of this many bytes, longer than the limit: read past, not kept.
+    TooLong(u64),
+}
+
+/// Reads the next line (up to and with its newline) into `buf`, keeping at most `max` bytes:
+/// a longer line is read to its end and dropped, so memory stays bounded by `max` whatever
+/// the file holds.
+fn read_bounded_line<R: BufRead>(
+    reader: &mut R,
+    buf: &mut Vec<u8>,
+    max: usize,
+) -> std::io::Result<LineRead> {
+    buf.clear();
+    let mut total: u64 = 0;
+    loop {
+        let available = match reader.fill_buf() {
+            Ok(available) => available,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e),
+        };
+        if available.is_empty() {
+            break;
+        }
+        let (taken, ends) = match available.iter().position(|&b| b == b'\n') {
+            Some(at) => (at + 1, true),
+            None => (available.len(), false),
+        };
+        if total.saturating_add(taken as u64) <= max as u64 {
+            buf.extend_from_slice(&available[..taken]);
+        } else {
+            buf.clear();
+        }
+        total = total.saturating_add(taken as u64);
+        reader.consume(taken);
+        if ends {
+            break;
+        }
+    }
+    Ok(match total {
+        0 => LineRead::End,
+        n if n > max as u64 => LineRead::TooLong(n),
+        _ => LineRead::Line,
+    })
+}
+
+/// `reason` cut to [`MAX_REASON`] characters, saying how long it was.
+fn bounded_reason(reason: String) -> String {
+    match reason.char_indices().nth(MAX_REASON) {
+        Some((cut, _)) => format!("{}… ({} bytes)", &reason[..cut], reason.len()),
+        None => reason,
+    }
+}
+
 /// The time every file of a recording was flushed up to together, if it says. A file the
 /// recorder never got to write (killed within its first flush period), or one that is not
 /// a time, cuts nothing: the recording plays whole rather than not at all.
 fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
     let path = dir.join(COVERED_FILE);
-    let text = match std::fs::read_to_string(&path) {
+    let text = match super::read_small(&path, MAX_COVERED_BYTES) {
         Ok(text) => text,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(source) => return Err(RecordError::Io { path, source }),
+        Err(RecordError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(None);
+        }
+        Err(e) => return Err(e),
     };
     let text = text.trim();
     if text.is_empty() {
@@ -365,6 +434,31 @@ pub fn parse_line(kind: SourceKind, line: &str) -> Result<Record, EnvelopeError>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_line_over_the_limit_is_read_past_and_not_kept() {
+        let text = format!("short\n{}\nnext\nlast", "x".repeat(100));
+        let mut reader = BufReader::with_capacity(16, text.as_bytes());
+        let mut buf = Vec::new();
+        let mut read = |buf: &mut Vec<u8>| read_bounded_line(&mut reader, buf, 50).unwrap();
+        assert_eq!(read(&mut buf), LineRead::Line);
+        assert_eq!(buf, b"short\n");
+        assert_eq!(read(&mut buf), LineRead::TooLong(101));
+        assert!(buf.capacity() <= 64, "kept {}", buf.capacity());
+        assert_eq!(read(&mut buf), LineRead::Line);
+        assert_eq!(buf, b"next\n");
+        assert_eq!(read(&mut buf), LineRead::Line);
+        assert_eq!(buf, b"last");
+        assert_eq!(read(&mut buf), LineRead::End);
+    }
+
+    #[test]
+    fn a_reason_is_cut_and_says_its_length() {
+        let cut = bounded_reason(format!("bad timestamp {:?}", "\0".repeat(10_000)));
+        assert!(cut.chars().count() < MAX_REASON + 20, "{cut}");
+        assert!(cut.ends_with("bytes)"), "{cut}");
+        assert_eq!(bounded_reason("short".into()), "short");
+    }
 
     #[test]
     fn the_covered_time_cuts_only_when_it_is_one() {

@@ -1,0 +1,101 @@
+//! Recordings whose files lie (issue 48): replay reads a data file of any size in bounded
+//! memory, reports an over-long line by its length and never quotes it whole, and refuses
+//! a FIFO instead of waiting on it.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A copy of `fixtures/sim-drive` (a live simulation's recording) to spoil.
+fn sim_drive_copy(name: &str) -> PathBuf {
+    let from = common::repo().join("fixtures/sim-drive");
+    let to = common::tempdir(name);
+    for entry in std::fs::read_dir(&from).expect("fixture") {
+        let entry = entry.expect("entry");
+        if entry.file_type().expect("type").is_file() {
+            std::fs::copy(entry.path(), to.join(entry.file_name())).expect("copy");
+        }
+    }
+    to
+}
+
+/// Runs `chassisd replay --lenient DIR` to its end (at most `limit`), sampling its memory;
+/// its exit status, stderr and peak resident memory (kB).
+fn replay_sampled(dir: &Path, limit: Duration) -> (bool, String, u64) {
+    let stderr_file = dir.with_extension("stderr");
+    let mut child = Command::new(common::chassisd())
+        .args(["replay", "--lenient"])
+        .arg(dir)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr_file).expect("stderr file"))
+        .spawn()
+        .expect("chassisd runs");
+    let started = Instant::now();
+    let mut peak = 0;
+    let status = loop {
+        peak = peak.max(common::rss_with_children_kb(child.id()));
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("replay still running after {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let stderr = std::fs::read(&stderr_file).expect("stderr");
+    (
+        status.success(),
+        String::from_utf8_lossy(&stderr).into_owned(),
+        peak,
+    )
+}
+
+#[test]
+fn a_data_file_with_a_256_mb_line_replays_in_bounded_memory() {
+    let dir = sim_drive_copy("replay-huge-line");
+    // The GNSS log's records, then 256 MB of zeros without a newline (a sparse file: the
+    // disk holds none of it).
+    let gnss = std::fs::OpenOptions::new()
+        .append(true)
+        .open(dir.join("gnss.log"))
+        .expect("gnss.log");
+    let len = gnss.metadata().expect("metadata").len();
+    gnss.set_len(len + (256 << 20)).expect("sparse tail");
+    let (ok, stderr, peak_kb) = replay_sampled(&dir, Duration::from_secs(60));
+    assert!(ok, "{}", &stderr[..stderr.len().min(2000)]);
+    assert!(
+        stderr.contains("a line of 268435456 bytes, over the 4194304 a recording holds"),
+        "{}",
+        &stderr[..stderr.len().min(2000)]
+    );
+    // The line is neither held nor quoted: a few MB of buffers, a short report.
+    assert!(peak_kb < 100_000, "peak resident memory {peak_kb} kB");
+    assert!(stderr.len() < 20_000, "stderr of {} bytes", stderr.len());
+    // The records before it still played.
+    assert!(stderr.contains("250 status lines"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_fifo_as_a_data_file_is_refused_with_the_reason() {
+    let dir = sim_drive_copy("replay-fifo");
+    let gnss = dir.join("gnss.log");
+    std::fs::remove_file(&gnss).expect("remove gnss.log");
+    nix::unistd::mkfifo(
+        &gnss,
+        nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR,
+    )
+    .expect("mkfifo");
+    // Nobody writes the FIFO: a reader that opened it would wait for ever.
+    let (ok, stderr, _) = replay_sampled(&dir, Duration::from_secs(30));
+    assert!(!ok, "{stderr}");
+    assert!(
+        stderr.contains("gnss.log") && stderr.contains("not a regular file"),
+        "{stderr}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
