@@ -577,10 +577,7 @@ impl MapFilter {
     /// How far fix `b` is from agreeing with fix `a`: the squared distance between their
     /// displacement and the odom frame's, over the agreement's gate (at most 1: they agree).
     fn disagreement(&self, a: &Placed, b: &Placed) -> f64 {
-        let (pa, pb) = (self.antenna_in_odom(&a.odom), self.antenna_in_odom(&b.odom));
-        let (ox, oy) = (pb.0 - pa.0, pb.1 - pa.1);
-        let (fx, fy) = (b.fix.en.0 - a.fix.en.0, b.fix.en.1 - a.fix.en.1);
-        let dist = ox.hypot(oy);
+        let dist = self.travelled(a, b);
         let dt = b.fix.t.saturating_since(a.fix.t).as_secs_f64();
         let fix_var = self.white_var(&a.fix)
             + self.white_var(&b.fix)
@@ -588,13 +585,13 @@ impl MapFilter {
             + self.slow_change_var(a, b);
         let slip_var = (SLIP_FRACTION * dist).powi(2);
         let turn_var = (AGREE_YAW_RATE * dt * dist).powi(2);
-        if let Some((mx, my)) = self.odom_displacement_in_map(a, b) {
+        if let Some((sx, sy)) = self.step(a, b) {
             let var = fix_var + slip_var + turn_var + (self.yaw_sigma() * dist).powi(2);
-            let d2 = ((fx - mx).powi(2) + (fy - my).powi(2)) / var;
-            d2 / AGREE_GATE
+            (sx * sx + sy * sy) / var / AGREE_GATE
         } else {
             let var = fix_var + slip_var + turn_var;
-            let d = fx.hypot(fy) - dist;
+            let fixes_apart = (b.fix.en.0 - a.fix.en.0).hypot(b.fix.en.1 - a.fix.en.1);
+            let d = fixes_apart - dist;
             d * d / var / (AGREE_GATE / 2.0)
         }
     }
