@@ -469,7 +469,8 @@ mod broker {
     use super::*;
     use bytes::BytesMut;
     use chassisd::broker::admission::{self, Credentials, Places, Policy};
-    use chassisd::broker::session::{Pass, Session, TopicNames};
+    use chassisd::broker::held::Held;
+    use chassisd::broker::session::{Pass, Session};
     use chassisd::broker::wire::{self, Version};
     use rumqttd::protocol::Protocol;
 
@@ -667,15 +668,16 @@ mod broker {
             }),
             max_clients: 4,
             own_client_id: Some("chassisd-fuzz".into()),
+            reserved_client_ids: vec!["chassisd".into()],
         };
-        let mut names = TopicNames::default();
+        let mut names = Held::new([], MAX_PACKET);
         let mut n = 0u64;
         Box::new(move |input| {
             // The broker's names fill up over a run; a fresh broker now and then keeps the
             // limit from hiding everything behind it.
             n += 1;
             if n.is_multiple_of(50_000) {
-                names = TopicNames::default();
+                names = Held::new([], MAX_PACKET);
             }
             // Half the inputs meet a broker without credentials, so that sessions go on.
             let policy = match input.first() {
@@ -704,7 +706,7 @@ mod broker {
             let v5 = connect.version == Version::V5;
             let mut stream = BytesMut::from(&input[..header.total()]);
             let mut parts = vec![rumqttd_parse(v5, &mut stream)];
-            let mut session = Session::new(connect.version);
+            let mut session = Session::new(connect.version, MAX_PACKET);
             let mut at = header.total();
             loop {
                 let h = match wire::header(&input[at..], MAX_PACKET) {
@@ -748,6 +750,8 @@ mod broker {
                 }
                 at += h.total();
             }
+            // The session ends with the input: what the broker held for it goes.
+            session.end(&mut names);
             signature(&parts)
         })
     }

@@ -34,8 +34,13 @@ pub struct Policy {
     /// Clients connected at once, chassisd's own not counted.
     pub max_clients: usize,
     /// chassisd's own client identifier: it always finds a place, so a full broker never
-    /// silences the vehicle's own status and command link.
+    /// silences the vehicle's own status and command link. It carries a part no other
+    /// client can guess (`mqtt.client_id_suffix`).
     pub own_client_id: Option<String>,
+    /// Identifiers no other client may present: chassisd's own without its unguessable
+    /// part, and `mqtt.reserved_client_ids`. MQTT hands an identifier to its newest
+    /// connection, so a client presenting chassisd's would close chassisd's session.
+    pub reserved_client_ids: Vec<String>,
 }
 
 /// Places taken.
@@ -93,6 +98,9 @@ pub fn admit(policy: &Policy, places: &mut Places, connect: &Connect) -> Result<
         .own_client_id
         .as_deref()
         .is_some_and(|id| id == connect.client_id);
+    if !own && policy.reserved_client_ids.contains(&connect.client_id) {
+        return Err(Refusal::ReservedIdentifier);
+    }
     if own && places.own < OWN_PLACES {
         places.own += 1;
         return Ok(Place::Own);
@@ -126,6 +134,7 @@ mod tests {
             username: credentials.map(|c| c.0.into()),
             password: credentials.map(|c| c.1.as_bytes().to_vec()),
             will_topic: None,
+            max_packet_to_client: None,
         }
     }
 
@@ -137,6 +146,7 @@ mod tests {
             }),
             max_clients: max,
             own_client_id: Some("chassisd-sim".into()),
+            reserved_client_ids: vec!["chassisd".into(), "app-main".into()],
         }
     }
 
@@ -201,6 +211,25 @@ mod tests {
         assert_eq!(
             admit(&p, &mut places, &connect("c", None)),
             Ok(Place::Client)
+        );
+    }
+
+    #[test]
+    fn reserved_identifiers_are_refused_to_everyone_else() {
+        let p = policy(8, false);
+        let mut places = Places::default();
+        for id in ["chassisd", "app-main"] {
+            assert_eq!(
+                admit(&p, &mut places, &connect(id, None)),
+                Err(Refusal::ReservedIdentifier),
+                "{id}"
+            );
+        }
+        assert_eq!(places, Places::default());
+        // The exact own identifier (with its unguessable part) is chassisd's place.
+        assert_eq!(
+            admit(&p, &mut places, &connect("chassisd-sim", None)),
+            Ok(Place::Own)
         );
     }
 

@@ -51,6 +51,17 @@ impl fmt::Display for WireError {
 
 impl std::error::Error for WireError {}
 
+/// One MQTT 5 property as read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct Property {
+    /// Its identifier.
+    pub id: u8,
+    /// Its value, for the integer ones.
+    pub value: Option<usize>,
+    /// Where it lies in the body, identifier included.
+    pub span: std::ops::Range<usize>,
+}
+
 /// Reads a packet's body without reading past it.
 pub(crate) struct Cursor<'a> {
     body: &'a [u8],
@@ -134,11 +145,7 @@ impl<'a> Cursor<'a> {
 
     /// MQTT 5 properties, each read by its type; returns the identifiers present.
     pub(crate) fn properties(&mut self) -> Result<Vec<u8>, WireError> {
-        Ok(self
-            .read_properties()?
-            .into_iter()
-            .map(|(id, _)| id)
-            .collect())
+        Ok(self.read_properties()?.into_iter().map(|p| p.id).collect())
     }
 
     /// Whether the properties carry a subscription identifier of 0.
@@ -146,17 +153,11 @@ impl<'a> Cursor<'a> {
         Ok(self
             .read_properties()?
             .iter()
-            .any(|&(id, value)| id == 0x0b && value == Some(0)))
+            .any(|p| p.id == 0x0b && p.value == Some(0)))
     }
 
-    /// MQTT 5 properties: their length, then skipped whole.
-    pub(crate) fn skip_properties(&mut self, field: &'static str) -> Result<(), WireError> {
-        let n = self.varint(field)?;
-        self.take(n, field).map(|_| ())
-    }
-
-    /// Properties as (identifier, integer value if it has one).
-    fn read_properties(&mut self) -> Result<Vec<(u8, Option<usize>)>, WireError> {
+    /// The properties, each with its integer value if it has one and where it lies.
+    pub(crate) fn read_properties(&mut self) -> Result<Vec<Property>, WireError> {
         const FIELD: &str = "properties";
         let length = self.varint(FIELD)?;
         let end = self
@@ -168,6 +169,7 @@ impl<'a> Cursor<'a> {
         }
         let mut found = Vec::new();
         while self.at < end {
+            let start = self.at;
             let id = self.u8(FIELD)?;
             let value = match id {
                 0x01 | 0x17 | 0x19 | 0x24 | 0x25 | 0x28 | 0x29 | 0x2a => {
@@ -195,7 +197,11 @@ impl<'a> Cursor<'a> {
                 }
                 _ => return Err(WireError::Truncated("property (unknown identifier)")),
             };
-            found.push((id, value));
+            found.push(Property {
+                id,
+                value,
+                span: start..self.at,
+            });
         }
         if self.at != end {
             return Err(WireError::Truncated(FIELD));

@@ -4,5 +4,6 @@
 
 pub mod admission;
 mod cursor;
+pub mod held;
 pub mod session;
 pub mod wire;

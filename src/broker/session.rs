@@ -10,14 +10,12 @@
 //! It also keeps the broker's memory bounded: every topic and filter name the broker ever
 //! sees costs it a log of its own, so the names are counted across all sessions.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 
 use super::cursor::Cursor;
+use super::held::{Held, MAX_IN_FLIGHT, MAX_TOPIC_BYTES, OverBudget, TopicNames};
 use super::wire::{Header, Version, WireError, kind};
 
-/// Distinct topic and filter names the broker may hold logs for. A vehicle's own dialects
-/// use a few dozen; beyond this, a session that brings a new name is ended.
-pub const MAX_TOPIC_NAMES: usize = 4096;
 /// New names one session may bring: a client that invents names is ended long before it
 /// fills the broker, and must reconnect for every few dozen more.
 pub const MAX_NEW_NAMES_PER_SESSION: usize = 64;
@@ -38,8 +36,25 @@ pub enum Violation {
     /// MQTT 5 features the broker does not serve safely: topic aliases, subscription
     /// identifiers in PUBLISH or of 0, enhanced authentication.
     Unsupported(&'static str),
-    /// The broker already holds [`MAX_TOPIC_NAMES`] names.
-    TooManyTopics,
+    /// The packet would make the broker hold more than its budget.
+    OverBudget(OverBudget),
+}
+
+impl Violation {
+    /// The MQTT 5 DISCONNECT reason code that tells a 5.0 client why (section 3.14.2.1).
+    pub fn reason_code(&self) -> u8 {
+        match self {
+            Self::Wire(WireError::TooLarge { .. }) => 0x95,
+            Self::Wire(_) => 0x81,
+            Self::UnknownPacketId { .. } => 0x82,
+            Self::BadTopic => 0x90,
+            Self::BadFilter => 0x8f,
+            Self::Unsupported("a topic alias") => 0x94,
+            Self::Unsupported(_) => 0x83,
+            Self::OverBudget(OverBudget::InFlight) => 0x93,
+            Self::OverBudget(_) => 0x97,
+        }
+    }
 }
 
 impl std::fmt::Display for Violation {
@@ -55,11 +70,25 @@ impl std::fmt::Display for Violation {
             Self::BadTopic => write!(f, "PUBLISH topic is empty, has a wildcard or is not text"),
             Self::BadFilter => write!(f, "subscription filter is malformed or starts with $"),
             Self::Unsupported(what) => write!(f, "{what} is not served"),
-            Self::TooManyTopics => write!(
+            Self::OverBudget(OverBudget::TopicNames) => write!(
                 f,
                 "a new topic name beyond the session's {MAX_NEW_NAMES_PER_SESSION} or the \
-                 broker's {MAX_TOPIC_NAMES}"
+                 broker's {}",
+                super::held::MAX_TOPIC_NAMES
             ),
+            Self::OverBudget(OverBudget::Retained) => write!(
+                f,
+                "a retained message beyond the broker's {} messages or {} bytes",
+                super::held::MAX_RETAINED,
+                super::held::MAX_RETAINED_BYTES
+            ),
+            Self::OverBudget(OverBudget::InFlight) => write!(
+                f,
+                "more than {MAX_IN_FLIGHT} QoS 1 and 2 messages in flight (receive maximum)"
+            ),
+            Self::OverBudget(OverBudget::InFlightBytes) => {
+                write!(f, "unreleased QoS 2 messages beyond the broker's budget")
+            }
         }
     }
 }
@@ -67,6 +96,12 @@ impl std::fmt::Display for Violation {
 impl From<WireError> for Violation {
     fn from(e: WireError) -> Self {
         Self::Wire(e)
+    }
+}
+
+impl From<OverBudget> for Violation {
+    fn from(e: OverBudget) -> Self {
+        Self::OverBudget(e)
     }
 }
 
@@ -79,57 +114,6 @@ pub enum Pass {
     LastOne,
 }
 
-/// Topic and filter names the broker holds, shared by every session.
-#[derive(Debug, Default)]
-pub struct TopicNames {
-    names: HashSet<String>,
-    /// chassisd's own topics (its commands and reports): always served, never counted, so
-    /// names invented by others can never lock the vehicle's own out.
-    reserved: HashSet<String>,
-}
-
-impl TopicNames {
-    /// Names with `reserved` always admitted.
-    pub fn with_reserved(reserved: impl IntoIterator<Item = String>) -> Self {
-        Self {
-            names: HashSet::new(),
-            reserved: reserved.into_iter().collect(),
-        }
-    }
-
-    /// Holds `name` as chassisd's own, beyond the limit.
-    pub fn reserve(&mut self, name: &str) {
-        self.reserved.insert(name.to_owned());
-    }
-
-    /// Whether `name` is held already (or reserved).
-    pub fn holds(&self, name: &str) -> bool {
-        self.reserved.contains(name) || self.names.contains(name)
-    }
-
-    /// Admits `name` (already known, or new with room left).
-    pub fn admit(&mut self, name: &str) -> Result<(), Violation> {
-        if self.holds(name) {
-            return Ok(());
-        }
-        if self.names.len() >= MAX_TOPIC_NAMES {
-            return Err(Violation::TooManyTopics);
-        }
-        self.names.insert(name.to_owned());
-        Ok(())
-    }
-
-    /// Names held.
-    pub fn len(&self) -> usize {
-        self.names.len()
-    }
-
-    /// Whether none is held.
-    pub fn is_empty(&self) -> bool {
-        self.names.is_empty()
-    }
-}
-
 /// Packet ids in flight, each side's.
 #[derive(Debug)]
 pub struct Session {
@@ -140,8 +124,15 @@ pub struct Session {
     out_qos2: HashSet<u16>,
     /// PUBRELs the broker sent, awaiting the client's PUBCOMP.
     out_pubrel: HashSet<u16>,
-    /// QoS 2 PUBLISHes the client sent, awaiting its PUBREL.
-    in_qos2: HashSet<u16>,
+    /// QoS 1 PUBLISHes the client sent, awaiting the broker's PUBACK.
+    in_qos1: HashSet<u16>,
+    /// QoS 2 PUBLISHes the client sent, awaiting its PUBREL, with their sizes (the broker
+    /// keeps each until then).
+    in_qos2: HashMap<u16, usize>,
+    /// Bytes of `in_qos2`.
+    in_qos2_bytes: usize,
+    /// The largest packet the client may send, bytes.
+    max_packet: usize,
     /// Names this session brought to the broker.
     new_names: usize,
     /// chassisd's own link: its names are admitted without a budget.
@@ -149,26 +140,79 @@ pub struct Session {
 }
 
 impl Session {
-    /// A session in `version` (3.1.1 or 5).
-    pub fn new(version: Version) -> Self {
+    /// A session in `version` (3.1.1 or 5) whose packets are at most `max_packet` bytes.
+    pub fn new(version: Version, max_packet: usize) -> Self {
         Self {
             version,
             out_qos1: HashSet::new(),
             out_qos2: HashSet::new(),
             out_pubrel: HashSet::new(),
-            in_qos2: HashSet::new(),
+            in_qos1: HashSet::new(),
+            in_qos2: HashMap::new(),
+            in_qos2_bytes: 0,
+            max_packet,
             new_names: 0,
             trusted: false,
         }
     }
 
     /// chassisd's own link's session: the same checks, but its topic names (its reports)
-    /// are always admitted.
-    pub fn trusted(version: Version) -> Self {
+    /// and retained messages are always admitted.
+    pub fn trusted(version: Version, max_packet: usize) -> Self {
         Self {
             trusted: true,
-            ..Self::new(version)
+            ..Self::new(version, max_packet)
         }
+    }
+
+    /// Gives back what the broker held for this session (its unreleased QoS 2 messages,
+    /// dropped with the session, which is always clean).
+    pub fn end(&mut self, held: &mut Held) {
+        held.in_flight_bytes = held.in_flight_bytes.saturating_sub(self.in_qos2_bytes);
+        self.in_qos2.clear();
+        self.in_qos2_bytes = 0;
+    }
+
+    /// Notes a QoS 1 or 2 PUBLISH `id` of `size` bytes from the client, within the
+    /// budgets. A repeated id (a DUP) is the same message.
+    fn in_flight(
+        &mut self,
+        qos: u8,
+        id: u16,
+        size: usize,
+        held: &mut Held,
+    ) -> Result<(), Violation> {
+        if self.in_qos1.contains(&id) || self.in_qos2.contains_key(&id) {
+            return Ok(());
+        }
+        let trusted = self.trusted;
+        if !trusted && self.in_qos1.len() + self.in_qos2.len() >= usize::from(MAX_IN_FLIGHT) {
+            return Err(OverBudget::InFlight.into());
+        }
+        if qos == 1 {
+            self.in_qos1.insert(id);
+            return Ok(());
+        }
+        let over_client = self.in_qos2_bytes + size > held.client_in_flight_bytes(self.max_packet);
+        let over_all = held.in_flight_bytes + size > held.max_in_flight_bytes;
+        if !trusted && (over_client || over_all) {
+            return Err(OverBudget::InFlightBytes.into());
+        }
+        self.in_qos2.insert(id, size);
+        self.in_qos2_bytes += size;
+        held.in_flight_bytes += size;
+        Ok(())
+    }
+
+    /// The client released QoS 2 message `id`: the broker passes it on and lets it go.
+    fn released(&mut self, id: u16, held: &mut Held) -> Result<(), Violation> {
+        let size = self.in_qos2.remove(&id).ok_or(Violation::UnknownPacketId {
+            kind: kind::PUBREL,
+            id,
+        })?;
+        self.in_qos2_bytes -= size;
+        held.in_flight_bytes = held.in_flight_bytes.saturating_sub(size);
+        Ok(())
     }
 
     /// Admits `name` into `names`, within this session's budget of new ones.
@@ -180,8 +224,8 @@ impl Session {
             names.reserve(name);
             return Ok(());
         }
-        if self.new_names >= MAX_NEW_NAMES_PER_SESSION {
-            return Err(Violation::TooManyTopics);
+        if name.len() > MAX_TOPIC_BYTES || self.new_names >= MAX_NEW_NAMES_PER_SESSION {
+            return Err(OverBudget::TopicNames.into());
         }
         names.admit(name)?;
         self.new_names += 1;
@@ -193,7 +237,7 @@ impl Session {
         &mut self,
         h: &Header,
         packet: &[u8],
-        names: &mut TopicNames,
+        held: &mut Held,
     ) -> Result<Pass, Violation> {
         super::wire::check_client_packet(h, self.version)?;
         let body = &packet[h.header_len..h.total()];
@@ -208,7 +252,9 @@ impl Session {
                 }
                 let id = if qos > 0 { Some(f.packet_id()?) } else { None };
                 if v5 {
-                    let ids = f.properties()?;
+                    let properties = f.read_properties()?;
+                    super::wire::check_user_properties(&properties)?;
+                    let ids: Vec<u8> = properties.iter().map(|p| p.id).collect();
                     if ids.contains(&0x23) {
                         return Err(Violation::Unsupported("a topic alias"));
                     }
@@ -218,15 +264,18 @@ impl Session {
                         ));
                     }
                 }
-                self.admit(topic, names)?;
-                if let (2, Some(id)) = (qos, id) {
-                    self.in_qos2.insert(id);
+                self.admit(topic, &mut held.names)?;
+                if let Some(id) = id {
+                    self.in_flight(qos, id, h.total(), held)?;
                 }
+                let retain = h.flags & 1 != 0;
+                let trusted = self.trusted;
+                held.retained.publish(topic, f.left(), retain, trusted)?;
             }
             kind::PUBACK => ack(&mut self.out_qos1, h.kind, f.packet_id()?)?,
             kind::PUBREC => ack(&mut self.out_qos2, h.kind, f.packet_id()?)?,
             kind::PUBCOMP => ack(&mut self.out_pubrel, h.kind, f.packet_id()?)?,
-            kind::PUBREL => ack(&mut self.in_qos2, h.kind, f.packet_id()?)?,
+            kind::PUBREL => self.released(f.packet_id()?, held)?,
             kind::SUBSCRIBE => {
                 f.packet_id()?;
                 if v5 && f.subscription_id_of_zero()? {
@@ -247,7 +296,7 @@ impl Session {
                     if !valid_filter(filter) {
                         return Err(Violation::BadFilter);
                     }
-                    self.admit(filter, names)?;
+                    self.admit(filter, &mut held.names)?;
                     filters += 1;
                 }
                 if filters == 0 {
@@ -283,6 +332,11 @@ impl Session {
         let body = &packet[h.header_len.min(packet.len())..h.total().min(packet.len())];
         let mut f = Cursor::new(body);
         match h.kind {
+            kind::PUBACK => {
+                if let Ok(id) = f.packet_id() {
+                    self.in_qos1.remove(&id);
+                }
+            }
             kind::PUBLISH => {
                 let qos = (h.flags >> 1) & 0b11;
                 if qos > 0
@@ -336,13 +390,10 @@ pub fn valid_filter(filter: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::broker::held::MAX_TOPIC_NAMES;
     use crate::broker::wire::header;
 
-    fn judge(
-        session: &mut Session,
-        packet: &[u8],
-        names: &mut TopicNames,
-    ) -> Result<Pass, Violation> {
+    fn judge(session: &mut Session, packet: &[u8], names: &mut Held) -> Result<Pass, Violation> {
         let h = header(packet, 1 << 16).unwrap().unwrap();
         session.from_client(&h, packet, names)
     }
@@ -362,9 +413,7 @@ mod tests {
             body.push(0);
         }
         body.extend_from_slice(b"payload");
-        let mut p = vec![0x30 | qos << 1, body.len() as u8];
-        p.extend(body);
-        p
+        crate::broker::wire::packet(0x30 | qos << 1, &body)
     }
 
     fn subscribe(filters: &[&str], v5_props: Option<&[u8]>) -> Vec<u8> {
@@ -385,8 +434,8 @@ mod tests {
 
     #[test]
     fn acknowledgements_must_answer_what_was_sent() {
-        let mut s = Session::new(Version::V4);
-        let mut names = TopicNames::default();
+        let mut s = Session::new(Version::V4, 1 << 16);
+        let mut names = Held::new([], 1 << 16);
         assert_eq!(
             judge(&mut s, &[0x40, 2, 0, 9], &mut names),
             Err(Violation::UnknownPacketId { kind: 4, id: 9 })
@@ -423,8 +472,8 @@ mod tests {
 
     #[test]
     fn topics_and_filters_are_those_the_broker_serves() {
-        let mut s = Session::new(Version::V4);
-        let mut names = TopicNames::default();
+        let mut s = Session::new(Version::V4, 1 << 16);
+        let mut names = Held::new([], 1 << 16);
         for bad in ["", "a/+", "a/#"] {
             assert_eq!(
                 judge(&mut s, &publish(0, bad, 0, false), &mut names),
@@ -456,8 +505,8 @@ mod tests {
 
     #[test]
     fn v5_features_the_broker_mishandles_are_refused() {
-        let mut s = Session::new(Version::V5);
-        let mut names = TopicNames::default();
+        let mut s = Session::new(Version::V5, 1 << 16);
+        let mut names = Held::new([], 1 << 16);
         // Subscription identifier 0, then 5.
         assert_eq!(
             judge(&mut s, &subscribe(&["a"], Some(&[0x0b, 0])), &mut names),
@@ -483,15 +532,15 @@ mod tests {
 
     #[test]
     fn a_session_brings_a_bounded_number_of_new_names() {
-        let mut names = TopicNames::with_reserved(["mqtt_control".to_owned()]);
-        let mut s = Session::new(Version::V4);
+        let mut names = Held::new(["mqtt_control".to_owned()], 1 << 16);
+        let mut s = Session::new(Version::V4, 1 << 16);
         for i in 0..MAX_NEW_NAMES_PER_SESSION {
             let p = publish(0, &format!("t/{i}"), 0, false);
             assert_eq!(judge(&mut s, &p, &mut names), Ok(Pass::Forward));
         }
         assert_eq!(
             judge(&mut s, &publish(0, "one/more", 0, false), &mut names),
-            Err(Violation::TooManyTopics)
+            Err(Violation::OverBudget(OverBudget::TopicNames))
         );
         // Names held, and reserved ones, go on being served.
         assert_eq!(
@@ -506,17 +555,17 @@ mod tests {
 
     #[test]
     fn the_broker_holds_a_bounded_number_of_names() {
-        let mut names = TopicNames::with_reserved(["mqtt_control".to_owned()]);
+        let mut names = Held::new(["mqtt_control".to_owned()], 1 << 16);
         for i in 0..MAX_TOPIC_NAMES {
             // A fresh session now and then, as a client that reconnects to go on.
-            let mut s = Session::new(Version::V4);
+            let mut s = Session::new(Version::V4, 1 << 16);
             let p = publish(0, &format!("t/{i}"), 0, false);
             assert_eq!(judge(&mut s, &p, &mut names), Ok(Pass::Forward));
         }
-        let mut s = Session::new(Version::V4);
+        let mut s = Session::new(Version::V4, 1 << 16);
         assert_eq!(
             judge(&mut s, &publish(0, "one/more", 0, false), &mut names),
-            Err(Violation::TooManyTopics)
+            Err(Violation::OverBudget(OverBudget::TopicNames))
         );
         // Names already held, and chassisd's own, go on being served.
         assert_eq!(
@@ -527,18 +576,119 @@ mod tests {
             judge(&mut s, &publish(0, "mqtt_control", 0, false), &mut names),
             Ok(Pass::Forward)
         );
-        assert_eq!(names.len(), MAX_TOPIC_NAMES);
+        assert_eq!(names.names.len(), MAX_TOPIC_NAMES);
+    }
+
+    #[test]
+    fn messages_in_flight_are_bounded_and_released_by_their_acknowledgement() {
+        let mut held = Held::new([], 1 << 16);
+        let mut s = Session::new(Version::V4, 1 << 16);
+        let max = usize::from(MAX_IN_FLIGHT);
+        for id in 1..=max as u16 {
+            let qos = if id % 2 == 0 { 2 } else { 1 };
+            assert_eq!(
+                judge(&mut s, &publish(qos, "t", id, false), &mut held),
+                Ok(Pass::Forward)
+            );
+        }
+        // A repeat (DUP) of one in flight is the same message.
+        assert_eq!(
+            judge(&mut s, &publish(2, "t", 2, false), &mut held),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &publish(1, "t", 999, false), &mut held),
+            Err(Violation::OverBudget(OverBudget::InFlight))
+        );
+        assert_eq!(
+            Violation::OverBudget(OverBudget::InFlight).reason_code(),
+            0x93
+        );
+        assert_eq!(
+            held.in_flight_bytes,
+            (max / 2) * publish(2, "t", 2, false).len()
+        );
+        // The broker's PUBACK frees a QoS 1 place, the client's PUBREL a QoS 2 one.
+        broker_sends(&mut s, &[0x40, 2, 0, 1]);
+        assert_eq!(
+            judge(&mut s, &publish(1, "t", 1000, false), &mut held),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &[0x62, 2, 0, 2], &mut held),
+            Ok(Pass::Forward)
+        );
+        assert_eq!(
+            judge(&mut s, &publish(2, "t", 1001, false), &mut held),
+            Ok(Pass::Forward)
+        );
+        // The session's end gives back what the broker held for it.
+        s.end(&mut held);
+        assert_eq!(held.in_flight_bytes, 0);
+    }
+
+    #[test]
+    fn unreleased_bytes_are_bounded_for_all_clients_together() {
+        let max_packet = 1 << 20;
+        let mut held = Held::new([], max_packet);
+        let big = |id: u16| {
+            let mut body = vec![0, 1, b't'];
+            body.extend_from_slice(&id.to_be_bytes());
+            body.resize(max_packet - 8, b'x');
+            crate::broker::wire::packet(0x34, &body)
+        };
+        let mut refused_at = None;
+        'clients: for client in 0..64 {
+            let mut s = Session::new(Version::V4, max_packet);
+            for id in 1..=8u16 {
+                let p = big(id);
+                let h = header(&p, max_packet).unwrap().unwrap();
+                match s.from_client(&h, &p, &mut held) {
+                    Ok(_) => {}
+                    Err(Violation::OverBudget(OverBudget::InFlightBytes)) if id > 1 => break,
+                    Err(e) => {
+                        refused_at = Some((client, e));
+                        break 'clients;
+                    }
+                }
+            }
+            // Each client keeps its share: a quarter of the whole.
+            std::mem::forget(s);
+        }
+        assert!(held.in_flight_bytes <= held.max_in_flight_bytes);
+        assert!(
+            matches!(
+                refused_at,
+                Some((4, Violation::OverBudget(OverBudget::InFlightBytes)))
+            ),
+            "{refused_at:?}"
+        );
+    }
+
+    #[test]
+    fn retained_messages_count_against_the_broker_and_topics_are_bounded() {
+        let mut held = Held::new([], 1 << 16);
+        let mut s = Session::new(Version::V4, 1 << 16);
+        let mut retained = publish(0, "r/0", 0, false);
+        retained[0] |= 1;
+        assert_eq!(judge(&mut s, &retained, &mut held), Ok(Pass::Forward));
+        assert_eq!(held.retained.len(), 1);
+        let long = "x".repeat(crate::broker::held::MAX_TOPIC_BYTES + 1);
+        assert_eq!(
+            judge(&mut s, &publish(0, &long, 0, false), &mut held),
+            Err(Violation::OverBudget(OverBudget::TopicNames))
+        );
     }
 
     #[test]
     fn truncated_packets_are_errors_never_panics() {
         let whole = publish(1, "device/x/goal", 3, true);
-        let mut names = TopicNames::default();
+        let mut names = Held::new([], 1 << 16);
         // Up to the properties' end (the payload may have any length).
         for cut in 2..2 + 2 + 13 + 2 + 1 {
             let mut p = whole[..cut].to_vec();
             p[1] = (cut - 2) as u8;
-            let mut s = Session::new(Version::V5);
+            let mut s = Session::new(Version::V5, 1 << 16);
             assert!(judge(&mut s, &p, &mut names).is_err(), "cut at {cut}");
         }
     }

@@ -2,8 +2,8 @@
 //! CONNECT read field by field, and CONNACK refusals written. Nothing here trusts a length
 //! it is given: every one is checked against the bytes present and the configured bound.
 
-use super::cursor::Cursor;
 pub use super::cursor::WireError;
+use super::cursor::{Cursor, Property};
 
 /// MQTT control packet types (the fixed header's high nibble).
 pub mod kind {
@@ -134,7 +134,13 @@ pub struct Connect {
     pub password: Option<Vec<u8>>,
     /// The last will's topic, when a will is set.
     pub will_topic: Option<String>,
+    /// MQTT 5: the largest packet the client accepts (`Maximum Packet Size`), bytes.
+    pub max_packet_to_client: Option<usize>,
 }
+
+/// User properties one packet may carry: MQTT sets no bound, and each is two strings the
+/// broker keeps with the message.
+pub const MAX_USER_PROPERTIES: usize = 32;
 
 /// Reads a CONNECT body (the bytes after the fixed header). A version the broker does not
 /// speak is returned, not refused, so that the caller can answer it with a CONNACK.
@@ -163,14 +169,26 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
         return Err(WireError::BadConnectFlags(flags));
     }
     let keep_alive_s = f.u16("keep alive")?;
+    let mut max_packet_to_client = None;
     if version == Version::V5 {
-        f.skip_properties("connect properties")?;
+        let properties = f.read_properties()?;
+        check_user_properties(&properties)?;
+        for p in properties {
+            match (p.id, p.value) {
+                // Receive Maximum and Maximum Packet Size of 0 are protocol errors (MQTT 5
+                // sections 3.1.2.11.3 and 3.1.2.11.4).
+                (0x21, Some(0)) => return Err(WireError::Truncated("receive maximum (0)")),
+                (0x27, Some(0)) => return Err(WireError::Truncated("maximum packet size (0)")),
+                (0x27, Some(n)) => max_packet_to_client = Some(n),
+                _ => {}
+            }
+        }
     }
     let client_id = f.string("client identifier")?.to_owned();
     let mut will_topic = None;
     if will {
         if version == Version::V5 {
-            f.skip_properties("will properties")?;
+            check_user_properties(&f.read_properties()?)?;
         }
         will_topic = Some(f.string("will topic")?.to_owned());
         f.binary("will payload")?;
@@ -192,7 +210,16 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
         username,
         password,
         will_topic,
+        max_packet_to_client,
     })
+}
+
+/// Refuses more than [`MAX_USER_PROPERTIES`] user properties (identifier 0x26).
+pub(crate) fn check_user_properties(properties: &[Property]) -> Result<(), WireError> {
+    if properties.iter().filter(|p| p.id == 0x26).count() > MAX_USER_PROPERTIES {
+        return Err(WireError::Truncated("user properties (too many)"));
+    }
+    Ok(())
 }
 
 fn refused_version(version: Version) -> Connect {
@@ -203,6 +230,73 @@ fn refused_version(version: Version) -> Connect {
         username: None,
         password: None,
         will_topic: None,
+        max_packet_to_client: None,
+    }
+}
+
+/// The keep-alive the broker is told for a client that asked for none (0): rumqttd takes 0
+/// as "no silence allowed at all" and drops the client at once, where MQTT means "no
+/// keep-alive". The longest it can be told, some 18 hours; the gate watches such a client
+/// with TCP keep-alive instead.
+pub const NO_KEEP_ALIVE_UPSTREAM: u16 = u16::MAX;
+
+/// Sets the keep-alive of a whole CONNECT packet that [`connect`] read, whose fixed header
+/// is `h`.
+pub fn set_keep_alive(packet: &mut [u8], h: &Header, seconds: u16) {
+    // The keep-alive follows the name (6 bytes), the level and the flags.
+    let at = h.header_len + 8;
+    if let Some(field) = packet.get_mut(at..at + 2) {
+        field.copy_from_slice(&seconds.to_be_bytes());
+    }
+}
+
+/// An MQTT 5 DISCONNECT with `reason` (the gate tells a 5.0 client why it ends a session).
+pub fn disconnect_v5(reason: u8) -> [u8; 3] {
+    [kind::DISCONNECT << 4, 0x01, reason]
+}
+
+/// The broker's MQTT 5 CONNACK (whole packet) with the gate's own limits told to the
+/// client: `Receive Maximum` (QoS 1 and 2 messages it may have in flight) and `Maximum
+/// Packet Size`, replacing what the broker said of either. `None` if it cannot be read.
+pub fn connack_v5_with_limits(
+    connack: &[u8],
+    receive_maximum: u16,
+    max_packet: usize,
+) -> Option<Vec<u8>> {
+    let h = header(connack, usize::MAX).ok()??;
+    let body = connack.get(h.header_len..h.total())?;
+    let mut f = Cursor::new(body);
+    let flags = f.u8("acknowledge flags").ok()?;
+    let reason = f.u8("reason code").ok()?;
+    let mut properties = Vec::new();
+    if !f.done() {
+        for p in f.read_properties().ok()? {
+            if !matches!(p.id, 0x21 | 0x27) {
+                properties.extend_from_slice(body.get(p.span)?);
+            }
+        }
+    }
+    properties.push(0x21);
+    properties.extend_from_slice(&receive_maximum.to_be_bytes());
+    properties.push(0x27);
+    let max_packet = u32::try_from(max_packet).unwrap_or(u32::MAX);
+    properties.extend_from_slice(&max_packet.to_be_bytes());
+    let mut out = vec![flags, reason];
+    out.extend(variable_length(properties.len()));
+    out.extend(properties);
+    Some(packet(kind::CONNACK << 4, &out))
+}
+
+/// A length in MQTT's variable byte encoding.
+fn variable_length(mut n: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(4);
+    loop {
+        let digit = (n % 128) as u8;
+        n /= 128;
+        out.push(if n > 0 { digit | 0x80 } else { digit });
+        if n == 0 {
+            return out;
+        }
     }
 }
 
@@ -229,6 +323,11 @@ pub enum Refusal {
     BadCredentials,
     /// No credentials where they are required.
     NotAuthorized,
+    /// The client identifier is chassisd's own, or one the configuration reserves.
+    ReservedIdentifier,
+    /// The last will would publish on one of chassisd's own topics (a will is no
+    /// command, and no report of the vehicle's).
+    ReservedWill,
 }
 
 impl Refusal {
@@ -240,6 +339,8 @@ impl Refusal {
             Self::ServerUnavailable => "client limit reached",
             Self::BadCredentials => "wrong user name or password",
             Self::NotAuthorized => "no credentials",
+            Self::ReservedIdentifier => "client identifier reserved for chassisd",
+            Self::ReservedWill => "last will on one of chassisd's own topics",
         }
     }
 }
@@ -251,7 +352,8 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
     if version == Version::V5 {
         let reason = match why {
             Refusal::UnacceptableVersion => 0x84,
-            Refusal::IdentifierRejected => 0x85,
+            Refusal::IdentifierRejected | Refusal::ReservedIdentifier => 0x85,
+            Refusal::ReservedWill => 0x87,
             // Server busy: the limit is a passing condition, worth a later retry.
             Refusal::ServerUnavailable => 0x89,
             Refusal::BadCredentials | Refusal::NotAuthorized => 0x87,
@@ -261,9 +363,9 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
     } else {
         let code = match why {
             Refusal::UnacceptableVersion => 1,
-            Refusal::IdentifierRejected => 2,
+            Refusal::IdentifierRejected | Refusal::ReservedIdentifier => 2,
             Refusal::ServerUnavailable => 3,
-            Refusal::BadCredentials | Refusal::NotAuthorized => 5,
+            Refusal::BadCredentials | Refusal::NotAuthorized | Refusal::ReservedWill => 5,
         };
         vec![0x20, 0x02, 0x00, code]
     }
@@ -273,15 +375,7 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
 pub fn packet(first: u8, body: &[u8]) -> Vec<u8> {
     let mut p = Vec::with_capacity(body.len() + 5);
     p.push(first);
-    let mut n = body.len();
-    loop {
-        let digit = (n % 128) as u8;
-        n /= 128;
-        p.push(if n > 0 { digit | 0x80 } else { digit });
-        if n == 0 {
-            break;
-        }
-    }
+    p.extend(variable_length(body.len()));
     p.extend_from_slice(body);
     p
 }
@@ -397,6 +491,64 @@ mod tests {
         let mut longer = body.to_vec();
         longer.push(0);
         assert_eq!(connect(&longer), Err(WireError::TrailingBytes(1)));
+    }
+
+    /// A v5 CONNECT of client `x` whose properties are `props`.
+    fn v5_with_properties(props: &[u8]) -> Vec<u8> {
+        let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', 5, 0x02, 0, 30];
+        body.extend(variable_length(props.len()));
+        body.extend_from_slice(props);
+        body.extend_from_slice(&[0, 1, b'x']);
+        packet(0x10, &body)
+    }
+
+    #[test]
+    fn v5_limits_are_read_and_zero_ones_refused() {
+        // Maximum Packet Size 1000, Receive Maximum 10.
+        let c = parse(&v5_with_properties(&[0x27, 0, 0, 0x03, 0xe8, 0x21, 0, 10])).unwrap();
+        assert_eq!(c.max_packet_to_client, Some(1000));
+        // Receive Maximum 0 and Maximum Packet Size 0 are protocol errors.
+        assert!(parse(&v5_with_properties(&[0x21, 0, 0])).is_err());
+        assert!(parse(&v5_with_properties(&[0x27, 0, 0, 0, 0])).is_err());
+        // At most MAX_USER_PROPERTIES user properties.
+        let user = [0x26, 0, 1, b'k', 0, 1, b'v'];
+        let many: Vec<u8> = user.repeat(MAX_USER_PROPERTIES);
+        assert!(parse(&v5_with_properties(&many)).is_ok());
+        let too_many: Vec<u8> = user.repeat(MAX_USER_PROPERTIES + 1);
+        assert!(parse(&v5_with_properties(&too_many)).is_err());
+    }
+
+    #[test]
+    fn no_keep_alive_is_told_to_the_broker_as_the_longest() {
+        let mut p = connect_packet(4, "x", None, false);
+        let h = header(&p, 1 << 20).unwrap().unwrap();
+        set_keep_alive(&mut p, &h, NO_KEEP_ALIVE_UPSTREAM);
+        let c = parse(&p).unwrap();
+        assert_eq!((c.keep_alive_s, c.client_id.as_str()), (u16::MAX, "x"));
+    }
+
+    #[test]
+    fn a_v5_connack_carries_the_gates_limits() {
+        // rumqttd's CONNACK: session present 0, success, with a Maximum QoS and a Receive
+        // Maximum of its own.
+        let ack = packet(0x20, &[0x00, 0x00, 0x05, 0x24, 0x01, 0x21, 0x00, 0x64]);
+        let out = connack_v5_with_limits(&ack, 32, 4096).unwrap();
+        let h = header(&out, 1 << 20).unwrap().unwrap();
+        assert_eq!((h.kind, h.total()), (kind::CONNACK, out.len()));
+        let mut f = Cursor::new(&out[h.header_len..]);
+        assert_eq!((f.u8("").unwrap(), f.u8("").unwrap()), (0, 0));
+        let props: Vec<(u8, Option<usize>)> = f
+            .read_properties()
+            .unwrap()
+            .into_iter()
+            .map(|p| (p.id, p.value))
+            .collect();
+        assert_eq!(
+            props,
+            [(0x24, Some(1)), (0x21, Some(32)), (0x27, Some(4096))]
+        );
+        assert!(connack_accepts(&out));
+        assert_eq!(connack_v5_with_limits(&[0x20, 0x05, 0], 32, 1), None);
     }
 
     #[test]

@@ -20,6 +20,15 @@ pub struct MqttConfig {
     /// Client id; default `chassisd-<vehicle name>`.
     #[serde(default)]
     pub client_id: Option<String>,
+    /// Append 16 random hex digits, drawn at each start, to the client id: MQTT hands an
+    /// id to its newest connection, so one an outsider can guess lets them close
+    /// chassisd's session. Off for a broker whose ACLs want the exact id.
+    #[serde(default = "default_true")]
+    pub client_id_suffix: bool,
+    /// Client ids the embedded broker refuses to every client but chassisd (besides
+    /// chassisd's own, always reserved): e.g. the controlling app's.
+    #[serde(default)]
+    pub reserved_client_ids: Vec<String>,
     /// User name, if the broker wants one.
     #[serde(default)]
     pub username: Option<String>,
@@ -168,6 +177,9 @@ fn default_command_rate_hz() -> f64 {
 fn default_command_burst() -> u32 {
     50
 }
+fn default_true() -> bool {
+    true
+}
 fn default_max_payload() -> usize {
     1 << 20
 }
@@ -184,6 +196,8 @@ impl Default for MqttConfig {
             host: default_host(),
             port: default_port(),
             client_id: None,
+            client_id_suffix: true,
+            reserved_client_ids: Vec::new(),
             username: None,
             password: None,
             keep_alive_s: default_keep_alive_s(),
@@ -215,11 +229,31 @@ impl MqttConfig {
         Duration::from_secs_f64(self.reconnect_max_s)
     }
 
-    /// The client id for a vehicle called `name`.
+    /// The client id chassisd's link uses for a vehicle called `name`: the configured or
+    /// default id, with this process's unguessable tag unless `client_id_suffix` is off.
     pub fn client_id(&self, name: &str) -> String {
+        let base = self.base_client_id(name);
+        if self.client_id_suffix {
+            format!("{base}-{}", crate::secret::process_tag())
+        } else {
+            base
+        }
+    }
+
+    /// The configured or default client id without the tag: chassisd's other clients
+    /// (`check`, the recorder) add a suffix of their own to it.
+    pub fn base_client_id(&self, name: &str) -> String {
         self.client_id
             .clone()
             .unwrap_or_else(|| format!("chassisd-{name}"))
+    }
+
+    /// Client ids the embedded broker refuses to everyone but chassisd's link: the base id
+    /// (and the link's own, when it is the same) and `reserved_client_ids`.
+    pub fn reserved_client_ids(&self, name: &str) -> Vec<String> {
+        let mut ids = vec![self.base_client_id(name)];
+        ids.extend(self.reserved_client_ids.iter().cloned());
+        ids
     }
 
     /// Where the embedded broker's health goes (retained JSON), for a vehicle called `name`.

@@ -5,6 +5,7 @@ pub mod broker;
 pub mod command_rate;
 pub mod input_lines;
 pub mod mqtt;
+pub mod mqtt_losses;
 pub mod mqtt_observe;
 pub mod ntrip;
 pub mod ros1;

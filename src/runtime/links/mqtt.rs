@@ -26,6 +26,7 @@ use crate::config::mqtt::MqttConfig;
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
+use crate::runtime::links::mqtt_losses::{Losses, Tell};
 use crate::vehicle::LinkState;
 
 /// Messages from the engine waiting for the link task.
@@ -297,6 +298,10 @@ async fn run(
         .with_known_topics(spec.command_topics.iter().cloned());
     let mut connected = false;
     let mut last_failure: Option<String> = None;
+    let mut losses = Losses::default();
+    // Whether this session's connect and subscribe are worth an info line (not while
+    // sessions keep being lost: those are summarised).
+    let mut announce = true;
     let mut events = Poller::spawn(eventloop, c.reconnect_max());
     let link = |state| Record {
         t: clock.now(),
@@ -307,6 +312,9 @@ async fn run(
         if let Some(report) = rate.due_summary(Instant::now()) {
             log_rate(&report, c);
         }
+        if let Some(lost) = losses.due_summary(Instant::now()) {
+            tracing::warn!(%broker, lost, "MQTT sessions lost in the last 5 s; reconnecting each time");
+        }
         tokio::select! {
             event = events.next() => {
                 let Some(event) = event else { return LinkEnd::PollerLost };
@@ -314,7 +322,10 @@ async fn run(
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     connected = true;
                     last_failure = None;
-                    tracing::info!(%broker, "MQTT connected");
+                    losses.connected(Instant::now());
+                    if announce {
+                        tracing::info!(%broker, client_id = %c.client_id(&spec.vehicle), "MQTT connected");
+                    }
                     let filters = spec
                         .subscriptions
                         .iter()
@@ -366,7 +377,7 @@ async fn run(
                     let refused = refused_subscriptions(&ack);
                     if refused > 0 {
                         tracing::error!(refused, "MQTT broker refused subscriptions");
-                    } else {
+                    } else if announce {
                         tracing::info!(topics = ?spec.subscriptions, "MQTT subscribed");
                     }
                 }
@@ -382,7 +393,9 @@ async fn run(
                     outbox.requeue_unacknowledged();
                     if connected {
                         connected = false;
-                        tracing::warn!(%broker, error = %e, "MQTT connection lost; reconnecting");
+                        let tell = losses.lost(Instant::now());
+                        announce = tell == Tell::Lost;
+                        log_loss(&tell, &broker, &e, &c.client_id(&spec.vehicle));
                         if records.send(link(LinkState::Down)).await.is_err() {
                             return LinkEnd::EngineGone;
                         }
@@ -438,6 +451,11 @@ impl Poller {
                     return;
                 }
                 if failed {
+                    // rumqttc keeps a publish whose packet id collided across a lost
+                    // connection, and then refuses every request of every later session
+                    // until a "collision timeout" ends it: the link stayed wedged for good
+                    // after a takeover. The link queues unacknowledged replies itself.
+                    eventloop.state.collision = None;
                     tokio::time::sleep(backoff).await;
                     backoff = (backoff * 2).min(reconnect_max);
                 }
@@ -465,6 +483,26 @@ pub(crate) fn refused_subscriptions(ack: &rumqttc::SubAck) -> usize {
         .iter()
         .filter(|c| matches!(c, rumqttc::SubscribeReasonCode::Failure))
         .count()
+}
+
+/// A lost session, as [`Losses`] says to tell it.
+fn log_loss(tell: &Tell, broker: &str, error: &rumqttc::ConnectionError, client_id: &str) {
+    match tell {
+        Tell::Lost => {
+            tracing::warn!(%broker, %error, "MQTT connection lost; reconnecting");
+        }
+        Tell::LikelyTakeover { cut_short } => tracing::error!(
+            %broker,
+            %error,
+            cut_short,
+            client_id,
+            "MQTT: the broker keeps closing chassisd's session soon after it connects: another \
+             client is probably connecting with chassisd's client id (MQTT gives an id to its \
+             newest connection). Keep mqtt.client_id_suffix on, and have the broker's ACL \
+             reserve the id (docs/security.md); further losses are summarised every 5 s"
+        ),
+        Tell::Quiet => tracing::debug!(%broker, %error, "MQTT connection lost again"),
+    }
 }
 
 /// One line when a flood starts on a topic, then one per period while it lasts.

@@ -27,7 +27,7 @@ pub fn spawn(
     clock: RecordClock,
     records: mpsc::Sender<Record>,
 ) -> Result<(), crate::runtime::error::RuntimeError> {
-    let client_id = format!("{}-recorder", config.client_id(vehicle));
+    let client_id = format!("{}-recorder", config.base_client_id(vehicle));
     let (client, mut events) = AsyncClient::new(client_options(config, client_id)?, CLIENT_QUEUE);
     events.set_network_options(low_latency());
     let broker = format!("{}:{}", config.host, config.port);

@@ -468,7 +468,7 @@ async fn probe_broker(
         return Ok("no broker configured".into());
     };
     // A client id of its own (the daemon's stays connected) and no last will.
-    let client_id = format!("{}-check", m.client_id(&config.vehicle.name));
+    let client_id = format!("{}-check", m.base_client_id(&config.vehicle.name));
     let options = match crate::runtime::links::mqtt::client_options(m, client_id) {
         Ok(o) => o,
         Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),

@@ -62,6 +62,8 @@ pub struct ChildSettings {
     pub credentials: Option<(String, String)>,
     /// chassisd's own client identifier, which always finds a place.
     pub own_client_id: Option<String>,
+    /// Identifiers refused to every other client.
+    pub reserved_client_ids: Vec<String>,
     /// TLS on the listener.
     pub tls: Option<super::tls::ServerTls>,
     /// chassisd's own topics, always served whatever others invented.
@@ -116,7 +118,7 @@ pub fn main() -> Result<(), RuntimeError> {
         .build()
         .map_err(io("the broker's runtime"))?;
     let gate = runtime.block_on(open_gate(&settings, upstream))?;
-    let probe_id = format!("chassisd-probe-{:016x}", unguessable());
+    let probe_id = format!("chassisd-probe-{:016x}", crate::secret::unguessable());
     runtime.spawn(probe(upstream.v4, probe_id));
     runtime.spawn(report_stats(gate.clone()));
     say(&ChildReport::Ready);
@@ -132,22 +134,6 @@ pub fn main() -> Result<(), RuntimeError> {
         .await;
     });
     std::process::exit(0);
-}
-
-/// A number no client can guess (the kernel's random source), for the probe's identifier:
-/// a client that took it over would have the broker restarted.
-fn unguessable() -> u64 {
-    let mut bytes = [0u8; 8];
-    // SAFETY: the buffer is 8 writable bytes, as the length says.
-    let n = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
-    if n != 8 {
-        // Without the kernel's source: the time and the process id, still unknown outside.
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as u64);
-        return nanos ^ u64::from(std::process::id()).rotate_left(32);
-    }
-    u64::from_ne_bytes(bytes)
 }
 
 /// Writes one report line to chassisd.
@@ -256,6 +242,7 @@ async fn open_gate(
                     .map(|(username, password)| Credentials { username, password }),
                 max_clients: settings.max_clients,
                 own_client_id: settings.own_client_id.clone(),
+                reserved_client_ids: settings.reserved_client_ids.clone(),
             },
             upstream,
             max_packet: settings.max_packet,
@@ -305,7 +292,8 @@ async fn probe(upstream: SocketAddr, client_id: String) {
     }
 }
 
-/// Sends the counters to chassisd every [`STATS_EVERY`], and logs what changed.
+/// Sends the counters to chassisd every [`STATS_EVERY`], and logs what changed: one summary
+/// line for every refusal and closing of the period, never one per client.
 async fn report_stats(gate: Arc<Gate>) {
     let mut every = tokio::time::interval(STATS_EVERY);
     let mut before = gate.counters.snapshot();
@@ -313,26 +301,33 @@ async fn report_stats(gate: Arc<Gate>) {
         every.tick().await;
         let now = gate.counters.snapshot();
         let connected = gate.connected();
+        let holdings = gate.holdings();
         let mut counters: HashMap<String, u64> =
             now.iter().map(|(k, v)| ((*k).to_owned(), *v)).collect();
-        counters.insert("topic_names".into(), gate.topic_names() as u64);
+        counters.extend(holdings.iter().map(|(k, v)| ((*k).to_owned(), *v)));
         say(&ChildReport::Stats {
             connected,
             counters,
         });
-        let delta = |i: usize| now[i].1 - before[i].1;
-        let refused = (1..now.len()).map(delta).sum::<u64>();
-        if refused > 0 {
+        let changes: Vec<String> = now
+            .iter()
+            .zip(&before)
+            .skip(1)
+            .filter(|(n, b)| n.1 > b.1)
+            .map(|(n, b)| format!("{} {}", n.0, n.1 - b.1))
+            .collect();
+        if !changes.is_empty() {
             let last = gate.last_refused();
+            let held = holdings
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect::<Vec<_>>()
+                .join(", ");
             tracing::warn!(
                 connected,
-                admitted = delta(0),
-                refused_credentials = delta(1),
-                refused_full = delta(2),
-                refused_protocol = delta(3),
-                malformed = delta(4),
-                handshake_dropped = delta(5),
-                idle_closed = delta(6),
+                admitted = now[0].1 - before[0].1,
+                refused = %changes.join(", "),
+                held = %held,
                 last_peer = ?last.map(|l| l.0),
                 last_reason = last.map_or("", |l| l.1),
                 "embedded broker: connections refused or closed in the last {} s",
@@ -365,6 +360,7 @@ mod tests {
             max_packet: 1 << 20,
             credentials: Some(("op".into(), "hunter2".into())),
             own_client_id: None,
+            reserved_client_ids: Vec::new(),
             tls: None,
             reserved_topics: Vec::new(),
         };

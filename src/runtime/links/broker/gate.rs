@@ -24,7 +24,8 @@ use tokio_rustls::TlsAcceptor;
 use super::identifiers::Identifiers;
 use super::relay::{Ended, Relay};
 use crate::broker::admission::{self, Place, Places, Policy};
-use crate::broker::session::{self, TopicNames};
+use crate::broker::held::{self, Held};
+use crate::broker::session;
 use crate::broker::wire::{self, Connect, Header, Refusal, WireError};
 
 /// A client must have sent its whole CONNECT (and finished TLS) within this long.
@@ -79,20 +80,32 @@ pub struct GateCounters {
     pub handshake_dropped: AtomicU64,
     /// Closed for keep-alive silence or a client that stopped reading.
     pub idle_closed: AtomicU64,
+    /// Refused for presenting chassisd's identifier (or a reserved one), or a last will on
+    /// chassisd's own topics.
+    pub refused_reserved: AtomicU64,
+    /// Closed for making the broker hold more than its budget (topic names, retained
+    /// messages, messages in flight).
+    pub over_budget: AtomicU64,
+    /// Admitted by the gate but not by the broker behind it.
+    pub upstream_failed: AtomicU64,
 }
 
 impl GateCounters {
-    /// The counters as (name, value) pairs, in a fixed order.
-    pub fn snapshot(&self) -> [(&'static str, u64); 7] {
+    /// The counters as (name, value) pairs, in a fixed order: `admitted` first, then every
+    /// kind of refusal or closing.
+    pub fn snapshot(&self) -> [(&'static str, u64); 10] {
         let get = |c: &AtomicU64| c.load(Ordering::Relaxed);
         [
             ("admitted", get(&self.admitted)),
             ("refused_credentials", get(&self.refused_credentials)),
             ("refused_full", get(&self.refused_full)),
             ("refused_protocol", get(&self.refused_protocol)),
+            ("refused_reserved", get(&self.refused_reserved)),
             ("malformed", get(&self.malformed)),
+            ("over_budget", get(&self.over_budget)),
             ("handshake_dropped", get(&self.handshake_dropped)),
             ("idle_closed", get(&self.idle_closed)),
+            ("upstream_failed", get(&self.upstream_failed)),
         ]
     }
 
@@ -101,6 +114,7 @@ impl GateCounters {
             Refusal::BadCredentials | Refusal::NotAuthorized => &self.refused_credentials,
             Refusal::ServerUnavailable => &self.refused_full,
             Refusal::UnacceptableVersion | Refusal::IdentifierRejected => &self.refused_protocol,
+            Refusal::ReservedIdentifier | Refusal::ReservedWill => &self.refused_reserved,
         };
         counter.fetch_add(1, Ordering::Relaxed);
     }
@@ -112,7 +126,7 @@ pub struct Gate {
     tls: Option<TlsAcceptor>,
     places: Mutex<Places>,
     identifiers: Arc<Identifiers>,
-    names: Mutex<TopicNames>,
+    held: Mutex<Held>,
     handshakes: Arc<Semaphore>,
     /// What the gate saw.
     pub counters: GateCounters,
@@ -123,13 +137,16 @@ pub struct Gate {
 impl Gate {
     /// A gate with `settings`, serving TLS when `tls` is given.
     pub fn new(settings: GateSettings, tls: Option<TlsAcceptor>) -> Arc<Self> {
-        let names = TopicNames::with_reserved(settings.reserved_topics.iter().cloned());
+        let held = Held::new(
+            settings.reserved_topics.iter().cloned(),
+            settings.max_packet,
+        );
         Arc::new(Self {
             settings,
             tls,
             places: Mutex::new(Places::default()),
             identifiers: Arc::new(Identifiers::default()),
-            names: Mutex::new(names),
+            held: Mutex::new(held),
             handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
             counters: GateCounters::default(),
             last_refused: Mutex::new(None),
@@ -154,9 +171,16 @@ impl Gate {
         lock(&self.places)
     }
 
-    /// Topic and filter names the broker holds.
-    pub fn topic_names(&self) -> usize {
-        lock(&self.names).len()
+    /// What the broker holds: topic and filter names, retained messages and their bytes,
+    /// bytes of unreleased QoS 2 messages.
+    pub fn holdings(&self) -> [(&'static str, u64); 4] {
+        let held = lock(&self.held);
+        [
+            ("topic_names", held.names.len() as u64),
+            ("retained", held.retained.len() as u64),
+            ("retained_bytes", held.retained.bytes() as u64),
+            ("in_flight_bytes", held.in_flight_bytes as u64),
+        ]
     }
 
     /// Accepts connections on `listener` for ever.
@@ -250,20 +274,16 @@ impl Gate {
             }
         };
         let (connect, header) = connect;
-        let admitted = admission::admit(&self.settings.policy, &mut self.places(), &connect)
-            .and_then(|place| {
-                // A will is published under its topic: one more name for the broker to hold.
-                let will_ok = connect
-                    .will_topic
-                    .as_deref()
-                    .is_none_or(|t| session::valid_topic(t) && lock(&self.names).admit(t).is_ok());
-                if will_ok {
-                    Ok(place)
-                } else {
-                    self.places().leave(place);
-                    Err(Refusal::ServerUnavailable)
-                }
-            });
+        // The places' lock is let go before the will is judged (which may give the place
+        // back): held across both, the gate's one thread would wait for itself.
+        let admitted = admission::admit(&self.settings.policy, &mut self.places(), &connect);
+        let admitted = admitted.and_then(|place| match self.judge_will(&connect, place) {
+            Ok(()) => Ok(place),
+            Err(why) => {
+                self.places().leave(place);
+                Err(why)
+            }
+        });
         let place = match admitted {
             Ok(place) => place,
             Err(why) => {
@@ -295,12 +315,15 @@ impl Gate {
         self.counters.admitted.fetch_add(1, Ordering::Relaxed);
         let mut connect_bytes = buf.split_to(header.total());
         wire::force_clean_session(&mut connect_bytes, &header);
+        if connect.keep_alive_s == 0 {
+            wire::set_keep_alive(&mut connect_bytes, &header, wire::NO_KEEP_ALIVE_UPSTREAM);
+        }
         let upstream = match connect.version {
             wire::Version::V5 => self.settings.upstream.v5,
             _ => self.settings.upstream.v4,
         };
         let Some(upstream) = self
-            .open_upstream(upstream, &connect_bytes, &mut stream)
+            .open_upstream(upstream, &connect_bytes, connect.version, &mut stream)
             .await
         else {
             return;
@@ -313,9 +336,15 @@ impl Gate {
             keep_alive: (connect.keep_alive_s > 0).then(|| {
                 Duration::from_secs_f64(f64::from(connect.keep_alive_s) * KEEP_ALIVE_GRACE)
             }),
-            names: &self.names,
+            max_packet_to_client: connect.max_packet_to_client,
+            held: &self.held,
         };
         match relay.run(stream, buf, upstream, turn.as_ref()).await {
+            Ended::Violation(v @ session::Violation::OverBudget(_)) => {
+                self.counters.over_budget.fetch_add(1, Ordering::Relaxed);
+                self.note_refused(peer, "over the broker's budget");
+                tracing::debug!(%peer, client = %connect.client_id, violation = %v, "embedded broker: session ended");
+            }
             Ended::Violation(v) => {
                 self.counters.malformed.fetch_add(1, Ordering::Relaxed);
                 self.note_refused(peer, "protocol violation");
@@ -328,6 +357,27 @@ impl Gate {
             | Ended::ClientDisconnected
             | Ended::BrokerClosed
             | Ended::TakenOver => {}
+        }
+    }
+
+    /// Whether a CONNECT's last will may be kept: its topic is one the broker serves, not
+    /// one of chassisd's own (a will is no command, nor a report of the vehicle's), and a
+    /// name the broker may hold.
+    fn judge_will(&self, connect: &Connect, place: Place) -> Result<(), Refusal> {
+        let Some(topic) = connect.will_topic.as_deref() else {
+            return Ok(());
+        };
+        let mut held = lock(&self.held);
+        if place != Place::Own && held.names.is_reserved(topic) {
+            return Err(Refusal::ReservedWill);
+        }
+        let admitted = session::valid_topic(topic)
+            && topic.len() <= held::MAX_TOPIC_BYTES
+            && held.names.admit(topic).is_ok();
+        if admitted {
+            Ok(())
+        } else {
+            Err(Refusal::ServerUnavailable)
         }
     }
 
@@ -353,6 +403,7 @@ impl Gate {
         &self,
         upstream: SocketAddr,
         connect: &[u8],
+        version: wire::Version,
         client: &mut S,
     ) -> Option<TcpStream> {
         let handshake = async {
@@ -377,15 +428,37 @@ impl Gate {
         {
             Ok(Ok(done)) => done,
             Ok(Err(e)) => {
-                tracing::warn!(error = %e, "embedded broker: the broker refused a forwarded connection");
+                // Counted for the summary: one line per client would let a client flood the log.
+                tracing::debug!(error = %e, "embedded broker: the broker refused a forwarded connection");
+                self.counters
+                    .upstream_failed
+                    .fetch_add(1, Ordering::Relaxed);
                 return None;
             }
             Err(_) => {
-                tracing::warn!("embedded broker: the broker did not answer a CONNECT in time");
+                tracing::debug!("embedded broker: the broker did not answer a CONNECT in time");
+                self.counters
+                    .upstream_failed
+                    .fetch_add(1, Ordering::Relaxed);
                 return None;
             }
         };
         let accepted = header.kind == wire::kind::CONNACK && wire::connack_accepts(&ack);
+        // A 5.0 client is told the gate's limits, which it would otherwise learn by being
+        // disconnected.
+        let ack = match version {
+            wire::Version::V5 if accepted => wire::connack_v5_with_limits(
+                &ack[..header.total()],
+                held::MAX_IN_FLIGHT,
+                self.settings.max_packet,
+            )
+            .map_or(ack.clone(), |rewritten| {
+                let mut whole = BytesMut::from(&rewritten[..]);
+                whole.extend_from_slice(&ack[header.total()..]);
+                whole
+            }),
+            _ => ack,
+        };
         let delivered = tokio::time::timeout(HANDSHAKE_TIMEOUT, client.write_all(&ack))
             .await
             .is_ok_and(|r| r.is_ok());

@@ -145,6 +145,7 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, Run
             .clone()
             .map(|u| (u, config.password.clone().unwrap_or_default())),
         own_client_id: Some(config.client_id(vehicle)),
+        reserved_client_ids: config.reserved_client_ids(vehicle),
         tls,
         reserved_topics,
     })

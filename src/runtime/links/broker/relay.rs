@@ -15,7 +15,8 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::net::TcpStream;
 
 use super::identifiers::Turn;
-use crate::broker::session::{Pass, Session, TopicNames, Violation};
+use crate::broker::held::Held;
+use crate::broker::session::{Pass, Session, Violation};
 use crate::broker::wire::{self, Version};
 
 /// Bytes read from a socket at a time.
@@ -55,8 +56,11 @@ pub struct Relay<'a> {
     pub max_packet: usize,
     /// Silence allowed from the client (1.5 keep-alive), if it has a keep-alive.
     pub keep_alive: Option<Duration>,
-    /// Topic and filter names the broker holds, shared by every session.
-    pub names: &'a Mutex<TopicNames>,
+    /// The largest packet the client accepts (MQTT 5's `Maximum Packet Size`): larger ones
+    /// the broker sends are not passed on.
+    pub max_packet_to_client: Option<usize>,
+    /// What the broker holds for every session.
+    pub held: &'a Mutex<Held>,
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -74,15 +78,20 @@ impl Relay<'_> {
         turn: Option<&Turn>,
     ) -> Ended {
         let session = Mutex::new(if self.trusted {
-            Session::trusted(self.version)
+            Session::trusted(self.version, self.max_packet)
         } else {
-            Session::new(self.version)
+            Session::new(self.version, self.max_packet)
         });
         let (mut client_rx, mut client_tx) = tokio::io::split(client);
         let (mut upstream_rx, mut upstream_tx) = upstream.into_split();
         let ended = {
             let inbound = self.inbound(&mut client_rx, &mut upstream_tx, pending, &session);
-            let outbound = outbound(&mut upstream_rx, &mut client_tx, &session);
+            let outbound = outbound(
+                &mut upstream_rx,
+                &mut client_tx,
+                &session,
+                self.max_packet_to_client,
+            );
             let taken_over = async {
                 match turn {
                     Some(turn) => turn.taken_over().await,
@@ -95,6 +104,12 @@ impl Relay<'_> {
                 () = taken_over => Ended::TakenOver,
             }
         };
+        lock(&session).end(&mut lock(self.held));
+        if let (Ended::Violation(v), Version::V5) = (&ended, self.version) {
+            // A 5.0 client is told why (a 3.1.1 one can only be closed on).
+            let reason = wire::disconnect_v5(v.reason_code());
+            let _ = tokio::time::timeout(BROKER_CLOSE, client_tx.write_all(&reason)).await;
+        }
         if !matches!(ended, Ended::BrokerClosed) {
             if !matches!(ended, Ended::ClientDisconnected) {
                 // The broker sees the session end; without a DISCONNECT the will fires.
@@ -135,7 +150,7 @@ impl Relay<'_> {
                     break None;
                 }
                 let packet = &buf[ready..ready + h.total()];
-                let pass = lock(session).from_client(&h, packet, &mut lock(self.names));
+                let pass = lock(session).from_client(&h, packet, &mut lock(self.held));
                 match pass {
                     Ok(Pass::Forward) => ready += h.total(),
                     Ok(Pass::LastOne) => {
@@ -170,11 +185,13 @@ impl Relay<'_> {
     }
 }
 
-/// Moves the broker's packets to the client, noting each in the session.
+/// Moves the broker's packets to the client, noting each in the session. Packets larger
+/// than the client accepts (`limit`) are dropped, as MQTT 5 has the server do.
 async fn outbound<R: AsyncRead + Unpin, W: AsyncWrite + Unpin>(
     from: &mut R,
     to: &mut W,
     session: &Mutex<Session>,
+    limit: Option<usize>,
 ) -> Ended {
     let mut buf = BytesMut::with_capacity(READ_CHUNK);
     loop {
@@ -182,22 +199,32 @@ async fn outbound<R: AsyncRead + Unpin, W: AsyncWrite + Unpin>(
         if !from.read_buf(&mut buf).await.is_ok_and(|n| n > 0) {
             return Ended::BrokerClosed;
         }
-        let mut ready = 0;
         // The broker's packets are bounded by its own packet limit.
-        while let Ok(Some(h)) = wire::header(&buf[ready..], usize::MAX) {
-            if buf.len() - ready < h.total() {
+        loop {
+            let mut ready = 0;
+            let mut skip = 0;
+            while let Ok(Some(h)) = wire::header(&buf[ready..], usize::MAX) {
+                if buf.len() - ready < h.total() {
+                    break;
+                }
+                if limit.is_some_and(|limit| h.total() > limit) {
+                    skip = h.total();
+                    break;
+                }
+                lock(session).from_broker(&h, &buf[ready..ready + h.total()]);
+                ready += h.total();
+            }
+            if ready > 0 {
+                match tokio::time::timeout(WRITE_STALL, to.write_all(&buf[..ready])).await {
+                    Ok(Ok(())) => buf.advance(ready),
+                    Ok(Err(_)) => return Ended::ClientClosed,
+                    Err(_) => return Ended::Stalled,
+                }
+            }
+            if skip == 0 {
                 break;
             }
-            lock(session).from_broker(&h, &buf[ready..ready + h.total()]);
-            ready += h.total();
-        }
-        if ready == 0 {
-            continue;
-        }
-        match tokio::time::timeout(WRITE_STALL, to.write_all(&buf[..ready])).await {
-            Ok(Ok(())) => buf.advance(ready),
-            Ok(Err(_)) => return Ended::ClientClosed,
-            Err(_) => return Ended::Stalled,
+            buf.advance(skip);
         }
     }
 }
@@ -206,13 +233,14 @@ async fn outbound<R: AsyncRead + Unpin, W: AsyncWrite + Unpin>(
 mod tests {
     use super::*;
 
-    fn relay(names: &Mutex<TopicNames>, keep_alive: Option<Duration>) -> Relay<'_> {
+    fn relay(held: &Mutex<Held>, keep_alive: Option<Duration>) -> Relay<'_> {
         Relay {
             version: Version::V4,
             trusted: false,
             max_packet: 1024,
             keep_alive,
-            names,
+            max_packet_to_client: None,
+            held,
         }
     }
 
@@ -220,8 +248,8 @@ mod tests {
     async fn whole_packets_pass_and_a_forbidden_one_ends_the_session() {
         // PINGREQ, a QoS 0 PUBLISH split across reads, then a CONNACK (a server's packet).
         let publish = [0x30, 0x05, 0x00, 0x01, b't', b'h', b'i'];
-        let names = Mutex::new(TopicNames::default());
-        let session = Mutex::new(Session::new(Version::V4));
+        let names = Mutex::new(Held::new([], 1024));
+        let session = Mutex::new(Session::new(Version::V4, 1024));
         let (mut client, mut gate_side) = tokio::io::duplex(1024);
         let (mut broker_side, mut broker) = tokio::io::duplex(1024);
         let r = relay(&names, None);
@@ -251,8 +279,8 @@ mod tests {
 
     #[tokio::test]
     async fn a_packet_over_the_limit_is_refused_before_its_body_arrives() {
-        let names = Mutex::new(TopicNames::default());
-        let session = Mutex::new(Session::new(Version::V4));
+        let names = Mutex::new(Held::new([], 1024));
+        let session = Mutex::new(Session::new(Version::V4, 1024));
         let (mut client, mut gate_side) = tokio::io::duplex(1024);
         let (mut broker_side, _broker) = tokio::io::duplex(1024);
         // A PUBLISH that claims 2 MB.
@@ -274,8 +302,8 @@ mod tests {
 
     #[tokio::test]
     async fn a_silent_client_is_dropped_after_its_keep_alive() {
-        let names = Mutex::new(TopicNames::default());
-        let session = Mutex::new(Session::new(Version::V4));
+        let names = Mutex::new(Held::new([], 1024));
+        let session = Mutex::new(Session::new(Version::V4, 1024));
         let (_client, mut gate_side) = tokio::io::duplex(1024);
         let (mut broker_side, _broker) = tokio::io::duplex(1024);
         let ended = relay(&names, Some(Duration::from_millis(50)))
@@ -286,8 +314,8 @@ mod tests {
 
     #[tokio::test]
     async fn a_client_acknowledges_only_what_the_broker_delivered() {
-        let names = Mutex::new(TopicNames::default());
-        let session = Mutex::new(Session::new(Version::V4));
+        let names = Mutex::new(Held::new([], 1024));
+        let session = Mutex::new(Session::new(Version::V4, 1024));
         // The broker delivers a QoS 1 PUBLISH with id 7.
         let (mut broker, mut broker_side) = tokio::io::duplex(1024);
         let (mut to_client, mut client) = tokio::io::duplex(1024);
@@ -297,7 +325,7 @@ mod tests {
             .unwrap();
         drop(broker);
         assert!(matches!(
-            outbound(&mut broker_side, &mut to_client, &session).await,
+            outbound(&mut broker_side, &mut to_client, &session, None).await,
             Ended::BrokerClosed
         ));
         let mut delivered = [0u8; 8];
