@@ -152,3 +152,47 @@ fn a_failed_mission_stops_the_blade_and_bad_missions_are_refused() {
         "the cancelled mission's cutter step never ran"
     );
 }
+
+#[test]
+fn a_mission_of_many_instant_steps_is_bounded_and_spread_over_ticks() {
+    use chassisd::control::mission::{MAX_STEPS, MAX_STEPS_PER_TICK};
+    let mut v = Vehicle::located(11);
+    let wait = r#"{"action": "WAIT", "parameters": {"seconds": 0}}"#;
+    let steps = |n: usize| format!("[{}]", vec![wait; n].join(","));
+    // 20,000 steps once ran in one tick: 40,001 notifies, most dropped with the end's.
+    let refused = v
+        .send("mission", &steps(MAX_STEPS + 1))
+        .expect_err("over the step limit");
+    assert!(
+        refused.contains(&format!("at most {MAX_STEPS} steps")),
+        "{refused}"
+    );
+    v.sink.events.clear();
+    v.send("mission", &steps(MAX_STEPS))
+        .expect("the mission starts");
+    // One plant step (1 ms) at a time: no control tick emits more than a few steps' notifies.
+    let mut most_in_a_tick = 0;
+    for _ in 0..30_000 {
+        let before = v.sink.events.len();
+        v.sim.step(common::lockstep::FIXED, &mut v.sink);
+        most_in_a_tick = most_in_a_tick.max(v.sink.events.len() - before);
+        if v.sink.events.iter().any(|e| e == "mission succeeded") {
+            break;
+        }
+    }
+    let mission_events: Vec<&String> = v
+        .sink
+        .events
+        .iter()
+        .filter(|e| e.starts_with("mission"))
+        .collect();
+    assert_eq!(mission_events.len(), 2 * MAX_STEPS + 1);
+    assert_eq!(
+        mission_events.last().map(|e| e.as_str()),
+        Some("mission succeeded")
+    );
+    assert!(
+        most_in_a_tick <= 2 * MAX_STEPS_PER_TICK + 1,
+        "{most_in_a_tick} events in one tick"
+    );
+}

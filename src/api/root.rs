@@ -20,7 +20,7 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::mqtt::{CoreAccess, Dialect, Publish};
-use crate::control::mission::{MissionEvent, MissionStep};
+use crate::control::mission::{MAX_STEPS, MissionEvent, MissionStep};
 use crate::control::{MotionTag, Outcome};
 use crate::devices::bms::ChargeState;
 use crate::fusion::geodesy::Geodetic;
@@ -638,6 +638,15 @@ pub(crate) fn mission(data: &Value) -> Result<Vec<MissionStep>, (u32, String)> {
     };
     if steps.is_empty() {
         return Err((INVALID, "a mission needs at least one step".to_owned()));
+    }
+    if steps.len() > MAX_STEPS {
+        return Err((
+            INVALID,
+            format!(
+                "a mission has at most {MAX_STEPS} steps, this one {}: split it",
+                steps.len()
+            ),
+        ));
     }
     let mut out = Vec::with_capacity(steps.len());
     for (i, step) in steps.iter().enumerate() {

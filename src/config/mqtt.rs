@@ -318,6 +318,17 @@ impl MqttConfig {
                 "choose a shorter, non-empty id",
             ));
         }
+        if let Some(bad) = self
+            .reserved_client_ids
+            .iter()
+            .find(|id| !crate::broker::admission::routable_client_id(id) || id.is_empty())
+        {
+            return Err(invalid(
+                "reserved_client_ids",
+                &format!("{bad:?} is not a client id a broker can route"),
+                "list non-empty ids without + # / $ or control characters",
+            ));
+        }
         if self.status_topic.is_empty() || self.status_topic.contains(['+', '#']) {
             return Err(invalid(
                 "status_topic",

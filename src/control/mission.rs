@@ -18,6 +18,14 @@ use super::outcome::{AbortReason, CancelReason, StepAt};
 use super::{MotionId, MotionTag, Outcome};
 use crate::time::Timestamp;
 
+/// Steps a mission may have: far beyond a day's work, few enough that its notifies (two per
+/// step) cannot flood a link.
+pub const MAX_STEPS: usize = 1000;
+/// Steps that may start in one control tick: instant ones (WAIT 0, the cutter) run on in
+/// the same tick up to this many, so a mission of many of them spreads its notifies over
+/// ticks instead of emitting them all at once.
+pub const MAX_STEPS_PER_TICK: usize = 8;
+
 /// The settings missions run with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MissionSettings {
@@ -113,6 +121,8 @@ pub struct Mission {
     phase: Phase,
     paused: bool,
     last_tick: Option<Timestamp>,
+    /// Steps started in the tick at `last_tick`.
+    started_this_tick: usize,
     events: Vec<MissionEvent>,
     ended: Option<Outcome>,
 }
@@ -128,6 +138,7 @@ impl Mission {
             phase: Phase::Start,
             paused: false,
             last_tick: None,
+            started_this_tick: 0,
             events: Vec::new(),
             ended: None,
         }
@@ -249,6 +260,10 @@ impl Mission {
         let dt = self
             .last_tick
             .map_or(0.0, |last| t.saturating_since(last).as_secs_f64());
+        // The core calls again within a tick after an instant step (the cutter).
+        if self.last_tick != Some(t) {
+            self.started_this_tick = 0;
+        }
         self.last_tick = Some(t);
         if self.ended.is_some() || self.paused {
             return None;
@@ -257,6 +272,10 @@ impl Mission {
             let step = self.steps.get(self.index)?.clone();
             match (&self.phase, &step) {
                 (Phase::Start, _) => {
+                    if self.started_this_tick >= MAX_STEPS_PER_TICK {
+                        return None;
+                    }
+                    self.started_this_tick += 1;
                     self.events
                         .push(MissionEvent::StepStarted(self.index, step.action()));
                     match step {
@@ -389,6 +408,33 @@ mod tests {
         let events: Vec<String> = m.take_events().iter().map(ToString::to_string).collect();
         assert_eq!(events.len(), 13, "{events:?}");
         assert_eq!(events[12], "mission succeeded");
+    }
+
+    #[test]
+    fn instant_steps_spread_over_ticks_and_the_end_comes_last() {
+        let n = 20;
+        let mut m = Mission::new(vec![MissionStep::Wait(0.0); n], settings(false), None);
+        let mut per_tick = Vec::new();
+        for i in 0..10 {
+            assert_eq!(m.tick(at(i * 10), false), None);
+            // A second call in the same tick (after the cutter) starts nothing more.
+            assert_eq!(m.tick(at(i * 10), false), None);
+            per_tick.push(m.take_events());
+            if m.ended().is_some() {
+                break;
+            }
+        }
+        let starts: Vec<usize> = per_tick
+            .iter()
+            .map(|e| {
+                e.iter()
+                    .filter(|e| matches!(e, MissionEvent::StepStarted(..)))
+                    .count()
+            })
+            .collect();
+        assert_eq!(starts, [8, 8, 4]);
+        let last = per_tick.last().and_then(|e| e.last());
+        assert_eq!(last, Some(&MissionEvent::Ended(Outcome::Succeeded)));
     }
 
     #[test]

@@ -40,13 +40,21 @@ const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 #[derive(Clone)]
 pub struct MqttSender {
     tx: mpsc::Sender<Publish>,
+    dropped: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl MqttSender {
-    /// Queues a message; never blocks. Only a stalled link task can refuse one (logged).
+    /// Queues a message; never blocks. Only a stalled link task can refuse one: counted, and
+    /// logged at the 1st, 2nd, 4th, 8th... drop, never once per message.
     pub fn send(&self, message: Publish) {
         if let Err(e) = self.tx.try_send(message) {
-            tracing::error!(error = %e, "MQTT link task is not keeping up; message dropped");
+            let n = self
+                .dropped
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+                + 1;
+            if n.is_power_of_two() {
+                tracing::error!(error = %e, dropped = n, "MQTT link task is not keeping up; messages dropped");
+            }
         }
     }
 }
@@ -209,7 +217,10 @@ pub fn spawn(
             tokio::time::sleep(Duration::from_secs(1)).await;
         }
     });
-    Ok(MqttSender { tx })
+    Ok(MqttSender {
+        tx,
+        dropped: Default::default(),
+    })
 }
 
 /// Commands and their acks are small packets that must not wait for Nagle's algorithm to

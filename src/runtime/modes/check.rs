@@ -449,11 +449,16 @@ fn describe_health(h: &BrokerHealth) -> String {
     }
     let _ = write!(
         text,
-        "; refused since the last restart: {} credentials, {} full, {} protocol, {} malformed",
+        "; refused since the last restart: {} credentials, {} full, {} protocol, {} reserved, \
+         {} malformed, {} over budget; holding {} retained messages ({} bytes)",
         count("refused_credentials"),
         count("refused_full"),
         count("refused_protocol"),
-        count("malformed")
+        count("refused_reserved"),
+        count("malformed"),
+        count("over_budget"),
+        count("retained"),
+        count("retained_bytes")
     );
     text
 }

@@ -314,19 +314,19 @@ async fn report_stats(gate: Arc<Gate>) {
             .zip(&before)
             .skip(1)
             .filter(|(n, b)| n.1 > b.1)
-            .map(|(n, b)| format!("{} {}", n.0, n.1 - b.1))
+            .map(|(n, b)| format!("{}={}", n.0, n.1 - b.1))
             .collect();
         if !changes.is_empty() {
             let last = gate.last_refused();
             let held = holdings
                 .iter()
-                .map(|(k, v)| format!("{k} {v}"))
+                .map(|(k, v)| format!("{k}={v}"))
                 .collect::<Vec<_>>()
-                .join(", ");
+                .join(" ");
             tracing::warn!(
                 connected,
                 admitted = now[0].1 - before[0].1,
-                refused = %changes.join(", "),
+                refused = %changes.join(" "),
                 held = %held,
                 last_peer = ?last.map(|l| l.0),
                 last_reason = last.map_or("", |l| l.1),
