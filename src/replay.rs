@@ -269,13 +269,15 @@ impl<W: Write> Consumer for Output<'_, W> {
     }
 }
 
+/// The largest trajectories file read, bytes: the store's limit of points written as JSON
+/// (some 60 bytes each) fits with room; a larger file is refused with the reason, never read
+/// whole into memory.
+const MAX_TRAJECTORIES_BYTES: u64 = 256 << 20;
+
 /// The trajectories a recording stored at its start.
 fn read_trajectories(path: &Path) -> Result<Vec<Trajectory>, ReplayError> {
-    let bytes = std::fs::read(path).map_err(|source| RecordError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
-    serde_json::from_slice(&bytes).map_err(|e| {
+    let text = crate::record::read_small(path, MAX_TRAJECTORIES_BYTES)?;
+    serde_json::from_str(&text).map_err(|e| {
         ReplayError::Recording(RecordError::Meta {
             path: path.to_owned(),
             message: format!("trajectories: {e}"),

@@ -99,3 +99,63 @@ fn a_fifo_as_a_data_file_is_refused_with_the_reason() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn an_oversized_trajectories_file_is_refused_before_it_is_read() {
+    let dir = sim_drive_copy("replay-huge-trajectories");
+    // 300 MB claimed, none of it on the disk, and named in meta.toml.
+    let meta = dir.join("meta.toml");
+    let text = std::fs::read_to_string(&meta).expect("meta.toml");
+    let text = text.replacen(
+        "vehicle_config = ",
+        "trajectories = \"trajectories.json\"\nvehicle_config = ",
+        1,
+    );
+    std::fs::write(&meta, text).expect("meta.toml written");
+    let trajectories = std::fs::File::create(dir.join("trajectories.json")).expect("create");
+    trajectories.set_len(300 << 20).expect("sparse");
+    let (ok, stderr, peak_kb) = replay_sampled(&dir, Duration::from_secs(30));
+    assert!(!ok, "{stderr}");
+    assert!(
+        stderr.contains("trajectories.json") && stderr.contains("more than such a file holds"),
+        "{stderr}"
+    );
+    assert!(peak_kb < 100_000, "peak resident memory {peak_kb} kB");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_fifo_given_as_an_nmea_log_is_refused_with_the_reason() {
+    let dir = common::tempdir("replay-nmea-fifo");
+    let log = dir.join("receiver.nmea");
+    nix::unistd::mkfifo(
+        &log,
+        nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR,
+    )
+    .expect("mkfifo");
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&log)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("chassisd runs");
+    let started = Instant::now();
+    let mut out = out;
+    let status = loop {
+        if let Some(status) = out.try_wait().expect("wait") {
+            break status;
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            let _ = out.kill();
+            panic!("replay waited on the FIFO");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut out.stderr.take().expect("stderr"), &mut stderr)
+        .expect("stderr");
+    assert!(!status.success(), "{stderr}");
+    assert!(stderr.contains("not a regular file"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -74,16 +74,22 @@ pub fn read_small(path: &std::path::Path, limit: u64) -> Result<String, RecordEr
         path: path.to_path_buf(),
         source,
     };
-    let mut text = String::new();
-    open_regular(path)?
-        .take(limit + 1)
-        .read_to_string(&mut text)
-        .map_err(io)?;
-    if text.len() as u64 > limit {
-        return Err(io(std::io::Error::new(
+    let too_big = || {
+        io(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
             format!("over {limit} bytes, more than such a file holds"),
-        )));
+        ))
+    };
+    let file = open_regular(path)?;
+    // Its size says when it is too large before a byte is read (a sparse file costs nothing
+    // to claim); the read's own bound catches one that grows meanwhile.
+    if file.metadata().map_err(io)?.len() > limit {
+        return Err(too_big());
+    }
+    let mut text = String::new();
+    file.take(limit + 1).read_to_string(&mut text).map_err(io)?;
+    if text.len() as u64 > limit {
+        return Err(too_big());
     }
     Ok(text)
 }

@@ -15,7 +15,6 @@
 //! The log is read twice, line by line (the first pass finds the first date), so memory does
 //! not grow with its length or the span it covers.
 
-use std::fs::File;
 use std::io::{BufRead, BufReader, Cursor, Read};
 use std::path::Path;
 use std::time::Duration;
@@ -234,12 +233,9 @@ impl NmeaLogReader {
     pub fn open(path: &Path, options: ImportOptions) -> Result<Self, RecordError> {
         Self::new(
             || {
-                File::open(path)
+                // A FIFO or device would hang the second pass, or never end.
+                super::open_regular(path)
                     .map(|f| Box::new(BufReader::with_capacity(1 << 16, f)) as Box<dyn BufRead>)
-                    .map_err(|source| RecordError::Io {
-                        path: path.to_owned(),
-                        source,
-                    })
             },
             options,
         )
