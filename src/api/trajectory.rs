@@ -205,6 +205,24 @@ pub trait TrajectoryStore: Send {
     fn delete(&mut self, name: &str) -> Result<(), TrajectoryError>;
     /// Deletes every one; returns how many.
     fn delete_all(&mut self) -> Result<usize, TrajectoryError>;
+    /// Changes answered as done whose writing to storage failed since the last call (a
+    /// store that writes later, off the control task, learns of a full disk after its
+    /// answer): the dialect tells the client that asked.
+    fn failed_writes(&mut self) -> Vec<FailedWrite> {
+        Vec::new()
+    }
+}
+
+/// A change whose success was answered, then failed to reach storage.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FailedWrite {
+    /// The command that made it (`save_trajectory`, `delete_trajectory`,
+    /// `delete_all_trajectory`).
+    pub command: &'static str,
+    /// What it changed: a trajectory's name, or every trajectory.
+    pub what: String,
+    /// Why the write failed.
+    pub reason: String,
 }
 
 /// No storage configured: every operation is refused, saying how to configure it.

@@ -16,7 +16,9 @@ use std::time::Duration;
 
 use crate::runtime::error::{RuntimeError, invalid};
 
-use crate::api::trajectory::{DirStore, MemoryStore, Trajectory, TrajectoryError, TrajectoryStore};
+use crate::api::trajectory::{
+    DirStore, FailedWrite, MemoryStore, Trajectory, TrajectoryError, TrajectoryStore,
+};
 use crate::config::VehicleConfig;
 
 /// Changes waiting for the disk before new ones are refused.
@@ -49,6 +51,8 @@ pub struct QueuedStore {
     points: usize,
     limits: Limits,
     changes: SyncSender<Change>,
+    /// Writes that failed, told by the writer thread.
+    failed: Receiver<FailedWrite>,
 }
 
 /// The writer thread, for waiting on it at exit.
@@ -107,12 +111,13 @@ pub fn spawn(
     let points = existing.iter().map(|t| t.data.len()).sum();
     let (changes, queue) = sync_channel(capacity);
     let (done_tx, done) = sync_channel(1);
+    let (failed_tx, failed) = sync_channel(capacity);
     let failures = Arc::new(AtomicU64::new(0));
-    let failed = failures.clone();
+    let failure_count = failures.clone();
     std::thread::Builder::new()
         .name("trajectory-writer".into())
         .spawn(move || {
-            write_changes(disk, queue, &failed);
+            write_changes(disk, queue, &failure_count, &failed_tx);
             let _ = done_tx.send(());
         })?;
     Ok((
@@ -121,24 +126,42 @@ pub fn spawn(
             points,
             limits,
             changes,
+            failed,
         },
         StoreWriter { done, failures },
     ))
 }
 
-fn write_changes(mut disk: DirStore, queue: Receiver<Change>, failures: &AtomicU64) {
+fn write_changes(
+    mut disk: DirStore,
+    queue: Receiver<Change>,
+    failures: &AtomicU64,
+    told: &SyncSender<FailedWrite>,
+) {
     for change in queue {
-        let (what, result) = match &change {
-            Change::Save(t) => (t.name.as_str(), disk.save(t)),
-            Change::Delete(name) => (name.as_str(), disk.delete(name)),
-            Change::DeleteAll => ("every trajectory", disk.delete_all().map(|_| ())),
+        let (command, what, result) = match &change {
+            Change::Save(t) => ("save_trajectory", t.name.as_str(), disk.save(t)),
+            Change::Delete(name) => ("delete_trajectory", name.as_str(), disk.delete(name)),
+            Change::DeleteAll => (
+                "delete_all_trajectory",
+                "every trajectory",
+                disk.delete_all().map(|_| ()),
+            ),
         };
         match result {
             // Deleting what a crash or a hand already removed is done.
             Ok(()) | Err(TrajectoryError::NotFound(_)) => {}
             Err(e) => {
-                failures.fetch_add(1, Ordering::Relaxed);
-                tracing::error!(trajectory = %what, error = %e, "trajectory folder write failed; the change is kept in memory only");
+                let n = failures.fetch_add(1, Ordering::Relaxed) + 1;
+                if n.is_power_of_two() {
+                    tracing::error!(trajectory = %what, error = %e, failed = n, "trajectory folder write failed; the change is kept in memory only");
+                }
+                // Told to the client that asked; beyond the queue's bound the log holds it.
+                let _ = told.try_send(FailedWrite {
+                    command,
+                    what: what.to_owned(),
+                    reason: e.to_string(),
+                });
             }
         }
     }
@@ -196,6 +219,10 @@ impl TrajectoryStore for QueuedStore {
         self.queue(Change::DeleteAll)?;
         self.points = 0;
         self.mirror.delete_all()
+    }
+
+    fn failed_writes(&mut self) -> Vec<FailedWrite> {
+        self.failed.try_iter().collect()
     }
 }
 
@@ -263,6 +290,71 @@ mod tests {
         assert!(writer.finish(Duration::from_secs(5)));
         assert_eq!(disk.all().unwrap(), vec![]);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_write_that_fails_after_its_answer_is_told_to_the_dialect() {
+        use crate::api::mqtt::Dialect;
+        let dir = folder("queued-failing");
+        let (store, writer) = spawn(&dir, QUEUE, LIMITS).unwrap();
+        let mut rtk = crate::api::rtk::RtkDialect::new(Box::new(store), 1 << 20);
+        // The folder goes away under the running store (a disk unmounted, a hand): the save
+        // is answered from the mirror, then its write fails.
+        std::fs::remove_dir_all(&dir).unwrap();
+        let save = serde_json::json!({
+            "cmd": "save_trajectory",
+            "cmd_type": "trajectory_control",
+            "data": {"name": "row", "data": [
+                {"angle": 0.0, "latitude": 23.0, "longitude": 113.0, "x": 0.0, "y": 0.0, "yaw": 0.0, "z": 0.0}
+            ]}
+        });
+        struct NoCore;
+        impl crate::api::mqtt::CoreAccess for NoCore {
+            fn command(
+                &mut self,
+                _: crate::vehicle::Command,
+            ) -> Result<(), crate::vehicle::chassis::CommandRejected> {
+                Ok(())
+            }
+        }
+        let mut core = NoCore;
+        let mut out = Vec::new();
+        rtk.on_message(
+            crate::time::Timestamp::from_micros(0),
+            "mqtt_control",
+            save.to_string().as_bytes(),
+            &mut core,
+            &mut out,
+        );
+        let answers: Vec<String> = out
+            .iter()
+            .map(|p| String::from_utf8_lossy(&p.payload).into_owned())
+            .collect();
+        assert!(
+            answers[0].contains("save_trajectory_success"),
+            "{answers:?}"
+        );
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        let mut later = Vec::new();
+        while later.is_empty() && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(10));
+            rtk.on_status(
+                &crate::vehicle::VehicleStatus::default(),
+                &mut core,
+                &mut later,
+            );
+            later.retain(|p| p.topic == "feedback");
+        }
+        let told = String::from_utf8_lossy(&later[0].payload).into_owned();
+        assert!(
+            told.contains("save_trajectory_failse") && told.contains("row"),
+            "{told}"
+        );
+        drop(rtk);
+        assert!(
+            !writer.finish(Duration::from_secs(5)),
+            "the failure counted"
+        );
     }
 
     #[test]

@@ -303,5 +303,15 @@ impl Dialect for RtkDialect {
             BASE_STATUS,
             BaseStatus::from_status(status).to_json(),
         ));
+        // A change answered as done that did not reach the folder: the client hears it
+        // failed, on the channel it asked on.
+        for failed in self.store.failed_writes() {
+            let reason = format!(
+                "{}: kept in memory only, the trajectory folder's write failed ({}); it is lost \
+                 at the next start",
+                failed.what, failed.reason
+            );
+            Self::feedback(failed.command, Err(reason), out);
+        }
     }
 }
