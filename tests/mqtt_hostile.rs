@@ -437,3 +437,45 @@ fn a_takeover_on_an_external_broker_is_named_and_the_link_comes_back() {
         "{loss_lines} loss lines: one, then summaries"
     );
 }
+
+#[test]
+fn large_packets_sent_slowly_hold_a_bounded_share_of_the_gates_buffers() {
+    let port = free_port();
+    let daemon = sim(port);
+    // 40 clients each announce a PUBLISH of 4,000,000 bytes (within the packet limit) and
+    // send 100 KB of it, then wait: the gate buffers at most 64 MiB of such packets.
+    let mut held = Vec::new();
+    for i in 0..40 {
+        let (mut s, code) = raw::connect(port, 4, &format!("slow-{i}"), None);
+        assert_eq!(code, Some(0));
+        let mut head = vec![0x30];
+        let mut n = 4_000_000usize;
+        loop {
+            let digit = (n % 128) as u8;
+            n /= 128;
+            head.push(if n > 0 { digit | 0x80 } else { digit });
+            if n == 0 {
+                break;
+            }
+        }
+        head.extend_from_slice(&[0, 4, b's', b'l', b'o', b'w']);
+        head.resize(100_000, b'x');
+        let _ = s.write_all(&head);
+        held.push(s);
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let cut = held
+        .iter_mut()
+        .map(|s| read_to_close(s, Duration::from_millis(100)).1)
+        .filter(|&closed| closed)
+        .count();
+    assert!(
+        (24..=40).contains(&cut),
+        "{cut} of 40 cut: 16 may hold 4 MB each"
+    );
+    let clients = Mosquitto::clients_for(port);
+    let sub = clients.subscribe(&["base_status"]);
+    assert!(sub.next_on("base_status", WAIT).is_some());
+    drop(held);
+    daemon.stop();
+}

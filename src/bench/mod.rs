@@ -1,6 +1,7 @@
 //! Benchmarks that print figures (`chassisd bench ...`), as opposed to the criterion
 //! micro-benchmarks under `benches/`.
 
+pub mod attacks;
 pub mod control;
 pub mod envelope;
 pub mod error;

@@ -2,7 +2,9 @@
 //! client for minutes while faults come round in cycles: a command flood, a connection
 //! flood (more clients than the embedded broker holds, held, then one more), a broker
 //! killed (mosquitto started again by the soak, the embedded broker by chassisd itself), a
-//! GNSS outage, an IMU stall, lost drive heartbeats and the CAN interface down.
+//! GNSS outage, an IMU stall, lost drive heartbeats and the CAN interface down, and three
+//! hostile clients (`bench::attacks`): one presenting chassisd's client id, one sending QoS 2
+//! messages it never releases, one retaining 1 MB messages on new topics.
 //!
 //! A client subscribes to base_status and drives the vehicle as an operator would: a
 //! heartbeat and a root DRIVE every 200 ms, and a zero DRIVE (the deliberate re-arm)
@@ -26,6 +28,7 @@ use serde_json::Value;
 use tokio::sync::watch;
 
 use super::Broker;
+use super::attacks::{self, AttackFigures};
 use super::mqtt::Spread;
 use crate::config::mqtt::MqttConfig;
 use crate::runtime::host::{children_running, resident_memory_bytes};
@@ -38,6 +41,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 /// No base_status gap may be longer, outside a broker restart.
 pub const GAP_LIMIT: Duration = Duration::from_millis(300);
+/// base_status must reach the client in this share of its periods, outside broker restarts.
+pub const AVAILABILITY_TARGET: f64 = 0.99;
 /// Resident memory may grow at most this fast after the warm-up cycle, MB per hour.
 pub const RSS_SLOPE_LIMIT_MB_PER_H: f64 = 1.0;
 /// A fault not seen, or not recovered from, within this long is a miss.
@@ -75,13 +80,24 @@ pub enum FaultKind {
     DriveHeartbeatLoss,
     /// The CAN interface goes down.
     CanDown,
+    /// A client presents chassisd's configured client id every 50 ms.
+    ClientIdTakeover,
+    /// Clients send QoS 2 messages and never release them.
+    UnreleasedQos2,
+    /// A client retains 1 MB messages on new topics (64 at most).
+    RetainedFlood,
 }
 
 impl FaultKind {
     /// How long the fault holds.
     fn hold(self) -> Duration {
         Duration::from_secs(match self {
-            Self::CommandFlood | Self::ConnectionFlood | Self::ImuStall => 5,
+            Self::CommandFlood
+            | Self::ConnectionFlood
+            | Self::ImuStall
+            | Self::ClientIdTakeover
+            | Self::UnreleasedQos2
+            | Self::RetainedFlood => 5,
             Self::GnssOutage => 8,
             Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown => 3,
         })
@@ -102,20 +118,31 @@ impl FaultKind {
     /// Whether base_status can show the fault: a flood is refused silently, and while the
     /// broker is gone nothing arrives.
     fn observable(self) -> bool {
-        !matches!(
+        !self.on_the_broker()
+    }
+
+    /// The fault is a client's (or the broker's own), not the vehicle's.
+    fn on_the_broker(self) -> bool {
+        matches!(
             self,
-            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart
+            Self::CommandFlood
+                | Self::ConnectionFlood
+                | Self::BrokerRestart
+                | Self::ClientIdTakeover
+                | Self::UnreleasedQos2
+                | Self::RetainedFlood
         )
     }
 
     /// Whether `o` shows the fault; `None` when base_status cannot show it.
     fn shown(self, o: &Observation) -> Option<bool> {
         match self {
-            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart => None,
+            _ if self.on_the_broker() => None,
             Self::GnssOutage => Some(!o.gnss),
             Self::ImuStall => Some(!o.imu),
             Self::DriveHeartbeatLoss => Some(o.bits & status_bits::HEARTBEAT_LOST != 0),
             Self::CanDown => Some(o.bits & status_bits::BUS_DOWN != 0),
+            _ => None,
         }
     }
 
@@ -124,11 +151,11 @@ impl FaultKind {
     fn recovered(self, o: &Observation) -> bool {
         let enabled = o.bits & status_bits::ENABLED != 0;
         match self {
-            Self::CommandFlood | Self::ConnectionFlood | Self::BrokerRestart => true,
             Self::GnssOutage => o.gnss,
             Self::ImuStall => o.imu,
             Self::DriveHeartbeatLoss => o.bits & status_bits::HEARTBEAT_LOST == 0 && enabled,
             Self::CanDown => o.bits & status_bits::BUS_DOWN == 0 && enabled,
+            _ => true,
         }
     }
 
@@ -186,6 +213,8 @@ pub struct FaultFigures {
     /// The bound for the command to stop, with the ramp down to rest in it: cmd_timeout +
     /// one control period + speed / deceleration.
     pub stop_bound_s: Option<f64>,
+    /// A hostile client's attempts and how many the broker refused or cut.
+    pub attack: Option<super::attacks::AttackFigures>,
     /// Seen (where base_status can show it), recovered, and stopped within the bound.
     pub pass: bool,
 }
@@ -210,6 +239,10 @@ pub struct RunFigures {
     pub status_period_ms: Option<Spread>,
     /// The largest gap between base_status messages outside broker restarts, ms.
     pub largest_gap_ms: f64,
+    /// base_status messages seen outside broker restarts per status period there (10 Hz).
+    pub status_availability: f64,
+    /// The embedded broker's process's largest resident memory, MB (sampled every 250 ms).
+    pub broker_peak_mb: Option<f64>,
     /// Every fault.
     pub faults: Vec<FaultFigures>,
     /// Every target met.
@@ -340,14 +373,25 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         FaultKind::ImuStall,
         FaultKind::DriveHeartbeatLoss,
         FaultKind::CanDown,
+        FaultKind::ClientIdTakeover,
+        FaultKind::UnreleasedQos2,
+        FaultKind::RetainedFlood,
     ];
+    let own_id = mqtt.base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
     let rss_start = resident_memory_with_broker();
     let floors = Arc::new(Floors::new(
         (options.run_for.as_secs_f64() / cycle_length.as_secs_f64()) as usize + 1,
     ));
     let sampler = tokio::spawn(sample_floors(floors.clone()));
-    let mut injected: Vec<(FaultKind, Instant, Instant, f64, Stop)> = Vec::new();
+    let mut injected: Vec<(
+        FaultKind,
+        Instant,
+        Instant,
+        f64,
+        Stop,
+        Option<AttackFigures>,
+    )> = Vec::new();
     let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
     let mut cycles = 0;
     while start.elapsed() + cycle_length <= options.run_for {
@@ -361,16 +405,21 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             let speed = probe.borrow().truth.v;
             let began = Instant::now();
             let flood = match kind {
-                FaultKind::CommandFlood => Some(tokio::spawn(flood(
+                FaultKind::CommandFlood => {
+                    let run = flood(mqtt.host.clone(), mqtt.port, topics.clone(), kind.hold());
+                    Some(tokio::spawn(async move { run.await.map(|()| None) }))
+                }
+                FaultKind::ConnectionFlood => {
+                    let run = connection_flood(mqtt.host.clone(), mqtt.port, kind.hold());
+                    Some(tokio::spawn(async move { run.await.map(|()| None) }))
+                }
+                FaultKind::ClientIdTakeover
+                | FaultKind::UnreleasedQos2
+                | FaultKind::RetainedFlood => Some(tokio::spawn(attack(
+                    kind,
                     mqtt.host.clone(),
                     mqtt.port,
-                    topics.clone(),
-                    kind.hold(),
-                ))),
-                FaultKind::ConnectionFlood => Some(tokio::spawn(connection_flood(
-                    mqtt.host.clone(),
-                    mqtt.port,
-                    kind.hold(),
+                    own_id.clone(),
                 ))),
                 FaultKind::BrokerRestart => {
                     match mosquitto.as_mut() {
@@ -399,14 +448,15 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             {
                 tokio::task::block_in_place(|| m.restart())?;
             }
-            if let Some(f) = flood {
-                f.await.map_err(invalid("flood task"))??;
-            }
+            let attacked = match flood {
+                Some(f) => f.await.map_err(invalid("flood task"))??,
+                None => None,
+            };
             let cleared = Instant::now();
             if kind == FaultKind::BrokerRestart {
                 broker_down.push((began, cleared));
             }
-            injected.push((kind, began, cleared, speed, stop));
+            injected.push((kind, began, cleared, speed, stop, attacked));
             tokio::time::sleep(CALM).await;
         }
         cycles += 1;
@@ -433,25 +483,44 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         .windows(2)
         .map(|w| w[1].at.duration_since(w[0].at).as_secs_f64() * 1000.0)
         .collect();
+    let outside_restarts =
+        |w: &&[Observation]| !windows.iter().any(|&(a, b)| w[1].at >= a && w[0].at <= b);
     let largest_gap_ms = observations
         .windows(2)
-        .filter(|w| !windows.iter().any(|&(a, b)| w[1].at >= a && w[0].at <= b))
+        .filter(outside_restarts)
         .map(|w| w[1].at.duration_since(w[0].at).as_secs_f64() * 1000.0)
         .fold(0.0, f64::max);
+    // Messages outside restarts, per 100 ms period there.
+    let (seen, spanned) =
+        observations
+            .windows(2)
+            .filter(outside_restarts)
+            .fold((0.0, 0.0), |(n, span), w| {
+                (
+                    n + 1.0,
+                    span + w[1].at.duration_since(w[0].at).as_secs_f64(),
+                )
+            });
+    let status_availability = if spanned > 0.0 {
+        (seen / (spanned * 10.0)).min(1.0)
+    } else {
+        0.0
+    };
+    let broker_peak = floors
+        .broker_peak
+        .load(std::sync::atomic::Ordering::Relaxed);
     let faults: Vec<FaultFigures> = injected
         .iter()
-        .map(|&(kind, began, cleared, speed, stop)| {
+        .map(|&(kind, began, cleared, speed, stop, attack)| {
             let detected_s = observations
                 .iter()
                 .find(|o| o.at >= began && kind.shown(o) == Some(true))
                 .map(|o| o.at.duration_since(began).as_secs_f64());
             let recovered_at = match kind {
-                // Commands are taken again: the driver's next DRIVE is acknowledged.
-                FaultKind::CommandFlood | FaultKind::ConnectionFlood => {
-                    acks.iter().find(|&&a| a >= cleared).copied()
-                }
                 // Telemetry is back.
                 FaultKind::BrokerRestart => first_status_after(cleared),
+                // Commands are taken again: the driver's next DRIVE is acknowledged.
+                _ if kind.on_the_broker() => acks.iter().find(|&&a| a >= cleared).copied(),
                 _ => observations
                     .iter()
                     .find(|o| o.at >= cleared && kind.recovered(o))
@@ -478,6 +547,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
                 stop_command_s: stop.command_s,
                 at_rest_s: stop.at_rest_s,
                 stop_bound_s,
+                attack,
                 pass,
             }
         })
@@ -486,6 +556,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     let pass = cycles >= 2
         && slope.is_some_and(|s| s < RSS_SLOPE_LIMIT_MB_PER_H)
         && largest_gap_ms <= GAP_LIMIT.as_secs_f64() * 1000.0
+        && status_availability >= AVAILABILITY_TARGET
         && faults.iter().all(|f| f.pass);
     Ok(RunFigures {
         broker: broker.name().into(),
@@ -497,6 +568,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         rss_slope_mb_per_h: slope,
         status_period_ms: Spread::of(periods),
         largest_gap_ms,
+        status_availability,
+        // Only this run's own broker: a mosquitto run has none of chassisd's.
+        broker_peak_mb: (broker == Broker::Embedded && broker_peak > 0)
+            .then(|| broker_peak as f64 / 1e6),
         faults,
         pass,
     })
@@ -530,6 +605,8 @@ const RSS_SAMPLE_EVERY: Duration = Duration::from_millis(250);
 struct Floors {
     cycle: std::sync::atomic::AtomicUsize,
     mb: Mutex<Vec<f64>>,
+    /// The embedded broker's largest resident memory seen, bytes.
+    broker_peak: std::sync::atomic::AtomicU64,
 }
 
 impl Floors {
@@ -538,6 +615,7 @@ impl Floors {
         Self {
             cycle: std::sync::atomic::AtomicUsize::new(usize::MAX),
             mb: Mutex::new(vec![f64::INFINITY; cycles]),
+            broker_peak: std::sync::atomic::AtomicU64::new(0),
         }
     }
 
@@ -569,6 +647,10 @@ async fn sample_floors(floors: Arc<Floors>) {
     loop {
         every.tick().await;
         floors.sample(resident_memory_with_broker() as f64 / 1e6);
+        floors.broker_peak.fetch_max(
+            embedded_broker_memory(),
+            std::sync::atomic::Ordering::Relaxed,
+        );
     }
 }
 
@@ -689,11 +771,31 @@ async fn drive(
 /// `hold`: cancel_task on `mqtt_control` and an unknown root message type.
 /// Resident memory of chassisd and, when it runs one, its embedded broker's process, bytes.
 fn resident_memory_with_broker() -> u64 {
-    let broker: u64 = children_running(CHILD_COMMAND)
+    resident_memory_bytes().unwrap_or(0) + embedded_broker_memory()
+}
+
+/// One of `bench::attacks`' hostile clients for `kind`, on the broker at `host:port`
+/// whose chassisd has the configured client id `own_id`.
+async fn attack(
+    kind: FaultKind,
+    host: String,
+    port: u16,
+    own_id: String,
+) -> crate::bench::error::Result<Option<AttackFigures>> {
+    let hold = kind.hold();
+    Ok(Some(match kind {
+        FaultKind::ClientIdTakeover => attacks::take_over(&host, port, &own_id, hold).await,
+        FaultKind::UnreleasedQos2 => attacks::unreleased_qos2(&host, port, hold).await,
+        _ => attacks::retained_flood(&host, port, hold).await,
+    }))
+}
+
+/// The embedded broker's process's resident memory, bytes (0 when there is none).
+fn embedded_broker_memory() -> u64 {
+    children_running(CHILD_COMMAND)
         .iter()
         .map(|&(_, rss)| rss)
-        .sum();
-    resident_memory_bytes().unwrap_or(0) + broker
+        .sum()
 }
 
 /// Kills the embedded broker's process (SIGKILL), as a crash would end it.
@@ -782,7 +884,7 @@ impl RunFigures {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "soak on {}: {:.0} s, {} cycles; RSS {:.2} -> {:.2} MB, floor per cycle {:?} MB, slope {} MB/h; base_status p99 {} ms, largest gap {:.1} ms (outside broker restarts)",
+            "soak on {}: {:.0} s, {} cycles; RSS {:.2} -> {:.2} MB, floor per cycle {:?} MB, slope {} MB/h; embedded broker peak {} MB; base_status p99 {} ms, largest gap {:.1} ms, {:.2} % of periods (outside broker restarts)",
             self.broker,
             self.seconds,
             self.cycles,
@@ -793,14 +895,16 @@ impl RunFigures {
                 .map(|m| (m * 100.0).round() / 100.0)
                 .collect::<Vec<_>>(),
             opt(self.rss_slope_mb_per_h),
+            opt(self.broker_peak_mb),
             self.status_period_ms
                 .as_ref()
                 .map_or("-".to_owned(), |s| format!("{:.1}", s.p99)),
             self.largest_gap_ms,
+            self.status_availability * 100.0,
         );
         let _ = writeln!(
             out,
-            "{:<22} {:>8} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8} {:>5}",
+            "{:<22} {:>8} {:>10} {:>11} {:>8} {:>8} {:>8} {:>8} {:>13} {:>5}",
             "fault",
             "at s",
             "detected s",
@@ -809,12 +913,13 @@ impl RunFigures {
             "stop s",
             "bound s",
             "rest s",
+            "refused/tried",
             ""
         );
         for f in &self.faults {
             let _ = writeln!(
                 out,
-                "{:<22} {:>8.1} {:>10} {:>11} {:>8.2} {:>8} {:>8} {:>8} {:>5}",
+                "{:<22} {:>8.1} {:>10} {:>11} {:>8.2} {:>8} {:>8} {:>8} {:>13} {:>5}",
                 serde_json::to_value(f.kind)
                     .ok()
                     .and_then(|v| v.as_str().map(str::to_owned))
@@ -826,6 +931,10 @@ impl RunFigures {
                 opt(f.stop_command_s),
                 opt(f.stop_bound_s),
                 opt(f.at_rest_s),
+                f.attack.map_or("-".to_owned(), |a| format!(
+                    "{}/{}",
+                    a.refused_or_cut, a.attempts
+                )),
                 if f.pass { "ok" } else { "MISS" },
             );
         }

@@ -23,6 +23,13 @@ pub const MAX_IN_FLIGHT: u16 = 32;
 /// two of the largest packet.
 pub const MAX_IN_FLIGHT_BYTES: usize = 32 << 20;
 
+/// Bytes of packets still arriving that the gate buffers for all clients together: each
+/// large packet is whole before it is judged, so a client that announces one and sends it
+/// slowly holds its announced size. A packet of up to [`SMALL_PACKET`] bytes needs none.
+pub const MAX_BUFFERED_BYTES: usize = 64 << 20;
+/// Packets this small are buffered without a reservation (a socket read's worth).
+pub const SMALL_PACKET: usize = 64 << 10;
+
 /// Why a packet would make the broker hold more than its budget.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OverBudget {
@@ -34,6 +41,8 @@ pub enum OverBudget {
     InFlight,
     /// Unreleased QoS 2 bytes beyond the client's share or the broker's.
     InFlightBytes,
+    /// A large packet still arriving beyond what the gate buffers for all clients.
+    Buffered,
 }
 
 /// Topic and filter names the broker holds, shared by every session.
@@ -159,6 +168,10 @@ pub struct Held {
     pub in_flight_bytes: usize,
     /// The most [`Held::in_flight_bytes`] may reach.
     pub max_in_flight_bytes: usize,
+    /// Bytes reserved for large packets still arriving, all clients together.
+    pub buffered_bytes: usize,
+    /// The most [`Held::buffered_bytes`] may reach.
+    pub max_buffered_bytes: usize,
 }
 
 impl Held {
@@ -170,6 +183,8 @@ impl Held {
             retained: Retained::default(),
             in_flight_bytes: 0,
             max_in_flight_bytes: MAX_IN_FLIGHT_BYTES.max(2 * max_packet),
+            buffered_bytes: 0,
+            max_buffered_bytes: MAX_BUFFERED_BYTES.max(2 * max_packet),
         }
     }
 

@@ -13,7 +13,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::cursor::Cursor;
-use super::held::{Held, MAX_IN_FLIGHT, MAX_TOPIC_BYTES, OverBudget, TopicNames};
+use super::held::{Held, MAX_IN_FLIGHT, MAX_TOPIC_BYTES, OverBudget, SMALL_PACKET, TopicNames};
 use super::wire::{Header, Version, WireError, kind};
 
 /// New names one session may bring: a client that invents names is ended long before it
@@ -89,6 +89,11 @@ impl std::fmt::Display for Violation {
             Self::OverBudget(OverBudget::InFlightBytes) => {
                 write!(f, "unreleased QoS 2 messages beyond the broker's budget")
             }
+            Self::OverBudget(OverBudget::Buffered) => write!(
+                f,
+                "a large packet arriving while the gate buffers {} bytes of others",
+                super::held::MAX_BUFFERED_BYTES
+            ),
         }
     }
 }
@@ -133,6 +138,8 @@ pub struct Session {
     in_qos2_bytes: usize,
     /// The largest packet the client may send, bytes.
     max_packet: usize,
+    /// Bytes reserved in [`Held::buffered_bytes`] for a large packet still arriving.
+    buffering: usize,
     /// Names this session brought to the broker.
     new_names: usize,
     /// chassisd's own link: its names are admitted without a budget.
@@ -151,6 +158,7 @@ impl Session {
             in_qos2: HashMap::new(),
             in_qos2_bytes: 0,
             max_packet,
+            buffering: 0,
             new_names: 0,
             trusted: false,
         }
@@ -171,6 +179,28 @@ impl Session {
         held.in_flight_bytes = held.in_flight_bytes.saturating_sub(self.in_qos2_bytes);
         self.in_qos2.clear();
         self.in_qos2_bytes = 0;
+        self.release_buffer(held);
+    }
+
+    /// Reserves room for a packet of `total` bytes that is still arriving, when it is
+    /// larger than a read's worth: the gate buffers it whole before judging it.
+    pub fn reserve_buffer(&mut self, total: usize, held: &mut Held) -> Result<(), Violation> {
+        self.release_buffer(held);
+        if self.trusted || total <= SMALL_PACKET {
+            return Ok(());
+        }
+        if held.buffered_bytes + total > held.max_buffered_bytes {
+            return Err(OverBudget::Buffered.into());
+        }
+        held.buffered_bytes += total;
+        self.buffering = total;
+        Ok(())
+    }
+
+    /// Gives back the room reserved for a packet that arrived (or never will).
+    pub fn release_buffer(&mut self, held: &mut Held) {
+        held.buffered_bytes = held.buffered_bytes.saturating_sub(self.buffering);
+        self.buffering = 0;
     }
 
     /// Notes a QoS 1 or 2 PUBLISH `id` of `size` bytes from the client, within the
@@ -663,6 +693,37 @@ mod tests {
             ),
             "{refused_at:?}"
         );
+    }
+
+    #[test]
+    fn large_packets_still_arriving_are_bounded_for_all_clients_together() {
+        let max_packet = 4 << 20;
+        let mut held = Held::new([], max_packet);
+        let mut sessions: Vec<Session> = Vec::new();
+        let mut refused = None;
+        for i in 0..64 {
+            let mut s = Session::new(Version::V4, max_packet);
+            match s.reserve_buffer(max_packet, &mut held) {
+                Ok(()) => sessions.push(s),
+                Err(e) => {
+                    refused = Some((i, e));
+                    break;
+                }
+            }
+        }
+        assert_eq!(
+            refused,
+            Some((16, Violation::OverBudget(OverBudget::Buffered)))
+        );
+        // A small packet needs no room; a session's end gives its room back.
+        let mut small = Session::new(Version::V4, max_packet);
+        assert_eq!(small.reserve_buffer(1000, &mut held), Ok(()));
+        sessions[0].end(&mut held);
+        let mut next = Session::new(Version::V4, max_packet);
+        assert_eq!(next.reserve_buffer(max_packet, &mut held), Ok(()));
+        // Reserving again for the same session replaces its reservation.
+        assert_eq!(next.reserve_buffer(max_packet, &mut held), Ok(()));
+        assert_eq!(held.buffered_bytes, 16 * max_packet);
     }
 
     #[test]

@@ -137,6 +137,8 @@ impl Relay<'_> {
             // Every whole packet in the buffer, judged, then written in one go; those
             // before a bad one still go (they were the client's to send).
             let mut ready = 0;
+            // A large packet still arriving holds room in the gate's buffers until it is whole.
+            lock(session).release_buffer(&mut lock(self.held));
             let verdict = loop {
                 let h = match wire::header(&buf[ready..], self.max_packet) {
                     Ok(Some(h)) => h,
@@ -147,7 +149,8 @@ impl Relay<'_> {
                     break Some(Ended::Violation(e.into()));
                 }
                 if buf.len() - ready < h.total() {
-                    break None;
+                    let reserved = lock(session).reserve_buffer(h.total(), &mut lock(self.held));
+                    break reserved.err().map(Ended::Violation);
                 }
                 let packet = &buf[ready..ready + h.total()];
                 let pass = lock(session).from_client(&h, packet, &mut lock(self.held));
