@@ -25,6 +25,7 @@ use std::collections::VecDeque;
 use serde::Serialize;
 use serde_json::Value;
 
+use super::log_budget::{self, LogBudget, SharedBudget};
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::goal::GoalPose;
 use crate::control::{MotionResult, MotionTag, Outcome};
@@ -95,7 +96,10 @@ impl DeviceDialect {
         out: &mut Vec<Publish>,
     ) {
         if let Some((code, reason)) = failure {
-            tracing::warn!(dialect = "device", %command, code, %reason, "request refused");
+            static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
+            if let Some(left_out) = log_budget::allow(&REFUSALS) {
+                tracing::warn!(dialect = "device", %command, code, %reason, refusals_not_logged = left_out, "request refused");
+            }
         }
         self.publish_ack(t, command, msg_id, failure, out);
     }

@@ -4,6 +4,7 @@ pub mod adapter;
 pub mod device;
 pub mod legacy;
 pub mod local;
+pub mod log_budget;
 pub mod mqtt;
 pub mod publish;
 pub mod requests;

@@ -19,6 +19,7 @@
 use serde::Serialize;
 use serde_json::{Value, json};
 
+use super::log_budget::{self, LogBudget, SharedBudget};
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::mission::{MAX_STEPS, MissionEvent, MissionStep};
 use crate::control::{MotionTag, Outcome};
@@ -292,7 +293,10 @@ impl RootDialect {
         let (code, message) = match outcome {
             Ok(()) => (OK, None),
             Err((code, reason)) => {
-                tracing::warn!(dialect = "root", topic = %to.base, code, %reason, "request refused");
+                static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
+                if let Some(left_out) = log_budget::allow(&REFUSALS) {
+                    tracing::warn!(dialect = "root", topic = %to.base, code, %reason, refusals_not_logged = left_out, "request refused");
+                }
                 (code, Some(reason))
             }
         };

@@ -24,6 +24,7 @@ use serde_json::Value;
 use super::trajectory::{self, Trajectory, TrajectoryError, TrajectoryStore};
 pub use status::BaseStatus;
 
+use super::log_budget::{self, LogBudget, SharedBudget};
 use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::MotionTag;
 use crate::time::Timestamp;
@@ -76,7 +77,10 @@ impl RtkDialect {
         };
         let json = serde_json::to_string(&body).unwrap_or_default();
         if let Err(reason) = &result {
-            tracing::warn!(dialect = "rtk", %cmd, %reason, "command refused");
+            static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
+            if let Some(left_out) = log_budget::allow(&REFUSALS) {
+                tracing::warn!(dialect = "rtk", %cmd, %reason, refusals_not_logged = left_out, "command refused");
+            }
         }
         out.push(Publish::reply(FEEDBACK, json));
     }

@@ -21,6 +21,7 @@ use rumqttc::{
 };
 use tokio::sync::mpsc;
 
+use crate::api::log_budget::{self, LogBudget, SharedBudget};
 use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
 use crate::config::mqtt::MqttConfig;
 use crate::record::{Payload, Record};
@@ -28,6 +29,9 @@ use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
 use crate::runtime::links::mqtt_losses::{Losses, Tell};
 use crate::vehicle::LinkState;
+
+/// The budget of "retained command ignored" lines.
+static RETAINED_IGNORED: SharedBudget = SharedBudget::new(LogBudget::new());
 
 /// Messages from the engine waiting for the link task.
 const HANDOFF: usize = 4096;
@@ -365,7 +369,9 @@ async fn run(
                     }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
-                        tracing::warn!(topic = %p.topic, "retained command ignored: commands must be live");
+                        if let Some(left_out) = log_budget::allow(&RETAINED_IGNORED) {
+                            tracing::warn!(topic = %p.topic, not_logged = left_out, "retained command ignored: commands must be live");
+                        }
                         continue;
                     }
                     let (admitted, report) = rate.admit(&p.topic, Instant::now());
