@@ -622,3 +622,157 @@ fn wrong_tokens_are_delayed_and_the_fifth_closes_the_connection() {
     assert_eq!(lines, 1, "logged once: {:#?}", daemon.log);
     daemon.stop();
 }
+
+/// Descriptors `pid` has open.
+fn descriptors(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
+}
+
+/// Whether the server closed `s` (end of stream or reset) within `wait`.
+fn closed_within(s: &mut std::net::TcpStream, wait: Duration) -> bool {
+    use std::io::Read;
+    s.set_read_timeout(Some(wait)).expect("timeout");
+    let mut buf = [0u8; 1024];
+    loop {
+        match s.read(&mut buf) {
+            Ok(0) => return true,
+            Ok(_) => {}
+            Err(e) => {
+                return !matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn half_sent_requests_are_closed_within_the_header_timeout_while_a_client_connects() {
+    use std::io::Write;
+    let port = free_port();
+    let mut sim = sim(port);
+    let pid = sim.child.id();
+    let before = descriptors(pid);
+    let here = format!("127.0.0.1:{port}");
+    // 200 connections from one host (127.0.0.2) that never finish their request's head.
+    let started = std::time::Instant::now();
+    let mut half: Vec<std::net::TcpStream> = (0..200)
+        .map(|_| {
+            let mut s = ws::connect_from([127, 0, 0, 2], port);
+            let _ = s.write_all(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n");
+            s
+        })
+        .collect();
+    // Meanwhile a rosbridge client from another host connects and is served.
+    let (mut client, code) = ws::handshake(port, "/", &here, None);
+    assert_eq!(code, 101);
+    ws::send_text(
+        &mut client,
+        r#"{"op": "subscribe", "topic": "/diagnostics"}"#,
+    )
+    .unwrap();
+    let first = ws::next_json(&mut client).expect("a message");
+    assert_eq!(first["topic"], "/diagnostics", "{first}");
+    // Every half-sent one is closed: beyond the per-address cap at once, the others at the
+    // header timeout (5 s), all well within the 10 s deadline.
+    for (i, s) in half.iter_mut().enumerate() {
+        let left = Duration::from_secs(9).saturating_sub(started.elapsed());
+        assert!(closed_within(s, left), "connection {i} still open");
+    }
+    drop(half);
+    std::thread::sleep(Duration::from_millis(300));
+    let after = descriptors(pid);
+    assert!(
+        after <= before + 2,
+        "descriptors: {before} before, {after} after"
+    );
+    // Summed up in the log, not one line per connection.
+    sim.wait_log(Duration::from_secs(8), "header_timeout=");
+    let lines = sim.log_count("websocket: clients refused or closed");
+    assert!(
+        sim.log.iter().any(|l| l.contains("over_address=")),
+        "{:#?}",
+        sim.log
+    );
+    assert!((1..=3).contains(&lines), "{lines}: {:#?}", sim.log);
+    drop(client);
+}
+
+#[test]
+fn clients_without_the_token_lock_no_operator_out_and_are_closed_within_20_s() {
+    let dir = common::tempdir("websocket-idle");
+    let link = dir.join("gnss-port");
+    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
+    let port = free_port();
+    let token = "s3cret-token-1234";
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"ws-idle\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let here = format!("127.0.0.1:{port}");
+    let idle_from =
+        |host: u8| ws::handshake_on(ws::connect_from([127, 0, 0, host], port), "/", &here, None);
+    // 16 idle clients without the token (websocket.max_clients) from four hosts: all in,
+    // waiting to authenticate. A fifth from one host, and a 17th from a new one, are not.
+    let started = std::time::Instant::now();
+    let mut idle = Vec::new();
+    for host in 2..6 {
+        for _ in 0..4 {
+            let (s, code) = idle_from(host);
+            assert_eq!(code, 101);
+            idle.push(s);
+        }
+    }
+    assert_eq!(idle_from(2).1, 503, "four per host");
+    assert_eq!(idle_from(9).1, 503, "max_clients waiting at once");
+    // A wrong token in the URL takes no place at all.
+    let wrong = ws::handshake(port, "/?token=not-the-token", &here, None).1;
+    assert_eq!(wrong, 401);
+    // The operator, with the token, has places of its own and is served.
+    let (mut operator, code) = ws::handshake(port, &format!("/?token={token}"), &here, None);
+    assert_eq!(code, 101);
+    ws::send_text(
+        &mut operator,
+        r#"{"op": "subscribe", "topic": "/diagnostics"}"#,
+    )
+    .unwrap();
+    let first = ws::next_json(&mut operator).expect("a message");
+    assert_eq!(first["topic"], "/diagnostics", "{first}");
+    // The idle ones are told and closed 20 s after their handshake.
+    for s in &mut idle {
+        s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        let said = ws::next_json(s).expect("a status");
+        assert!(
+            said["msg"]
+                .as_str()
+                .unwrap_or("")
+                .contains("not done within 20 s"),
+            "{said}"
+        );
+        assert_eq!(ws::next_json(s), None, "closed");
+    }
+    let waited = started.elapsed();
+    assert!(waited >= Duration::from_secs(19), "{waited:?}");
+    // Their places are back.
+    drop(idle);
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(idle_from(2).1, 101);
+    daemon.wait_log(Duration::from_secs(8), "auth_timeout=16");
+    assert_eq!(
+        daemon.log_count("websocket: client connected"),
+        1,
+        "only the operator is logged: {:#?}",
+        daemon.log
+    );
+    drop(operator);
+    daemon.stop();
+}

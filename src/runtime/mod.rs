@@ -9,6 +9,7 @@
 //!   journal, systemd notification, panic containment, the allocator's tuning.
 
 pub mod clock;
+pub mod descriptors;
 pub mod drivers;
 pub mod error;
 pub mod heap;
@@ -21,6 +22,7 @@ pub mod notify;
 pub mod outage_log;
 pub mod panics;
 pub mod recorder;
+pub mod refusals;
 pub mod status_out;
 pub mod stderr;
 pub mod trajectory_writer;

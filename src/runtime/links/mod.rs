@@ -7,5 +7,6 @@ pub mod input_lines;
 pub mod mqtt;
 pub mod mqtt_observe;
 pub mod ntrip;
+pub mod per_address;
 pub mod ros1;
 pub mod websocket;
