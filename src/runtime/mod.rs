@@ -16,6 +16,7 @@ pub mod heap;
 pub mod host;
 pub mod journal;
 pub mod links;
+pub mod listeners;
 pub mod lossy;
 pub mod modes;
 pub mod notify;

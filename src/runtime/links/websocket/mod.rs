@@ -153,6 +153,9 @@ pub fn start(
         ))
     })?;
     let listener = listen(address).map_err(io(format!("websocket: cannot listen on {address}")))?;
+    if let Ok(local) = listener.local_addr() {
+        crate::runtime::listeners::own(local.port());
+    }
     engine.emit_poses();
     let localizer = crate::config::localization::localizer_config(vehicle);
     let noise = OdometryNoise::from_localizer(&localizer, vehicle.imu.is_some());
