@@ -527,7 +527,8 @@ impl Server {
         };
         let mut publishes = Vec::new();
         let was_authenticated = client.session.authenticated;
-        for action in client.session.on_op(id, text, now, self.token.as_deref()) {
+        let failures = client.session.auth_failures();
+        for action in client.session.on_op(text, now, self.token.as_deref()) {
             match action {
                 Action::Status(level, text) => client.status(level, text),
                 Action::Answer(text) => client.answer(text),
@@ -544,6 +545,9 @@ impl Server {
                     id: op_id,
                 } => publishes.push((name, topic, msg, op_id)),
             }
+        }
+        if client.session.auth_failures() > failures {
+            self.refusals.count("wrong_token", None);
         }
         if !was_authenticated && client.session.authenticated {
             self.on_authenticated(id);

@@ -44,6 +44,7 @@ pub const REASONS: &[&str] = &[
     "malformed",
     "foreign_origin",
     "bad_token",
+    "wrong_token",
     "full",
     "unauthenticated_full",
     "auth_timeout",
