@@ -28,8 +28,10 @@ impl PerAddress {
         })
     }
 
-    /// A place for `address`, or `None` when it holds `most` already.
+    /// A place for `address`, or `None` when it holds `most` already. IPv6 addresses count
+    /// by their /64: one host is given a whole /64 to pick from.
     pub fn take(self: &Arc<Self>, address: IpAddr) -> Option<AddressPlace> {
+        let address = host(address);
         let mut held = self.lock();
         let n = held.entry(address).or_insert(0);
         if *n >= self.most {
@@ -44,7 +46,7 @@ impl PerAddress {
 
     /// Places `address` holds now.
     pub fn held(&self, address: IpAddr) -> usize {
-        self.lock().get(&address).copied().unwrap_or(0)
+        self.lock().get(&host(address)).copied().unwrap_or(0)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<IpAddr, usize>> {
@@ -52,6 +54,17 @@ impl PerAddress {
         self.held
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
+
+/// The key `address` counts under: an IPv4 address (mapped ones too), or an IPv6 /64.
+fn host(address: IpAddr) -> IpAddr {
+    match address {
+        IpAddr::V4(_) => address,
+        IpAddr::V6(v6) => match v6.to_ipv4_mapped() {
+            Some(v4) => IpAddr::V4(v4),
+            None => IpAddr::V6((u128::from(v6) & !0u128 << 64).into()),
+        },
     }
 }
 
@@ -85,5 +98,12 @@ mod tests {
         assert_eq!(places.held(a), 1);
         assert!(places.take(a).is_some());
         assert_eq!(places.lock().len(), 1, "b's place went back with its guard");
+        // One /64 is one host.
+        let c: IpAddr = "2001:db8::1".parse().unwrap();
+        let d: IpAddr = "2001:db8::ffff:1234".parse().unwrap();
+        let _c = places.take(c).unwrap();
+        let _d = places.take(d).unwrap();
+        assert!(places.take(c).is_none());
+        assert!(places.take("2001:db8:0:1::1".parse().unwrap()).is_some());
     }
 }

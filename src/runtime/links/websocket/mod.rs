@@ -10,6 +10,7 @@
 //! Commands go to the engine as records of the source `websocket`, so a recording keeps
 //! them and the engine's answer comes back to the client that sent them.
 
+mod handshakes;
 pub mod hub;
 mod serve;
 mod slots;

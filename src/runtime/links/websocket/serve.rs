@@ -14,6 +14,7 @@ use hyper_util::service::TowerToHyperService;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 
+use super::handshakes::{self, Handshakes};
 use crate::runtime::descriptors;
 use crate::runtime::links::per_address::{AddressPlace, PerAddress};
 use crate::runtime::refusals::Refusals;
@@ -24,8 +25,9 @@ pub const HEADER_TIMEOUT: Duration = Duration::from_secs(5);
 /// The whole HTTP exchange (the request, and the page or the upgrade's answer) must be over
 /// within this long; a connection still in it is closed.
 pub const HTTP_DEADLINE: Duration = Duration::from_secs(10);
-/// Connections in their HTTP exchange at once; more are closed at once.
-pub const MAX_HANDSHAKES: usize = 32;
+/// Connections in their HTTP exchange at once; a new one beyond takes the oldest one's
+/// place (see `handshakes`).
+pub const MAX_HANDSHAKES: usize = 64;
 /// Connections in their HTTP exchange at once from one address.
 pub const HANDSHAKES_PER_ADDRESS: usize = 8;
 /// The largest request head read, bytes (hyper's least): a token and an Origin fit many
@@ -36,7 +38,7 @@ const MAX_HEAD: usize = 8192;
 pub const REASONS: &[&str] = &[
     "over_descriptors",
     "over_connections",
-    "over_handshakes",
+    "handshake_evicted",
     "over_address",
     "accept_failed",
     "header_timeout",
@@ -54,7 +56,7 @@ pub const REASONS: &[&str] = &[
 pub struct Limits {
     /// Connections at once, in any phase.
     total: Arc<Semaphore>,
-    handshakes: Arc<Semaphore>,
+    handshakes: Arc<Handshakes>,
     per_address: Arc<PerAddress>,
     /// What was refused or closed.
     pub refusals: Arc<Refusals>,
@@ -64,8 +66,9 @@ impl Limits {
     /// Caps for a server of `places` WebSocket places (authenticated or not).
     pub fn new(places: usize, refusals: Arc<Refusals>) -> Self {
         Self {
-            total: Arc::new(Semaphore::new(places + MAX_HANDSHAKES)),
-            handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
+            // Room for connections told to go that have not closed yet.
+            total: Arc::new(Semaphore::new(places + 2 * MAX_HANDSHAKES)),
+            handshakes: Handshakes::new(MAX_HANDSHAKES),
             per_address: PerAddress::new(HANDSHAKES_PER_ADDRESS),
             refusals,
         }
@@ -83,8 +86,8 @@ pub struct Held {
 
 /// What a connection holds during its HTTP exchange only.
 struct Handshake {
-    _permit: OwnedSemaphorePermit,
-    _place: AddressPlace,
+    place: handshakes::Place,
+    _address: AddressPlace,
 }
 
 /// Serves `router` on `listener` for ever.
@@ -105,7 +108,9 @@ pub async fn serve(listener: TcpListener, router: axum::Router, limits: Limits) 
                 let router = router.clone();
                 let refusals = refusals.clone();
                 tokio::spawn(async move {
-                    exchange(socket, router, held, refusals).await;
+                    let mut handshake = handshake;
+                    let evicted = &mut handshake.place.evicted;
+                    exchange(socket, router, held, evicted, refusals).await;
                     drop(handshake);
                 });
             }
@@ -121,8 +126,11 @@ pub async fn serve(listener: TcpListener, router: axum::Router, limits: Limits) 
 fn admit(limits: &Limits, peer: SocketAddr) -> Result<(Held, Handshake), &'static str> {
     let descriptor = descriptors::try_acquire().ok_or("over_descriptors")?;
     let total = (limits.total.clone().try_acquire_owned()).map_err(|_| "over_connections")?;
-    let place = limits.per_address.take(peer.ip()).ok_or("over_address")?;
-    let permit = (limits.handshakes.clone().try_acquire_owned()).map_err(|_| "over_handshakes")?;
+    let address = limits.per_address.take(peer.ip()).ok_or("over_address")?;
+    let (place, evicted) = limits.handshakes.enter();
+    if evicted {
+        limits.refusals.count("handshake_evicted", None);
+    }
     let held = Held {
         peer,
         _life: Arc::new((descriptor, total)),
@@ -130,14 +138,21 @@ fn admit(limits: &Limits, peer: SocketAddr) -> Result<(Held, Handshake), &'stati
     Ok((
         held,
         Handshake {
-            _permit: permit,
-            _place: place,
+            place,
+            _address: address,
         },
     ))
 }
 
 /// Serves one connection's HTTP exchange, within [`HEADER_TIMEOUT`] and [`HTTP_DEADLINE`].
-async fn exchange(socket: TcpStream, router: axum::Router, held: Held, refusals: Arc<Refusals>) {
+/// A newer connection taking its place (`evicted`) ends it at once.
+async fn exchange(
+    socket: TcpStream,
+    router: axum::Router,
+    held: Held,
+    evicted: &mut tokio::sync::oneshot::Receiver<()>,
+    refusals: Arc<Refusals>,
+) {
     let peer = held.peer;
     let service = WithHeld {
         inner: TowerToHyperService::new(router),
@@ -151,7 +166,12 @@ async fn exchange(socket: TcpStream, router: axum::Router, held: Held, refusals:
         .keep_alive(false)
         .serve_connection(TokioIo::new(socket), service)
         .with_upgrades();
-    match tokio::time::timeout(HTTP_DEADLINE, connection).await {
+    let served = tokio::select! {
+        served = tokio::time::timeout(HTTP_DEADLINE, connection) => served,
+        // Counted where the place was taken.
+        Ok(()) = evicted => return,
+    };
+    match served {
         Ok(Ok(())) => {}
         Ok(Err(e)) if e.is_timeout() => refusals.count("header_timeout", Some(peer)),
         Ok(Err(e)) if e.is_parse() || e.is_parse_too_large() => {
