@@ -861,3 +861,41 @@ fn clients_without_the_token_lock_no_operator_out_and_are_closed_within_20_s() {
     drop(operator);
     daemon.stop();
 }
+
+#[test]
+fn a_client_that_authenticates_with_every_place_taken_is_closed_with_a_status() {
+    let dir = common::tempdir("websocket-full");
+    let link = dir.join("gnss-port");
+    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
+    let port = free_port();
+    let token = "s3cret-token-1234";
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"ws-full\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\nmax_clients = 1\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let here = format!("127.0.0.1:{port}");
+    // The one place is taken by an operator; a second client waits without the token.
+    let (_operator, code) = ws::handshake(port, &format!("/?token={token}"), &here, None);
+    assert_eq!(code, 101);
+    let (mut late, code) = ws::handshake(port, "/", &here, None);
+    assert_eq!(code, 101);
+    ws::send_text(&mut late, &format!(r#"{{"op": "auth", "mac": "{token}"}}"#)).unwrap();
+    let mut said = Vec::new();
+    while let Some(v) = ws::next_json(&mut late) {
+        said.push(v["msg"].as_str().unwrap_or_default().to_owned());
+    }
+    assert!(
+        said.iter().any(|m| m.contains("websocket.max_clients")),
+        "{said:?}"
+    );
+    wait_summed(&mut daemon, "full", 1);
+    daemon.stop();
+}
