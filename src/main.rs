@@ -43,6 +43,8 @@ const LOG_QUEUE: usize = 4096;
 fn main() -> ExitCode {
     // Before any thread exists: see runtime::heap.
     chassisd::runtime::heap::tune_allocator();
+    // Before anything opens a descriptor: see runtime::descriptors.
+    chassisd::runtime::descriptors::init();
     // Errors travel to network clients (a ROS1 service's refusal carries its text), so they
     // carry no backtrace unless asked for by RUST_LIB_BACKTRACE itself; RUST_BACKTRACE still
     // gives panics theirs.

@@ -816,3 +816,64 @@ fn the_md5sums_are_what_ros_clients_compute_from_the_same_files() {
         );
     }
 }
+
+/// The port of a `scheme://host:port[/]` address.
+fn port_of(address: &str) -> u16 {
+    address
+        .trim()
+        .trim_end_matches('/')
+        .rsplit(':')
+        .next()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or_else(|| panic!("no port in {address:?}"))
+}
+
+#[test]
+fn with_ros_ip_the_nodes_ports_answer_on_that_address_only() {
+    use std::net::SocketAddr;
+    let master = Master::start();
+    let uri = master.uri();
+    let mut p = Proc::start_with_env(
+        &["sim", "--no-mqtt", "--ros-master", &uri],
+        &[("ROS_IP", "127.0.0.1")],
+    );
+    p.wait_log(Duration::from_secs(30), "ROS1 node registered");
+    p.wait_log_seen(
+        Duration::from_secs(5),
+        "its ports take connections to these addresses only",
+    );
+    let registered = p
+        .log
+        .iter()
+        .find(|l| l.contains("ROS1 node registered"))
+        .expect("the line");
+    let xmlrpc = port_of(
+        registered
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix("uri="))
+            .expect("the node's URI"),
+    );
+    // A service's TCPROS port, as the master gives it to clients.
+    let service = text(&ros(
+        &master,
+        &["rosservice", "uri", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    let tcpros = port_of(service.lines().next().unwrap_or_default());
+    // roslibrust listens on 0.0.0.0: the ports answer on ROS_IP, and on nothing else.
+    for port in [xmlrpc, tcpros] {
+        let to = |ip: [u8; 4]| {
+            TcpStream::connect_timeout(&SocketAddr::from((ip, port)), Duration::from_secs(1))
+        };
+        assert!(to([127, 0, 0, 1]).is_ok(), "{port} on ROS_IP");
+        assert!(to([127, 0, 0, 2]).is_err(), "{port} elsewhere");
+    }
+    // The graph works as before.
+    let info = text(&ros(
+        &master,
+        &["rosservice", "call", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    assert!(info.contains("name"), "{info}");
+    interrupt(p);
+}

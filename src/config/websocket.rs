@@ -22,7 +22,8 @@ pub struct WebsocketConfig {
     /// Messages waiting for one client before its oldest are dropped (and counted).
     #[serde(default = "default_client_queue")]
     pub client_queue: usize,
-    /// Clients served at once; more are turned away.
+    /// Authenticated clients served at once; more are turned away. With a token, clients
+    /// still to present it have as many places again, apart, for 20 s each.
     #[serde(default = "default_max_clients")]
     pub max_clients: usize,
     /// Messages a client may publish per second (beyond it they are refused with a status).

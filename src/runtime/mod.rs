@@ -9,18 +9,21 @@
 //!   journal, systemd notification, panic containment, the allocator's tuning.
 
 pub mod clock;
+pub mod descriptors;
 pub mod drivers;
 pub mod error;
 pub mod heap;
 pub mod host;
 pub mod journal;
 pub mod links;
+pub mod listeners;
 pub mod lossy;
 pub mod modes;
 pub mod notify;
 pub mod outage_log;
 pub mod panics;
 pub mod recorder;
+pub mod refusals;
 pub mod status_out;
 pub mod stderr;
 pub mod trajectory_writer;

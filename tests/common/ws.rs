@@ -8,7 +8,28 @@ use std::time::Duration;
 /// Opens a handshake to `127.0.0.1:port` for `path` with `host` and, if given, `origin`.
 /// Returns the socket and the response's status code.
 pub fn handshake(port: u16, path: &str, host: &str, origin: Option<&str>) -> (TcpStream, u16) {
-    let mut s = TcpStream::connect(("127.0.0.1", port)).expect("connect");
+    handshake_on(connect_from([127, 0, 0, 1], port), path, host, origin)
+}
+
+/// A connection to `127.0.0.1:port` from the loopback address `source` (any of 127/8: each
+/// is a host of its own to a server counting connections per address).
+pub fn connect_from(source: [u8; 4], port: u16) -> TcpStream {
+    let socket =
+        socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).expect("socket");
+    let from = std::net::SocketAddr::from((source, 0));
+    socket.bind(&from.into()).expect("bind the source address");
+    let to = std::net::SocketAddr::from(([127, 0, 0, 1], port));
+    socket.connect(&to.into()).expect("connect");
+    socket.into()
+}
+
+/// [`handshake`] over the connection `s`.
+pub fn handshake_on(
+    mut s: TcpStream,
+    path: &str,
+    host: &str,
+    origin: Option<&str>,
+) -> (TcpStream, u16) {
     s.set_read_timeout(Some(Duration::from_secs(10)))
         .expect("timeout");
     let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));

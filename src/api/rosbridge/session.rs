@@ -147,21 +147,19 @@ impl Session {
         keep
     }
 
-    /// What the operation `text` asks at `now`; `token` is the configured one. `client`
-    /// names the client in the log.
-    pub fn on_op(
-        &mut self,
-        client: u64,
-        text: &str,
-        now: Instant,
-        token: Option<&str>,
-    ) -> Vec<Action> {
+    /// Wrong tokens it sent so far (the server sums them up in its log).
+    pub fn auth_failures(&self) -> u32 {
+        self.auth_failures
+    }
+
+    /// What the operation `text` asks at `now`; `token` is the configured one.
+    pub fn on_op(&mut self, text: &str, now: Instant, token: Option<&str>) -> Vec<Action> {
         let op = match ops::parse(text) {
             Ok(op) => op,
             Err(refusal) => return vec![Action::Status(Level::Error, refusal.status())],
         };
         if !self.authenticated {
-            return self.authenticate(client, op, now, token);
+            return self.authenticate(op, now, token);
         }
         let refuse = |op_id: Option<&str>, reason: &str| {
             vec![Action::Status(
@@ -274,13 +272,7 @@ impl Session {
 
     /// An operation from a client that has not authenticated: only `auth` is taken, and a
     /// wrong token costs it time, then its connection.
-    fn authenticate(
-        &mut self,
-        client: u64,
-        op: ClientOp,
-        now: Instant,
-        token: Option<&str>,
-    ) -> Vec<Action> {
+    fn authenticate(&mut self, op: ClientOp, now: Instant, token: Option<&str>) -> Vec<Action> {
         let status =
             |level: Level, text: &str| Action::Status(level, ops::status(level, None, text));
         if let Some(until) = self.locked_until.filter(|&u| now < u) {
@@ -296,13 +288,6 @@ impl Session {
             ClientOp::Auth { .. } => {
                 self.auth_failures += 1;
                 let n = self.auth_failures;
-                if n == 1 {
-                    tracing::warn!(
-                        client,
-                        "websocket: a wrong token; the client's next tries are delayed, and its \
-                         {MAX_AUTH_FAILURES}th closes the connection"
-                    );
-                }
                 if n >= MAX_AUTH_FAILURES {
                     let text = format!("authentication failed {n} times: the connection closes");
                     return vec![Action::Close, status(Level::Error, &text)];
@@ -373,7 +358,7 @@ mod tests {
     use super::*;
 
     fn op(session: &mut Session, text: &str, now: Instant) -> Vec<Action> {
-        session.on_op(1, text, now, Some("s3cret-token"))
+        session.on_op(text, now, Some("s3cret-token"))
     }
 
     fn is_error(actions: &[Action], needle: &str) -> bool {

@@ -8,5 +8,6 @@ pub mod mqtt;
 pub mod mqtt_losses;
 pub mod mqtt_observe;
 pub mod ntrip;
+pub mod per_address;
 pub mod ros1;
 pub mod websocket;

@@ -8,6 +8,8 @@
 //! records of the source `ros1`, so a recording keeps them and replays without ROS.
 
 #[cfg(feature = "ros1")]
+mod bind;
+#[cfg(feature = "ros1")]
 pub mod messages;
 #[cfg(feature = "ros1")]
 mod node;

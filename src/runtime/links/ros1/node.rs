@@ -273,6 +273,8 @@ async fn run(
     let mut outage = OutageLog::default();
     let mut outage_start: Option<Instant> = None;
     let mut retry = Duration::from_millis(250);
+    // Where the ports listen is said once, not at every registration.
+    let mut said_where = false;
     let mut watch = tokio::time::interval(WATCH_EVERY);
     watch.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
@@ -323,6 +325,7 @@ async fn run(
             }
         };
         let uri = graph.node.get_client_uri().await.unwrap_or_default();
+        keep_to_advertised(&spec.config.master_uri, &uri, &mut said_where).await;
         tracing::info!(
             master = %spec.config.master_uri,
             node = %spec.config.node_name,
@@ -373,6 +376,36 @@ async fn run(
             }
         }
         drop(graph);
+    }
+}
+
+/// Keeps the node's ports (roslibrust's listeners on 0.0.0.0) to the address the node
+/// advertises in `uri`, when one is configured (see `bind`); says where they listen once.
+async fn keep_to_advertised(master_uri: &str, uri: &str, said: &mut bool) {
+    let host = uri
+        .strip_prefix("http://")
+        .and_then(|rest| rest.rsplit_once(':'))
+        .map_or("", |(host, _)| host);
+    let allowed = super::bind::allowed(host, super::bind::master_on_loopback(master_uri)).await;
+    let outcome = allowed.as_ref().map(super::bind::restrict);
+    if std::mem::replace(said, true) {
+        return;
+    }
+    match (allowed, outcome) {
+        (Some(allowed), Some(Ok(ports))) => {
+            tracing::info!(
+                ?allowed,
+                ports,
+                "ROS1 node: its ports take connections to these addresses only"
+            );
+        }
+        (_, Some(Err(e))) => {
+            tracing::warn!(error = %e, "ROS1 node: its ports could not be kept to its address; they listen on every interface")
+        }
+        _ => tracing::warn!(
+            %host,
+            "ROS1 node: its ports listen on every interface (set ROS_IP to the address other nodes reach it at to keep them to it)"
+        ),
     }
 }
 

@@ -10,7 +10,10 @@
 //! Commands go to the engine as records of the source `websocket`, so a recording keeps
 //! them and the engine's answer comes back to the client that sent them.
 
+mod handshakes;
 pub mod hub;
+mod serve;
+mod slots;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -19,13 +22,15 @@ use std::time::Instant;
 
 use crate::runtime::error::{RuntimeError, io};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Query, State};
+use axum::extract::{Extension, Query, State};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde_json::Value;
 use tokio::sync::mpsc;
 
 use self::hub::{Client, ClientQueue};
+use self::serve::{Held, Limits};
+use self::slots::{AUTH_WINDOW, Slot, Slots};
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::api::rosbridge::ops::{self, Level};
 use crate::api::rosbridge::session::{Action, token_matches};
@@ -37,6 +42,7 @@ use crate::fusion::odometry::OdomPose;
 use crate::record::{Payload, Record, SourceMeta};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::links::command_rate::CommandRate;
+use crate::runtime::refusals::Refusals;
 use crate::time::Timestamp;
 use crate::vehicle::VehicleStatus;
 
@@ -112,8 +118,10 @@ pub fn source_meta() -> SourceMeta {
 
 /// What the server task hears from connections.
 enum Event {
-    Connected(u64, Arc<ClientQueue>, bool),
+    Connected(u64, Arc<ClientQueue>, Slot),
     Op(u64, String),
+    /// The client's [`AUTH_WINDOW`] is over.
+    AuthDeadline(u64),
     Gone(u64),
 }
 
@@ -123,10 +131,9 @@ struct Shared {
     token: Option<String>,
     /// Web pages allowed besides chassisd's own (`websocket.allowed_origins`).
     allowed_origins: Vec<String>,
-    /// Handshakes refused for their Origin, for the log (every power of two).
-    foreign_origins: AtomicUsize,
-    clients: AtomicUsize,
-    max_clients: usize,
+    /// The clients' places.
+    slots: Arc<Slots>,
+    refusals: Arc<Refusals>,
     client_queue: usize,
     next_id: AtomicUsize,
 }
@@ -147,23 +154,28 @@ pub fn start(
         ))
     })?;
     let listener = listen(address).map_err(io(format!("websocket: cannot listen on {address}")))?;
+    if let Ok(local) = listener.local_addr() {
+        crate::runtime::listeners::own(local.port());
+    }
     engine.emit_poses();
     let localizer = crate::config::localization::localizer_config(vehicle);
     let noise = OdometryNoise::from_localizer(&localizer, vehicle.imu.is_some());
     let (feed_tx, feed_rx) = mpsc::channel(FEED_QUEUE);
     let (events_tx, events_rx) = mpsc::channel(EVENT_QUEUE);
+    let refusals = Refusals::start("websocket", serve::REASONS);
+    let slots = Arc::new(Slots::new(config.max_clients));
     let shared = Arc::new(Shared {
         events: events_tx,
         token: config.token.clone(),
         allowed_origins: config.allowed_origins.clone(),
-        foreign_origins: AtomicUsize::new(0),
-        clients: AtomicUsize::new(0),
-        max_clients: config.max_clients,
+        slots: slots.clone(),
+        refusals: refusals.clone(),
         client_queue: config.client_queue,
         next_id: AtomicUsize::new(1),
     });
     let server = Server {
         clients: BTreeMap::new(),
+        places: BTreeMap::new(),
         rates: BTreeMap::new(),
         command_rate_hz: config.command_rate_hz,
         pending: BTreeMap::new(),
@@ -173,6 +185,8 @@ pub fn start(
         latches: published::Latches::default(),
         latched: BTreeMap::new(),
         token: config.token.clone(),
+        slots,
+        refusals: refusals.clone(),
         clock,
         records,
     };
@@ -188,11 +202,9 @@ pub fn start(
         )
         .with_state(shared);
     tracing::info!(%address, token = config.token.is_some(), "websocket: rosbridge v2 server listening");
-    tokio::spawn(async move {
-        if let Err(e) = axum::serve(listener, router).await {
-            tracing::error!(error = %e, "websocket: the server stopped");
-        }
-    });
+    // Both kinds of places, authenticated or not.
+    let limits = Limits::new(2 * config.max_clients, refusals);
+    tokio::spawn(serve::serve(listener, router, limits));
     Ok(WebsocketLink {
         feed: feed_tx,
         ticks: 0,
@@ -243,9 +255,12 @@ fn page(body: &'static str, content_type: &'static str) -> Response {
         .into_response()
 }
 
-/// `GET /`: a WebSocket upgrade becomes a rosbridge client.
+/// `GET /`: a WebSocket upgrade becomes a rosbridge client. With a token set, a wrong
+/// `?token=` is refused here, and a client without one gets a place of those waiting to
+/// authenticate, never an authenticated client's.
 async fn root(
     State(shared): State<Arc<Shared>>,
+    Extension(held): Extension<Held>,
     Query(query): Query<BTreeMap<String, String>>,
     headers: axum::http::HeaderMap,
     ws: Option<WebSocketUpgrade>,
@@ -253,6 +268,7 @@ async fn root(
     let Some(ws) = ws else {
         return page(PAGE, "text/html; charset=utf-8");
     };
+    let peer = Some(held.peer);
     let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
     if let Some(origin) = header(axum::http::header::ORIGIN)
         && !origin_allowed(
@@ -261,14 +277,7 @@ async fn root(
             &shared.allowed_origins,
         )
     {
-        let n = shared.foreign_origins.fetch_add(1, Ordering::Relaxed) + 1;
-        if n.is_power_of_two() {
-            tracing::warn!(
-                %origin,
-                refused = n,
-                "websocket: a handshake from another web page refused (websocket.allowed_origins)"
-            );
-        }
+        shared.refusals.count("foreign_origin", peer);
         return (
             StatusCode::FORBIDDEN,
             "chassisd: WebSocket connections from other web pages are refused; add the \
@@ -276,42 +285,64 @@ async fn root(
         )
             .into_response();
     }
-    if shared.clients.fetch_add(1, Ordering::AcqRel) >= shared.max_clients {
-        shared.clients.fetch_sub(1, Ordering::AcqRel);
-        tracing::warn!(
-            max = shared.max_clients,
-            "websocket: a client turned away (websocket.max_clients)"
-        );
-        return (
-            StatusCode::SERVICE_UNAVAILABLE,
-            "chassisd: too many WebSocket clients (websocket.max_clients)",
-        )
-            .into_response();
-    }
-    let authenticated = match &shared.token {
-        None => true,
-        Some(_) => token_matches(
-            shared.token.as_deref(),
-            query.get("token").map_or("", String::as_str),
-        ),
+    let slot = match (shared.token.as_deref(), query.get("token")) {
+        (None, _) => shared.slots.authenticated().ok_or("full"),
+        (Some(token), Some(given)) if token_matches(Some(token), given) => {
+            shared.slots.authenticated().ok_or("full")
+        }
+        (Some(_), Some(_)) => {
+            shared.refusals.count("bad_token", peer);
+            return (
+                StatusCode::UNAUTHORIZED,
+                "chassisd: wrong token (websocket.token)",
+            )
+                .into_response();
+        }
+        (Some(_), None) => shared
+            .slots
+            .unauthenticated(held.peer.ip())
+            .ok_or("unauthenticated_full"),
+    };
+    let slot = match slot {
+        Ok(slot) => slot,
+        Err(reason) => {
+            shared.refusals.count(reason, peer);
+            let text = if reason == "full" {
+                "chassisd: too many WebSocket clients (websocket.max_clients)"
+            } else {
+                "chassisd: too many WebSocket clients waiting to authenticate; connect with \
+                 ?token=TOKEN"
+            };
+            return (StatusCode::SERVICE_UNAVAILABLE, text).into_response();
+        }
     };
     ws.max_message_size(ops::MAX_MESSAGE + 1024)
-        .on_upgrade(move |socket| connection(socket, shared, authenticated))
+        .on_upgrade(move |socket| connection(socket, shared, slot, held))
 }
 
 /// One client: its queue to the socket, its operations to the server task.
-async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: bool) {
+/// `_held` keeps the connection's descriptor and place in the server's total.
+async fn connection(mut socket: WebSocket, shared: Arc<Shared>, slot: Slot, _held: Held) {
     let id = shared.next_id.fetch_add(1, Ordering::Relaxed) as u64;
     let queue = Arc::new(ClientQueue::new(shared.client_queue));
+    // Only a client still to authenticate has a deadline; the server task judges it.
+    let mut deadline_due = slot.is_unauthenticated();
+    let deadline = tokio::time::sleep(AUTH_WINDOW);
+    tokio::pin!(deadline);
     if shared
         .events
-        .send(Event::Connected(id, queue.clone(), authenticated))
+        .send(Event::Connected(id, queue.clone(), slot))
         .await
         .is_ok()
     {
-        tracing::info!(client = id, "websocket: client connected");
         loop {
             tokio::select! {
+                () = &mut deadline, if deadline_due => {
+                    deadline_due = false;
+                    if shared.events.send(Event::AuthDeadline(id)).await.is_err() {
+                        break;
+                    }
+                }
                 message = socket.recv() => match message {
                     Some(Ok(Message::Text(text))) => {
                         // A client flooding the server task waits here alone.
@@ -355,13 +386,7 @@ async fn connection(mut socket: WebSocket, shared: Arc<Shared>, authenticated: b
             }
         }
         let _ = shared.events.send(Event::Gone(id)).await;
-        tracing::info!(
-            client = id,
-            dropped = queue.dropped(),
-            "websocket: client gone"
-        );
     }
-    shared.clients.fetch_sub(1, Ordering::AcqRel);
 }
 
 /// A Close frame with `code` and `reason`.
@@ -375,6 +400,11 @@ fn close_frame(code: u16, reason: &'static str) -> Message {
 /// The server task's state.
 struct Server {
     clients: BTreeMap<u64, Client>,
+    /// Each client's place, given back when it goes.
+    places: BTreeMap<u64, Slot>,
+    /// Where places come from (a client that authenticates takes an authenticated one).
+    slots: Arc<Slots>,
+    refusals: Arc<Refusals>,
     /// Each client's publishing rate limit.
     rates: BTreeMap<u64, CommandRate>,
     command_rate_hz: f64,
@@ -402,13 +432,26 @@ impl Server {
                     None => return,
                 },
                 event = events.recv() => match event {
-                    Some(Event::Connected(id, queue, authenticated)) => {
+                    Some(Event::Connected(id, queue, slot)) => {
+                        // Operators only: those still to authenticate are counted, never
+                        // logged one by one.
+                        let authenticated = !slot.is_unauthenticated();
+                        if authenticated {
+                            tracing::info!(client = id, "websocket: client connected");
+                        }
                         self.clients.insert(id, Client::new(queue, authenticated));
+                        self.places.insert(id, slot);
                         self.rates.insert(id, CommandRate::new(self.command_rate_hz, self.command_rate_hz.ceil() as u32));
                     }
                     Some(Event::Op(id, text)) => self.on_op(id, &text),
+                    Some(Event::AuthDeadline(id)) => self.on_auth_deadline(id),
                     Some(Event::Gone(id)) => {
-                        self.clients.remove(&id);
+                        if let Some(client) = self.clients.remove(&id)
+                            && client.session.authenticated
+                        {
+                            tracing::info!(client = id, dropped = client.queue.dropped(), "websocket: client gone");
+                        }
+                        self.places.remove(&id);
                         self.rates.remove(&id);
                     }
                     None => return,
@@ -484,7 +527,9 @@ impl Server {
             return;
         };
         let mut publishes = Vec::new();
-        for action in client.session.on_op(id, text, now, self.token.as_deref()) {
+        let was_authenticated = client.session.authenticated;
+        let failures = client.session.auth_failures();
+        for action in client.session.on_op(text, now, self.token.as_deref()) {
             match action {
                 Action::Status(level, text) => client.status(level, text),
                 Action::Answer(text) => client.answer(text),
@@ -502,9 +547,59 @@ impl Server {
                 } => publishes.push((name, topic, msg, op_id)),
             }
         }
+        if client.session.auth_failures() > failures {
+            self.refusals.count("wrong_token", None);
+        }
+        if !was_authenticated && client.session.authenticated {
+            self.on_authenticated(id);
+        }
         for (name, topic, msg, op_id) in publishes {
             self.command(id, op_id.as_deref(), name, &topic, &msg);
         }
+    }
+
+    /// Client `id` presented the token: it moves to an authenticated client's place, or
+    /// goes when none is free.
+    fn on_authenticated(&mut self, id: u64) {
+        let Some(client) = self.clients.get(&id) else {
+            return;
+        };
+        match self.slots.authenticated() {
+            // The place it waited in goes back.
+            Some(slot) => {
+                tracing::info!(client = id, "websocket: client authenticated");
+                drop(self.places.insert(id, slot));
+            }
+            None => {
+                self.refusals.count("full", None);
+                client.status(
+                    Level::Error,
+                    ops::status(
+                        Level::Error,
+                        None,
+                        "too many WebSocket clients (websocket.max_clients): the connection closes",
+                    ),
+                );
+                client.queue.close();
+            }
+        }
+    }
+
+    /// Client `id`'s time to authenticate is over: it goes unless it has.
+    fn on_auth_deadline(&mut self, id: u64) {
+        let Some(client) = self.clients.get(&id) else {
+            return;
+        };
+        if client.session.authenticated {
+            return;
+        }
+        self.refusals.count("auth_timeout", None);
+        let text = format!(
+            "authentication: not done within {} s: the connection closes",
+            AUTH_WINDOW.as_secs()
+        );
+        client.status(Level::Error, ops::status(Level::Error, None, &text));
+        client.queue.close();
     }
 
     /// A client's checked `publish` on `name`: a command for the engine, within the
