@@ -132,6 +132,8 @@ pub struct Gate {
     pub counters: GateCounters,
     /// The last refused peer and why, for the summary.
     last_refused: Mutex<Option<(SocketAddr, &'static str)>>,
+    /// Accepts that failed (out of descriptors).
+    accept_failures: AtomicU64,
 }
 
 impl Gate {
@@ -150,6 +152,7 @@ impl Gate {
             handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
             counters: GateCounters::default(),
             last_refused: Mutex::new(None),
+            accept_failures: AtomicU64::new(0),
         })
     }
 
@@ -189,13 +192,21 @@ impl Gate {
             let (socket, peer) = match listener.accept().await {
                 Ok(accepted) => accepted,
                 Err(e) => {
-                    // Out of descriptors, most likely: wait rather than spin.
-                    tracing::warn!(error = %e, "embedded broker: accept failed");
+                    // Out of descriptors, most likely: wait rather than spin, and say so at
+                    // the 1st, 2nd, 4th... failure, not at each.
+                    let n = self.accept_failures.fetch_add(1, Ordering::Relaxed) + 1;
+                    if n.is_power_of_two() {
+                        tracing::warn!(error = %e, failures = n, "embedded broker: accept failed");
+                    }
                     tokio::time::sleep(Duration::from_millis(100)).await;
                     continue;
                 }
             };
-            let Ok(permit) = self.handshakes.clone().try_acquire_owned() else {
+            // A descriptor of the process's client budget, then a handshake place.
+            let (Some(descriptor), Ok(permit)) = (
+                crate::runtime::descriptors::try_acquire(),
+                self.handshakes.clone().try_acquire_owned(),
+            ) else {
                 self.counters
                     .handshake_dropped
                     .fetch_add(1, Ordering::Relaxed);
@@ -205,6 +216,7 @@ impl Gate {
             let gate = self.clone();
             tokio::spawn(async move {
                 gate.connection(socket, peer, permit).await;
+                drop(descriptor);
             });
         }
     }
