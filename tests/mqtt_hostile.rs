@@ -76,6 +76,25 @@ fn connect_packet(
     chassisd::broker::wire::packet(0x10, &body)
 }
 
+/// A CONNECT of `level` whose will, on `app/gone`, is retained with `payload` bytes.
+fn retained_will_connect(level: u8, client_id: &str, payload: usize) -> Vec<u8> {
+    let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level, 0x26, 0, 30];
+    if level == 5 {
+        body.push(0);
+    }
+    let string = |body: &mut Vec<u8>, s: &[u8]| {
+        body.extend_from_slice(&(s.len() as u16).to_be_bytes());
+        body.extend_from_slice(s);
+    };
+    string(&mut body, client_id.as_bytes());
+    if level == 5 {
+        body.push(0);
+    }
+    string(&mut body, b"app/gone");
+    string(&mut body, &vec![b'w'; payload]);
+    chassisd::broker::wire::packet(0x10, &body)
+}
+
 /// A PUBLISH (3.1.1) of `payload` on `topic` at `qos` with packet id `id`.
 fn publish_packet(topic: &str, qos: u8, retain: bool, id: u16, payload: &[u8]) -> Vec<u8> {
     let mut body = (topic.len() as u16).to_be_bytes().to_vec();
@@ -206,6 +225,15 @@ fn a_will_on_chassisds_topics_is_refused_and_a_client_without_keep_alive_is_serv
         &connect_packet(4, "willful", 30, Some("app/gone"), &[]),
     );
     assert_eq!(code, Some(0));
+    // A will to be retained is kept small: the broker holds it after its client is gone.
+    for (payload, level, code) in [(2000, 4, 3), (2000, 5, 0x97), (100, 4, 0)] {
+        let packet = retained_will_connect(level, &format!("retainer-{payload}-{level}"), payload);
+        assert_eq!(
+            raw::connect_with(port, &packet).1,
+            Some(code),
+            "{payload} bytes, MQTT {level}"
+        );
+    }
     // Keep-alive 0 is legal MQTT (no keep-alive): admitted, and still served seconds later.
     for level in [4, 5] {
         let (mut s, code) = raw::connect_with(

@@ -135,6 +135,7 @@ mod tests {
             password: credentials.map(|c| c.1.as_bytes().to_vec()),
             will_topic: None,
             max_packet_to_client: None,
+            retained_will: None,
         }
     }
 

@@ -16,6 +16,10 @@ pub const MAX_TOPIC_BYTES: usize = 1024;
 pub const MAX_RETAINED: usize = 1024;
 /// Bytes of retained messages (topic and payload) the broker keeps at once.
 pub const MAX_RETAINED_BYTES: usize = 16 << 20;
+/// The largest payload of a will to be retained, bytes (`offline` and its kind): the broker
+/// publishes a will after the gate has seen its client go, so retained wills are bounded by
+/// this and the topic names' budget ([`MAX_TOPIC_NAMES`] × 1 KiB = 4 MiB), not counted.
+pub const MAX_RETAINED_WILL: usize = 1024;
 /// QoS 1 and 2 messages one client may have in flight towards the broker (MQTT 5's
 /// `Receive Maximum`, told to 5.0 clients in the CONNACK).
 pub const MAX_IN_FLIGHT: u16 = 32;

@@ -136,6 +136,8 @@ pub struct Connect {
     pub will_topic: Option<String>,
     /// MQTT 5: the largest packet the client accepts (`Maximum Packet Size`), bytes.
     pub max_packet_to_client: Option<usize>,
+    /// The will's payload length, when the will is to be retained.
+    pub retained_will: Option<usize>,
 }
 
 /// User properties one packet may carry: MQTT sets no bound, and each is two strings the
@@ -186,12 +188,14 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
     }
     let client_id = f.string("client identifier")?.to_owned();
     let mut will_topic = None;
+    let mut retained_will = None;
     if will {
         if version == Version::V5 {
             check_user_properties(&f.read_properties()?)?;
         }
         will_topic = Some(f.string("will topic")?.to_owned());
-        f.binary("will payload")?;
+        let payload = f.binary("will payload")?;
+        retained_will = will_retain.then_some(payload.len());
     }
     let username = has_username
         .then(|| f.string("user name").map(str::to_owned))
@@ -211,6 +215,7 @@ pub fn connect(body: &[u8]) -> Result<Connect, WireError> {
         password,
         will_topic,
         max_packet_to_client,
+        retained_will,
     })
 }
 
@@ -231,6 +236,7 @@ fn refused_version(version: Version) -> Connect {
         password: None,
         will_topic: None,
         max_packet_to_client: None,
+        retained_will: None,
     }
 }
 
@@ -328,6 +334,8 @@ pub enum Refusal {
     /// The last will would publish on one of chassisd's own topics (a will is no
     /// command, and no report of the vehicle's).
     ReservedWill,
+    /// The will would be retained with a payload over what the broker keeps for one.
+    QuotaExceeded,
 }
 
 impl Refusal {
@@ -341,6 +349,7 @@ impl Refusal {
             Self::NotAuthorized => "no credentials",
             Self::ReservedIdentifier => "client identifier reserved for chassisd",
             Self::ReservedWill => "last will on one of chassisd's own topics",
+            Self::QuotaExceeded => "retained will over the broker's budget",
         }
     }
 }
@@ -354,6 +363,7 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
             Refusal::UnacceptableVersion => 0x84,
             Refusal::IdentifierRejected | Refusal::ReservedIdentifier => 0x85,
             Refusal::ReservedWill => 0x87,
+            Refusal::QuotaExceeded => 0x97,
             // Server busy: the limit is a passing condition, worth a later retry.
             Refusal::ServerUnavailable => 0x89,
             Refusal::BadCredentials | Refusal::NotAuthorized => 0x87,
@@ -364,7 +374,7 @@ pub fn connack_refusal(version: Version, why: Refusal) -> Vec<u8> {
         let code = match why {
             Refusal::UnacceptableVersion => 1,
             Refusal::IdentifierRejected | Refusal::ReservedIdentifier => 2,
-            Refusal::ServerUnavailable => 3,
+            Refusal::ServerUnavailable | Refusal::QuotaExceeded => 3,
             Refusal::BadCredentials | Refusal::NotAuthorized | Refusal::ReservedWill => 5,
         };
         vec![0x20, 0x02, 0x00, code]
@@ -457,6 +467,10 @@ mod tests {
         assert_eq!(c.username.as_deref(), Some("op"));
         assert_eq!(c.password.as_deref(), Some(&b"s3cret"[..]));
         assert_eq!(c.will_topic.as_deref(), Some("will/topic"));
+        assert_eq!(c.retained_will, None);
+        let mut retained = connect_packet(4, "robot", None, true);
+        retained[9] |= 0x20;
+        assert_eq!(parse(&retained).unwrap().retained_will, Some(4));
     }
 
     #[test]

@@ -115,6 +115,7 @@ impl GateCounters {
             Refusal::ServerUnavailable => &self.refused_full,
             Refusal::UnacceptableVersion | Refusal::IdentifierRejected => &self.refused_protocol,
             Refusal::ReservedIdentifier | Refusal::ReservedWill => &self.refused_reserved,
+            Refusal::QuotaExceeded => &self.over_budget,
         };
         counter.fetch_add(1, Ordering::Relaxed);
     }
@@ -382,6 +383,13 @@ impl Gate {
         let mut held = lock(&self.held);
         if place != Place::Own && held.names.is_reserved(topic) {
             return Err(Refusal::ReservedWill);
+        }
+        if place != Place::Own
+            && connect
+                .retained_will
+                .is_some_and(|len| len > held::MAX_RETAINED_WILL)
+        {
+            return Err(Refusal::QuotaExceeded);
         }
         let admitted = session::valid_topic(topic)
             && topic.len() <= held::MAX_TOPIC_BYTES
