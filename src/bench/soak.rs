@@ -86,6 +86,9 @@ pub enum FaultKind {
     UnreleasedQos2,
     /// A client retains 1 MB messages on new topics (64 at most).
     RetainedFlood,
+    /// Connections to the WebSocket server's HTTP port send half a request's head, then
+    /// nothing (1,000 at most).
+    Slowloris,
 }
 
 impl FaultKind {
@@ -97,7 +100,8 @@ impl FaultKind {
             | Self::ImuStall
             | Self::ClientIdTakeover
             | Self::UnreleasedQos2
-            | Self::RetainedFlood => 5,
+            | Self::RetainedFlood
+            | Self::Slowloris => 5,
             Self::GnssOutage => 8,
             Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown => 3,
         })
@@ -131,6 +135,7 @@ impl FaultKind {
                 | Self::ClientIdTakeover
                 | Self::UnreleasedQos2
                 | Self::RetainedFlood
+                | Self::Slowloris
         )
     }
 
@@ -334,6 +339,11 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         chassis.cmd_timeout_s + CONTROL_PERIOD.as_secs_f64() + speed / chassis.max_decel_mps2
     };
 
+    // The WebSocket server, for the slowloris, on a free loopback port.
+    let websocket_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map_err(invalid("a free loopback port"))?
+        .port();
     let start = Instant::now();
     let log = Arc::new(Mutex::new(Log::new(options.run_for, start)));
     let (handle, faults_tx, probe) = SimHandle::new();
@@ -347,7 +357,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             duration: Some(options.run_for + Duration::from_secs(3)),
             mqtt: Some(mqtt.clone()),
             ros1: None,
-            websocket: None,
+            websocket: Some(crate::config::websocket::WebsocketConfig {
+                bind: format!("127.0.0.1:{websocket_port}"),
+                ..Default::default()
+            }),
             handle: Some(handle),
             ntrip: None,
             zones: None,
@@ -376,6 +389,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         FaultKind::ClientIdTakeover,
         FaultKind::UnreleasedQos2,
         FaultKind::RetainedFlood,
+        FaultKind::Slowloris,
     ];
     let own_id = mqtt.base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
@@ -421,6 +435,14 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
                     mqtt.port,
                     own_id.clone(),
                 ))),
+                FaultKind::Slowloris => {
+                    let hold = kind.hold();
+                    Some(tokio::spawn(async move {
+                        Ok(Some(
+                            attacks::slowloris("127.0.0.1", websocket_port, hold).await,
+                        ))
+                    }))
+                }
                 FaultKind::BrokerRestart => {
                     match mosquitto.as_mut() {
                         Some(m) => m.stop(),
