@@ -63,22 +63,6 @@ fn a_port_held_by_another_broker_fails_loudly() {
     );
 }
 
-/// A root e-stop (messageType 101) through `clients`; its ack's code.
-fn estop(clients: &Mosquitto, on: u8) -> i64 {
-    let acks = clients.subscribe(&["/root/sim/cmd/chassis/ack"]);
-    clients.publish(
-        "/root/sim/cmd/chassis/set",
-        &format!(r#"{{"messageId": 77, "timestamp": "x", "messageType": 101, "data": {on}}}"#),
-    );
-    let ack: Value = serde_json::from_str(
-        &acks
-            .next_on("/root/sim/cmd/chassis/ack", WAIT)
-            .expect("e-stop ack"),
-    )
-    .expect("JSON");
-    ack["data"]["code"].as_i64().expect("code")
-}
-
 /// A base_status within the wait, through `clients`.
 fn one_status(clients: &Mosquitto) -> Value {
     let sub = clients.subscribe(&["base_status"]);
@@ -118,7 +102,7 @@ fn a_connection_flood_is_refused_cleanly_and_the_vehicle_stays_commandable() {
     std::thread::sleep(Duration::from_millis(500));
     let clients = Mosquitto::clients_for(port);
     assert!(one_status(&clients)["rtk"].is_object());
-    assert_eq!(estop(&clients, 1), 0);
+    assert_eq!(clients.sim_estop(1), 0);
     let status = one_status(&clients);
     assert!(
         status["robot"]["robot_status"].as_u64().expect("bits") & (1 << 3) != 0,
@@ -171,7 +155,7 @@ fn a_killed_broker_is_noticed_and_restarted_within_a_second() {
     // chassisd's own link reconnects, and the vehicle answers commands again.
     daemon.wait_log(WAIT, "MQTT subscribed");
     let clients = Mosquitto::clients_for(port);
-    assert_eq!(estop(&clients, 1), 0);
+    assert_eq!(clients.sim_estop(1), 0);
     // The restart is counted where monitoring and `check` read it.
     let health = clients.subscribe(&["chassisd/sim-mower/status/broker"]);
     let deadline = Instant::now() + WAIT;
@@ -493,7 +477,7 @@ fn random_sessions_never_bring_the_broker_down() {
     assert!(sessions > 100, "{sessions} sessions");
     let clients = Mosquitto::clients_for(port);
     assert!(one_status(&clients)["rtk"].is_object());
-    assert_eq!(estop(&clients, 1), 0);
+    assert_eq!(clients.sim_estop(1), 0);
     daemon.log.extend(daemon.stderr.try_iter());
     let log = daemon.log.join("\n");
     assert!(

@@ -26,33 +26,26 @@ fn sim(port: u16) -> Proc {
     daemon
 }
 
-/// A root e-stop through `clients`; its ack's code.
-fn estop(clients: &Mosquitto, on: u8) -> i64 {
-    let acks = clients.subscribe(&["/root/sim/cmd/chassis/ack"]);
-    clients.publish(
-        "/root/sim/cmd/chassis/set",
-        &format!(r#"{{"messageId": 77, "timestamp": "x", "messageType": 101, "data": {on}}}"#),
-    );
-    let ack: Value = serde_json::from_str(
-        &acks
-            .next_on("/root/sim/cmd/chassis/ack", WAIT)
-            .expect("e-stop ack"),
-    )
-    .expect("JSON");
-    ack["data"]["code"].as_i64().expect("code")
-}
+/// A last will: its topic, its payload and whether it is retained.
+type Will<'a> = (&'a str, &'a [u8], bool);
 
-/// A CONNECT of `level` with keep-alive `keep_alive_s`, a will on `will_topic` if given,
-/// and MQTT 5 `properties`.
+/// The will of a command: an e-stop release.
+const RELEASE: &[u8] = br#"{"messageId": 1, "messageType": 101, "data": 0}"#;
+
+/// A CONNECT of `level` with keep-alive `keep_alive_s`, a `will` if given, and MQTT 5
+/// `properties`.
 fn connect_packet(
     level: u8,
     client_id: &str,
     keep_alive_s: u16,
-    will_topic: Option<&str>,
+    will: Option<Will<'_>>,
     properties: &[u8],
 ) -> Vec<u8> {
-    let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level];
-    body.push(if will_topic.is_some() { 0x06 } else { 0x02 });
+    let mut flags = 0x02;
+    if let Some((_, _, retain)) = will {
+        flags |= 0x04 | if retain { 0x20 } else { 0 };
+    }
+    let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level, flags];
     body.extend_from_slice(&keep_alive_s.to_be_bytes());
     if level == 5 {
         body.push(properties.len() as u8);
@@ -63,44 +56,33 @@ fn connect_packet(
         body.extend_from_slice(s);
     };
     string(&mut body, client_id.as_bytes());
-    if let Some(topic) = will_topic {
+    if let Some((topic, payload, _)) = will {
         if level == 5 {
             body.push(0);
         }
         string(&mut body, topic.as_bytes());
-        string(
-            &mut body,
-            br#"{"messageId": 1, "messageType": 101, "data": 0}"#,
-        );
+        string(&mut body, payload);
     }
     chassisd::broker::wire::packet(0x10, &body)
 }
 
-/// A CONNECT of `level` whose will, on `app/gone`, is retained with `payload` bytes.
-fn retained_will_connect(level: u8, client_id: &str, payload: usize) -> Vec<u8> {
-    let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', level, 0x26, 0, 30];
-    if level == 5 {
-        body.push(0);
-    }
-    let string = |body: &mut Vec<u8>, s: &[u8]| {
-        body.extend_from_slice(&(s.len() as u16).to_be_bytes());
-        body.extend_from_slice(s);
-    };
-    string(&mut body, client_id.as_bytes());
-    if level == 5 {
-        body.push(0);
-    }
-    string(&mut body, b"app/gone");
-    string(&mut body, &vec![b'w'; payload]);
-    chassisd::broker::wire::packet(0x10, &body)
-}
-
-/// A PUBLISH (3.1.1) of `payload` on `topic` at `qos` with packet id `id`.
-fn publish_packet(topic: &str, qos: u8, retain: bool, id: u16, payload: &[u8]) -> Vec<u8> {
+/// A PUBLISH in MQTT `level` (5: with no properties) of `payload` on `topic` at `qos` with
+/// packet id `id`.
+fn publish_packet(
+    level: u8,
+    topic: &str,
+    qos: u8,
+    retain: bool,
+    id: u16,
+    payload: &[u8],
+) -> Vec<u8> {
     let mut body = (topic.len() as u16).to_be_bytes().to_vec();
     body.extend_from_slice(topic.as_bytes());
     if qos > 0 {
         body.extend_from_slice(&id.to_be_bytes());
+    }
+    if level == 5 {
+        body.push(0);
     }
     body.extend_from_slice(payload);
     chassisd::broker::wire::packet(0x30 | qos << 1 | u8::from(retain), &body)
@@ -179,7 +161,7 @@ fn nobody_else_takes_chassisds_seat_on_the_embedded_broker() {
         })
     };
     std::thread::sleep(Duration::from_secs(1));
-    assert_eq!(estop(&clients, 1), 0, "an e-stop during the attack");
+    assert_eq!(clients.sim_estop(1), 0, "an e-stop during the attack");
     let status = {
         let sub = clients.subscribe(&["base_status"]);
         serde_json::from_str::<Value>(&sub.next_on("base_status", WAIT).expect("status"))
@@ -211,7 +193,7 @@ fn a_will_on_chassisds_topics_is_refused_and_a_client_without_keep_alive_is_serv
     // A will is no command, and no report of the vehicle's.
     for topic in ["/root/sim/cmd/chassis/set", "chassisd/sim-mower/status"] {
         for level in [4, 5] {
-            let packet = connect_packet(level, "willful", 30, Some(topic), &[]);
+            let packet = connect_packet(level, "willful", 30, Some((topic, RELEASE, false)), &[]);
             let refused = if level == 4 { 5 } else { 0x87 };
             assert_eq!(
                 raw::connect_with(port, &packet).1,
@@ -222,12 +204,14 @@ fn a_will_on_chassisds_topics_is_refused_and_a_client_without_keep_alive_is_serv
     }
     let (_ok, code) = raw::connect_with(
         port,
-        &connect_packet(4, "willful", 30, Some("app/gone"), &[]),
+        &connect_packet(4, "willful", 30, Some(("app/gone", RELEASE, false)), &[]),
     );
     assert_eq!(code, Some(0));
     // A will to be retained is kept small: the broker holds it after its client is gone.
     for (payload, level, code) in [(2000, 4, 3), (2000, 5, 0x97), (100, 4, 0)] {
-        let packet = retained_will_connect(level, &format!("retainer-{payload}-{level}"), payload);
+        let will = vec![b'w'; payload];
+        let id = format!("retainer-{payload}-{level}");
+        let packet = connect_packet(level, &id, 30, Some(("app/gone", &will, true)), &[]);
         assert_eq!(
             raw::connect_with(port, &packet).1,
             Some(code),
@@ -311,11 +295,7 @@ fn unreleased_qos2_and_retained_floods_are_bounded_and_base_status_flows() {
             assert_eq!(code, Some(0));
             sessions += 1;
             for pid in 1..=40u16 {
-                let p = if level == 5 {
-                    v5_publish("flood/qos2", 2, pid, &payload)
-                } else {
-                    publish_packet("flood/qos2", 2, false, pid, &payload)
-                };
+                let p = publish_packet(level, "flood/qos2", 2, false, pid, &payload);
                 if s.write_all(&p).is_err() {
                     break;
                 }
@@ -345,7 +325,7 @@ fn unreleased_qos2_and_retained_floods_are_bounded_and_base_status_flows() {
             }
             sessions += 1;
             loop {
-                let p = publish_packet(&format!("flood/r/{sent}"), 0, true, 0, &payload);
+                let p = publish_packet(4, &format!("flood/r/{sent}"), 0, true, 0, &payload);
                 if s.write_all(&p).is_err() {
                     break;
                 }
@@ -392,18 +372,6 @@ fn unreleased_qos2_and_retained_floods_are_bounded_and_base_status_flows() {
     let log = daemon.log.join("\n");
     assert!(!log.contains("embedded broker stopped"), "{log}");
     daemon.stop();
-}
-
-/// A PUBLISH (5.0, no properties).
-fn v5_publish(topic: &str, qos: u8, id: u16, payload: &[u8]) -> Vec<u8> {
-    let mut body = (topic.len() as u16).to_be_bytes().to_vec();
-    body.extend_from_slice(topic.as_bytes());
-    if qos > 0 {
-        body.extend_from_slice(&id.to_be_bytes());
-    }
-    body.push(0);
-    body.extend_from_slice(payload);
-    chassisd::broker::wire::packet(0x30 | qos << 1, &body)
 }
 
 #[test]

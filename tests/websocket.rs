@@ -50,6 +50,34 @@ fn sim_in_the_yard(port: u16, dir: &std::path::Path) -> Proc {
     ])
 }
 
+/// `chassisd run` of a vehicle called `name` (in a fresh folder `dir_name`) with a receiver
+/// on a pseudo-terminal, and the WebSocket server on `port` requiring `token`, with `extra`
+/// lines in `[websocket]`; once the server listens. The receiver must outlive the daemon.
+fn run_with_token(
+    dir_name: &str,
+    name: &str,
+    port: u16,
+    token: &str,
+    extra: &str,
+) -> (Proc, common::pty::Talker) {
+    let dir = common::tempdir(dir_name);
+    let link = dir.join("gnss-port");
+    let receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"{name}\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\n{extra}",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
+    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    (daemon, receiver)
+}
+
 /// Runs one check of the client script against the server on `port`.
 fn client(port: u16, check: &[&str]) -> Value {
     let out = Command::new(python())
@@ -296,23 +324,9 @@ fn a_client_that_never_reads_delays_no_other_client() {
 
 #[test]
 fn with_a_token_nothing_is_served_before_it_is_presented() {
-    let dir = common::tempdir("websocket-token");
-    let link = dir.join("gnss-port");
-    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
     let port = free_port();
     let token = "s3cret-token-1234";
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[vehicle]\nname = \"ws-token\"\n\n[gnss]\nport = \"{}\"\n\n\
-             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\n",
-            link.display()
-        ),
-    )
-    .expect("config");
-    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
-    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let (daemon, _receiver) = run_with_token("websocket-token", "ws-token", port, token, "");
     let seen = client(port, &["auth", token]);
     assert_eq!(seen["before"], 0, "{seen}");
     assert!(
@@ -550,22 +564,14 @@ fn a_publish_without_a_message_or_over_the_size_limit_is_refused_with_a_status()
 
 #[test]
 fn wrong_tokens_are_delayed_and_the_fifth_closes_the_connection() {
-    let dir = common::tempdir("websocket-wrong-token");
-    let link = dir.join("gnss-port");
-    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
     let port = free_port();
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[vehicle]\nname = \"ws-guess\"\n\n[gnss]\nport = \"{}\"\n\n\
-             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"s3cret-token-1234\"\n",
-            link.display()
-        ),
-    )
-    .expect("config");
-    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
-    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let (mut daemon, _receiver) = run_with_token(
+        "websocket-wrong-token",
+        "ws-guess",
+        port,
+        "s3cret-token-1234",
+        "",
+    );
     let (mut s, code) = ws::handshake(port, "/", &format!("127.0.0.1:{port}"), None);
     assert_eq!(code, 101);
     let started = std::time::Instant::now();
@@ -786,23 +792,9 @@ fn summed(log: &[String], key: &str) -> u64 {
 
 #[test]
 fn clients_without_the_token_lock_no_operator_out_and_are_closed_within_20_s() {
-    let dir = common::tempdir("websocket-idle");
-    let link = dir.join("gnss-port");
-    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
     let port = free_port();
     let token = "s3cret-token-1234";
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[vehicle]\nname = \"ws-idle\"\n\n[gnss]\nport = \"{}\"\n\n\
-             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\n",
-            link.display()
-        ),
-    )
-    .expect("config");
-    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
-    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let (mut daemon, _receiver) = run_with_token("websocket-idle", "ws-idle", port, token, "");
     let here = format!("127.0.0.1:{port}");
     let idle_from =
         |host: u8| ws::handshake_on(ws::connect_from([127, 0, 0, host], port), "/", &here, None);
@@ -864,23 +856,15 @@ fn clients_without_the_token_lock_no_operator_out_and_are_closed_within_20_s() {
 
 #[test]
 fn a_client_that_authenticates_with_every_place_taken_is_closed_with_a_status() {
-    let dir = common::tempdir("websocket-full");
-    let link = dir.join("gnss-port");
-    let _receiver = common::pty::Talker::start(common::pty::Port::open_at(&link));
     let port = free_port();
     let token = "s3cret-token-1234";
-    let config = dir.join("vehicle.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[vehicle]\nname = \"ws-full\"\n\n[gnss]\nport = \"{}\"\n\n\
-             [websocket]\nbind = \"127.0.0.1:{port}\"\ntoken = \"{token}\"\nmax_clients = 1\n",
-            link.display()
-        ),
-    )
-    .expect("config");
-    let mut daemon = Proc::start(&["run".as_ref(), "--config".as_ref(), config.as_os_str()]);
-    daemon.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    let (mut daemon, _receiver) = run_with_token(
+        "websocket-full",
+        "ws-full",
+        port,
+        token,
+        "max_clients = 1\n",
+    );
     let here = format!("127.0.0.1:{port}");
     // The one place is taken by an operator; a second client waits without the token.
     let (_operator, code) = ws::handshake(port, &format!("/?token={token}"), &here, None);

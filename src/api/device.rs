@@ -97,7 +97,7 @@ impl DeviceDialect {
     ) {
         if let Some((code, reason)) = failure {
             static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
-            if let Some(left_out) = log_budget::allow(&REFUSALS) {
+            if let Some(left_out) = log_budget::allow(&REFUSALS, t) {
                 tracing::warn!(dialect = "device", %command, code, %reason, refusals_not_logged = left_out, "request refused");
             }
         }

@@ -1,9 +1,12 @@
 //! How many lines a kind of per-message log (a refused command, an ignored message) may
 //! write: the first few of every 5 s, the rest counted and told with the next line that is
 //! written. A client sending bad commands as fast as the rate limit lets it costs the log a
-//! few lines per period, never one per message.
+//! few lines per period, never one per message. Times are the records' (the core reads no
+//! clock).
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use crate::time::Timestamp;
 
 /// The period over which lines are counted.
 pub const PERIOD: Duration = Duration::from_secs(5);
@@ -13,7 +16,7 @@ pub const LINES_PER_PERIOD: u32 = 5;
 /// One kind of log line's budget.
 #[derive(Debug, Default)]
 pub struct LogBudget {
-    period_start: Option<Instant>,
+    period_start: Option<Timestamp>,
     written: u32,
     suppressed: u64,
 }
@@ -21,12 +24,12 @@ pub struct LogBudget {
 /// A log site's budget, shared by every instance that writes that line.
 pub type SharedBudget = std::sync::Mutex<LogBudget>;
 
-/// [`LogBudget::allow`] now, on a shared budget.
-pub fn allow(budget: &SharedBudget) -> Option<u64> {
+/// [`LogBudget::allow`] at `now`, on a shared budget.
+pub fn allow(budget: &SharedBudget, now: Timestamp) -> Option<u64> {
     budget
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
-        .allow(Instant::now())
+        .allow(now)
 }
 
 impl LogBudget {
@@ -41,10 +44,10 @@ impl LogBudget {
 
     /// Whether a line may be written at `now`: `Some(n)` with the lines left unwritten
     /// since the last one written (to be told in it), `None` to stay quiet (counted).
-    pub fn allow(&mut self, now: Instant) -> Option<u64> {
+    pub fn allow(&mut self, now: Timestamp) -> Option<u64> {
         if self
             .period_start
-            .is_none_or(|start| now.duration_since(start) >= PERIOD)
+            .is_none_or(|start| now.saturating_since(start) >= PERIOD)
         {
             self.period_start = Some(now);
             self.written = 0;
@@ -65,14 +68,15 @@ mod tests {
     #[test]
     fn a_flood_writes_a_few_lines_per_period_and_tells_what_it_left_out() {
         let mut b = LogBudget::default();
-        let t0 = Instant::now();
+        let t0 = Timestamp::from_micros(1_000_000);
+        let at = |d: Duration| t0.saturating_add(d);
         let verdicts: Vec<Option<u64>> = (0..1000)
-            .map(|i| b.allow(t0 + Duration::from_millis(i)))
+            .map(|i| b.allow(at(Duration::from_millis(i))))
             .collect();
         assert_eq!(verdicts.iter().filter(|v| v.is_some()).count(), 5);
         assert!(verdicts[..5].iter().all(|v| *v == Some(0)));
         // The next period's first line tells the 995 left out.
-        assert_eq!(b.allow(t0 + PERIOD + Duration::from_secs(1)), Some(995));
-        assert_eq!(b.allow(t0 + PERIOD + Duration::from_secs(2)), Some(0));
+        assert_eq!(b.allow(at(PERIOD + Duration::from_secs(1))), Some(995));
+        assert_eq!(b.allow(at(PERIOD + Duration::from_secs(2))), Some(0));
     }
 }

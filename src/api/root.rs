@@ -294,7 +294,7 @@ impl RootDialect {
             Ok(()) => (OK, None),
             Err((code, reason)) => {
                 static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
-                if let Some(left_out) = log_budget::allow(&REFUSALS) {
+                if let Some(left_out) = log_budget::allow(&REFUSALS, t) {
                     tracing::warn!(dialect = "root", topic = %to.base, code, %reason, refusals_not_logged = left_out, "request refused");
                 }
                 (code, Some(reason))

@@ -301,6 +301,21 @@ impl Mosquitto {
         assert!(status.success(), "mosquitto_pub failed");
     }
 
+    /// A root e-stop (messageType 101, `on` 1 or 0) to the simulator (`vehicleId` `sim`);
+    /// its ack's code.
+    pub fn sim_estop(&self, on: u8) -> i64 {
+        let acks = self.subscribe(&["/root/sim/cmd/chassis/ack"]);
+        self.publish(
+            "/root/sim/cmd/chassis/set",
+            &format!(r#"{{"messageId": 77, "timestamp": "x", "messageType": 101, "data": {on}}}"#),
+        );
+        let ack = acks
+            .next_on("/root/sim/cmd/chassis/ack", Duration::from_secs(15))
+            .expect("e-stop ack");
+        let ack: serde_json::Value = serde_json::from_str(&ack).expect("JSON");
+        ack["data"]["code"].as_i64().expect("code")
+    }
+
     /// Subscribes with mosquitto_sub to `topics`; lines are `topic payload`.
     pub fn subscribe(&self, topics: &[&str]) -> Subscriber {
         let mut cmd = Command::new("mosquitto_sub");

@@ -52,12 +52,18 @@ struct Feedback<'a> {
 pub struct RtkDialect {
     store: Box<dyn TrajectoryStore>,
     max_payload: usize,
+    /// The time of the message or status tick being handled (for the log's budget).
+    now: Timestamp,
 }
 
 impl RtkDialect {
     /// A dialect keeping trajectories in `store`, refusing messages above `max_payload`.
     pub fn new(store: Box<dyn TrajectoryStore>, max_payload: usize) -> Self {
-        Self { store, max_payload }
+        Self {
+            store,
+            max_payload,
+            now: Timestamp::default(),
+        }
     }
 
     /// Replaces the trajectory store.
@@ -65,7 +71,7 @@ impl RtkDialect {
         self.store = store;
     }
 
-    fn feedback(cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) {
+    fn feedback(&self, cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) {
         let (suffix, message) = match &result {
             Ok(()) => ("success", None),
             Err(m) => ("failse", Some(m.as_str())),
@@ -78,7 +84,7 @@ impl RtkDialect {
         let json = serde_json::to_string(&body).unwrap_or_default();
         if let Err(reason) = &result {
             static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
-            if let Some(left_out) = log_budget::allow(&REFUSALS) {
+            if let Some(left_out) = log_budget::allow(&REFUSALS, self.now) {
                 tracing::warn!(dialect = "rtk", %cmd, %reason, refusals_not_logged = left_out, "command refused");
             }
         }
@@ -92,16 +98,16 @@ impl RtkDialect {
                 payload.len(),
                 self.max_payload
             );
-            return Self::feedback(MQTT_CONTROL, Err(reason), out);
+            return self.feedback(MQTT_CONTROL, Err(reason), out);
         }
         let message: Value = match serde_json::from_slice(payload) {
             Ok(v) => v,
             Err(e) => {
-                return Self::feedback(MQTT_CONTROL, Err(format!("malformed JSON: {e}")), out);
+                return self.feedback(MQTT_CONTROL, Err(format!("malformed JSON: {e}")), out);
             }
         };
         let Some(cmd) = message.get("cmd").and_then(Value::as_str) else {
-            return Self::feedback(
+            return self.feedback(
                 MQTT_CONTROL,
                 Err("no \"cmd\" string in the message".into()),
                 out,
@@ -116,7 +122,7 @@ impl RtkDialect {
             "start_task" | "cancel_task" | "init_rtk_data" => "task_control",
             _ => {
                 let reason = format!("unknown command {cmd:?}");
-                return Self::feedback(&safe_cmd(&cmd), Err(reason), out);
+                return self.feedback(&safe_cmd(&cmd), Err(reason), out);
             }
         };
         match message.get("cmd_type").and_then(Value::as_str) {
@@ -126,7 +132,7 @@ impl RtkDialect {
                     "cmd_type must be {expected_type:?} for {cmd}, not {}",
                     other.map_or("absent".to_owned(), |t| format!("{t:?}"))
                 );
-                return Self::feedback(&cmd, Err(reason), out);
+                return self.feedback(&cmd, Err(reason), out);
             }
         }
         match cmd.as_str() {
@@ -135,7 +141,7 @@ impl RtkDialect {
                     let json = serde_json::to_string(&all).unwrap_or_default();
                     out.push(Publish::reply(TRAJECTORY_DATA, json));
                 }
-                Err(e) => Self::feedback(&cmd, Err(e.to_string()), out),
+                Err(e) => self.feedback(&cmd, Err(e.to_string()), out),
             },
             "save_trajectory" => {
                 let result = message
@@ -149,7 +155,7 @@ impl RtkDialect {
                         t.check().map_err(|e| e.to_string())?;
                         self.store.save(&t).map_err(|e| e.to_string())
                     });
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
             "delete_trajectory" => {
                 let result = match message.get("name").and_then(Value::as_str) {
@@ -158,7 +164,7 @@ impl RtkDialect {
                         .and_then(|name| self.store.delete(&name))
                         .map_err(|e: TrajectoryError| e.to_string()),
                 };
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
             "delete_all_trajectory" => {
                 let result = self
@@ -166,7 +172,7 @@ impl RtkDialect {
                     .delete_all()
                     .map(|_| ())
                     .map_err(|e| e.to_string());
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
             "start_task" => {
                 let result = self.start_task(&message).and_then(|request| {
@@ -179,7 +185,7 @@ impl RtkDialect {
                     })
                     .map_err(|e| e.to_string())
                 });
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
             "cancel_task" => {
                 let result = match core.command(Command::CancelMotion) {
@@ -187,13 +193,13 @@ impl RtkDialect {
                     Ok(()) | Err(CommandRejected::NoDrives) => Ok(()),
                     Err(e) => Err(e.to_string()),
                 };
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
             _ => {
                 let result = core
                     .command(Command::ZeroLocalFrame)
                     .map_err(|e| e.to_string());
-                Self::feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out);
             }
         }
     }
@@ -288,12 +294,13 @@ impl Dialect for RtkDialect {
 
     fn on_message(
         &mut self,
-        _t: Timestamp,
+        t: Timestamp,
         _topic: &str,
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     ) {
+        self.now = t;
         self.control(payload, core, out);
     }
 
@@ -303,6 +310,7 @@ impl Dialect for RtkDialect {
         _core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     ) {
+        self.now = status.time;
         out.push(Publish::telemetry(
             BASE_STATUS,
             BaseStatus::from_status(status).to_json(),
@@ -315,7 +323,7 @@ impl Dialect for RtkDialect {
                  at the next start",
                 failed.what, failed.reason
             );
-            Self::feedback(failed.command, Err(reason), out);
+            self.feedback(failed.command, Err(reason), out);
         }
     }
 }

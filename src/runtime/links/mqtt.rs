@@ -369,7 +369,7 @@ async fn run(
                     }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
-                        if let Some(left_out) = log_budget::allow(&RETAINED_IGNORED) {
+                        if let Some(left_out) = log_budget::allow(&RETAINED_IGNORED, clock.now()) {
                             tracing::warn!(topic = %p.topic, not_logged = left_out, "retained command ignored: commands must be live");
                         }
                         continue;
