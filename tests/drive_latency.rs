@@ -1,6 +1,7 @@
 //! A velocity command's way to the bus, in simulation time (deterministic, not a timing
 //! test): the simulated vehicle in lockstep with the engine; each change of speed reaches the
-//! left drive's RPDO within one control period, whatever the command's phase in the period.
+//! left drive's RPDO within one control period, whatever the command's phase in the period,
+//! and so does the watchdog's stop when commands cease.
 
 use std::time::Duration;
 
@@ -84,4 +85,58 @@ fn a_new_speed_reaches_the_drive_within_one_control_period() {
         );
     }
     eprintln!("worst command-to-RPDO latency over every phase: {worst:?}");
+}
+
+/// The simulator's command timeout (src/sim/lockstep.rs).
+const CMD_TIMEOUT: Duration = Duration::from_millis(500);
+
+#[test]
+fn a_lapsed_command_zeroes_the_target_from_the_first_stale_tick_whatever_its_phase() {
+    let plant = PlantConfig::builtin().expect("built-in plant");
+    let mut sim = Lockstep::new(plant, 5, Timestamp::from_micros(1_767_225_600_000_000))
+        .expect("simulated vehicle");
+    let mut out = Rpdos::default();
+    hold(&mut sim, &mut out, 0.0, Duration::from_secs(2));
+    // The drives' periodic refresh (20 ms) and the control period (10 ms) meet the command's
+    // lapse at every phase over 40 ms: the last command comes `phase` ms after a second of
+    // commands every 100 ms.
+    for phase in 0..40 {
+        hold(&mut sim, &mut out, 0.3, Duration::from_millis(1000));
+        hold_silent(&mut sim, &mut out, Duration::from_millis(phase));
+        let last = hold(&mut sim, &mut out, 0.3, Duration::from_millis(1));
+        let from = out.0.len();
+        hold_silent(&mut sim, &mut out, Duration::from_millis(800));
+        let stale_from = last.saturating_add(CMD_TIMEOUT);
+        let frames = &out.0[from..];
+        assert!(
+            frames.iter().any(|(t, v)| *t <= stale_from && *v != 0),
+            "phase {phase} ms: the drive was driven until the lapse"
+        );
+        // A tick after the timeout sees the command stale: nothing it sends carries a target,
+        // not even a refresh of the last one in the instant the target changes.
+        for (t, target) in frames.iter().filter(|(t, _)| *t > stale_from) {
+            assert_eq!(
+                *target,
+                0,
+                "phase {phase} ms: target {target} at {:?} after the lapse",
+                t.saturating_since(stale_from)
+            );
+        }
+        let stopped = frames
+            .iter()
+            .find(|(t, _)| *t > stale_from)
+            .expect("a frame after the lapse");
+        assert!(
+            stopped.0.saturating_since(stale_from) <= CONTROL_PERIOD,
+            "phase {phase} ms: the stop left {:?} after the lapse",
+            stopped.0.saturating_since(stale_from)
+        );
+    }
+}
+
+/// Steps for `span` with no command.
+fn hold_silent(sim: &mut Lockstep, out: &mut Rpdos, span: Duration) {
+    for _ in 0..(span.as_secs_f64() / PLANT_STEP.as_secs_f64()).round() as u64 {
+        sim.step(FIXED, out);
+    }
 }

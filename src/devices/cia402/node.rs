@@ -409,6 +409,17 @@ impl DriveNode {
 
     /// Runs timers: heartbeat watchdog, boot retries, SDO timeouts, polling and commands.
     pub fn poll(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+        self.poll_with(t, out, Commands::Send);
+    }
+
+    /// [`Self::poll`] without the commands' periodic refresh, for an owner that sets this
+    /// tick's command next and sends it with [`Self::flush_command`]: a refresh sent first
+    /// would repeat the last tick's targets on the bus in the very instant they change.
+    pub fn poll_timers(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+        self.poll_with(t, out, Commands::Hold);
+    }
+
+    fn poll_with(&mut self, t: Timestamp, out: &mut Vec<Frame>, commands: Commands) {
         match self.phase {
             Phase::Offline => return,
             Phase::Booting { since, attempts } => {
@@ -428,7 +439,7 @@ impl DriveNode {
             return;
         }
         if self.phase == Phase::Running {
-            self.run(t, out);
+            self.run(t, out, commands);
         }
         self.poll_sdo(t, out);
     }
@@ -438,7 +449,7 @@ impl DriveNode {
     /// time everything but a changed command is a no-op.
     pub fn flush_command(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
         if self.phase == Phase::Running {
-            self.run(t, out);
+            self.run(t, out, Commands::Send);
         }
     }
 
@@ -448,7 +459,7 @@ impl DriveNode {
         }
     }
 
-    fn run(&mut self, t: Timestamp, out: &mut Vec<Frame>) {
+    fn run(&mut self, t: Timestamp, out: &mut Vec<Frame>, commands: Commands) {
         self.check_feedback(t);
         let state = self.drive_state();
         self.check_enable(t, state);
@@ -466,7 +477,7 @@ impl DriveNode {
             self.targets.iter_mut().for_each(|x| *x = 0);
         }
         // Nothing is commanded until the drive's state is known.
-        if state.is_some() {
+        if state.is_some() && commands == Commands::Send {
             match self.profile.command.mode {
                 Transport::Pdo => self.send_rpdos(t, out),
                 Transport::Sdo => self.send_sdo_commands(t),
@@ -480,6 +491,13 @@ impl DriveNode {
             }
         }
     }
+}
+
+/// Whether a poll sends the commands (due refreshes and changes) or leaves them to a flush.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Commands {
+    Send,
+    Hold,
 }
 
 /// Order of states on the way to operation enabled.

@@ -42,11 +42,13 @@ pub trait CanDevice: Send + std::fmt::Debug {
     fn on_frame(&mut self, t: Timestamp, frame: &Frame, out: &mut Vec<Frame>) -> Heard;
     /// The interface went up or down at `t`.
     fn on_link(&mut self, _t: Timestamp, _up: bool, _out: &mut Vec<Frame>) {}
-    /// Timers due at `t` (the interface is not known to be down).
+    /// Timers due at `t` (the interface is not known to be down); commands wait for
+    /// [`CanDevice::flush`].
     fn poll(&mut self, _t: Timestamp, _out: &mut Vec<Frame>) {}
     /// The core's command at `t`.
     fn command(&mut self, _t: Timestamp, _command: &DriveCommand) {}
-    /// Sends what [`CanDevice::command`] gave it in this tick.
+    /// Sends the commands due at `t`: what [`CanDevice::command`] gave it in this tick, and
+    /// the periodic refresh, so no refresh repeats the last tick's command after it changed.
     fn flush(&mut self, _t: Timestamp, _out: &mut Vec<Frame>) {}
     /// The cutter is switched at `t`; false when the device is not the cutter's switch.
     fn switch_cutter(&mut self, _t: Timestamp, _on: bool, _out: &mut Vec<Frame>) -> bool {

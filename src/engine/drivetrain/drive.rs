@@ -140,7 +140,8 @@ impl CanDevice for Drive {
             self.started = true;
             self.node.start(t, out);
         }
-        self.node.poll(t, out);
+        // The command goes out with the flush that follows this tick's command.
+        self.node.poll_timers(t, out);
     }
 
     fn command(&mut self, t: Timestamp, command: &DriveCommand) {

@@ -231,7 +231,8 @@ impl Drivetrain {
         }
     }
 
-    /// Sends the wheel command just given to [`Self::command`] in the same control tick.
+    /// Sends the wheel command just given to [`Self::command`] in the same control tick, and
+    /// the periodic refreshes due (never before the tick's command).
     pub fn flush_commands(&mut self, t: Timestamp, tx: &mut Vec<(String, Frame)>) {
         for bus in self.buses.iter_mut().filter(|b| b.link != BusLink::Down) {
             let mut out = Vec::new();
