@@ -259,10 +259,13 @@ fn reports_arrive_with_the_spec_keys() {
             .unwrap_or_else(|| panic!("no example for {rest}"));
         has_spec_keys(&example, &ours[0], rest);
     }
-    // Rates: localization and chassis at 5 Hz, the others at 1 Hz (4 s observed).
+    // Rates: localization and chassis at 5 Hz, the others at 1 Hz (4 s observed; a report
+    // delayed by a busy machine may fall on either side of the window's ends).
     let count = |rest: &str| seen.get(&topic(rest)).map_or(0, Vec::len);
-    assert!((17..=22).contains(&count("report/navigation/localization")));
-    assert!((3..=5).contains(&count("report/navigation/usage")));
+    let localization = count("report/navigation/localization");
+    assert!((17..=22).contains(&localization), "{localization} localization reports");
+    let usage = count("report/navigation/usage");
+    assert!((2..=6).contains(&usage), "{usage} usage reports");
     let usage = &seen[&topic("report/navigation/usage")][0]["data"];
     assert!(
         usage["cpu"]
