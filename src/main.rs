@@ -7,6 +7,8 @@ use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
 
 #[derive(Parser)]
 #[command(version, about = "Chassis daemon for RTK ground robots")]
@@ -32,6 +34,11 @@ enum Command {
     /// standard input); not for use by hand.
     #[command(name = "broker-child", hide = true)]
     BrokerChild,
+    /// The ROS1 node's own process, started and watched by chassisd (settings on standard
+    /// input); not for use by hand.
+    #[cfg(feature = "ros1")]
+    #[command(name = "ros1-child", hide = true)]
+    Ros1Child,
 }
 
 /// Exit status of a configuration error (sysexits' EX_CONFIG).
@@ -64,11 +71,23 @@ fn main() -> ExitCode {
     let logs = tracing_subscriber::fmt()
         .with_writer(log_writer)
         .with_env_filter(filter);
+    // Libraries that log per connection are held to a budget (runtime::foreign_log); it is
+    // asked before the level filter, so only the levels shown by default are counted.
+    let budget = tracing_subscriber::filter::filter_fn(|meta| {
+        !meta.is_event()
+            || *meta.level() > tracing::Level::WARN
+            || chassisd::runtime::foreign_log::allow(meta.target())
+    });
     if chassisd::runtime::journal::to_journal() {
         logs.event_format(chassisd::runtime::journal::JournalFormat::default())
+            .finish()
+            .with(budget)
             .init();
     } else {
-        logs.with_ansi(std::io::stderr().is_terminal()).init();
+        logs.with_ansi(std::io::stderr().is_terminal())
+            .finish()
+            .with(budget)
+            .init();
     }
     match run(Cli::parse()) {
         Ok(true) => ExitCode::SUCCESS,
@@ -103,6 +122,11 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         Command::Ntrip(args) => cli::ntrip::execute(args),
         Command::BrokerChild => {
             chassisd::runtime::links::broker::child::main()?;
+            Ok(true)
+        }
+        #[cfg(feature = "ros1")]
+        Command::Ros1Child => {
+            chassisd::runtime::links::ros1::child::main()?;
             Ok(true)
         }
     }

@@ -121,7 +121,7 @@ fn python_classes() -> &'static Path {
 /// after `limit` (as a person stops `rostopic hz`).
 fn ros(master: &Master, args: &[&str], limit: Duration) -> Output {
     Command::new("timeout")
-        .args(["-s", "INT", &format!("{}", limit.as_secs_f64())])
+        .args(["-s", "INT", "-k", "3", &format!("{}", limit.as_secs_f64())])
         .args(args)
         .env("ROS_MASTER_URI", master.uri())
         .env("PYTHONPATH", python_classes())
@@ -876,4 +876,168 @@ fn with_ros_ip_the_nodes_ports_answer_on_that_address_only() {
     ));
     assert!(info.contains("name"), "{info}");
     interrupt(p);
+}
+
+/// Resident memory of process `pid`, MB.
+fn rss_mb(pid: u32) -> f64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))?
+                .split_whitespace()
+                .nth(1)?
+                .parse::<f64>()
+                .ok()
+        })
+        .map_or(0.0, |kib| kib / 1024.0)
+}
+
+/// Open descriptors of process `pid`.
+fn descriptors(pid: u32) -> usize {
+    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
+}
+
+/// The processes `pid` started (any of its threads).
+fn children_of(pid: u32) -> Vec<u32> {
+    std::fs::read_dir(format!("/proc/{pid}/task"))
+        .map(|tasks| {
+            tasks
+                .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("children")).ok())
+                .flat_map(|c| {
+                    c.split_whitespace()
+                        .filter_map(|p| p.parse().ok())
+                        .collect::<Vec<u32>>()
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Waits until `/navi_info` answers (the node registered and serving).
+fn serves(master: &Master, wait: Duration) {
+    let deadline = Instant::now() + wait;
+    loop {
+        let info = text(&ros(
+            master,
+            &["rosservice", "call", "/navi_info"],
+            Duration::from_secs(10),
+        ));
+        if info.contains("status: 0") {
+            return;
+        }
+        assert!(Instant::now() < deadline, "the node does not serve: {info}");
+        std::thread::sleep(Duration::from_millis(300));
+    }
+}
+
+/// The TCPROS port of `/navi_info`'s server, as the master gives it now.
+fn service_port(master: &Master) -> u16 {
+    let uri = text(&ros(
+        master,
+        &["rosservice", "uri", "/navi_info"],
+        Duration::from_secs(10),
+    ));
+    port_of(uri.lines().next().unwrap_or_default())
+}
+
+/// Sends a TCPROS connection header that announces `told` bytes, then up to `sent` bytes of
+/// it, while chassisd's own memory is watched; the most chassisd held, MB.
+fn lie_about_a_length(port: u16, told: u32, sent: usize, chassisd: u32) -> f64 {
+    use std::io::Write;
+    let mut most = rss_mb(chassisd);
+    let Ok(mut peer) = TcpStream::connect(("127.0.0.1", port)) else {
+        return most;
+    };
+    let _ = peer.set_write_timeout(Some(Duration::from_secs(5)));
+    let chunk = vec![b'x'; 1 << 20];
+    let mut written = peer.write_all(&told.to_le_bytes()).map(|()| 0).ok();
+    while let Some(n) = written.filter(|&n| n < sent) {
+        written = peer.write_all(&chunk).ok().map(|()| n + chunk.len());
+        if n % (16 << 20) == 0 {
+            most = most.max(rss_mb(chassisd));
+        }
+    }
+    most.max(rss_mb(chassisd))
+}
+
+/// Item 8 of issue 48: a raw TCPROS peer that announces a gigabyte, one that sends 200 MB,
+/// and one that opens connections without end. Each costs the node's own process at most
+/// its limits (ended and started again past them); chassisd's memory and descriptors stay
+/// where they were, its status keeps its rate, and the node serves again afterwards.
+#[test]
+fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
+    let master = Master::start();
+    let mut p = sim(&master);
+    let pid = p.child.id();
+    p.wait_out(Duration::from_secs(10), "a status", |_| true);
+    let (rss_before, fds_before) = (rss_mb(pid), descriptors(pid));
+    let attack_start = Instant::now();
+    p.drain_out();
+
+    // A header of 1 GiB: the allocation fails in the node's process, which ends.
+    let most = lie_about_a_length(service_port(&master), 1 << 30, 64 << 20, pid);
+    eprintln!("1 GiB told: {:?}", attack_start.elapsed());
+    p.wait_log(Duration::from_secs(10), "ROS1 node's process ended");
+    serves(&master, Duration::from_secs(30));
+    // 200 MB announced and sent: the node's process holds it, within its limit or ended.
+    let most = most.max(lie_about_a_length(
+        service_port(&master),
+        200 << 20,
+        200 << 20,
+        pid,
+    ));
+    eprintln!("200 MB sent: {:?}", attack_start.elapsed());
+    serves(&master, Duration::from_secs(30));
+    eprintln!("serving: {:?}", attack_start.elapsed());
+    // Connections without end: the node's process runs out of descriptors, chassisd not;
+    // held, they make the node's process end (roslibrust would retry its accept without end).
+    let port = service_port(&master);
+    let mut held = Vec::new();
+    for _ in 0..600 {
+        match TcpStream::connect_timeout(
+            &std::net::SocketAddr::from(([127, 0, 0, 1], port)),
+            Duration::from_secs(1),
+        ) {
+            Ok(s) => held.push(s),
+            Err(_) => break,
+        }
+    }
+    let connected = held.len();
+    let fds_during = descriptors(pid);
+    let node_fds: Vec<usize> = children_of(pid).into_iter().map(descriptors).collect();
+    p.wait_log(Duration::from_secs(10), "held all its descriptors");
+    drop(held);
+    let most = most.max(rss_mb(pid));
+    let attacked = attack_start.elapsed().as_secs_f64();
+    let statuses = p.drain_out().len() as f64;
+    eprintln!(
+        "chassisd: {rss_before:.1} MB before, {most:.1} MB at most; descriptors {fds_before} before, {fds_during} with {connected} peers connected (the node's process: {node_fds:?}); {statuses} statuses in {attacked:.1} s"
+    );
+    assert!(connected >= 200, "{connected} connections made");
+    assert!(
+        most < rss_before + 30.0,
+        "chassisd grew from {rss_before:.1} to {most:.1} MB"
+    );
+    assert!(
+        fds_during < fds_before + 16,
+        "chassisd's descriptors {fds_before} → {fds_during}"
+    );
+    assert!(
+        statuses >= 0.9 * 10.0 * (attacked - 0.5),
+        "{statuses} statuses in {attacked:.1} s"
+    );
+    // The node serves again.
+    serves(&master, Duration::from_secs(30));
+    let log = interrupt(p).1;
+    for line in log
+        .iter()
+        .filter(|l| l.contains("ROS1 node's process") || l.contains("left out"))
+    {
+        eprintln!("{line}");
+    }
+    assert!(
+        log.iter().filter(|l| l.contains("roslibrust")).count() <= 40,
+        "roslibrust's lines were not held to their budget"
+    );
 }

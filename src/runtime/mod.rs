@@ -8,10 +8,12 @@
 //! - the plumbing beside them: clocks, the recorder and status threads, logging to the
 //!   journal, systemd notification, panic containment, the allocator's tuning.
 
+pub mod child_process;
 pub mod clock;
 pub mod descriptors;
 pub mod drivers;
 pub mod error;
+pub mod foreign_log;
 pub mod heap;
 pub mod host;
 pub mod journal;

@@ -26,8 +26,8 @@ pub const SET_SHAPE: &str = "/set_shape";
 /// `/set_region`'s name.
 pub const SET_REGION: &str = "/set_region";
 
-/// A request of the node.
-#[derive(Debug, Clone, PartialEq)]
+/// A request of the node (also as the node's process hands it to chassisd's).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Ros1Request {
     /// `/cmd_vel` (geometry_msgs/Twist): through the arbiter and the command watchdog like
     /// every velocity source; components a ground vehicle cannot follow are refused.

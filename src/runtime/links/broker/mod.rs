@@ -23,6 +23,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use crate::runtime::child_process;
 use crate::runtime::error::{RuntimeError, invalid, io};
 
 use crate::api::mqtt::Publish;
@@ -190,7 +191,7 @@ pub fn start(settings: ChildSettings) -> Result<EmbeddedBroker, RuntimeError> {
     drop(TcpListener::bind(addr).map_err(io(format!(
         "embedded broker: cannot listen on {addr} (another broker running there?)"
     )))?);
-    let exe = broker_exe()?;
+    let exe = child_process::self_exe("embedded broker")?;
     let line = serde_json::to_string(&settings).map_err(invalid("embedded broker: settings"))?;
     let shared = Arc::new(Shared::default());
     let running = spawn(&exe, &line, &shared)?;
@@ -203,17 +204,6 @@ pub fn start(settings: ChildSettings) -> Result<EmbeddedBroker, RuntimeError> {
         .spawn(supervisor)
         .map_err(io("embedded broker: cannot start its supervisor"))?;
     Ok(EmbeddedBroker { addr, shared })
-}
-
-/// The program that runs the broker process: chassisd itself, through /proc/self/exe, the
-/// very file this process runs, even after a package upgrade replaced the one at its path
-/// (a restart then starts the same version, not the new one).
-fn broker_exe() -> Result<PathBuf, RuntimeError> {
-    let this = PathBuf::from("/proc/self/exe");
-    if this.exists() {
-        return Ok(this);
-    }
-    std::env::current_exe().map_err(io("embedded broker: finding chassisd's program"))
 }
 
 /// A broker process and the pipe whose end tells it chassisd is gone.
@@ -306,18 +296,7 @@ fn check_memory(pid: u32) {
     if pid == 0 {
         return;
     }
-    let rss_mb = std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|status| {
-            status
-                .lines()
-                .find(|l| l.starts_with("VmRSS:"))?
-                .split_whitespace()
-                .nth(1)?
-                .parse::<u64>()
-                .ok()
-        })
-        .map(|kib| kib / 1024);
+    let rss_mb = child_process::rss_mb(pid);
     if let Some(mb) = rss_mb.filter(|&mb| mb > MAX_BROKER_RSS_MB) {
         tracing::error!(
             rss_mb = mb,
@@ -337,7 +316,10 @@ fn supervise(exe: PathBuf, settings: String, mut running: Running, shared: Arc<S
         shared.pid.store(0, Ordering::Relaxed);
         let lived = running.started.elapsed();
         let why = match status {
-            Ok(s) => describe_exit(s),
+            Ok(s) => child_process::describe_exit(
+                s,
+                &[(child::EXIT_UNRESPONSIVE, "it stopped answering its probe")],
+            ),
             Err(e) => format!("cannot be waited for: {e}"),
         };
         let restarts = shared.restarts.fetch_add(1, Ordering::Relaxed) + 1;
@@ -363,20 +345,5 @@ fn supervise(exe: PathBuf, settings: String, mut running: Running, shared: Arc<S
             }
         };
         tracing::info!(restarts, "embedded broker running again");
-    }
-}
-
-/// A process's end in words: its exit status, or the signal that ended it.
-fn describe_exit(status: std::process::ExitStatus) -> String {
-    use std::os::unix::process::ExitStatusExt;
-    match (status.code(), status.signal()) {
-        (Some(101), _) => "it panicked (exit status 101)".into(),
-        (Some(child::EXIT_UNRESPONSIVE), _) => format!(
-            "it stopped answering its probe (exit status {})",
-            child::EXIT_UNRESPONSIVE
-        ),
-        (Some(code), _) => format!("exit status {code}"),
-        (None, Some(signal)) => format!("killed by signal {signal}"),
-        (None, None) => "ended".into(),
     }
 }

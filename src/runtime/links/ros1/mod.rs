@@ -2,17 +2,25 @@
 //! TCPROS), with no ROS installation on the vehicle. What its topics and services mean is
 //! `api::ros1`; this module moves the messages.
 //!
-//! The engine's task hands the node what it publishes through a [`Ros1Link`], which never
-//! blocks: poses every control tick, IMU samples, the status, motion and mission ends, and
+//! The node runs in a process of its own (`child`, started and restarted by `node`), so
+//! that what a ROS peer sends costs that process, at most its limits, never the one that
+//! holds the control loop. The engine's task hands the node what it publishes through a
+//! [`Ros1Link`], which never blocks: poses every control tick, IMU samples, the status, motion and mission ends, and
 //! the answers to the node's own requests. The node's requests go to the engine as command
 //! records of the source `ros1`, so a recording keeps them and replays without ROS.
 
 #[cfg(feature = "ros1")]
 mod bind;
 #[cfg(feature = "ros1")]
+pub mod child;
+#[cfg(feature = "ros1")]
+mod graph;
+#[cfg(feature = "ros1")]
 pub mod messages;
 #[cfg(feature = "ros1")]
 mod node;
+#[cfg(feature = "ros1")]
+pub mod pipe;
 
 use tokio::sync::mpsc;
 
@@ -21,7 +29,7 @@ use crate::engine::EngineOutput;
 
 pub use crate::api::ros1::messages::ImuNoise;
 #[cfg(feature = "ros1")]
-pub use node::{Ros1Spec, spawn};
+pub use node::{CHILD_COMMAND, Ros1Spec, spawn};
 
 /// Feed items waiting for the node before the newest are dropped (some 2 s of poses).
 const FEED_QUEUE: usize = 256;
