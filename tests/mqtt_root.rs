@@ -263,7 +263,10 @@ fn reports_arrive_with_the_spec_keys() {
     // delayed by a busy machine may fall on either side of the window's ends).
     let count = |rest: &str| seen.get(&topic(rest)).map_or(0, Vec::len);
     let localization = count("report/navigation/localization");
-    assert!((17..=22).contains(&localization), "{localization} localization reports");
+    assert!(
+        (17..=22).contains(&localization),
+        "{localization} localization reports"
+    );
     let usage = count("report/navigation/usage");
     assert!((2..=6).contains(&usage), "{usage} usage reports");
     let usage = &seen[&topic("report/navigation/usage")][0]["data"];

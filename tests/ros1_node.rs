@@ -980,7 +980,7 @@ fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
     eprintln!("1 GiB told: {:?}", attack_start.elapsed());
     p.wait_log(Duration::from_secs(10), "ROS1 node's process ended");
     serves(&master, Duration::from_secs(30));
-    // 200 MB announced and sent: the node's process holds it, within its limit or ended.
+    // 200 MB announced and sent: the node's process holds it, within its limit.
     let most = most.max(lie_about_a_length(
         service_port(&master),
         200 << 20,
@@ -988,25 +988,36 @@ fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
         pid,
     ));
     eprintln!("200 MB sent: {:?}", attack_start.elapsed());
+    // roslibrust then reads the bytes sent as the header's first field length (2 GB): the
+    // node's process ends again, maybe after answering a call or two.
+    p.wait_log(Duration::from_secs(10), "ROS1 node's process ended");
     serves(&master, Duration::from_secs(30));
     eprintln!("serving: {:?}", attack_start.elapsed());
     // Connections without end: the node's process runs out of descriptors, chassisd not;
     // held, they make the node's process end (roslibrust would retry its accept without end).
     let port = service_port(&master);
     let mut held = Vec::new();
-    for _ in 0..600 {
-        match TcpStream::connect_timeout(
-            &std::net::SocketAddr::from(([127, 0, 0, 1], port)),
-            Duration::from_secs(1),
-        ) {
-            Ok(s) => held.push(s),
-            Err(_) => break,
+    let mut node_fds = Vec::new();
+    let mut fds_during = 0;
+    let flood_until = Instant::now() + Duration::from_secs(15);
+    while p.log_count("held all its descriptors") == 0 {
+        assert!(
+            Instant::now() < flood_until,
+            "{} connections held, the node's process holds {node_fds:?} descriptors, and it did not end",
+            held.len()
+        );
+        for _ in 0..50 {
+            if let Ok(s) = TcpStream::connect_timeout(
+                &std::net::SocketAddr::from(([127, 0, 0, 1], port)),
+                Duration::from_millis(200),
+            ) {
+                held.push(s);
+            }
         }
+        fds_during = fds_during.max(descriptors(pid));
+        node_fds = children_of(pid).into_iter().map(descriptors).collect();
     }
     let connected = held.len();
-    let fds_during = descriptors(pid);
-    let node_fds: Vec<usize> = children_of(pid).into_iter().map(descriptors).collect();
-    p.wait_log(Duration::from_secs(10), "held all its descriptors");
     drop(held);
     let most = most.max(rss_mb(pid));
     let attacked = attack_start.elapsed().as_secs_f64();
