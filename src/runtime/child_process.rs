@@ -18,6 +18,19 @@ pub fn self_exe(what: &str) -> Result<PathBuf, RuntimeError> {
     std::env::current_exe().map_err(io(format!("{what}: finding chassisd's program")))
 }
 
+/// Makes any panic end this helper process (exit status 101) after `what`'s line, so that
+/// chassisd starts a whole one rather than keep one a panic left half-dead.
+pub fn end_on_panic(what: &'static str) {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report(info);
+        crate::runtime::stderr::line(format!(
+            "chassisd {what}: panic; the process ends and chassisd restarts it"
+        ));
+        std::process::exit(101);
+    }));
+}
+
 /// A process's end in words: its exit status (with the meaning of those in `known`), or
 /// the signal that ended it.
 pub fn describe_exit(status: std::process::ExitStatus, known: &[(i32, &str)]) -> String {

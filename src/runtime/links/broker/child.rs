@@ -97,14 +97,7 @@ pub enum ChildReport {
 pub fn main() -> Result<(), RuntimeError> {
     // A panic anywhere in here (rumqttd's router included) leaves the broker half-dead:
     // end the process, so chassisd notices and starts a whole one.
-    let report = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        report(info);
-        crate::runtime::stderr::line(
-            "chassisd broker: panic; the broker process ends and chassisd restarts it".into(),
-        );
-        std::process::exit(101);
-    }));
+    crate::runtime::child_process::end_on_panic("broker");
     let mut stdin = std::io::stdin().lock();
     let mut line = String::new();
     std::io::Read::take(&mut stdin, MAX_SETTINGS as u64)

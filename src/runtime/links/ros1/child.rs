@@ -53,14 +53,7 @@ const MAX_SETTINGS: u64 = 64 << 10;
 pub fn main() -> Result<(), RuntimeError> {
     // A panic in roslibrust (it panics on some peers' resets) may leave a topic without its
     // listener: end the process, so chassisd starts a whole one.
-    let report = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        report(info);
-        crate::runtime::stderr::line(
-            "chassisd ROS1 node: panic; the node's process ends and chassisd restarts it".into(),
-        );
-        std::process::exit(101);
-    }));
+    crate::runtime::child_process::end_on_panic("ROS1 node");
     let mut line = String::new();
     std::io::Read::take(std::io::stdin().lock(), MAX_SETTINGS)
         .read_line(&mut line)

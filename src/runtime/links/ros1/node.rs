@@ -14,6 +14,7 @@ use tokio::sync::mpsc;
 
 use super::pipe::{FromNode, Located, MAX_LINE, NodeSettings, ToNode};
 use super::{Answer, Feed, Ros1Queues};
+use crate::api::log_budget::{self, LogBudget, SharedBudget};
 use crate::api::ros1;
 use crate::api::ros1::adapter::Ros1Request;
 use crate::api::ros1::messages::ImuNoise;
@@ -40,6 +41,9 @@ const FIRST_BACKOFF: Duration = Duration::from_millis(250);
 const MAX_BACKOFF: Duration = Duration::from_secs(5);
 /// A process that lived this long resets the back-off.
 const STABLE_AFTER: Duration = Duration::from_secs(30);
+
+/// Refused requests' log lines (a caller may refuse itself as fast as it calls).
+static REFUSED: SharedBudget = SharedBudget::new(LogBudget::new());
 
 /// What the node is built from.
 #[derive(Debug, Clone)]
@@ -113,11 +117,6 @@ impl Requests {
                     sent: Instant::now(),
                 },
             );
-        } else if let Some(call) = call {
-            // Nothing more to wait for: accepted as sent.
-            return Err(format!(
-                "internal: call {call:?} for a request with no answer"
-            ));
         }
         Ok(())
     }
@@ -213,73 +212,21 @@ async fn run(
     let mut number = 0;
     loop {
         number += 1;
-        let mut node = match start(&exe, &settings, number).await {
-            Ok(node) => node,
-            Err(e) => {
-                tracing::error!(error = %e, "ROS1 node's process not started; trying again");
-                idle(
-                    backoff,
+        match start(&exe, &settings, number).await {
+            Ok(node) => {
+                let lived = serve(
+                    node,
                     &mut feed,
                     &mut answers,
                     &mut publishing,
                     &mut requests,
                 )
                 .await;
-                backoff = (backoff * 2).min(MAX_BACKOFF);
-                continue;
-            }
-        };
-        let status = loop {
-            tokio::select! {
-                Some(item) = feed.recv() => {
-                    let position = located(&item);
-                    let messages = on_feed(&mut publishing, &item);
-                    node.publish(messages, position);
+                if lived > STABLE_AFTER {
+                    backoff = FIRST_BACKOFF;
                 }
-                Some(answer) = answers.recv() => {
-                    answer_pending(&mut requests, &mut publishing, answer, Some(&mut node));
-                }
-                message = node.up.recv() => match message {
-                    Some(FromNode::Registered) => {
-                        node.registered = true;
-                        // The latched status codes again, for the new registrations.
-                        let mut latched = Vec::new();
-                        publishing.latched(&mut latched);
-                        node.publish(latched, Located::Unchanged);
-                    }
-                    Some(FromNode::Request { call, request }) => {
-                        let waiting = call.map(|c| (node.number, c));
-                        if let Err(reason) = requests.submit(&request, waiting) {
-                            tracing::warn!(request = request.name(), %reason, "ROS1 request refused");
-                            if let Some(call) = call {
-                                node.send(&ToNode::Answer { call, result: Err(reason) });
-                            }
-                        }
-                    }
-                    None => break node.child.wait().await,
-                },
-                status = node.child.wait() => break status,
             }
-        };
-        let lived = node.started.elapsed();
-        let why = match status {
-            Ok(s) => child_process::describe_exit(
-                s,
-                &[(
-                    super::child::EXIT_DESCRIPTORS,
-                    "peers' connections held all its descriptors",
-                )],
-            ),
-            Err(e) => format!("cannot be waited for: {e}"),
-        };
-        tracing::error!(
-            reason = %why,
-            lived_s = lived.as_secs_f64(),
-            restarts = number,
-            "ROS1 node's process ended; starting it again (it registers anew)"
-        );
-        if lived > STABLE_AFTER {
-            backoff = FIRST_BACKOFF;
+            Err(e) => tracing::error!(error = %e, "ROS1 node's process not started; trying again"),
         }
         idle(
             backoff,
@@ -291,6 +238,71 @@ async fn run(
         .await;
         backoff = (backoff * 2).min(MAX_BACKOFF);
     }
+}
+
+/// Serves the engine and the node's process until it ends; how long it lived.
+async fn serve(
+    mut node: NodeProcess,
+    feed: &mut mpsc::Receiver<Feed>,
+    answers: &mut mpsc::Receiver<Answer>,
+    publishing: &mut Publishing,
+    requests: &mut Requests,
+) -> Duration {
+    let status = loop {
+        tokio::select! {
+            Some(item) = feed.recv() => {
+                let position = located(&item);
+                let messages = on_feed(publishing, &item);
+                node.publish(messages, position);
+            }
+            Some(answer) = answers.recv() => {
+                answer_pending(requests, publishing, answer, Some(&mut node));
+            }
+            message = node.up.recv() => match message {
+                Some(FromNode::Registered) => {
+                    node.registered = true;
+                    // The latched status codes again, for the new registrations.
+                    let mut latched = Vec::new();
+                    publishing.latched(&mut latched);
+                    node.publish(latched, Located::Unchanged);
+                }
+                Some(FromNode::Request { call, request }) => {
+                    let result = requests.submit(&request, call.map(|c| (node.number, c)));
+                    if let Err(reason) = &result
+                        && let Some(left_out) = log_budget::allow(&REFUSED, requests.clock.now())
+                    {
+                        tracing::warn!(request = request.name(), %reason, left_out, "ROS1 request refused");
+                    }
+                    // A refusal, or a request the engine does not answer, is answered now.
+                    if let Some(call) = call
+                        && (result.is_err() || !request.awaits_answer())
+                    {
+                        node.send(&ToNode::Answer { call, result });
+                    }
+                }
+                None => break node.child.wait().await,
+            },
+            status = node.child.wait() => break status,
+        }
+    };
+    let lived = node.started.elapsed();
+    let why = match status {
+        Ok(s) => child_process::describe_exit(
+            s,
+            &[(
+                super::child::EXIT_DESCRIPTORS,
+                "peers' connections held all its descriptors",
+            )],
+        ),
+        Err(e) => format!("cannot be waited for: {e}"),
+    };
+    tracing::error!(
+        reason = %why,
+        lived_s = lived.as_secs_f64(),
+        process = node.number,
+        "ROS1 node's process ended; starting it again (it registers anew)"
+    );
+    lived
 }
 
 /// Where the feed item says the vehicle is, for `/get_position`.
