@@ -968,7 +968,14 @@ fn lie_about_a_length(port: u16, told: u32, sent: usize, chassisd: u32) -> f64 {
 #[test]
 fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
     let master = Master::start();
-    let mut p = sim(&master);
+    // Backtraces asked for, as a developer's shell often does: the node's ends must still
+    // cost one line each, not a backtrace read from the program's debug information.
+    let uri = master.uri();
+    let mut p = Proc::start_with_env(
+        &["sim", "--ros-master", uri.as_str(), "--no-mqtt"],
+        &[("RUST_BACKTRACE", "full")],
+    );
+    p.wait_log(Duration::from_secs(30), "ROS1 node registered");
     let pid = p.child.id();
     p.wait_out(Duration::from_secs(10), "a status", |_| true);
     let (rss_before, fds_before) = (rss_mb(pid), descriptors(pid));
@@ -1050,5 +1057,9 @@ fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
     assert!(
         log.iter().filter(|l| l.contains("roslibrust")).count() <= 40,
         "roslibrust's lines were not held to their budget"
+    );
+    assert!(
+        !log.iter().any(|l| l.contains("stack backtrace")),
+        "the node's process printed a backtrace as it ended"
     );
 }

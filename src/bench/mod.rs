@@ -12,6 +12,9 @@ pub mod mosquitto;
 pub mod mqtt;
 pub mod real;
 pub mod replay;
+#[cfg(feature = "ros1")]
+pub mod ros1_attack;
+pub mod rosmaster;
 pub mod soak;
 
 use std::process::{Command, Stdio};

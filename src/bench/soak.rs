@@ -4,7 +4,9 @@
 //! killed (mosquitto started again by the soak, the embedded broker by chassisd itself), a
 //! GNSS outage, an IMU stall, lost drive heartbeats and the CAN interface down, and three
 //! hostile clients (`bench::attacks`): one presenting chassisd's client id, one sending QoS 2
-//! messages it never releases, one retaining 1 MB messages on new topics.
+//! messages it never releases, one retaining 1 MB messages on new topics; and, when the
+//! soak runs a rosmaster for the ROS1 node, a TCPROS peer that lies about a header's length
+//! and holds connections without end (`bench::ros1_attack`).
 //!
 //! A client subscribes to base_status and drives the vehicle as an operator would: a
 //! heartbeat and a root DRIVE every 200 ms, and a zero DRIVE (the deliberate re-arm)
@@ -89,6 +91,9 @@ pub enum FaultKind {
     /// Connections to the WebSocket server's HTTP port send half a request's head, then
     /// nothing (1,000 at most).
     Slowloris,
+    /// A TCPROS peer announces a 1 GiB header to the ROS1 node and sends 64 MB of it, then
+    /// holds hundreds of connections, round after round.
+    TcprosLengthLie,
 }
 
 impl FaultKind {
@@ -101,7 +106,8 @@ impl FaultKind {
             | Self::ClientIdTakeover
             | Self::UnreleasedQos2
             | Self::RetainedFlood
-            | Self::Slowloris => 5,
+            | Self::Slowloris
+            | Self::TcprosLengthLie => 5,
             Self::GnssOutage => 8,
             Self::BrokerRestart | Self::DriveHeartbeatLoss | Self::CanDown => 3,
         })
@@ -122,11 +128,11 @@ impl FaultKind {
     /// Whether base_status can show the fault: a flood is refused silently, and while the
     /// broker is gone nothing arrives.
     fn observable(self) -> bool {
-        !self.on_the_broker()
+        !self.is_outside_the_vehicle()
     }
 
     /// The fault is a client's (or the broker's own), not the vehicle's.
-    fn on_the_broker(self) -> bool {
+    fn is_outside_the_vehicle(self) -> bool {
         matches!(
             self,
             Self::CommandFlood
@@ -136,13 +142,14 @@ impl FaultKind {
                 | Self::UnreleasedQos2
                 | Self::RetainedFlood
                 | Self::Slowloris
+                | Self::TcprosLengthLie
         )
     }
 
     /// Whether `o` shows the fault; `None` when base_status cannot show it.
     fn shown(self, o: &Observation) -> Option<bool> {
         match self {
-            _ if self.on_the_broker() => None,
+            _ if self.is_outside_the_vehicle() => None,
             Self::GnssOutage => Some(!o.gnss),
             Self::ImuStall => Some(!o.imu),
             Self::DriveHeartbeatLoss => Some(o.bits & status_bits::HEARTBEAT_LOST != 0),
@@ -185,6 +192,23 @@ pub struct SoakOptions {
     pub run_for: Duration,
     /// The runs, one per broker.
     pub brokers: Vec<Broker>,
+    /// Run the ROS1 node on a rosmaster the soak starts, and attack it over TCPROS.
+    pub ros1: bool,
+}
+
+/// One fault as it was injected and cleared.
+#[derive(Debug, Clone, Copy)]
+struct Injected {
+    kind: FaultKind,
+    began: Instant,
+    cleared: Instant,
+    /// The vehicle's true speed as it began, m/s.
+    speed: f64,
+    stop: Stop,
+    /// A hostile client's figures.
+    attack: Option<AttackFigures>,
+    /// When the ROS1 node answered a call again, after the TCPROS attack.
+    back: Option<Instant>,
 }
 
 /// One base_status as the client saw it.
@@ -248,6 +272,8 @@ pub struct RunFigures {
     pub status_availability: f64,
     /// The embedded broker's process's largest resident memory, MB (sampled every 250 ms).
     pub broker_peak_mb: Option<f64>,
+    /// The ROS1 node's process's largest resident memory, MB (sampled every 250 ms).
+    pub ros1_node_peak_mb: Option<f64>,
     /// Every fault.
     pub faults: Vec<FaultFigures>,
     /// Every target met.
@@ -332,6 +358,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     let vehicle_id = super::mqtt::root_vehicle_id(&options.mqtt)?;
     let mut mqtt = options.mqtt.clone();
     let mut mosquitto = broker.start(&mut mqtt)?;
+    let rosmaster = options
+        .ros1
+        .then(super::rosmaster::Rosmaster::start)
+        .transpose()?;
     let chassis = lockstep::vehicle_config(&options.plant)?
         .chassis
         .ok_or_else(missing("the simulated vehicle has a chassis"))?;
@@ -356,7 +386,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             scenario: None,
             duration: Some(options.run_for + Duration::from_secs(3)),
             mqtt: Some(mqtt.clone()),
-            ros1: None,
+            ros1: rosmaster.as_ref().map(|m| crate::config::ros1::Ros1Config {
+                master_uri: m.uri(),
+                ..Default::default()
+            }),
             websocket: Some(crate::config::websocket::WebsocketConfig {
                 bind: format!("127.0.0.1:{websocket_port}"),
                 ..Default::default()
@@ -378,7 +411,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
 
     // Warm up: the drives enabled and the vehicle at speed.
     tokio::time::sleep(CALM).await;
-    let schedule: Vec<FaultKind> = vec![
+    let mut schedule: Vec<FaultKind> = vec![
         FaultKind::CommandFlood,
         FaultKind::ConnectionFlood,
         FaultKind::BrokerRestart,
@@ -391,6 +424,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         FaultKind::RetainedFlood,
         FaultKind::Slowloris,
     ];
+    if rosmaster.is_some() {
+        schedule.push(FaultKind::TcprosLengthLie);
+    }
+    let master_uri = rosmaster.as_ref().map(|m| m.uri()).unwrap_or_default();
     let own_id = mqtt.base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
     let rss_start = resident_memory_with_broker();
@@ -398,14 +435,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         (options.run_for.as_secs_f64() / cycle_length.as_secs_f64()) as usize + 1,
     ));
     let sampler = tokio::spawn(sample_floors(floors.clone()));
-    let mut injected: Vec<(
-        FaultKind,
-        Instant,
-        Instant,
-        f64,
-        Stop,
-        Option<AttackFigures>,
-    )> = Vec::new();
+    let mut injected: Vec<Injected> = Vec::new();
     let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
     let mut cycles = 0;
     while start.elapsed() + cycle_length <= options.run_for {
@@ -443,6 +473,9 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
                         ))
                     }))
                 }
+                FaultKind::TcprosLengthLie => {
+                    Some(tokio::spawn(tcpros_attack(master_uri.clone(), kind.hold())))
+                }
                 FaultKind::BrokerRestart => {
                     match mosquitto.as_mut() {
                         Some(m) => m.stop(),
@@ -478,7 +511,19 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             if kind == FaultKind::BrokerRestart {
                 broker_down.push((began, cleared));
             }
-            injected.push((kind, began, cleared, speed, stop, attacked));
+            let back = match kind {
+                FaultKind::TcprosLengthLie => node_serves_again(&master_uri).await?,
+                _ => None,
+            };
+            injected.push(Injected {
+                kind,
+                began,
+                cleared,
+                speed,
+                stop,
+                attack: attacked,
+                back,
+            });
             tokio::time::sleep(CALM).await;
         }
         cycles += 1;
@@ -531,9 +576,19 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     let broker_peak = floors
         .broker_peak
         .load(std::sync::atomic::Ordering::Relaxed);
+    let node_peak = floors.node_peak.load(std::sync::atomic::Ordering::Relaxed);
     let faults: Vec<FaultFigures> = injected
         .iter()
-        .map(|&(kind, began, cleared, speed, stop, attack)| {
+        .map(|i| {
+            let Injected {
+                kind,
+                began,
+                cleared,
+                speed,
+                stop,
+                attack,
+                back,
+            } = *i;
             let detected_s = observations
                 .iter()
                 .find(|o| o.at >= began && kind.shown(o) == Some(true))
@@ -541,8 +596,10 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             let recovered_at = match kind {
                 // Telemetry is back.
                 FaultKind::BrokerRestart => first_status_after(cleared),
+                // The node answers a call again.
+                FaultKind::TcprosLengthLie => back,
                 // Commands are taken again: the driver's next DRIVE is acknowledged.
-                _ if kind.on_the_broker() => acks.iter().find(|&&a| a >= cleared).copied(),
+                _ if kind.is_outside_the_vehicle() => acks.iter().find(|&&a| a >= cleared).copied(),
                 _ => observations
                     .iter()
                     .find(|o| o.at >= cleared && kind.recovered(o))
@@ -594,6 +651,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         // Only this run's own broker: a mosquitto run has none of chassisd's.
         broker_peak_mb: (broker == Broker::Embedded && broker_peak > 0)
             .then(|| broker_peak as f64 / 1e6),
+        ros1_node_peak_mb: (node_peak > 0).then(|| node_peak as f64 / 1e6),
         faults,
         pass,
     })
@@ -629,6 +687,8 @@ struct Floors {
     mb: Mutex<Vec<f64>>,
     /// The embedded broker's largest resident memory seen, bytes.
     broker_peak: std::sync::atomic::AtomicU64,
+    /// The ROS1 node's process's largest resident memory seen, bytes.
+    node_peak: std::sync::atomic::AtomicU64,
 }
 
 impl Floors {
@@ -638,6 +698,7 @@ impl Floors {
             cycle: std::sync::atomic::AtomicUsize::new(usize::MAX),
             mb: Mutex::new(vec![f64::INFINITY; cycles]),
             broker_peak: std::sync::atomic::AtomicU64::new(0),
+            node_peak: std::sync::atomic::AtomicU64::new(0),
         }
     }
 
@@ -673,6 +734,9 @@ async fn sample_floors(floors: Arc<Floors>) {
             embedded_broker_memory(),
             std::sync::atomic::Ordering::Relaxed,
         );
+        floors
+            .node_peak
+            .fetch_max(ros1_node_memory(), std::sync::atomic::Ordering::Relaxed);
     }
 }
 
@@ -820,6 +884,41 @@ fn embedded_broker_memory() -> u64 {
         .sum()
 }
 
+/// The ROS1 node's process's resident memory, bytes (0 when there is none).
+fn ros1_node_memory() -> u64 {
+    #[cfg(feature = "ros1")]
+    let running = children_running(crate::runtime::links::ros1::CHILD_COMMAND);
+    #[cfg(not(feature = "ros1"))]
+    let running: Vec<(u32, u64)> = Vec::new();
+    running.iter().map(|&(_, rss)| rss).sum()
+}
+
+/// The TCPROS attack (`bench::ros1_attack`) on the node of the master at `master_uri`.
+async fn tcpros_attack(
+    master_uri: String,
+    hold: Duration,
+) -> crate::bench::error::Result<Option<AttackFigures>> {
+    #[cfg(feature = "ros1")]
+    return Ok(Some(
+        super::ros1_attack::lie_and_hold(&master_uri, hold).await,
+    ));
+    #[cfg(not(feature = "ros1"))]
+    Err(BenchError::Failed(format!(
+        "this build has no ROS1 node to attack ({master_uri}, {hold:?})"
+    )))
+}
+
+/// When the node answers a call again after the TCPROS attack (`None`: not within
+/// [`RECOVERY_LIMIT`]).
+async fn node_serves_again(master_uri: &str) -> crate::bench::error::Result<Option<Instant>> {
+    #[cfg(feature = "ros1")]
+    return Ok(super::ros1_attack::serves_again(master_uri, RECOVERY_LIMIT).await);
+    #[cfg(not(feature = "ros1"))]
+    Err(BenchError::Failed(format!(
+        "this build has no ROS1 node ({master_uri})"
+    )))
+}
+
 /// Kills the embedded broker's process (SIGKILL), as a crash would end it.
 fn kill_embedded_broker() {
     for (pid, _) in children_running(CHILD_COMMAND) {
@@ -906,7 +1005,7 @@ impl RunFigures {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "soak on {}: {:.0} s, {} cycles; RSS {:.2} -> {:.2} MB, floor per cycle {:?} MB, slope {} MB/h; embedded broker peak {} MB; base_status p99 {} ms, largest gap {:.1} ms, {:.2} % of periods (outside broker restarts)",
+            "soak on {}: {:.0} s, {} cycles; RSS {:.2} -> {:.2} MB, floor per cycle {:?} MB, slope {} MB/h; embedded broker peak {} MB; ROS1 node peak {} MB; base_status p99 {} ms, largest gap {:.1} ms, {:.2} % of periods (outside broker restarts)",
             self.broker,
             self.seconds,
             self.cycles,
@@ -918,6 +1017,7 @@ impl RunFigures {
                 .collect::<Vec<_>>(),
             opt(self.rss_slope_mb_per_h),
             opt(self.broker_peak_mb),
+            opt(self.ros1_node_peak_mb),
             self.status_period_ms
                 .as_ref()
                 .map_or("-".to_owned(), |s| format!("{:.1}", s.p99)),

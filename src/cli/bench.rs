@@ -133,7 +133,8 @@ enum BenchCommand {
     },
     /// Run the simulated vehicle on its brokers for minutes while faults come round
     /// (command floods, broker restarts, GNSS outage, IMU stall, lost drive heartbeats, CAN
-    /// down): memory slope, base_status gaps, each fault's detection, recovery and stop.
+    /// down, hostile MQTT, HTTP and TCPROS clients): memory slope, base_status gaps, each
+    /// fault's detection, recovery and stop.
     /// The last line is JSON with "pass"; exits with status 1 when a target is missed.
     Soak {
         /// Plant file (default: the built-in devices/plant.mower.toml).
@@ -145,6 +146,10 @@ enum BenchCommand {
         /// The embedded broker, mosquitto, or each for half the time.
         #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
         broker: BenchBroker,
+        /// Leave the ROS1 node and its TCPROS attack out (by default the soak starts a
+        /// rosmaster, Debian's ros-core, for them).
+        #[arg(long)]
+        without_ros1: bool,
     },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
@@ -256,7 +261,8 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             plant,
             minutes,
             broker,
-        } => bench_soak(plant, minutes, broker),
+            without_ros1,
+        } => bench_soak(plant, minutes, broker, !without_ros1),
         BenchCommand::Replay {
             data,
             megabytes,
@@ -380,6 +386,7 @@ fn bench_soak(
     plant: Option<PathBuf>,
     total: Duration,
     choice: BenchBroker,
+    ros1: bool,
 ) -> anyhow::Result<bool> {
     let brokers = bench_brokers(choice);
     if brokers.contains(&Broker::Mosquitto)
@@ -387,11 +394,18 @@ fn bench_soak(
     {
         anyhow::bail!(why);
     }
+    if ros1 && !cfg!(feature = "ros1") {
+        anyhow::bail!("this build has no ROS1 node (feature ros1): pass --without-ros1");
+    }
+    if ros1 && let Some(why) = chassisd::bench::rosmaster::Rosmaster::missing() {
+        anyhow::bail!("{why}; or pass --without-ros1");
+    }
     let options = SoakOptions {
         plant: load_plant(plant)?,
         mqtt: sim_mqtt(None)?,
         run_for: total / brokers.len() as u32,
         brokers,
+        ros1,
     };
     let report = block_on(2, chassisd::bench::soak::run(options))??;
     for run in &report.runs {

@@ -218,6 +218,7 @@ struct Running {
 fn spawn(exe: &PathBuf, settings: &str, shared: &Arc<Shared>) -> Result<Running, RuntimeError> {
     let mut child = Command::new(exe)
         .arg(CHILD_COMMAND)
+        .envs(child_process::HELPER_ENV)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())

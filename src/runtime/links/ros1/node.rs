@@ -351,6 +351,7 @@ async fn start(
 ) -> Result<NodeProcess, std::io::Error> {
     let mut child = Command::new(exe)
         .arg(CHILD_COMMAND)
+        .envs(child_process::HELPER_ENV)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
