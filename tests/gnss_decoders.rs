@@ -1,6 +1,8 @@
 //! GNSS decoder vectors: fixed sentences (NMEA 0183 examples and receiver-manual style
 //! output, checksums included) through the real framer and decoders, every field checked.
 
+mod common;
+
 use chassisd::devices::gnss::decode::{GnssSentence, decode};
 use chassisd::devices::gnss::{FixQuality, NmeaFramer, NmeaReceiver, Sentence};
 use chassisd::time::Timestamp;
@@ -180,4 +182,84 @@ fn receiver_counts_malformed_sentences_and_keeps_going() {
     assert_eq!(fixes, 1);
     assert_eq!(receiver.fix().quality, FixQuality::Single);
     assert!(stats.last_decode_error.unwrap().to_string().contains("GGA"));
+}
+
+/// The vendors' dual-antenna headings on the wire (examples from Trimble's, Septentrio's,
+/// Applanix's and Unicore's own documents, checksums as sent).
+#[test]
+fn vendor_headings_on_the_wire() {
+    let heading = |wire: &str| match decode_wire(wire) {
+        GnssSentence::Heading(h) => (h.heading_deg, h.sigma_deg),
+        other => panic!("{wire}: {other:?}"),
+    };
+    assert_eq!(
+        heading("$PTNL,AVR,181059.6,+149.4688,Yaw,+0.0134,Tilt,,,60.191,3,2.5,6*00"),
+        (Some(149.4688), None)
+    );
+    assert_eq!(
+        heading("$PSSN,HRP,142657.80,061222,152.236,,-0.708,0.084,,0.181,21,2,2.400,E*23"),
+        (Some(152.236), Some(0.084))
+    );
+    assert_eq!(
+        heading("$PASHR,183944.821,74.52,T,-1.63,1.51,0.14,0.020,0.020,0.012,2,1*05"),
+        (Some(74.52), Some(0.012))
+    );
+    assert_eq!(
+        heading("$GNHPR,081212.00,341.48,-00.64,000.00,4,46,0.00,0999*4F"),
+        (Some(341.48), None)
+    );
+}
+
+/// Trimble's GNS epoch: the combined `$GNGNS`, then each constellation's with its
+/// satellites and no position. The epoch keeps the combined fix (before, it was voided:
+/// a Trimble R2 log gave no fix at all).
+#[test]
+fn a_trimble_gns_epoch_keeps_its_fix() {
+    let mut receiver = NmeaReceiver::new();
+    let epoch = [
+        "GNGNS,014035.00,4332.69262,S,17235.48549,E,RR,13,0.9,25.63,11.24,,,U",
+        "GPGNS,014035.00,,,,,,8,,,,1.0,23",
+        "GLGNS,014035.00,,,,,,5,,,,1.0,23",
+    ];
+    let wire: String = epoch
+        .iter()
+        .map(|body| format!("${body}*{:02X}\r\n", checksum(body)))
+        .collect();
+    receiver.push(Timestamp::from_micros(1), wire.as_bytes(), |_| {});
+    let fix = receiver.fix();
+    assert_eq!(fix.quality, FixQuality::RtkFixed);
+    let p = fix.position.expect("a position").value;
+    assert!(close(p.latitude_deg, -(43.0 + 32.69262 / 60.0)));
+    assert_eq!(receiver.stats().decode_errors, 0);
+}
+
+fn checksum(body: &str) -> u8 {
+    body.bytes().fold(0, |c, b| c ^ b)
+}
+
+/// Unicore's sentences as a UM98x sent them (../shared/data/gnss/unicore-um98x-nmea.log,
+/// one capture of each): every one frames and decodes, the fixed headings are shown, and
+/// the second antenna's `H` positions never become the vehicle's.
+#[test]
+fn the_unicore_capture_gives_headings_and_keeps_the_second_antenna_apart() {
+    let log = std::fs::read(common::shared_gnss_dir().join("unicore-um98x-nmea.log"))
+        .expect("the Unicore capture");
+    let mut receiver = NmeaReceiver::new();
+    let mut headings = Vec::new();
+    receiver.push(Timestamp::from_micros(1), &log, |fix| {
+        if let Some(h) = fix.heading_deg {
+            headings.push(h.value);
+        }
+    });
+    let stats = receiver.stats();
+    assert_eq!(stats.framer.checksum_errors, 0);
+    assert_eq!(stats.decode_errors, 0, "{:?}", stats.last_decode_error);
+    for kind in [
+        "GNGGAH", "GNRMCH", "GNGNSH", "GNGSTH", "HPR", "GNHPR2", "GNTRA2", "GNTHS2",
+    ] {
+        assert_eq!(stats.sentences_by_kind.get(kind), Some(&1), "{kind}");
+    }
+    headings.dedup();
+    assert_eq!(headings, [88.364, 320.961, 88.364, 88.36]);
+    assert_eq!(receiver.fix().position, None);
 }

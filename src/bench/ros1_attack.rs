@@ -3,11 +3,13 @@
 //! The peer asks the master where the node serves `/navi_info` (anyone on the vehicle's
 //! network can), then lies about a connection header's length (1 GiB told, up to 64 MB
 //! sent) and opens connections it holds without end. Raw sockets: no ROS client does this.
+//! They run inside the soak's process, whose memory is chassisd's figure, so they keep
+//! their own small: one 1 MB buffer, and the master asked over a plain HTTP exchange rather
+//! than an HTTP client library's pools.
 
 use std::time::{Duration, Instant};
 
 use roslibrust::RosServiceType;
-use roslibrust::ros1::MasterClient;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
@@ -27,28 +29,60 @@ const HOLD_ROUND: Duration = Duration::from_secs(2);
 /// A header or answer the operator's call reads at most, bytes.
 const ANSWER_AT_MOST: usize = 64 << 10;
 
-/// The node's TCPROS port for [`SERVICE`], as the master names it now.
-async fn service_port(master: &MasterClient) -> Option<u16> {
-    let uri = master.lookup_service(SERVICE).await.ok()?;
-    uri.rsplit(':').next()?.trim_end_matches('/').parse().ok()
+/// The node's TCPROS port for [`SERVICE`], as the master at `master` (`host:port`) names
+/// it now: its XML-RPC `lookupService`, asked as `caller`.
+async fn service_port(master: &str, caller: &str) -> Option<u16> {
+    let body = format!(
+        "<?xml version=\"1.0\"?><methodCall><methodName>lookupService</methodName><params>\
+         <param><value><string>{caller}</string></value></param>\
+         <param><value><string>{SERVICE}</string></value></param></params></methodCall>"
+    );
+    let request = format!(
+        "POST / HTTP/1.1\r\nHost: {master}\r\nContent-Type: text/xml\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    );
+    let answer = tokio::time::timeout(Duration::from_secs(2), async {
+        let mut s = TcpStream::connect(master).await.ok()?;
+        s.write_all(request.as_bytes()).await.ok()?;
+        let mut answer = Vec::new();
+        s.take(ANSWER_AT_MOST as u64)
+            .read_to_end(&mut answer)
+            .await
+            .ok()?;
+        Some(answer)
+    })
+    .await
+    .ok()??;
+    port_in_lookup_answer(&String::from_utf8_lossy(&answer))
 }
 
-/// A master client under an id of its own (it only asks; it registers nothing).
-pub async fn master_client(master_uri: &str, id: &str) -> Option<MasterClient> {
-    MasterClient::new(master_uri, "http://127.0.0.1:9/", id)
-        .await
+/// The port of the service's `rosrpc://host:port` in a `lookupService` answer: its last
+/// value (the message before it quotes the URI too); `None` when the master knows none.
+fn port_in_lookup_answer(answer: &str) -> Option<u16> {
+    let uri = &answer[answer.rfind("rosrpc://")? + "rosrpc://".len()..];
+    let end = uri.find('<')?;
+    uri[..end]
+        .rsplit(':')
+        .next()?
+        .trim_end_matches('/')
+        .parse()
         .ok()
+}
+
+/// `host:port` of a master URI (`http://host:port[/]`).
+fn master_address(master_uri: &str) -> &str {
+    master_uri
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
 }
 
 /// Lies and held connections, round after round, for `hold`.
 pub async fn lie_and_hold(master_uri: &str, hold: Duration) -> AttackFigures {
     let until = Instant::now() + hold;
     let mut figures = AttackFigures::default();
-    let Some(master) = master_client(master_uri, "/soak_attacker").await else {
-        return figures;
-    };
+    let master = master_address(master_uri);
     while Instant::now() < until {
-        let Some(port) = service_port(&master).await else {
+        let Some(port) = service_port(master, "/soak_attacker").await else {
             tokio::time::sleep(Duration::from_millis(100)).await;
             continue;
         };
@@ -116,9 +150,9 @@ async fn hold_connections(port: u16, until: Instant) -> (u64, u64) {
 /// makes it), trying until `within` has passed.
 pub async fn serves_again(master_uri: &str, within: Duration) -> Option<Instant> {
     let deadline = Instant::now() + within;
-    let master = master_client(master_uri, "/soak_operator").await?;
+    let master = master_address(master_uri);
     while Instant::now() < deadline {
-        if let Some(port) = service_port(&master).await
+        if let Some(port) = service_port(master, "/soak_operator").await
             && let Ok(Some(())) =
                 tokio::time::timeout(Duration::from_secs(1), call_navi_info(port)).await
         {
@@ -164,4 +198,20 @@ async fn read_framed(s: &mut TcpStream) -> Option<Vec<u8>> {
     framed.resize(4 + length, 0);
     s.read_exact(&mut framed[4..]).await.ok()?;
     Some(framed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_port_is_read_from_a_rosmasters_answer() {
+        // rosmaster's answer, as it sends it.
+        let found = "<?xml version='1.0'?>\n<methodResponse>\n<params>\n<param>\n<value><array><data>\n\
+            <value><int>1</int></value>\n<value><string>rosrpc URI: [rosrpc://vm:41234]</string></value>\n\
+            <value><string>rosrpc://vm:41234</string></value>\n</data></array></value>\n</param>\n</params>\n</methodResponse>\n";
+        assert_eq!(port_in_lookup_answer(found), Some(41234));
+        let none = "<value><int>-1</int></value>\n<value><string>no provider</string></value>\n<value><string></string></value>";
+        assert_eq!(port_in_lookup_answer(none), None);
+    }
 }

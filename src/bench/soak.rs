@@ -434,7 +434,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     let floors = Arc::new(Floors::new(
         (options.run_for.as_secs_f64() / cycle_length.as_secs_f64()) as usize + 1,
     ));
-    let sampler = tokio::spawn(sample_floors(floors.clone()));
+    let sampler = tokio::spawn(sample_floors(floors.clone(), broker == Broker::Embedded));
     let mut injected: Vec<Injected> = Vec::new();
     let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
     let mut cycles = 0;
@@ -725,15 +725,20 @@ impl Floors {
     }
 }
 
-async fn sample_floors(floors: Arc<Floors>) {
+/// Samples the floors and peaks; with `embedded`, the embedded broker's process counts
+/// in the floors, and a moment when it is gone (killed, not yet started again) is skipped:
+/// it would show chassisd alone as a floor no other cycle has.
+async fn sample_floors(floors: Arc<Floors>, embedded: bool) {
     let mut every = tokio::time::interval(RSS_SAMPLE_EVERY);
     loop {
         every.tick().await;
-        floors.sample(resident_memory_with_broker() as f64 / 1e6);
-        floors.broker_peak.fetch_max(
-            embedded_broker_memory(),
-            std::sync::atomic::Ordering::Relaxed,
-        );
+        let broker = embedded_broker_memory();
+        if !embedded || broker > 0 {
+            floors.sample((resident_memory_bytes().unwrap_or(0) + broker) as f64 / 1e6);
+        }
+        floors
+            .broker_peak
+            .fetch_max(broker, std::sync::atomic::Ordering::Relaxed);
         floors
             .node_peak
             .fetch_max(ros1_node_memory(), std::sync::atomic::Ordering::Relaxed);

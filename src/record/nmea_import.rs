@@ -2,7 +2,9 @@
 //!
 //! Such logs have `#` comment lines and no host timestamps, so time comes from the
 //! sentences: each line becomes one serial chunk stamped with the UTC time of the timed
-//! sentence it holds (GGA, GNS, RMC, GST, ZDA), or of the last one before it. The date comes
+//! sentence it holds (GGA, GNS, RMC, GST, ZDA), or of the last one before it; but a
+//! position report that has no time (a receiver without a fix) is the receiver's next
+//! epoch, one period on, so that it never voids the fix before it. The date comes
 //! from RMC or ZDA; lines before the first date take it from the first dated sentence, and
 //! the date rolls over at midnight. Binary data and broken sentences are kept byte for byte.
 //!
@@ -173,6 +175,13 @@ fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
     }
 }
 
+/// Whether `body` is a position report (GGA, GNS, RMC), whose time `sentence_time` found
+/// absent.
+fn is_position_report(body: &str) -> bool {
+    let sentence = Sentence::parse(body);
+    sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC")
+}
+
 /// The first pass: the first timed sentence and the first dated one.
 fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
     let mut lines = Lines::new(input);
@@ -225,6 +234,8 @@ pub struct NmeaLogReader {
     offset_ns: i128,
     /// The last timed chunk started a segment.
     just_jumped: bool,
+    /// An untimed position report was placed one period after the last timed chunk.
+    untimed_placed: bool,
     report: ImportReport,
 }
 
@@ -260,6 +271,7 @@ impl NmeaLogReader {
             last_step: None,
             offset_ns: 0,
             just_jumped: false,
+            untimed_placed: false,
             report: ImportReport {
                 date_known: start.date_known,
                 ..ImportReport::default()
@@ -351,15 +363,33 @@ impl Iterator for NmeaLogReader {
             return None;
         };
         let mut stamp = None;
+        let mut untimed_report = false;
         let tracker = &mut self.tracker;
         self.framer.push(&chunk, |body| {
             if let Some((time, date)) = sentence_time(body) {
                 let dt = tracker.observe(time, date);
                 stamp = stamp.or(dt);
+            } else {
+                untimed_report |= is_position_report(body);
             }
         });
         let t = match stamp {
-            Some(logged) => self.place(line, logged),
+            Some(logged) => {
+                self.untimed_placed = false;
+                self.place(line, logged)
+            }
+            // A position report without a time (`$GPGGA,,,,,,0,...` from a receiver that
+            // lost its fix) is the receiver's next epoch: one period after the last, never
+            // the time of the fix before it, which it would void.
+            None if untimed_report && !self.untimed_placed => {
+                self.untimed_placed = true;
+                let step = self
+                    .last_step
+                    .unwrap_or(Duration::from_secs(1))
+                    .min(self.options.max_gap);
+                self.last_time = self.last_time.saturating_add(step);
+                self.last_time
+            }
             None => self.last_time,
         };
         self.report.chunks += 1;
@@ -407,6 +437,32 @@ mod tests {
                 "1640995199.000000",
                 "1640995200.500000",
                 "1640995201.000000"
+            ]
+        );
+    }
+
+    #[test]
+    fn a_report_without_a_time_is_the_next_epoch_not_the_last_fixs() {
+        let log = format!(
+            "{}{}{}{}{}",
+            line("GPGGA,120000.00,5104.0859,N,11405.7387,W,1,8,0.9,1.0,M,0,M,,"),
+            line("GPRMC,120000.50,A,5104.0859,N,11405.7387,W,0.0,,010122,,,A"),
+            line("GPGGA,,,,,,0,00,99.99,,,,,,"),
+            line("GPRMC,,V,,,,,,,,,,N"),
+            line("GPGGA,120001.50,5104.0859,N,11405.7387,W,1,8,0.9,1.0,M,0,M,,"),
+        );
+        let (records, _) = import_nmea_log(log.as_bytes()).unwrap();
+        let s: Vec<String> = records.iter().map(|r| r.t.to_string()).collect();
+        // The untimed reports come one period (0.5 s) after the fix; the next timed one
+        // carries on from its own time.
+        assert_eq!(
+            s,
+            [
+                "1641038400.000000",
+                "1641038400.500000",
+                "1641038401.000000",
+                "1641038401.000000",
+                "1641038401.500000"
             ]
         );
     }

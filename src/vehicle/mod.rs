@@ -1374,7 +1374,13 @@ impl Vehicle {
             && self.fed_gnss.0 != Some(h.rx)
         {
             self.fed_gnss.0 = Some(h.rx);
-            let sigma = self.localizer.config().heading_sigma_rad;
+            // The configured σ is the least the heading is trusted to; a receiver that
+            // states a larger one (a float baseline) is taken at its word.
+            let sigma = fix
+                .heading_sigma_deg
+                .map(f64::to_radians)
+                .unwrap_or(0.0)
+                .max(self.localizer.config().heading_sigma_rad);
             self.localizer.add(
                 at(h.rx),
                 Measurement::Heading {

@@ -8,6 +8,12 @@
 //! - it rejects GNS mode fields longer than two characters (one per constellation), so GNS is
 //!   decoded here;
 //! - it has no THS (true heading and status), decoded here;
+//! - it has none of the vendors' dual-antenna headings (Trimble `PTNL,AVR`, Septentrio
+//!   `PSSN,HRP`, `PASHR`, Unicore `HPR` and `TRA`), decoded here, each valid only with the
+//!   quality it states;
+//! - Unicore's `H` forms (`GNGGAH`, `GNRMCH`, ...) are its second (heading) antenna's
+//!   sentences: checked as their plain forms, never taken as the vehicle's position, which
+//!   they would move by the length of the baseline;
 //! - it keeps several values as `f32`; they are widened through their shortest decimal form,
 //!   so `244.28` stays `244.28` rather than `244.27999877929688`.
 
@@ -206,11 +212,14 @@ pub struct GstAccuracy {
     pub altitude_sd_m: Option<f64>,
 }
 
-/// True heading from a dual-antenna receiver (HDT, THS).
+/// True heading from a dual-antenna receiver (HDT, THS, and the vendors' own sentences).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrueHeading {
-    /// Heading, degrees true (0 = north, clockwise); `None` when the receiver marks it invalid.
+    /// Heading, degrees true (0 = north, clockwise); `None` when the receiver marks it invalid
+    /// or states a quality too poor for it (a float or code solution where it states one).
     pub heading_deg: Option<f64>,
+    /// Its 1σ, degrees, where the receiver states one (Septentrio, PASHR).
+    pub sigma_deg: Option<f64>,
 }
 
 /// ZDA: UTC date and time.
@@ -239,6 +248,12 @@ pub enum GnssSentence {
     Hdt(TrueHeading),
     /// THS true heading and status.
     Ths(TrueHeading),
+    /// A vendor's dual-antenna heading: Trimble `PTNL,AVR`, Septentrio `PSSN,HRP`, `PASHR`,
+    /// Unicore `HPR` and `TRA`.
+    Heading(TrueHeading),
+    /// A sentence of a dual-antenna receiver's second antenna (Unicore's `GGAH`, `RMCH`,
+    /// ...): checked, and never the vehicle's position.
+    SecondaryAntenna,
     /// ZDA date.
     Zda(ZdaDate),
 }
@@ -265,20 +280,74 @@ impl From<FieldError> for DecodeError {
 /// Decodes `sentence` if its type is one chassisd uses; other types are `Ok(None)`.
 pub fn decode(sentence: &Sentence<'_>) -> Result<Option<GnssSentence>, DecodeError> {
     if sentence.talker == "P" {
-        return Ok(None);
+        return decode_proprietary(sentence);
     }
+    match variant_of(sentence) {
+        Some((kind, 'H')) => {
+            let plain = decode_standard(&Sentence { kind, ..*sentence })?;
+            Ok(plain.map(|_| GnssSentence::SecondaryAntenna))
+        }
+        Some((kind, _)) => decode_standard(&Sentence { kind, ..*sentence }),
+        None => decode_standard(sentence),
+    }
+}
+
+/// Unicore's six-letter addresses: a talker, a standard formatter and `H` (the second
+/// antenna's sentence: `GNGGAH`) or `2` (`GNHPR2`, `GNTRA2`, `GNTHS2`, whose layout is the
+/// plain one's); the formatter and the suffix.
+fn variant_of<'a>(sentence: &Sentence<'a>) -> Option<(&'a str, char)> {
+    let address = sentence.address;
+    if address.len() != 6 || !address.bytes().all(|b| b.is_ascii_alphanumeric()) {
+        return None;
+    }
+    let (formatter, suffix) = (&address[2..5], address[5..].chars().next()?);
+    match suffix {
+        'H' => Some((formatter, 'H')),
+        '2' if matches!(formatter, "HPR" | "TRA" | "THS") => Some((formatter, '2')),
+        _ => None,
+    }
+}
+
+/// A standard sentence's decoding, by its formatter.
+fn decode_standard(sentence: &Sentence<'_>) -> Result<Option<GnssSentence>, DecodeError> {
     let decoded = match sentence.kind {
         "GGA" => GnssSentence::Gga(decode_gga(sentence)?),
         "GNS" => GnssSentence::Gns(decode_gns(sentence)?),
         "RMC" => GnssSentence::Rmc(decode_rmc(sentence)?),
-        "VTG" => GnssSentence::Vtg(decode_vtg(sentence)?),
+        "VTG" => match decode_vtg(sentence)? {
+            Some(velocity) => GnssSentence::Vtg(velocity),
+            // `$GPVTG,,T,,M,,N,,K,N`: legal, and nothing to use.
+            None => return Ok(None),
+        },
         "GST" => GnssSentence::Gst(decode_gst(sentence)?),
         "HDT" => GnssSentence::Hdt(decode_hdt(sentence)?),
         "THS" => GnssSentence::Ths(decode_ths(sentence)?),
         "ZDA" => GnssSentence::Zda(decode_zda(sentence)?),
+        "HPR" | "TRA" => GnssSentence::Heading(decode_hpr(sentence)?),
         _ => return Ok(None),
     };
     Ok(Some(decoded))
+}
+
+/// The proprietary sentences chassisd uses: the vendors' dual-antenna headings.
+fn decode_proprietary(sentence: &Sentence<'_>) -> Result<Option<GnssSentence>, DecodeError> {
+    let (sub, rest) = sentence.data.split_once(',').unwrap_or((sentence.data, ""));
+    let heading = match (sentence.kind, sub) {
+        ("PTNL", "AVR") => decode_avr(&Sentence {
+            kind: "PTNL,AVR",
+            data: rest,
+            ..*sentence
+        })?,
+        ("PSSN", "HRP") => decode_hrp(&Sentence {
+            kind: "PSSN,HRP",
+            data: rest,
+            ..*sentence
+        })?,
+        // The attitude form (`$PASHR,time,heading,T,...`), not Ashtech's `$PASHR,POS,...`.
+        ("PASHR", _) if sentence.data.split(',').nth(2) == Some("T") => decode_pashr(sentence)?,
+        _ => return Ok(None),
+    };
+    Ok(Some(GnssSentence::Heading(heading)))
 }
 
 /// The sentence in the form the `nmea` crate's per-type parsers take. They do not look at
@@ -405,20 +474,18 @@ fn gps_era_date(date: NaiveDate) -> NaiveDate {
     }
 }
 
-fn decode_vtg(sentence: &Sentence<'_>) -> Result<GroundVelocity, DecodeError> {
+/// VTG's speed and course; `None` for a VTG with no speed (a receiver without a fix sends
+/// its fields empty).
+fn decode_vtg(sentence: &Sentence<'_>) -> Result<Option<GroundVelocity>, DecodeError> {
     let vtg = nmea::sentences::parse_vtg(crate_sentence(sentence, SentenceType::VTG))
         .map_err(|e| crate_error("VTG", e))?;
-    let knots = vtg
+    Ok(vtg
         .speed_over_ground
         .and_then(widen)
-        .ok_or_else(|| DecodeError {
-            kind: "VTG".into(),
-            reason: "no speed over ground".into(),
-        })?;
-    Ok(GroundVelocity {
-        speed_mps: knots * MPS_PER_KNOT,
-        course_deg: vtg.true_course.and_then(widen),
-    })
+        .map(|knots| GroundVelocity {
+            speed_mps: knots * MPS_PER_KNOT,
+            course_deg: vtg.true_course.and_then(widen),
+        }))
 }
 
 fn decode_gst(sentence: &Sentence<'_>) -> Result<GstAccuracy, DecodeError> {
@@ -441,17 +508,21 @@ fn decode_hdt(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
         .map_err(|e| crate_error("HDT", e))?;
     let heading_deg = hdt.heading.and_then(widen);
     check_heading("HDT", heading_deg)?;
-    Ok(TrueHeading { heading_deg })
+    Ok(TrueHeading {
+        heading_deg,
+        sigma_deg: None,
+    })
 }
 
 /// `$--THS,x.x,a`: heading and mode (A autonomous, E estimated, M manual, S simulator,
-/// V not valid). Only autonomous headings are used.
+/// V not valid). Only autonomous headings are used, and Unicore's `T`: its `GNTHS2` sends
+/// it with the heading its `GNHPR2` reports at fixed quality (its manual names no `T`).
 fn decode_ths(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
     let mut f = sentence.fields();
     let heading = f.next_f64("heading")?;
     let mode = f.next_raw();
     let valid = match mode {
-        "A" => true,
+        "A" | "T" => true,
         "E" | "M" | "S" | "V" | "" => false,
         other => {
             return Err(f
@@ -462,7 +533,114 @@ fn decode_ths(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
     check_heading("THS", heading)?;
     Ok(TrueHeading {
         heading_deg: heading.filter(|_| valid),
+        sigma_deg: None,
     })
+}
+
+/// Unicore `$--HPR` and `$--TRA` (and their `2` forms): time, heading, pitch, roll, quality
+/// (4: fixed ambiguities), satellites, differential age, station. Only a fixed baseline's
+/// heading is used: these state no σ, and a float one can be degrees off. The time is not
+/// read: the heading keeps its arrival time, and `HPR2` sends `-00001.00` there.
+fn decode_hpr(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let mut f = sentence.fields();
+    f.next_raw();
+    let heading = f.next_f64("heading")?;
+    f.next_f64("pitch")?;
+    f.next_f64("roll")?;
+    let quality = f.next_u16("quality")?;
+    check_heading(sentence.kind, heading)?;
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| quality == Some(4)),
+        sigma_deg: None,
+    })
+}
+
+/// Trimble `$PTNL,AVR`: time, yaw, `Yaw`, tilt, `Tilt`, roll, `Roll` (empty in older
+/// firmware), baseline length, quality (0 none, 1 autonomous, 2 RTK float, 3 RTK fixed,
+/// 4 DGPS), PDOP, satellites. Only an RTK fixed baseline's yaw is used (no σ is stated).
+fn decode_avr(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let mut f = sentence.fields();
+    f.next_raw();
+    let yaw = f.next_f64("yaw")?;
+    f.next_raw();
+    f.next_f64("tilt")?;
+    f.next_raw();
+    f.next_f64("roll")?;
+    f.next_raw();
+    f.next_f64("baseline length")?;
+    let quality = f.next_u16("quality")?;
+    let heading = signed_heading(sentence.kind, yaw)?;
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| quality == Some(3)),
+        sigma_deg: None,
+    })
+}
+
+/// Septentrio `$PSSN,HRP`: time, date, heading, roll, pitch, their σ (heading, roll,
+/// pitch), satellites, attitude mode (0: none), magnetic variation and its side. Any
+/// attitude the receiver computed is used with the heading σ it states, which is what
+/// tells a float solution from a fixed one.
+fn decode_hrp(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let mut f = sentence.fields();
+    f.next_raw();
+    f.next_raw();
+    let heading = f.next_f64("heading")?;
+    f.next_f64("roll")?;
+    f.next_f64("pitch")?;
+    let sigma = f.next_f64("heading σ")?;
+    f.next_f64("roll σ")?;
+    f.next_f64("pitch σ")?;
+    f.next_u16("satellites")?;
+    let mode = f.next_u16("attitude mode")?;
+    check_heading(sentence.kind, heading)?;
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| mode.is_some_and(|m| m > 0)),
+        sigma_deg: stated_sigma(sentence.kind, sigma)?,
+    })
+}
+
+/// `$PASHR` in its attitude form (Applanix, NovAtel, Trimble): time, heading, `T`, roll,
+/// pitch, heave, roll σ, pitch σ, heading σ, GNSS quality (0: none, in every vendor's
+/// table), IMU status. The heading is used with the σ it states unless the quality is 0.
+fn decode_pashr(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let mut f = sentence.fields();
+    f.next_raw();
+    let heading = f.next_f64("heading")?;
+    f.next_raw();
+    f.next_f64("roll")?;
+    f.next_f64("pitch")?;
+    f.next_f64("heave")?;
+    f.next_f64("roll σ")?;
+    f.next_f64("pitch σ")?;
+    let sigma = f.next_f64("heading σ")?;
+    let quality = f.next_u16("quality")?;
+    check_heading("PASHR", heading)?;
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| quality != Some(0)),
+        sigma_deg: stated_sigma("PASHR", sigma)?,
+    })
+}
+
+/// A yaw that may be sent signed (Trimble's `+149.4688`, or -180..180), as 0..360.
+fn signed_heading(kind: &str, yaw: Option<f64>) -> Result<Option<f64>, DecodeError> {
+    match yaw {
+        Some(y) if !(-360.0..=360.0).contains(&y) => Err(DecodeError {
+            kind: kind.to_owned(),
+            reason: format!("yaw {y} outside -360..360"),
+        }),
+        y => Ok(y.map(|y| y.rem_euclid(360.0))),
+    }
+}
+
+/// A stated σ: a size, so below 0 is an error; 0 (some receivers' "unknown") is none.
+fn stated_sigma(kind: &str, sigma: Option<f64>) -> Result<Option<f64>, DecodeError> {
+    match sigma {
+        Some(s) if s < 0.0 => Err(DecodeError {
+            kind: kind.to_owned(),
+            reason: format!("σ {s} below 0"),
+        }),
+        s => Ok(s.filter(|&s| s > 0.0)),
+    }
 }
 
 fn check_heading(kind: &str, heading: Option<f64>) -> Result<(), DecodeError> {
@@ -539,6 +717,77 @@ mod tests {
     fn unknown_and_proprietary_types_are_not_errors() {
         assert_eq!(decode_body("GPGSV,1,1,00"), Ok(None));
         assert_eq!(decode_body("PSTI,030,1"), Ok(None));
+    }
+
+    fn heading_of(body: &str) -> TrueHeading {
+        match decode_body(body) {
+            Ok(Some(GnssSentence::Heading(h) | GnssSentence::Ths(h))) => h,
+            other => panic!("{body}: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn vendor_headings_are_used_at_the_quality_they_state() {
+        // Trimble: RTK fixed (3) only; signed yaws are brought to 0..360.
+        let avr = "PTNL,AVR,181059.6,+149.4688,Yaw,+0.0134,Tilt,,,60.191,3,2.5,6";
+        assert_eq!(heading_of(avr).heading_deg, Some(149.4688));
+        let float = "PTNL,AVR,145331.50,-35.9990,Yaw,-7.8209,Tilt,-0.4305,Roll,444.232,2,1.2,17";
+        assert_eq!(heading_of(float).heading_deg, None);
+        let fixed = float.replace(",2,1.2,", ",3,1.2,");
+        assert_eq!(heading_of(&fixed).heading_deg, Some(324.001));
+        // Septentrio: any attitude it computed, with its σ; mode 0 none.
+        let hrp = heading_of("PSSN,HRP,142657.80,061222,152.236,,-0.708,0.084,,0.181,21,2,2.400,E");
+        assert_eq!(
+            (hrp.heading_deg, hrp.sigma_deg),
+            (Some(152.236), Some(0.084))
+        );
+        let none = "PSSN,HRP,142657.80,061222,152.236,,-0.708,0.084,,0.181,21,0,2.400,E";
+        assert_eq!(heading_of(none).heading_deg, None);
+        // PASHR's attitude form with its σ; quality 0 none; Ashtech's forms are not headings.
+        let pashr = heading_of("PASHR,183944.821,74.52,T,-1.63,1.51,0.14,0.020,0.020,0.012,2,1");
+        assert_eq!(
+            (pashr.heading_deg, pashr.sigma_deg),
+            (Some(74.52), Some(0.012))
+        );
+        let lost = "PASHR,183944.821,74.52,T,-1.63,1.51,0.14,0.020,0.020,0.012,0,1";
+        assert_eq!(heading_of(lost).heading_deg, None);
+        assert_eq!(decode_body("PASHR,POS,0,10,151858.00,3723.4"), Ok(None));
+        // Unicore: fixed (4) only, the `2` forms as the plain ones, HPR2's odd time unread.
+        let hpr = "GNHPR,074615.00,320.9610,-66.1712,000.0000,4,47,0.00,0999";
+        assert_eq!(heading_of(hpr).heading_deg, Some(320.961));
+        let hpr2 = "GNHPR2,-00001.00,088.3640,-00.0873,000.0000,4,32,0.00,0401";
+        assert_eq!(heading_of(hpr2).heading_deg, Some(88.364));
+        let tra2 = "GNTRA2,090415.00,88.36,-0.09,0.00,5,30,0.00,0000";
+        assert_eq!(heading_of(tra2).heading_deg, None);
+        assert_eq!(heading_of("GNTHS2,88.3640,T").heading_deg, Some(88.364));
+    }
+
+    #[test]
+    fn bad_vendor_headings_are_errors() {
+        assert!(decode_body("PTNL,AVR,181059.6,+549.4,Yaw,+0.0134,Tilt,,,60.191,3,2.5,6").is_err());
+        assert!(decode_body("PSSN,HRP,142657.80,061222,152.236,,-0.708,-1,,0.181,21,2").is_err());
+        assert!(decode_body("GNHPR,074615.00,x,-66.1712,000.0000,4,47,0.00,0999").is_err());
+        assert!(
+            decode_body("PASHR,183944.821,74.52,T,-1.63,1.51,0.14,0.020,0.020,0.012,x").is_err()
+        );
+    }
+
+    #[test]
+    fn the_second_antennas_sentences_are_checked_but_never_a_position() {
+        let ggah =
+            "GNGGAH,073346.00,4004.73874301,N,11614.19077585,E,1,28,0.6,64.2831,M,8.4925,M,,";
+        assert_eq!(decode_body(ggah), Ok(Some(GnssSentence::SecondaryAntenna)));
+        assert!(decode_body("GNGGAH,073346.00,4004.7,N,11614.1,E,x,28").is_err());
+        // Other six-letter addresses are not variants.
+        assert_eq!(
+            decode_body("GNGGA2,073346.00,4004.7,N,11614.1,E,1,28"),
+            Ok(None)
+        );
+    }
+
+    #[test]
+    fn an_empty_vtg_is_legal_and_gives_nothing() {
+        assert_eq!(decode_body("GPVTG,,T,,M,,N,,K,N"), Ok(None));
     }
 
     #[test]

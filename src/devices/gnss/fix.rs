@@ -59,6 +59,8 @@ pub struct GnssFix {
     pub velocity: Option<Timed<GroundVelocity>>,
     /// Latest valid dual-antenna true heading, degrees (0 = north, clockwise).
     pub heading_deg: Option<Timed<f64>>,
+    /// That heading's 1σ, degrees, where its sentence stated one.
+    pub heading_sigma_deg: Option<f64>,
     /// Latest GST accuracy figures.
     pub accuracy: Option<Timed<GstAccuracy>>,
 }
@@ -88,6 +90,14 @@ impl FixAssembler {
     /// Merges one decoded sentence received at host time `rx`.
     pub fn apply(&mut self, rx: Timestamp, sentence: &GnssSentence) {
         match sentence {
+            // A constellation's own GNS after the epoch's combined one (Trimble: `$GNGNS`
+            // with the position, then `$GPGNS`, `$GLGNS` with their satellites and no
+            // position): a part of the epoch, not a report that voids it.
+            GnssSentence::Gns(report)
+                if report.latitude.is_none()
+                    && report.longitude.is_none()
+                    && self.epoch_has_position_report
+                    && (report.time.is_none() || report.time == self.epoch) => {}
             GnssSentence::Gga(report) | GnssSentence::Gns(report) => {
                 self.enter_epoch(report.time);
                 self.epoch_has_position_report = true;
@@ -123,10 +133,17 @@ impl FixAssembler {
                     rx,
                 });
             }
-            GnssSentence::Hdt(TrueHeading { heading_deg })
-            | GnssSentence::Ths(TrueHeading { heading_deg }) => {
+            GnssSentence::Hdt(heading)
+            | GnssSentence::Ths(heading)
+            | GnssSentence::Heading(heading) => {
+                let TrueHeading {
+                    heading_deg,
+                    sigma_deg,
+                } = *heading;
                 self.fix.heading_deg = heading_deg.map(|value| Timed { value, rx });
+                self.fix.heading_sigma_deg = sigma_deg.filter(|_| heading_deg.is_some());
             }
+            GnssSentence::SecondaryAntenna => {}
             GnssSentence::Zda(zda) => {
                 if let (Some(time), Some(date)) = (zda.time, zda.date) {
                     self.utc.observe(time, Some(date));
@@ -264,6 +281,37 @@ mod tests {
         assert_eq!(asm.fix().utc, None);
         feed(&mut asm, 1, "GNZDA,231408.00,11,04,2025,00,00");
         assert_eq!(asm.fix().utc.unwrap().to_string(), "2025-04-11 23:14:08");
+    }
+
+    #[test]
+    fn a_constellations_own_gns_is_part_of_the_epoch_not_its_end() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "GNGNS,014035.00,4332.69262,S,17235.48549,E,RR,13,0.9,25.63,11.24,,,U",
+        );
+        feed(&mut asm, 1, "GPGNS,014035.00,,,,,,8,,,,1.0,23");
+        feed(&mut asm, 1, "GLGNS,014035.00,,,,,,5,,,,1.0,23");
+        let fix = asm.fix();
+        assert_eq!(fix.quality, FixQuality::RtkFixed);
+        assert_eq!(fix.satellites, Some(13));
+        // Alone in its epoch, a GNS without a position is no fix.
+        feed(&mut asm, 2, "GPGNS,014036.00,,,,,,8,,,,1.0,23");
+        assert_eq!(asm.fix().quality, FixQuality::Invalid);
+    }
+
+    #[test]
+    fn a_stated_sigma_goes_with_its_heading() {
+        let mut asm = FixAssembler::new();
+        feed(
+            &mut asm,
+            1,
+            "PSSN,HRP,142657.80,061222,152.236,,-0.708,0.084,,0.181,21,2,2.400,E",
+        );
+        assert_eq!(asm.fix().heading_sigma_deg, Some(0.084));
+        feed(&mut asm, 2, "GNHDT,12.5,T");
+        assert_eq!(asm.fix().heading_sigma_deg, None);
     }
 
     #[test]
