@@ -958,8 +958,21 @@ fn signature(parts: &[u64]) -> u64 {
 
 // ---- targets -------------------------------------------------------------------------------
 
+/// The vendors' sentences no shared log holds, as their documents quote them.
+const VENDOR_SENTENCES: &[&str] = &[
+    "$PTNL,AVR,181059.6,+149.4688,Yaw,+0.0134,Tilt,,,60.191,3,2.5,6*00\r\n",
+    "$PSSN,HRP,142657.80,061222,152.236,,-0.708,0.084,,0.181,21,2,2.400,E*23\r\n",
+    "$PASHR,183944.821,74.52,T,-1.63,1.51,0.14,0.020,0.020,0.012,2,1*05\r\n",
+    "$KSXT,20211016083433.00,116.31296102,39.95817066,49.4911,223.57,-11.32,330.19,0.024,,1,3,28,27,,,,-0.012,0.021,0.020,,*2D\r\n",
+    "#UNIHEADINGA,79,GPS,FINE,2242,167498200,0,0,18,22;SOL_COMPUTED,L1_INT,2.7889,296.7233,-25.7710,0.0000,0.1127,0.1812,\"999\",49,37,37,0,3,00,1,51*d50af0ea\r\n",
+    "$GNGNS,014035.00,4332.69262,S,17235.48549,E,RR,13,0.9,25.63,11.24,,,U*09\r\n$GPGNS,014035.00,,,,,,8,,,,1.0,23*76\r\n",
+];
+
 fn nmea_seeds() -> Vec<Vec<u8>> {
-    let mut seeds = Vec::new();
+    let mut seeds: Vec<Vec<u8>> = VENDOR_SENTENCES
+        .iter()
+        .map(|s| s.as_bytes().to_vec())
+        .collect();
     for log in files_in(&shared().join("gnss"), "log") {
         if let Ok(bytes) = std::fs::read(&log) {
             seeds.extend(pieces(&bytes, 1024, 40));

@@ -15,8 +15,9 @@
 //! itself. For faults that must stop the vehicle (lost heartbeats, the bus down, the
 //! broker gone so no command arrives) the simulated drives time the command to stop,
 //! which is what the bound is about, and the simulator's truth times the wheels coming to
-//! rest, which adds the drives' own lag. Resident
-//! memory (chassisd's and its embedded broker's process together) is read every 250 ms and each cycle's floor kept: a leak raises the floor, while
+//! rest, which adds the drives' own lag. chassisd's own resident memory is read every
+//! 250 ms and each cycle's floor kept (its helper processes, killed every cycle, give
+//! their peaks instead): a leak raises the floor, while
 //! the faults' own swings do not, so the floors' slope after the first (warm-up) cycle is
 //! not the noise of the faults themselves.
 
@@ -430,11 +431,11 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     let master_uri = rosmaster.as_ref().map(|m| m.uri()).unwrap_or_default();
     let own_id = mqtt.base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
-    let rss_start = resident_memory_with_broker();
+    let rss_start = resident_memory_bytes().unwrap_or(0);
     let floors = Arc::new(Floors::new(
         (options.run_for.as_secs_f64() / cycle_length.as_secs_f64()) as usize + 1,
     ));
-    let sampler = tokio::spawn(sample_floors(floors.clone(), broker == Broker::Embedded));
+    let sampler = tokio::spawn(sample_floors(floors.clone()));
     let mut injected: Vec<Injected> = Vec::new();
     let mut broker_down: Vec<(Instant, Instant)> = Vec::new();
     let mut cycles = 0;
@@ -528,7 +529,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         }
         cycles += 1;
     }
-    let rss_end = resident_memory_with_broker();
+    let rss_end = resident_memory_bytes().unwrap_or(0);
     sampler.abort();
     let rss_floors = floors.take(cycles as usize);
     client.await.map_err(invalid("client task"))??;
@@ -725,20 +726,19 @@ impl Floors {
     }
 }
 
-/// Samples the floors and peaks; with `embedded`, the embedded broker's process counts
-/// in the floors, and a moment when it is gone (killed, not yet started again) is skipped:
-/// it would show chassisd alone as a floor no other cycle has.
-async fn sample_floors(floors: Arc<Floors>, embedded: bool) {
+/// Samples chassisd's own floors, and the peaks of its helper processes. The helpers are
+/// killed in every cycle (the broker by the soak, the ROS1 node by the TCPROS attack) and
+/// start small again, so they cannot carry a leak from one cycle to the next, and counted
+/// in the floors they would show their restarts instead.
+async fn sample_floors(floors: Arc<Floors>) {
     let mut every = tokio::time::interval(RSS_SAMPLE_EVERY);
     loop {
         every.tick().await;
-        let broker = embedded_broker_memory();
-        if !embedded || broker > 0 {
-            floors.sample((resident_memory_bytes().unwrap_or(0) + broker) as f64 / 1e6);
-        }
-        floors
-            .broker_peak
-            .fetch_max(broker, std::sync::atomic::Ordering::Relaxed);
+        floors.sample(resident_memory_bytes().unwrap_or(0) as f64 / 1e6);
+        floors.broker_peak.fetch_max(
+            embedded_broker_memory(),
+            std::sync::atomic::Ordering::Relaxed,
+        );
         floors
             .node_peak
             .fetch_max(ros1_node_memory(), std::sync::atomic::Ordering::Relaxed);
@@ -858,13 +858,6 @@ async fn drive(
     Ok(())
 }
 
-/// Two misbehaving clients' worth of commands, as fast as the connection takes them, for
-/// `hold`: cancel_task on `mqtt_control` and an unknown root message type.
-/// Resident memory of chassisd and, when it runs one, its embedded broker's process, bytes.
-fn resident_memory_with_broker() -> u64 {
-    resident_memory_bytes().unwrap_or(0) + embedded_broker_memory()
-}
-
 /// One of `bench::attacks`' hostile clients for `kind`, on the broker at `host:port`
 /// whose chassisd has the configured client id `own_id`.
 async fn attack(
@@ -964,6 +957,8 @@ async fn connection_flood(
 /// Connections the connection flood holds: beyond the embedded broker's 64.
 const FLOOD_CONNECTIONS: usize = 80;
 
+/// Two misbehaving clients' worth of commands, as fast as the connection takes them, for
+/// `hold`: cancel_task on `mqtt_control` and an unknown root message type.
 async fn flood(
     host: String,
     port: u16,

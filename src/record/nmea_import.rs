@@ -171,15 +171,16 @@ fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
     match decode(&sentence) {
         Ok(Some(GnssSentence::Rmc(r))) => r.time.map(|t| (t, r.date)),
         Ok(Some(GnssSentence::Zda(z))) => z.time.map(|t| (t, z.date)),
+        Ok(Some(GnssSentence::Ksxt(k))) => k.position.time.map(|t| (t, k.date)),
         _ => None,
     }
 }
 
-/// Whether `body` is a position report (GGA, GNS, RMC), whose time `sentence_time` found
+/// Whether `body` is a position report (GGA, GNS, RMC, KSXT), whose time `sentence_time` found
 /// absent.
 fn is_position_report(body: &str) -> bool {
     let sentence = Sentence::parse(body);
-    sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC")
+    sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC" | "KSXT")
 }
 
 /// The first pass: the first timed sentence and the first dated one.

@@ -1594,4 +1594,28 @@ mod tests {
         v.handle(at(400), Input::Gnss(&fix));
         assert_eq!(tick(&mut v, 500).gnss.heading_deg, 90.0);
     }
+
+    /// docs/configuration.md: the configured heading σ is the least a heading is trusted
+    /// to; a receiver that states a larger one is weighed by that, a smaller one is not.
+    #[test]
+    fn a_stated_heading_sigma_weighs_the_heading_when_larger_than_the_configured() {
+        let yaw_variance = |stated: Option<f64>| {
+            let mut v = Vehicle::new(CoreConfig::default());
+            let mut status = None;
+            for i in 0..20 {
+                let mut fix = fixed_at(i * 100);
+                fix.heading_deg = Some(Timed {
+                    value: 45.0,
+                    rx: at(i * 100),
+                });
+                fix.heading_sigma_deg = stated;
+                v.handle(at(i * 100), Input::Gnss(&fix));
+                status = Some(tick(&mut v, i * 100 + 50));
+            }
+            status.and_then(|s| s.pose_covariance).expect("located").yaw
+        };
+        let configured = yaw_variance(None);
+        assert!(yaw_variance(Some(20.0)) > 10.0 * configured);
+        assert_eq!(yaw_variance(Some(0.01)), configured);
+    }
 }

@@ -26,6 +26,8 @@ use super::sentence::{FieldError, Sentence};
 
 /// Metres per second in one knot.
 const MPS_PER_KNOT: f64 = 1852.0 / 3600.0;
+/// Metres per second in one km/h.
+const MPS_PER_KMH: f64 = 1.0 / 3.6;
 
 /// GNSS fix quality, as GGA reports it (and as RMC/GNS mode letters map onto it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -222,6 +224,20 @@ pub struct TrueHeading {
     pub sigma_deg: Option<f64>,
 }
 
+/// `$KSXT` (Unicore and compatible receivers): a whole solution in one sentence.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ksxt {
+    /// UTC date of the solution.
+    pub date: Option<NaiveDate>,
+    /// Position, its quality (0 none, 1 single, 2 RTK float, 3 RTK fixed), satellites and
+    /// differential age; the height is not kept (its datum is not documented).
+    pub position: PositionReport,
+    /// Heading at its own quality (3, fixed, only).
+    pub heading: TrueHeading,
+    /// Speed and track over ground.
+    pub velocity: Option<GroundVelocity>,
+}
+
 /// ZDA: UTC date and time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ZdaDate {
@@ -254,6 +270,8 @@ pub enum GnssSentence {
     /// A sentence of a dual-antenna receiver's second antenna (Unicore's `GGAH`, `RMCH`,
     /// ...): checked, and never the vehicle's position.
     SecondaryAntenna,
+    /// `$KSXT`: position, heading and velocity of one epoch.
+    Ksxt(Ksxt),
     /// ZDA date.
     Zda(ZdaDate),
 }
@@ -281,6 +299,13 @@ impl From<FieldError> for DecodeError {
 pub fn decode(sentence: &Sentence<'_>) -> Result<Option<GnssSentence>, DecodeError> {
     if sentence.talker == "P" {
         return decode_proprietary(sentence);
+    }
+    match sentence.kind {
+        "#UNIHEADINGA" | "#HEADINGA" => {
+            return Ok(Some(GnssSentence::Heading(decode_uniheading(sentence)?)));
+        }
+        "KSXT" => return Ok(Some(GnssSentence::Ksxt(decode_ksxt(sentence)?))),
+        _ => {}
     }
     match variant_of(sentence) {
         Some((kind, 'H')) => {
@@ -621,6 +646,132 @@ fn decode_pashr(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
     })
 }
 
+/// Unicore's `#UNIHEADINGA` (and the NovAtel-style `#HEADINGA`): a header, `;`, then the
+/// solution status, the position type, baseline length, heading, pitch, a reserved field,
+/// heading σ, pitch σ, the station and satellite counts. Only a computed solution with
+/// integer ambiguities (`L1_INT`, `NARROW_INT`, `WIDE_INT`) is used, with its σ: a float
+/// one states σ of hundreds of degrees.
+fn decode_uniheading(sentence: &Sentence<'_>) -> Result<TrueHeading, DecodeError> {
+    let kind = sentence.kind;
+    let (_, solution) = sentence.data.split_once(';').ok_or_else(|| DecodeError {
+        kind: kind.to_owned(),
+        reason: "no `;` between header and body".into(),
+    })?;
+    let mut f = Sentence {
+        data: solution,
+        ..*sentence
+    }
+    .fields();
+    let status = f.next_raw();
+    let position_type = f.next_raw();
+    f.next_f64("baseline length")?;
+    let heading = f.next_f64("heading")?;
+    f.next_f64("pitch")?;
+    f.next_raw();
+    let sigma = f.next_f64("heading σ")?;
+    check_heading(kind, heading)?;
+    let fixed = status == "SOL_COMPUTED" && position_type.ends_with("_INT");
+    Ok(TrueHeading {
+        heading_deg: heading.filter(|_| fixed),
+        sigma_deg: stated_sigma(kind, sigma)?,
+    })
+}
+
+/// `$KSXT`: time (`YYYYMMDDhhmmss.ss`, UTC), longitude and latitude (decimal degrees),
+/// height, heading, pitch, track, speed (km/h), roll, position quality, heading quality
+/// (each 0 none, 1 single, 2 RTK float, 3 RTK fixed), heading satellites, position
+/// satellites, east, north and up from the base, east, north and up velocity (km/h),
+/// differential age, base satellites.
+fn decode_ksxt(sentence: &Sentence<'_>) -> Result<Ksxt, DecodeError> {
+    let mut f = sentence.fields();
+    let stamp = f.next_raw();
+    let (date, time) = match stamp {
+        "" => (None, None),
+        s => ksxt_time(s)
+            .ok_or_else(|| f.error("time", format!("{s:?} is not YYYYMMDDhhmmss.ss")))?,
+    };
+    let longitude = f.next_f64("longitude")?;
+    let latitude = f.next_f64("latitude")?;
+    f.next_f64("height")?;
+    let heading = f.next_f64("heading")?;
+    f.next_f64("pitch")?;
+    let track = f.next_f64("track")?;
+    let speed_kmh = f.next_f64("speed")?;
+    f.next_f64("roll")?;
+    let position_quality = ksxt_quality(&mut f, "position quality")?;
+    let heading_quality = ksxt_quality(&mut f, "heading quality")?;
+    f.next_u16("heading satellites")?;
+    let satellites = f.next_u16("position satellites")?;
+    for what in [
+        "east",
+        "north",
+        "up",
+        "east velocity",
+        "north velocity",
+        "up velocity",
+    ] {
+        f.next_f64(what)?;
+    }
+    let diff_age_s = f.next_f64("differential age")?;
+    if latitude.is_some_and(|l| !(-90.0..=90.0).contains(&l))
+        || longitude.is_some_and(|l| !(-180.0..=180.0).contains(&l))
+    {
+        return Err(DecodeError {
+            kind: "KSXT".into(),
+            reason: format!("position {latitude:?}, {longitude:?} outside the globe"),
+        });
+    }
+    check_heading("KSXT", heading)?;
+    Ok(Ksxt {
+        date,
+        position: PositionReport {
+            time,
+            quality: position_quality,
+            latitude,
+            longitude,
+            satellites,
+            diff_age_s,
+            ..PositionReport::default()
+        },
+        heading: TrueHeading {
+            heading_deg: heading.filter(|_| heading_quality == FixQuality::RtkFixed),
+            sigma_deg: None,
+        },
+        velocity: speed_kmh.map(|kmh| GroundVelocity {
+            speed_mps: kmh * MPS_PER_KMH,
+            course_deg: track,
+        }),
+    })
+}
+
+/// KSXT's `YYYYMMDDhhmmss.ss`.
+fn ksxt_time(s: &str) -> Option<(Option<NaiveDate>, Option<NaiveTime>)> {
+    let (date, time) = (s.get(..8)?, s.get(8..)?);
+    if !date.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let date = NaiveDate::from_ymd_opt(
+        date[..4].parse().ok()?,
+        date[4..6].parse().ok()?,
+        date[6..].parse().ok()?,
+    )?;
+    Some((Some(date), Some(super::sentence::parse_hhmmss(time)?)))
+}
+
+/// KSXT's quality codes: 0 none, 1 single, 2 RTK float, 3 RTK fixed.
+fn ksxt_quality(
+    f: &mut super::sentence::Fields<'_>,
+    what: &'static str,
+) -> Result<FixQuality, DecodeError> {
+    Ok(match f.next_u16(what)? {
+        None | Some(0) => FixQuality::Invalid,
+        Some(1) => FixQuality::Single,
+        Some(2) => FixQuality::RtkFloat,
+        Some(3) => FixQuality::RtkFixed,
+        Some(other) => return Err(f.error(what, format!("unknown quality {other}")).into()),
+    })
+}
+
 /// A yaw that may be sent signed (Trimble's `+149.4688`, or -180..180), as 0..360.
 fn signed_heading(kind: &str, yaw: Option<f64>) -> Result<Option<f64>, DecodeError> {
     match yaw {
@@ -783,6 +934,50 @@ mod tests {
             decode_body("GNGGA2,073346.00,4004.7,N,11614.1,E,1,28"),
             Ok(None)
         );
+    }
+
+    #[test]
+    fn ksxt_gives_position_heading_and_velocity_each_at_its_quality() {
+        let body = "KSXT,20211016083433.00,116.31296102,39.95817066,49.4911,223.57,-11.32,330.19,0.024,,1,3,28,27,,,,-0.012,0.021,0.020,,";
+        let Ok(Some(GnssSentence::Ksxt(k))) = decode_body(body) else {
+            panic!("{:?}", decode_body(body))
+        };
+        assert_eq!(k.date, NaiveDate::from_ymd_opt(2021, 10, 16));
+        assert_eq!(k.position.time.unwrap().to_string(), "08:34:33");
+        assert_eq!(k.position.quality, FixQuality::Single);
+        assert_eq!(
+            (k.position.latitude, k.position.longitude),
+            (Some(39.95817066), Some(116.31296102))
+        );
+        assert_eq!(k.position.satellites, Some(27));
+        assert_eq!(k.heading.heading_deg, Some(223.57));
+        let v = k.velocity.unwrap();
+        assert!((v.speed_mps - 0.024 / 3.6).abs() < 1e-12);
+        assert_eq!(v.course_deg, Some(330.19));
+        // A float heading is not used; an unknown quality or a position off the globe is an error.
+        let float = body.replace(",1,3,28,", ",3,2,28,");
+        let Ok(Some(GnssSentence::Ksxt(k))) = decode_body(&float) else {
+            panic!()
+        };
+        assert_eq!(
+            (k.position.quality, k.heading.heading_deg),
+            (FixQuality::RtkFixed, None)
+        );
+        assert!(decode_body(&body.replace(",1,3,28,", ",7,3,28,")).is_err());
+        assert!(decode_body(&body.replace("39.95817066", "99.5")).is_err());
+        assert!(decode_body(&body.replace("20211016083433.00", "2021101608")).is_err());
+    }
+
+    #[test]
+    fn uniheading_is_used_with_integer_ambiguities_and_its_sigma() {
+        let fixed = "#UNIHEADINGA,79,GPS,FINE,2242,167498200,0,0,18,22;SOL_COMPUTED,L1_INT,2.7889,296.7233,-25.7710,0.0000,0.1127,0.1812,\"999\",49,37,37,0,3,00,1,51";
+        let h = heading_of(fixed);
+        assert_eq!((h.heading_deg, h.sigma_deg), (Some(296.7233), Some(0.1127)));
+        let float = "#HEADINGA,COM1,13495,95.0,FINE,2415,73711.000,17020772,13,18;SOL_COMPUTED,L1_FLOAT,12.2446,260.1887,-35.0258,0.0000,292.7253,155.0128,\"999\",29,7,7,0,3,00,0,51";
+        assert_eq!(heading_of(float).heading_deg, None);
+        let none = "#UNIHEADINGA,97,GPS,FINE,2190,365174000,0,0,18,12;INSUFFICIENT_OBS,NONE,0.0000,0.0000,0.0000,0.0000,0.0000,0.0000,\"\",0,0,0,0,0,00,0,0";
+        assert_eq!(heading_of(none).heading_deg, None);
+        assert!(decode_body("#UNIHEADINGA,79,GPS,FINE").is_err());
     }
 
     #[test]

@@ -144,6 +144,19 @@ impl FixAssembler {
                 self.fix.heading_sigma_deg = sigma_deg.filter(|_| heading_deg.is_some());
             }
             GnssSentence::SecondaryAntenna => {}
+            GnssSentence::Ksxt(k) => {
+                self.enter_epoch(k.position.time);
+                if let (Some(time), Some(date)) = (k.position.time, k.date) {
+                    self.utc.observe(time, Some(date));
+                }
+                self.epoch_has_position_report = true;
+                self.apply_report(rx, &k.position);
+                self.fix.heading_deg = k.heading.heading_deg.map(|value| Timed { value, rx });
+                self.fix.heading_sigma_deg = None;
+                if let Some(v) = k.velocity {
+                    self.fix.velocity = Some(Timed { value: v, rx });
+                }
+            }
             GnssSentence::Zda(zda) => {
                 if let (Some(time), Some(date)) = (zda.time, zda.date) {
                     self.utc.observe(time, Some(date));

@@ -5,6 +5,25 @@
 //! sentences longer than the standard's 82 characters (u-blox high-precision mode, Unicore,
 //! SkyTraq PSTI). A sentence is `$`, printable ASCII, `*`, two hex digits; it ends at its
 //! checksum, so line endings are optional. Everything else is counted and skipped.
+//!
+//! Two other forms share the stream: a `$` sentence checked by eight hex digits, the CRC-32
+//! NovAtel and Unicore use (`$KSXT` is sent with either), and a `#` ASCII log (Unicore's
+//! `#UNIHEADINGA`), which always carries that CRC. A `#` log is delivered with its `#`.
+
+use crc::{Algorithm, Crc};
+
+/// The CRC-32 of NovAtel's and Unicore's ASCII logs: the reflected IEEE polynomial with no
+/// initial value and no final XOR, over every byte between the `$` or `#` and the `*`.
+const CRC32_NOVATEL: Crc<u32> = Crc::<u32>::new(&Algorithm {
+    width: 32,
+    poly: 0x04c1_1db7,
+    init: 0,
+    refin: true,
+    refout: true,
+    xorout: 0,
+    check: 0x2dfd_2d88,
+    residue: 0,
+});
 
 /// Longest sentence accepted, from `$` to the checksum inclusive. The standard says 82
 /// including CR/LF; real receivers exceed it, so the limit only guards against runaway input.
@@ -40,6 +59,9 @@ enum State {
     ChecksumHigh,
     /// After the first checksum digit.
     ChecksumLow(u8),
+    /// After two digits that were not the XOR (or a `#` log's first two): the rest of an
+    /// eight-digit CRC-32, its value and digits so far.
+    Crc32(u32, u8),
 }
 
 /// Incremental NMEA framer. Feed it chunks of any size; it keeps partial sentences between calls.
@@ -50,6 +72,8 @@ pub struct NmeaFramer {
     body: Vec<u8>,
     /// Running XOR of `body`.
     xor: u8,
+    /// The sentence began with `#` (an ASCII log: CRC-32 only).
+    log: bool,
     stats: FramerStats,
 }
 
@@ -66,6 +90,7 @@ impl NmeaFramer {
             state: State::Idle,
             body: Vec::with_capacity(128),
             xor: 0,
+            log: false,
             stats: FramerStats::default(),
         }
     }
@@ -82,6 +107,7 @@ impl NmeaFramer {
             State::Body => 1,
             State::ChecksumHigh => 2,
             State::ChecksumLow(_) => 3,
+            State::Crc32(_, digits) => 2 + usize::from(digits),
         };
         consumed_markers + self.body.len()
     }
@@ -98,7 +124,8 @@ impl NmeaFramer {
     fn step(&mut self, byte: u8, on_sentence: &mut impl FnMut(&str)) {
         match self.state {
             State::Idle => match byte {
-                b'$' => self.start(),
+                b'$' => self.start(false),
+                b'#' => self.start(true),
                 b'\r' | b'\n' => {}
                 _ => self.stats.bytes_skipped += 1,
             },
@@ -107,7 +134,7 @@ impl NmeaFramer {
                 b'$' => {
                     self.abandon(0);
                     self.stats.truncated += 1;
-                    self.start();
+                    self.start(false);
                 }
                 b'\r' | b'\n' => {
                     self.abandon(0);
@@ -135,12 +162,11 @@ impl NmeaFramer {
             State::ChecksumLow(high) => match hex_value(byte) {
                 Some(low) => {
                     let expected = (high << 4) | low;
-                    if expected == self.xor {
+                    if expected == self.xor && !self.log {
                         self.deliver(on_sentence);
                     } else {
-                        // `$`, body, `*` and both digits are dropped.
-                        self.abandon(3);
-                        self.stats.checksum_errors += 1;
+                        // Maybe the first two digits of a CRC-32.
+                        self.state = State::Crc32(u32::from(expected), 2);
                     }
                 }
                 None => {
@@ -149,13 +175,33 @@ impl NmeaFramer {
                     self.bad_checksum_field(byte);
                 }
             },
+            State::Crc32(value, digits) => match hex_value(byte) {
+                Some(digit) => {
+                    let value = (value << 4) | u32::from(digit);
+                    if digits + 1 < 8 {
+                        self.state = State::Crc32(value, digits + 1);
+                    } else if value == CRC32_NOVATEL.checksum(&self.body) {
+                        self.deliver(on_sentence);
+                    } else {
+                        // `$`, body, `*` and the eight digits are dropped.
+                        self.abandon(9);
+                        self.stats.checksum_errors += 1;
+                    }
+                }
+                None => {
+                    // Two to seven digits that check nothing: dropped with the sentence.
+                    self.stats.bytes_skipped += u64::from(digits);
+                    self.bad_checksum_field(byte);
+                }
+            },
         }
     }
 
-    fn start(&mut self) {
+    fn start(&mut self, log: bool) {
         self.state = State::Body;
         self.body.clear();
         self.xor = 0;
+        self.log = log;
     }
 
     /// Drops the sentence in progress: `$`, the body and `extra` more consumed bytes.
@@ -171,7 +217,8 @@ impl NmeaFramer {
         // `$`, body and `*`.
         self.abandon(1);
         match byte {
-            b'$' => self.start(),
+            b'$' => self.start(false),
+            b'#' => self.start(true),
             b'\r' | b'\n' => {}
             _ => self.stats.bytes_skipped += 1,
         }
@@ -183,6 +230,10 @@ impl NmeaFramer {
         // would be a framer bug, and the sentence is then counted as skipped rather than lost
         // silently.
         match std::str::from_utf8(&self.body) {
+            Ok(body) if self.log => {
+                self.stats.sentences += 1;
+                on_sentence(&format!("#{body}"));
+            }
             Ok(body) => {
                 self.stats.sentences += 1;
                 on_sentence(body);
@@ -316,6 +367,49 @@ mod tests {
         let (out, stats) = frame_all(&[line.as_bytes()]);
         assert_eq!(out, vec![body.to_owned()]);
         assert_eq!(stats.bytes_skipped, 1);
+    }
+
+    /// Unicore's logs as ArduPilot's and Unicore's documents quote them, CRCs as sent.
+    const UNIHEADINGA: &str = "#UNIHEADINGA,79,GPS,FINE,2242,167498200,0,0,18,22;SOL_COMPUTED,L1_INT,2.7889,296.7233,-25.7710,0.0000,0.1127,0.1812,\"999\",49,37,37,0,3,00,1,51*d50af0ea\r\n";
+    const KSXT_XOR: &str = "$KSXT,20211016083433.00,116.31296102,39.95817066,49.4911,223.57,-11.32,330.19,0.024,,1,3,28,27,,,,-0.012,0.021,0.020,,*2D\r\n";
+
+    #[test]
+    fn crc32_logs_and_sentences_are_framed_beside_nmea() {
+        let ksxt_body = &KSXT_XOR[1..KSXT_XOR.len() - 5];
+        let ksxt_crc = format!(
+            "${ksxt_body}*{:08x}\r\n",
+            CRC32_NOVATEL.checksum(ksxt_body.as_bytes())
+        );
+        let stream = [
+            UNIHEADINGA,
+            KSXT_XOR,
+            &ksxt_crc,
+            std::str::from_utf8(GGA).unwrap(),
+        ]
+        .concat();
+        // Split at every byte: the CRC's eight digits survive any cut.
+        for cut in 0..stream.len() {
+            let (out, stats) = frame_all(&[&stream.as_bytes()[..cut], &stream.as_bytes()[cut..]]);
+            assert_eq!(out.len(), 4, "cut at {cut}: {stats:?}");
+            assert!(out[0].starts_with("#UNIHEADINGA,79,"));
+            assert_eq!(out[1], ksxt_body);
+            assert_eq!(out[2], ksxt_body);
+            assert_eq!(stats.bytes_skipped, 0);
+        }
+    }
+
+    #[test]
+    fn a_wrong_crc32_is_a_checksum_error_and_the_stream_goes_on() {
+        let bad = UNIHEADINGA.replace("*d50af0ea", "*d50af0eb");
+        let stream = [bad.as_str(), std::str::from_utf8(GGA).unwrap()].concat();
+        let (out, stats) = frame_all(&[stream.as_bytes()]);
+        assert_eq!(out.len(), 1);
+        assert_eq!(stats.checksum_errors, 1);
+        assert_eq!(stats.bytes_skipped, (bad.len() - 2) as u64);
+        // A `#` log with only a two-digit checksum is no log.
+        let short = "#UNIHEADINGA,79;SOL_COMPUTED*4F\r\n";
+        let (out, stats) = frame_all(&[short.as_bytes(), GGA]);
+        assert_eq!((out.len(), stats.checksum_errors), (1, 1));
     }
 
     #[test]
