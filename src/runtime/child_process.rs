@@ -3,7 +3,8 @@
 //! network clients reach, so that its faults (a panic, memory or descriptors taken by a
 //! client) end that process, never the one that holds the drives and the control loop.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
 
 use crate::runtime::error::{RuntimeError, io};
 
@@ -18,11 +19,22 @@ pub fn self_exe(what: &str) -> Result<PathBuf, RuntimeError> {
     std::env::current_exe().map_err(io(format!("{what}: finding chassisd's program")))
 }
 
-/// What a helper process's environment has on top of chassisd's: no backtraces. A client
-/// can make a helper end on purpose (an allocation over its memory limit); a backtrace would
-/// then read the program's debug information (measured: 291 MB and seconds for the ROS1
-/// node) and write a hundred lines for each end, where chassisd logs one saying why.
-pub const HELPER_ENV: [(&str, &str); 1] = [("RUST_BACKTRACE", "0")];
+/// The command that starts helper process `subcommand` of `exe`: its settings go in on
+/// standard input, its reports come out on standard output, its log goes to chassisd's.
+/// Its environment has no backtraces: a client can make a helper end on purpose (an
+/// allocation over its memory limit), and a backtrace would then read the program's debug
+/// information (measured: 291 MB and seconds for the ROS1 node) and write a hundred lines
+/// for each end, where chassisd logs one saying why.
+pub fn helper_command(exe: &Path, subcommand: &str) -> std::process::Command {
+    let mut command = std::process::Command::new(exe);
+    command
+        .arg(subcommand)
+        .env("RUST_BACKTRACE", "0")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit());
+    command
+}
 
 /// Makes any panic end this helper process (exit status 101) after `what`'s line, so that
 /// chassisd starts a whole one rather than keep one a panic left half-dead.

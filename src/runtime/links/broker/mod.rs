@@ -17,8 +17,8 @@ pub mod tls;
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
 use std::net::{SocketAddr, TcpListener, ToSocketAddrs};
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::path::{Path, PathBuf};
+use std::process::Child;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -215,13 +215,8 @@ struct Running {
 }
 
 /// Starts one broker process and waits until it accepts clients.
-fn spawn(exe: &PathBuf, settings: &str, shared: &Arc<Shared>) -> Result<Running, RuntimeError> {
-    let mut child = Command::new(exe)
-        .arg(CHILD_COMMAND)
-        .envs(child_process::HELPER_ENV)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+fn spawn(exe: &Path, settings: &str, shared: &Arc<Shared>) -> Result<Running, RuntimeError> {
+    let mut child = child_process::helper_command(exe, CHILD_COMMAND)
         .spawn()
         .map_err(io(format!("embedded broker: cannot run {}", exe.display())))?;
     let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {

@@ -5,7 +5,6 @@
 //! engine and the drives never wait for it.
 
 use std::collections::HashMap;
-use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncWriteExt, BufReader};
@@ -349,12 +348,7 @@ async fn start(
     settings: &str,
     number: u64,
 ) -> Result<NodeProcess, std::io::Error> {
-    let mut child = Command::new(exe)
-        .arg(CHILD_COMMAND)
-        .envs(child_process::HELPER_ENV)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+    let mut child = Command::from(child_process::helper_command(exe, CHILD_COMMAND))
         .kill_on_drop(true)
         .spawn()?;
     let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
