@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
-use chassisd::devices::gnss::NmeaReceiver;
+use chassisd::devices::gnss::GnssReceiver;
 use chassisd::record::{Payload, RecordingReader};
 use chassisd::replay::{ReplayOptions, replay};
 use chassisd::time::Timestamp;
@@ -46,7 +46,7 @@ fn shared_bytes() -> Option<Vec<u8>> {
 }
 
 fn sentences_in(bytes: &[u8]) -> u64 {
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     receiver.push(Timestamp::default(), bytes, |_| {});
     receiver.stats().framer.sentences
 }
@@ -61,7 +61,7 @@ fn decode(c: &mut Criterion) {
         group.throughput(Throughput::Elements(sentences_in(bytes)));
         group.bench_function(*name, |b| {
             b.iter(|| {
-                let mut receiver = NmeaReceiver::new();
+                let mut receiver = GnssReceiver::new();
                 let mut fixes = 0u64;
                 receiver.push(Timestamp::default(), black_box(bytes), |_| fixes += 1);
                 black_box(fixes)

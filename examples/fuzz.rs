@@ -35,7 +35,7 @@ use chassisd::config::mqtt::{
 use chassisd::devices::bms::profile::BmsProfile;
 use chassisd::devices::can::{Frame, Received};
 use chassisd::devices::cia402::profile::DriveProfile;
-use chassisd::devices::gnss::NmeaReceiver;
+use chassisd::devices::gnss::GnssReceiver;
 use chassisd::devices::imu::ImuDecoder;
 use chassisd::devices::imu::{hipnuc::HiPnuc, witmotion::WitMotion};
 use chassisd::engine::EngineOutput;
@@ -81,7 +81,7 @@ fn targets() -> Vec<Target> {
     vec![
         Target {
             name: "nmea",
-            about: "NMEA framer, sentence decoders and fix assembly (NmeaReceiver)",
+            about: "NMEA framer, sentence decoders and fix assembly (GnssReceiver)",
             seeds: nmea_seeds,
             tokens: NMEA_TOKENS,
             structured: None,
@@ -983,7 +983,7 @@ fn nmea_seeds() -> Vec<Vec<u8>> {
 
 fn nmea_runner() -> Runner {
     Box::new(|input| {
-        let mut receiver = NmeaReceiver::new();
+        let mut receiver = GnssReceiver::new();
         let mut fixes = 0u64;
         // Two chunks: a sentence split across reads is the framer's daily work.
         let cut = input.len() / 2;

@@ -420,7 +420,11 @@ impl ReplaySummary {
         let _ = write!(s, "), {} status lines", self.engine.ticks);
         for (name, g) in &self.gnss {
             let f = &g.framer;
-            let _ = write!(s, "; {name}: {} sentences (", f.sentences);
+            let _ = write!(
+                s,
+                "; {name}: {} sentences and {} UBX frames (",
+                f.sentences, f.ubx_frames
+            );
             join(
                 &mut s,
                 g.sentences_by_kind.iter().map(|(k, v)| format!("{k} {v}")),
@@ -428,11 +432,12 @@ impl ReplaySummary {
             let _ = write!(
                 s,
                 "), checksum errors {}, missing checksums {}, truncated {}, overlong {}, \
-                 bytes skipped {} of {}, decode errors {}",
+                 UBX checksum errors {}, bytes skipped {} of {}, decode errors {}",
                 f.checksum_errors,
                 f.missing_checksum,
                 f.truncated,
                 f.overlong,
+                f.ubx_checksum_errors,
                 f.bytes_skipped,
                 f.bytes_in,
                 g.decode_errors

@@ -1,5 +1,6 @@
-//! Conformance against gpsd: every real receiver log in the shared data folder is decoded by
-//! chassisd and compared with gpsd's decoded output beside it (`.log.chk`).
+//! Conformance against gpsd: every real receiver log in the shared data folder (NMEA, u-blox
+//! UBX, or both) is decoded by chassisd and compared with gpsd's decoded output beside it
+//! (`.log.chk`).
 //!
 //! For every gpsd TPV with a position, chassisd's fix for the same UTC epoch must have
 //! latitude and longitude within 1e-7° and the same kind of fix (gpsd `status` 2 DGPS,
@@ -14,7 +15,7 @@ mod common;
 use std::collections::BTreeMap;
 
 use chassisd::devices::gnss::decode::{GnssSentence, decode};
-use chassisd::devices::gnss::{GnssFix, NmeaReceiver, Sentence};
+use chassisd::devices::gnss::{GnssFix, GnssReceiver, Sentence};
 use chassisd::record::Payload;
 use chassisd::record::nmea_import::import_nmea_log;
 use chrono::{NaiveDateTime, NaiveTime};
@@ -105,7 +106,7 @@ fn expected_tpvs(chk: &str) -> Vec<Expected> {
 /// chassisd's fix at the end of each UTC epoch of the log.
 fn chassisd_epochs(log: &[u8]) -> BTreeMap<NaiveDateTime, GnssFix> {
     let (records, _) = import_nmea_log(log).expect("importable log");
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     let mut epochs = BTreeMap::new();
     for record in records {
         let Payload::Serial(bytes) = &record.payload else {
@@ -123,7 +124,12 @@ fn chassisd_epochs(log: &[u8]) -> BTreeMap<NaiveDateTime, GnssFix> {
 #[test]
 fn every_shared_log_matches_gpsd() {
     let mut total_positions = 0;
-    for log_path in common::shared_gnss_logs() {
+    let logs = [
+        common::shared_gnss_logs(),
+        common::shared_binary_gnss_logs(),
+    ]
+    .concat();
+    for log_path in logs {
         let name = log_path.file_name().unwrap().to_string_lossy().into_owned();
         let chk_path = log_path.with_extension("log.chk");
         let chk =
@@ -134,6 +140,20 @@ fn every_shared_log_matches_gpsd() {
         let mut positions = 0;
         let mut no_fix = 0;
         let mut carried_over = 0;
+        // None invented: every epoch where chassisd has a valid fix is one gpsd reports, but
+        // for the log's first epoch, which gpsd spends identifying a u-blox receiver.
+        let gpsd_times: std::collections::BTreeSet<NaiveDateTime> =
+            expected.iter().filter_map(|e| e.time).collect();
+        let first_report = gpsd_times.first().copied();
+        let invented: Vec<&NaiveDateTime> = epochs
+            .iter()
+            .filter(|(t, fix)| fix.quality.is_valid() && !gpsd_times.contains(*t))
+            .map(|(t, _)| t)
+            .collect();
+        assert!(
+            invented.len() <= 1 && invented.iter().all(|t| Some(**t) < first_report),
+            "{name}: fixes gpsd does not report at {invented:?}"
+        );
         for e in &expected {
             let Some(time) = e.time else {
                 panic!("{name}:{}: TPV whose time cannot be derived", e.line)
@@ -173,7 +193,8 @@ fn every_shared_log_matches_gpsd() {
         }
         eprintln!(
             "{name}: {positions} positioned TPVs and {no_fix} no-fix TPVs match; \
-             {carried_over} carry-overs not compared"
+             {carried_over} carry-overs not compared; {} first epoch before gpsd's first report",
+            invented.len()
         );
         assert!(positions > 0, "{name}: nothing was compared");
         total_positions += positions;

@@ -4,12 +4,12 @@
 mod common;
 
 use chassisd::devices::gnss::decode::{GnssSentence, decode};
-use chassisd::devices::gnss::{FixQuality, NmeaFramer, NmeaReceiver, Sentence};
+use chassisd::devices::gnss::{FixQuality, GnssFramer, GnssReceiver, Sentence};
 use chassisd::time::Timestamp;
 
 /// Frames one wire sentence and decodes it.
 fn decode_wire(wire: &str) -> GnssSentence {
-    let mut framer = NmeaFramer::new();
+    let mut framer = GnssFramer::new();
     let mut decoded = None;
     framer.push(format!("{wire}\r\n").as_bytes(), |body| {
         decoded = Some(decode(&Sentence::parse(body)).expect("decodes"));
@@ -170,7 +170,7 @@ fn zda_date() {
 
 #[test]
 fn receiver_counts_malformed_sentences_and_keeps_going() {
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     let stream = "$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*48\r\n\
                   $GPGGA,123519,4807.038,X,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*51\r\n\
                   $GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n";
@@ -215,7 +215,7 @@ fn vendor_headings_on_the_wire() {
 /// a Trimble R2 log gave no fix at all).
 #[test]
 fn a_trimble_gns_epoch_keeps_its_fix() {
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     let epoch = [
         "GNGNS,014035.00,4332.69262,S,17235.48549,E,RR,13,0.9,25.63,11.24,,,U",
         "GPGNS,014035.00,,,,,,8,,,,1.0,23",
@@ -244,7 +244,7 @@ fn checksum(body: &str) -> u8 {
 fn the_unicore_capture_gives_headings_and_keeps_the_second_antenna_apart() {
     let log = std::fs::read(common::shared_gnss_dir().join("unicore-um98x-nmea.log"))
         .expect("the Unicore capture");
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     let mut headings = Vec::new();
     receiver.push(Timestamp::from_micros(1), &log, |fix| {
         if let Some(h) = fix.heading_deg {

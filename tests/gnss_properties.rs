@@ -4,13 +4,13 @@
 
 use chassisd::devices::gnss::decode::decode;
 use chassisd::devices::gnss::framer::checksum;
-use chassisd::devices::gnss::{NmeaFramer, NmeaReceiver, Sentence};
+use chassisd::devices::gnss::{GnssFramer, GnssReceiver, Sentence};
 use chassisd::record::nmea_import::import_nmea_log;
 use chassisd::time::Timestamp;
 use proptest::prelude::*;
 
 fn frame(chunks: &[&[u8]]) -> (Vec<String>, chassisd::devices::gnss::FramerStats, usize) {
-    let mut framer = NmeaFramer::new();
+    let mut framer = GnssFramer::new();
     let mut out = Vec::new();
     for chunk in chunks {
         framer.push(chunk, |s| out.push(s.to_owned()));
@@ -121,7 +121,7 @@ proptest! {
             stream.extend_from_slice(format!("${body}*{:02X}\n", checksum(body.as_bytes())).as_bytes());
         }
         stream.extend_from_slice(&junk);
-        let mut receiver = NmeaReceiver::new();
+        let mut receiver = GnssReceiver::new();
         let mut fixes = 0;
         receiver.push(Timestamp::from_micros(1), &stream, |_| fixes += 1);
         let stats = receiver.stats();

@@ -153,20 +153,36 @@ fn shared_logs_replay_to_status_lines() {
         );
         assert_eq!(out.stdout, replay(&log).stdout, "{}", log.display());
     }
-    // A receiver that sends only binary protocols (u-blox UBX) is refused, saying why.
+    // A receiver that sends only u-blox UBX replays from its NAV-PVT times.
     for log in common::shared_binary_gnss_logs() {
-        let out = Command::new(common::chassisd())
-            .arg("replay")
-            .arg(&log)
-            .output()
-            .expect("chassisd runs");
-        let stderr = String::from_utf8_lossy(&out.stderr);
+        let out = replay(&log);
+        let rows = statuses(&out.stdout);
         assert!(
-            !out.status.success() && stderr.contains("no sentence with a UTC time"),
-            "{}: {stderr}",
+            rows.iter().any(|r| r["sensor"]["gnss"] == true),
+            "{}: never a valid fix",
             log.display()
         );
+        let summary = String::from_utf8_lossy(&out.stderr);
+        assert!(summary.contains("NAV-PVT"), "{summary}");
     }
+    // A log with no time at all is refused, saying why.
+    let dir = common::tempdir("untimed-log");
+    let untimed = dir.join("untimed.log");
+    std::fs::write(
+        &untimed,
+        b"$GPGSA,A,3,04,09,,,,,,,,,,,1.21,0.94,0.76*01\r\n",
+    )
+    .unwrap();
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&untimed)
+        .output()
+        .expect("chassisd runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("no sentence or NAV-PVT with a UTC time"),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -13,7 +13,7 @@ use bytes::Bytes;
 use serde::Serialize;
 
 use crate::config::ConfigError;
-use crate::devices::gnss::NmeaReceiver;
+use crate::devices::gnss::GnssReceiver;
 use crate::engine::EngineOutput;
 use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::localizer::yaw_of_heading_deg;
@@ -419,7 +419,7 @@ fn score(
     let frame = Enu::new(plant.datum());
     let utc_zero = sim.vehicle().utc_at(START);
     let [ax, ay] = plant.geometry.antenna;
-    let mut receiver = NmeaReceiver::new();
+    let mut receiver = GnssReceiver::new();
     for (t, bytes) in &sink.gnss {
         receiver.push(*t, bytes, |_| {});
         let fix = receiver.fix();

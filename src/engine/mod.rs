@@ -23,7 +23,7 @@ use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
 use crate::devices::can::{Frame, Received};
 use crate::devices::gnss::rtcm::{RtcmFramer, RtcmStats};
-use crate::devices::gnss::{GnssStats, NmeaReceiver};
+use crate::devices::gnss::{GnssReceiver, GnssStats};
 use crate::devices::imu::hipnuc::HiPnuc;
 use crate::devices::imu::witmotion::WitMotion;
 use crate::devices::imu::{ImuDecoder, ImuStats, Mounting};
@@ -237,7 +237,7 @@ fn adapter_mut<'a>(
 
 /// The routes of a configuration's sources: later entries win a name taken twice.
 fn routes(
-    nmea: &BTreeMap<String, NmeaReceiver>,
+    nmea: &BTreeMap<String, GnssReceiver>,
     imu: &BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: &Drivetrain,
     adapters: &[Box<dyn Adapter>],
@@ -268,7 +268,7 @@ pub struct Engine {
     vehicle: Vehicle,
     /// Each source's route, by name.
     routes: HashMap<String, Route>,
-    nmea: BTreeMap<String, NmeaReceiver>,
+    nmea: BTreeMap<String, GnssReceiver>,
     imu: BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: Drivetrain,
     next_tick: Option<Timestamp>,
@@ -394,7 +394,7 @@ impl Engine {
         let nmea = sources
             .iter()
             .filter(|(_, d)| *d == Decoder::Nmea)
-            .map(|(name, _)| (name.clone(), NmeaReceiver::new()))
+            .map(|(name, _)| (name.clone(), GnssReceiver::new()))
             .collect();
         let mounting = config
             .imu
@@ -537,6 +537,9 @@ impl Engine {
                             }
                         }
                     });
+                    if let Some(news) = receiver.take_news() {
+                        out.push(EngineOutput::Event(news));
+                    }
                 } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
                     let emit = self.emit_poses;
                     decoder.push(t, bytes, |sample| {

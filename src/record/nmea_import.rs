@@ -1,12 +1,16 @@
-//! Imports a plain NMEA text log (such as gpsd's regression logs) as a stream of records.
+//! Imports a plain receiver log (such as gpsd's regression logs: NMEA, u-blox UBX, or both)
+//! as a stream of records.
 //!
 //! Such logs have `#` comment lines and no host timestamps, so time comes from the
 //! sentences: each line becomes one serial chunk stamped with the UTC time of the timed
-//! sentence it holds (GGA, GNS, RMC, GST, ZDA), or of the last one before it; but a
-//! position report that has no time (a receiver without a fix) is the receiver's next
-//! epoch, one period on, so that it never voids the fix before it. The date comes
-//! from RMC or ZDA; lines before the first date take it from the first dated sentence, and
-//! the date rolls over at midnight. Binary data and broken sentences are kept byte for byte.
+//! sentence or message it holds (GGA, GNS, RMC, GST, ZDA, KSXT, a UBX NAV-PVT with a valid
+//! time), or of the last one before it; but a position report that has no time (a receiver
+//! without a fix) is the receiver's next epoch, one period on, so that it never voids the
+//! fix before it. The date comes from RMC, ZDA or NAV-PVT; lines before the first date take
+//! it from the first dated sentence, and the date rolls over at midnight. Binary data and
+//! broken sentences are kept byte for byte. A line is a comment only where a frame may
+//! start, and only when no letter follows its `#` (Unicore's `#UNIHEADINGA` logs are data,
+//! and so is a `#` inside a UBX frame that follows a `0A` byte).
 //!
 //! Receivers boot with a default date and set their clock later, so a log's time can jump.
 //! A step back of more than [`BACKSTEP_TOLERANCE`], or forward by more than the configured
@@ -26,8 +30,9 @@ use chrono::{NaiveDate, NaiveDateTime, NaiveTime};
 
 use super::{Payload, Record, RecordError};
 use crate::devices::gnss::decode::{GnssSentence, decode};
+use crate::devices::gnss::ubx::{self, UbxFrame};
 use crate::devices::gnss::utc::UtcTracker;
-use crate::devices::gnss::{NmeaFramer, Sentence};
+use crate::devices::gnss::{Frame, GnssFramer, Sentence, UbxMessage};
 use crate::time::Timestamp;
 
 /// Source name given to imported chunks.
@@ -129,8 +134,9 @@ impl Lines {
         }
     }
 
-    /// The next chunk and its line, or `None` at the end (or at a read error).
-    fn next_chunk(&mut self) -> Option<(u64, Vec<u8>)> {
+    /// The next chunk and its line, or `None` at the end (or at a read error). `mid_frame`
+    /// says the framer is inside a frame, where a `#` is data.
+    fn next_chunk(&mut self, mid_frame: bool) -> Option<(u64, Vec<u8>)> {
         loop {
             let mut buf = Vec::with_capacity(128);
             let mut bounded = Read::take(&mut self.input, MAX_CHUNK as u64);
@@ -144,7 +150,7 @@ impl Lines {
             }
             if !self.mid_line {
                 self.line_no += 1;
-                self.in_comment = buf.first() == Some(&b'#');
+                self.in_comment = !mid_frame && is_comment(&buf);
                 self.comment_lines += usize::from(self.in_comment);
             }
             self.mid_line = buf.last() != Some(&b'\n');
@@ -152,6 +158,27 @@ impl Lines {
                 return Some((self.line_no, buf));
             }
         }
+    }
+}
+
+/// Whether a line that starts where a frame may start is a comment: `#` and no letter.
+fn is_comment(line: &[u8]) -> bool {
+    line.first() == Some(&b'#') && !line.get(1).is_some_and(u8::is_ascii_alphabetic)
+}
+
+/// The time of day (and date, where given) a frame states.
+fn frame_time(frame: &Frame<'_>) -> Option<(NaiveTime, Option<NaiveDate>)> {
+    match frame {
+        Frame::Text(body) => sentence_time(body),
+        Frame::Ubx(pvt) => nav_pvt(pvt)?.utc.map(|utc| (utc.time(), Some(utc.date()))),
+    }
+}
+
+/// A NAV-PVT frame's solution.
+fn nav_pvt(frame: &UbxFrame<'_>) -> Option<ubx::NavPvt> {
+    match ubx::decode(frame) {
+        Ok(Some(UbxMessage::NavPvt(pvt))) => Some(pvt),
+        _ => None,
     }
 }
 
@@ -176,24 +203,29 @@ fn sentence_time(body: &str) -> Option<(NaiveTime, Option<NaiveDate>)> {
     }
 }
 
-/// Whether `body` is a position report (GGA, GNS, RMC, KSXT), whose time `sentence_time` found
-/// absent.
-fn is_position_report(body: &str) -> bool {
-    let sentence = Sentence::parse(body);
-    sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC" | "KSXT")
+/// Whether `frame` is a position report (GGA, GNS, RMC, KSXT, NAV-PVT), whose time
+/// `frame_time` found absent.
+fn is_position_report(frame: &Frame<'_>) -> bool {
+    match frame {
+        Frame::Text(body) => {
+            let sentence = Sentence::parse(body);
+            sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC" | "KSXT")
+        }
+        Frame::Ubx(frame) => nav_pvt(frame).is_some(),
+    }
 }
 
 /// The first pass: the first timed sentence and the first dated one.
 fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
     let mut lines = Lines::new(input);
-    let mut framer = NmeaFramer::new();
+    let mut framer = GnssFramer::new();
     let mut first: Option<(NaiveTime, Option<NaiveDate>)> = None;
     let mut first_dated: Option<(NaiveTime, NaiveDate)> = None;
     while first_dated.is_none()
-        && let Some((_, chunk)) = lines.next_chunk()
+        && let Some((_, chunk)) = lines.next_chunk(framer.pending() > 0)
     {
-        framer.push(&chunk, |body| {
-            if let Some((time, date)) = sentence_time(body) {
+        framer.push_frames(&chunk, |frame| {
+            if let Some((time, date)) = frame_time(&frame) {
                 first.get_or_insert((time, date));
                 if let Some(d) = date {
                     first_dated.get_or_insert((time, d));
@@ -204,8 +236,9 @@ fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
     if let Some(e) = lines.read_error {
         return Err(RecordError::Import(format!("reading the log: {e}")));
     }
-    let (first_time, first_date) = first
-        .ok_or_else(|| RecordError::Import("no sentence with a UTC time in the log".into()))?;
+    let (first_time, first_date) = first.ok_or_else(|| {
+        RecordError::Import("no sentence or NAV-PVT with a UTC time in the log".into())
+    })?;
     let date = match first_dated {
         // Lines before the first date that show a later time of day were on the day before.
         Some((dated_time, date)) if first_time > dated_time => date.pred_opt().unwrap_or(date),
@@ -222,7 +255,7 @@ fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
 /// A plain NMEA log read as time-stamped records, in segments across clock jumps.
 pub struct NmeaLogReader {
     lines: Lines,
-    framer: NmeaFramer,
+    framer: GnssFramer,
     tracker: UtcTracker,
     options: ImportOptions,
     /// The log's time of the last chunk (the latest, within a segment) ...
@@ -264,7 +297,7 @@ impl NmeaLogReader {
             .ok_or_else(|| RecordError::Import(format!("time {} is before 1970", start.first)))?;
         Ok(Self {
             lines: Lines::new(open()?),
-            framer: NmeaFramer::new(),
+            framer: GnssFramer::new(),
             tracker: UtcTracker::starting_on(start.date),
             options,
             last_logged: start.first,
@@ -358,7 +391,7 @@ impl Iterator for NmeaLogReader {
     type Item = Record;
 
     fn next(&mut self) -> Option<Record> {
-        let Some((line, chunk)) = self.lines.next_chunk() else {
+        let Some((line, chunk)) = self.lines.next_chunk(self.framer.pending() > 0) else {
             self.report.comment_lines = self.lines.comment_lines;
             self.report.read_error = self.lines.read_error.clone();
             return None;
@@ -366,12 +399,12 @@ impl Iterator for NmeaLogReader {
         let mut stamp = None;
         let mut untimed_report = false;
         let tracker = &mut self.tracker;
-        self.framer.push(&chunk, |body| {
-            if let Some((time, date)) = sentence_time(body) {
+        self.framer.push_frames(&chunk, |frame| {
+            if let Some((time, date)) = frame_time(&frame) {
                 let dt = tracker.observe(time, date);
                 stamp = stamp.or(dt);
             } else {
-                untimed_report |= is_position_report(body);
+                untimed_report |= is_position_report(&frame);
             }
         });
         let t = match stamp {
@@ -484,6 +517,28 @@ mod tests {
         }
         assert_eq!(joined, log);
         assert_eq!(records[0].t, records[1].t);
+    }
+
+    #[test]
+    fn a_hash_inside_a_frame_or_before_a_log_name_is_data() {
+        // A UBX frame whose payload holds a line feed and then `# `, as gpsd's u-blox logs
+        // do; a Unicore `#` log; then a comment, which alone is dropped.
+        let frame = crate::devices::gnss::ubx::frame::encode(0x01, 0x26, b"ab\n# c").unwrap();
+        let mut data = frame.clone();
+        data.extend_from_slice(b"#UNIHEADINGA,97;INSUFFICIENT_OBS*ee072604\r\n");
+        data.extend_from_slice(rmc("120000.00", "010122").as_bytes());
+        let mut log = data.clone();
+        log.extend_from_slice(b"# a note\n");
+        let (records, report) = import_nmea_log(&log).unwrap();
+        let joined: Vec<u8> = records
+            .iter()
+            .flat_map(|r| match &r.payload {
+                Payload::Serial(b) => b.to_vec(),
+                other => panic!("unexpected {other:?}"),
+            })
+            .collect();
+        assert_eq!(joined, data);
+        assert_eq!(report.comment_lines, 1);
     }
 
     #[test]

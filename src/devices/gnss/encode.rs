@@ -150,7 +150,7 @@ impl GgaFix {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::devices::gnss::NmeaReceiver;
+    use crate::devices::gnss::GnssReceiver;
     use crate::time::Timestamp;
 
     #[test]
@@ -170,7 +170,7 @@ mod tests {
             text.starts_with("$GPGGA,123456.78,3351.40710720,S,15112.91784040,E,4,17,0.7,"),
             "{text}"
         );
-        let mut r = NmeaReceiver::new();
+        let mut r = GnssReceiver::new();
         r.push(Timestamp::from_micros(1), text.as_bytes(), |_| {});
         let f = r.fix();
         let p = f.position.expect("a position").value;
@@ -192,7 +192,7 @@ mod tests {
             hdop: f64::NAN,
         };
         let text = fix.gga_at(NaiveTime::MIN);
-        let mut r = NmeaReceiver::new();
+        let mut r = GnssReceiver::new();
         r.push(Timestamp::from_micros(1), text.as_bytes(), |_| {});
         assert_eq!(r.stats().framer.checksum_errors, 0, "{text}");
         assert!(text.contains(",1,99,"), "{text}");

@@ -10,6 +10,7 @@ use chrono::{NaiveDateTime, NaiveTime};
 use super::decode::{
     FixQuality, GnssSentence, GroundVelocity, GstAccuracy, PositionReport, TrueHeading,
 };
+use super::ubx::{NavPvt, UbxMessage};
 use super::utc::UtcTracker;
 use crate::time::Timestamp;
 
@@ -74,6 +75,10 @@ pub struct FixAssembler {
     epoch: Option<NaiveTime>,
     /// Whether this epoch already had a GGA or GNS, which outrank RMC for quality.
     epoch_has_position_report: bool,
+    /// GPS time of week of the last NAV-PVT: the UBX epoch the other NAV messages refine.
+    ubx_epoch: Option<u32>,
+    /// ... when that NAV-PVT gave a valid position.
+    ubx_located: bool,
 }
 
 impl FixAssembler {
@@ -135,14 +140,7 @@ impl FixAssembler {
             }
             GnssSentence::Hdt(heading)
             | GnssSentence::Ths(heading)
-            | GnssSentence::Heading(heading) => {
-                let TrueHeading {
-                    heading_deg,
-                    sigma_deg,
-                } = *heading;
-                self.fix.heading_deg = heading_deg.map(|value| Timed { value, rx });
-                self.fix.heading_sigma_deg = sigma_deg.filter(|_| heading_deg.is_some());
-            }
+            | GnssSentence::Heading(heading) => self.apply_heading(rx, *heading),
             GnssSentence::SecondaryAntenna => {}
             GnssSentence::Ksxt(k) => {
                 self.enter_epoch(k.position.time);
@@ -164,6 +162,121 @@ impl FixAssembler {
                 }
             }
         }
+    }
+
+    /// Merges one decoded UBX message received at host time `rx`. NAV-PVT makes the epoch;
+    /// NAV-HPPOSLLH, NAV-COV and NAV-DOP of the same epoch (by GPS time of week) refine it;
+    /// NAV-RELPOSNED's moving-base heading is a dual-antenna heading. Returns whether the fix
+    /// changed.
+    pub fn apply_ubx(&mut self, rx: Timestamp, message: &UbxMessage) -> bool {
+        match message {
+            UbxMessage::NavPvt(pvt) => self.apply_pvt(rx, pvt),
+            UbxMessage::NavHpPosLlh(hp) => {
+                let refines = self.ubx_located && self.ubx_epoch == Some(hp.itow_ms);
+                let Some(position) = self.fix.position.as_mut().filter(|_| refines) else {
+                    return false;
+                };
+                if hp.invalid_llh {
+                    return false;
+                }
+                // The epoch's position at full precision. It keeps the NAV-PVT's receive
+                // time: it is the same measurement, which the localiser has taken once.
+                position.value = GeoPosition {
+                    latitude_deg: hp.latitude_deg,
+                    longitude_deg: hp.longitude_deg,
+                    altitude_msl_m: Some(hp.height_msl_m),
+                    geoid_separation_m: Some(hp.height_m - hp.height_msl_m),
+                };
+            }
+            UbxMessage::NavCov(cov) => {
+                let Some((north, east)) = cov
+                    .horizontal_sigma_m()
+                    .filter(|_| self.ubx_epoch == Some(cov.itow_ms))
+                else {
+                    return false;
+                };
+                self.fix.accuracy = Some(Timed {
+                    value: GstAccuracy {
+                        time: self.fix.utc_time,
+                        latitude_sd_m: Some(north),
+                        longitude_sd_m: Some(east),
+                        altitude_sd_m: cov.vertical_sigma_m(),
+                        ..GstAccuracy::default()
+                    },
+                    rx,
+                });
+            }
+            UbxMessage::NavDop(dop) if self.ubx_epoch == Some(dop.itow_ms) => {
+                self.fix.hdop = Some(dop.hdop);
+            }
+            // Version 0 is a vector from a fixed base: no heading, and no reason to clear
+            // one from elsewhere.
+            UbxMessage::NavRelPosNed(relative) if relative.version >= 1 => {
+                self.apply_heading(rx, relative.heading());
+            }
+            _ => return false,
+        }
+        true
+    }
+
+    fn apply_pvt(&mut self, rx: Timestamp, pvt: &NavPvt) {
+        self.ubx_epoch = Some(pvt.itow_ms);
+        if let Some(utc) = pvt.utc {
+            self.enter_epoch(Some(utc.time()));
+            self.utc.observe(utc.time(), Some(utc.date()));
+        }
+        self.epoch_has_position_report = true;
+        let quality = pvt.quality();
+        // No fix, or time only: the position fields are the last solution or zeros.
+        let located = !pvt.invalid_llh && matches!(pvt.fix_type, 1..=4);
+        self.ubx_located = located && quality.is_valid();
+        self.apply_report(
+            rx,
+            &PositionReport {
+                time: pvt.utc.map(|t| t.time()),
+                quality,
+                latitude: located.then_some(pvt.latitude_deg),
+                longitude: located.then_some(pvt.longitude_deg),
+                altitude_msl: Some(pvt.height_msl_m),
+                geoid_separation: Some(pvt.height_m - pvt.height_msl_m),
+                satellites: Some(u16::from(pvt.satellites)),
+                hdop: None,
+                diff_age_s: pvt.correction_age_s.filter(|_| quality.is_corrected()),
+                diff_station: None,
+            },
+        );
+        if !quality.is_valid() {
+            return;
+        }
+        self.fix.velocity = Some(Timed {
+            value: GroundVelocity {
+                speed_mps: pvt.ground_speed_mps,
+                course_deg: Some(pvt.motion_heading_deg.rem_euclid(360.0)),
+            },
+            rx,
+        });
+        // hAcc is the horizontal error's RMS; split evenly between north and east until
+        // NAV-COV (later in the epoch) says how.
+        let per_axis = pvt.h_acc_m / std::f64::consts::SQRT_2;
+        self.fix.accuracy = Some(Timed {
+            value: GstAccuracy {
+                time: self.fix.utc_time,
+                latitude_sd_m: Some(per_axis),
+                longitude_sd_m: Some(per_axis),
+                altitude_sd_m: Some(pvt.v_acc_m),
+                ..GstAccuracy::default()
+            },
+            rx,
+        });
+    }
+
+    fn apply_heading(&mut self, rx: Timestamp, heading: TrueHeading) {
+        let TrueHeading {
+            heading_deg,
+            sigma_deg,
+        } = heading;
+        self.fix.heading_deg = heading_deg.map(|value| Timed { value, rx });
+        self.fix.heading_sigma_deg = sigma_deg.filter(|_| heading_deg.is_some());
     }
 
     /// Starts a new epoch when a timed sentence carries a new time of day.

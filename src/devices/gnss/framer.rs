@@ -1,7 +1,8 @@
-//! Byte-stream framer: cuts NMEA 0183 sentences out of a raw serial stream.
+//! Byte-stream framer: cuts NMEA 0183 sentences and u-blox UBX frames out of a raw serial
+//! stream.
 //!
-//! The stream is whatever the port delivered: binary protocols interleaved with NMEA
-//! (u-blox UBX, RTCM), partial sentences after a reconnect, any mix of CR and LF, and
+//! The stream is whatever the port delivered: UBX and NMEA interleaved, RTCM echoed back,
+//! partial sentences after a reconnect, any mix of CR and LF, and
 //! sentences longer than the standard's 82 characters (u-blox high-precision mode, Unicore,
 //! SkyTraq PSTI). A sentence is `$`, printable ASCII, `*`, two hex digits; it ends at its
 //! checksum, so line endings are optional. Everything else is counted and skipped.
@@ -9,8 +10,18 @@
 //! Two other forms share the stream: a `$` sentence checked by eight hex digits, the CRC-32
 //! NovAtel and Unicore use (`$KSXT` is sent with either), and a `#` ASCII log (Unicore's
 //! `#UNIHEADINGA`), which always carries that CRC. A `#` log is delivered with its `#`.
+//!
+//! A UBX frame starts at `B5 62` between sentences. Its class must be one u-blox uses and its
+//! length at most [`MAX_PAYLOAD`]; a frame whose checksum fails gives back every byte after
+//! its first, which is skipped, so a false sync in binary noise never swallows what follows.
+
+use std::collections::VecDeque;
 
 use crc::{Algorithm, Crc};
+
+use super::ubx::frame::{
+    HEADER_LEN, MAX_PAYLOAD, OVERHEAD, SYNC, UbxFrame, fletcher, is_known_class,
+};
 
 /// The CRC-32 of NovAtel's and Unicore's ASCII logs: the reflected IEEE polynomial with no
 /// initial value and no final XOR, over every byte between the `$` or `#` and the `*`.
@@ -30,7 +41,7 @@ const CRC32_NOVATEL: Crc<u32> = Crc::<u32>::new(&Algorithm {
 pub const MAX_SENTENCE_LEN: usize = 512;
 
 /// Counters of what the framer saw. Every input byte is either part of a delivered sentence,
-/// a line ending, or counted in `bytes_skipped`.
+/// a line ending, part of a delivered UBX frame (`ubx_bytes`), or counted in `bytes_skipped`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FramerStats {
     /// Bytes fed in.
@@ -45,8 +56,23 @@ pub struct FramerStats {
     pub truncated: u64,
     /// Sentences longer than [`MAX_SENTENCE_LEN`].
     pub overlong: u64,
-    /// Bytes that were not part of a delivered sentence or a line ending.
+    /// Bytes that were not part of a delivered sentence, a line ending or a UBX frame.
     pub bytes_skipped: u64,
+    /// UBX frames with a valid checksum, delivered to the caller.
+    pub ubx_frames: u64,
+    /// Bytes of those frames, sync to checksum.
+    pub ubx_bytes: u64,
+    /// UBX frames (plausible class and length) whose checksum did not match.
+    pub ubx_checksum_errors: u64,
+}
+
+/// What the framer cuts from the stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Frame<'a> {
+    /// An NMEA sentence's body between `$` and `*`, or a `#` log with its `#`.
+    Text(&'a str),
+    /// A UBX frame.
+    Ubx(UbxFrame<'a>),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,11 +88,13 @@ enum State {
     /// After two digits that were not the XOR (or a `#` log's first two): the rest of an
     /// eight-digit CRC-32, its value and digits so far.
     Crc32(u32, u8),
+    /// Inside a UBX frame, whose bytes so far are in `ubx`.
+    Ubx,
 }
 
-/// Incremental NMEA framer. Feed it chunks of any size; it keeps partial sentences between calls.
+/// Incremental framer. Feed it chunks of any size; it keeps partial frames between calls.
 #[derive(Debug)]
-pub struct NmeaFramer {
+pub struct GnssFramer {
     state: State,
     /// Body bytes between `$` and `*` (exclusive), printable ASCII only.
     body: Vec<u8>,
@@ -74,16 +102,20 @@ pub struct NmeaFramer {
     xor: u8,
     /// The sentence began with `#` (an ASCII log: CRC-32 only).
     log: bool,
+    /// The UBX frame in progress, from its sync.
+    ubx: Vec<u8>,
+    /// Bytes of a failed UBX frame to be framed again before new input.
+    replay: VecDeque<u8>,
     stats: FramerStats,
 }
 
-impl Default for NmeaFramer {
+impl Default for GnssFramer {
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl NmeaFramer {
+impl GnssFramer {
     /// A framer in the idle state with zeroed counters.
     pub fn new() -> Self {
         Self {
@@ -91,6 +123,8 @@ impl NmeaFramer {
             body: Vec::with_capacity(128),
             xor: 0,
             log: false,
+            ubx: Vec::new(),
+            replay: VecDeque::new(),
             stats: FramerStats::default(),
         }
     }
@@ -108,25 +142,41 @@ impl NmeaFramer {
             State::ChecksumHigh => 2,
             State::ChecksumLow(_) => 3,
             State::Crc32(_, digits) => 2 + usize::from(digits),
+            State::Ubx => return self.ubx.len(),
         };
         consumed_markers + self.body.len()
     }
 
-    /// Feeds `data`, calling `on_sentence` with each complete sentence body (the text between
-    /// `$` and `*`, checksum verified) in stream order.
-    pub fn push(&mut self, data: &[u8], mut on_sentence: impl FnMut(&str)) {
+    /// Feeds `data`, calling `on_frame` with each complete frame (checksum verified) in
+    /// stream order.
+    pub fn push_frames(&mut self, data: &[u8], mut on_frame: impl FnMut(Frame<'_>)) {
         self.stats.bytes_in += data.len() as u64;
         for &byte in data {
-            self.step(byte, &mut on_sentence);
+            self.step(byte, &mut on_frame);
+            while let Some(again) = self.replay.pop_front() {
+                self.step(again, &mut on_frame);
+            }
         }
     }
 
-    fn step(&mut self, byte: u8, on_sentence: &mut impl FnMut(&str)) {
+    /// Feeds `data`, calling `on_sentence` with each complete sentence body (the text between
+    /// `$` and `*`, checksum verified) in stream order. UBX frames are framed and counted but
+    /// not handed over.
+    pub fn push(&mut self, data: &[u8], mut on_sentence: impl FnMut(&str)) {
+        self.push_frames(data, |frame| {
+            if let Frame::Text(body) = frame {
+                on_sentence(body);
+            }
+        });
+    }
+
+    fn step(&mut self, byte: u8, on_frame: &mut impl FnMut(Frame<'_>)) {
         match self.state {
             State::Idle => match byte {
                 b'$' => self.start(false),
                 b'#' => self.start(true),
                 b'\r' | b'\n' => {}
+                _ if byte == SYNC[0] => self.start_ubx(),
                 _ => self.stats.bytes_skipped += 1,
             },
             State::Body => match byte {
@@ -135,6 +185,11 @@ impl NmeaFramer {
                     self.abandon(0);
                     self.stats.truncated += 1;
                     self.start(false);
+                }
+                _ if byte == SYNC[0] => {
+                    self.abandon(0);
+                    self.stats.truncated += 1;
+                    self.start_ubx();
                 }
                 b'\r' | b'\n' => {
                     self.abandon(0);
@@ -163,7 +218,7 @@ impl NmeaFramer {
                 Some(low) => {
                     let expected = (high << 4) | low;
                     if expected == self.xor && !self.log {
-                        self.deliver(on_sentence);
+                        self.deliver(on_frame);
                     } else {
                         // Maybe the first two digits of a CRC-32.
                         self.state = State::Crc32(u32::from(expected), 2);
@@ -181,7 +236,7 @@ impl NmeaFramer {
                     if digits + 1 < 8 {
                         self.state = State::Crc32(value, digits + 1);
                     } else if value == CRC32_NOVATEL.checksum(&self.body) {
-                        self.deliver(on_sentence);
+                        self.deliver(on_frame);
                     } else {
                         // `$`, body, `*` and the eight digits are dropped.
                         self.abandon(9);
@@ -194,7 +249,61 @@ impl NmeaFramer {
                     self.bad_checksum_field(byte);
                 }
             },
+            State::Ubx => self.step_ubx(byte, on_frame),
         }
+    }
+
+    fn step_ubx(&mut self, byte: u8, on_frame: &mut impl FnMut(Frame<'_>)) {
+        self.ubx.push(byte);
+        let plausible = match self.ubx.len() {
+            2 => byte == SYNC[1],
+            3 => is_known_class(byte),
+            HEADER_LEN => self.ubx_payload_len() <= MAX_PAYLOAD,
+            _ => true,
+        };
+        if !plausible {
+            self.resync_ubx();
+            return;
+        }
+        if self.ubx.len() < HEADER_LEN || self.ubx.len() < OVERHEAD + self.ubx_payload_len() {
+            return;
+        }
+        let end = self.ubx.len() - 2;
+        if fletcher(&self.ubx[2..end]) != self.ubx[end..] {
+            self.stats.ubx_checksum_errors += 1;
+            self.resync_ubx();
+            return;
+        }
+        self.stats.ubx_frames += 1;
+        self.stats.ubx_bytes += self.ubx.len() as u64;
+        self.state = State::Idle;
+        on_frame(Frame::Ubx(UbxFrame {
+            class: self.ubx[2],
+            id: self.ubx[3],
+            payload: &self.ubx[HEADER_LEN..end],
+        }));
+        self.ubx.clear();
+    }
+
+    /// The payload length a UBX header in progress states (its length field is complete).
+    fn ubx_payload_len(&self) -> usize {
+        usize::from(u16::from_le_bytes([self.ubx[4], self.ubx[5]]))
+    }
+
+    fn start_ubx(&mut self) {
+        self.state = State::Ubx;
+        self.ubx.clear();
+        self.ubx.push(SYNC[0]);
+    }
+
+    /// Not a UBX frame after all: its first byte is skipped and the rest framed again.
+    fn resync_ubx(&mut self) {
+        self.stats.bytes_skipped += 1;
+        self.state = State::Idle;
+        for &byte in self.ubx[1..].iter().rev() {
+            self.replay.push_front(byte);
+        }
+        self.ubx.clear();
     }
 
     fn start(&mut self, log: bool) {
@@ -220,11 +329,12 @@ impl NmeaFramer {
             b'$' => self.start(false),
             b'#' => self.start(true),
             b'\r' | b'\n' => {}
+            _ if byte == SYNC[0] => self.start_ubx(),
             _ => self.stats.bytes_skipped += 1,
         }
     }
 
-    fn deliver(&mut self, on_sentence: &mut impl FnMut(&str)) {
+    fn deliver(&mut self, on_frame: &mut impl FnMut(Frame<'_>)) {
         self.state = State::Idle;
         // The body holds only bytes 0x20..=0x7e, so it is always valid UTF-8; a failure here
         // would be a framer bug, and the sentence is then counted as skipped rather than lost
@@ -232,11 +342,11 @@ impl NmeaFramer {
         match std::str::from_utf8(&self.body) {
             Ok(body) if self.log => {
                 self.stats.sentences += 1;
-                on_sentence(&format!("#{body}"));
+                on_frame(Frame::Text(&format!("#{body}")));
             }
             Ok(body) => {
                 self.stats.sentences += 1;
-                on_sentence(body);
+                on_frame(Frame::Text(body));
             }
             Err(_) => self.stats.bytes_skipped += self.body.len() as u64 + 4,
         }
@@ -263,7 +373,7 @@ mod tests {
     use super::*;
 
     fn frame_all(chunks: &[&[u8]]) -> (Vec<String>, FramerStats) {
-        let mut framer = NmeaFramer::new();
+        let mut framer = GnssFramer::new();
         let mut out = Vec::new();
         for chunk in chunks {
             framer.push(chunk, |s| out.push(s.to_owned()));

@@ -25,7 +25,7 @@ use crate::config::zones::ZonesConfig;
 use crate::devices::can::Received;
 use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
 use crate::devices::canopen::{DEVICE_TYPE, NodeId};
-use crate::devices::gnss::NmeaReceiver;
+use crate::devices::gnss::GnssReceiver;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
 use crate::fusion::geodesy::{Enu, Geodetic};
@@ -244,7 +244,7 @@ const MAX_ZONE_REACH_M: f64 = 50_000.0;
 
 /// What listens on a serial port.
 enum Listener {
-    Nmea(Box<NmeaReceiver>),
+    Nmea(Box<GnssReceiver>),
     Imu(ImuDecoder),
 }
 

@@ -577,6 +577,7 @@ fn summarise_faults(
                 + s.framer.missing_checksum
                 + s.framer.truncated
                 + s.framer.overlong
+                + s.framer.ubx_checksum_errors
                 + s.decode_errors
         };
         if faults(stats) != faults(&before) || f.bytes_skipped != b.bytes_skipped {
@@ -586,6 +587,7 @@ fn summarise_faults(
                 missing_checksums = f.missing_checksum - b.missing_checksum,
                 truncated = f.truncated - b.truncated,
                 overlong = f.overlong - b.overlong,
+                ubx_checksum_errors = f.ubx_checksum_errors - b.ubx_checksum_errors,
                 bytes_skipped = f.bytes_skipped - b.bytes_skipped,
                 decode_errors = stats.decode_errors - before.decode_errors,
                 last_decode_error = ?stats.last_decode_error.as_ref().map(|e| e.to_string()),
