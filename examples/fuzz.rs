@@ -53,6 +53,9 @@ use chassisd::zones::local::LocalZones;
 #[path = "../tests/common/spec.rs"]
 mod spec;
 
+#[path = "fuzz/ubx.rs"]
+mod ubx;
+
 /// Longest input a mutation makes.
 const MAX_INPUT: usize = 8192;
 /// Inputs kept per target's corpus (seeds included).
@@ -86,6 +89,22 @@ fn targets() -> Vec<Target> {
             tokens: NMEA_TOKENS,
             structured: None,
             runner: nmea_runner,
+        },
+        Target {
+            name: "ubx",
+            about: "u-blox UBX frames in a mixed stream: framer (every byte accounted for), decoders, fix assembly",
+            seeds: ubx::stream_seeds,
+            tokens: ubx::TOKENS,
+            structured: Some(ubx::mutate_frames),
+            runner: ubx::stream_runner,
+        },
+        Target {
+            name: "ubx-messages",
+            about: "each UBX decoder on any payload (class, id, payload; past the checksum) and the fix assembly",
+            seeds: ubx::message_seeds,
+            tokens: ubx::TOKENS,
+            structured: None,
+            runner: ubx::message_runner,
         },
         Target {
             name: "witmotion",
@@ -1000,6 +1019,7 @@ fn nmea_runner() -> Runner {
             f.missing_checksum.min(4),
             f.truncated.min(4),
             f.overlong.min(4),
+            f.ubx_frames.min(8),
             s.sentences_by_kind.len() as u64,
             s.decode_errors.min(4),
         ])

@@ -5,6 +5,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
+pub use crate::devices::gnss::ubx::config::Port as UbloxPort;
 use crate::devices::profile::{ProfileError, toml_fix};
 
 pub mod calibration;
@@ -225,6 +226,19 @@ pub enum GnssProtocol {
     Nmea0183,
 }
 
+/// The receiver family, which sets what `check` asks of it and may configure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum ReceiverKind {
+    /// Any receiver sending NMEA 0183 (and its vendors' sentences).
+    #[default]
+    Nmea,
+    /// u-blox (UBX and NMEA): `check` asks MON-VER; `check --configure` sets its messages.
+    Ublox,
+    /// Unicore UM98x (NMEA, its `H` forms, HPR, KSXT, `#UNIHEADINGA`).
+    Unicore,
+}
+
 /// `[gnss]`
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -234,9 +248,17 @@ pub struct GnssConfig {
     /// Baud rate.
     #[serde(default = "default_baud")]
     pub baud: u32,
-    /// Wire protocol.
+    /// Wire protocol. Kept for older files: the framer tells NMEA, UBX and Unicore's logs
+    /// apart by themselves.
     #[serde(default)]
     pub protocol: GnssProtocol,
+    /// The receiver family.
+    #[serde(default)]
+    pub receiver: ReceiverKind,
+    /// The u-blox port this cable reaches (its message-rate keys differ by port); by default
+    /// USB for `/dev/ttyACM*`, else UART1.
+    #[serde(default)]
+    pub ublox_port: Option<UbloxPort>,
     /// A fix older than this is stale, seconds.
     #[serde(default = "default_fix_timeout_s")]
     pub fix_timeout_s: f64,
@@ -297,6 +319,20 @@ impl GnssConfig {
     /// The longest reconnect back-off.
     pub fn reconnect_max(&self) -> Duration {
         Duration::from_secs_f64(self.reconnect_max_s)
+    }
+
+    /// The u-blox port: as configured, else USB for a CDC-ACM device, else UART1.
+    pub fn ublox_port(&self) -> UbloxPort {
+        self.ublox_port.unwrap_or_else(|| {
+            let device = std::fs::canonicalize(&self.port)
+                .map(|p| p.to_string_lossy().into_owned())
+                .unwrap_or_else(|_| self.port.clone());
+            if device.contains("ttyACM") {
+                UbloxPort::Usb
+            } else {
+                UbloxPort::Uart1
+            }
+        })
     }
 }
 

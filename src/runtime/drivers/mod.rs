@@ -4,6 +4,7 @@
 pub mod can;
 pub mod serial;
 pub mod serial_tx;
+pub mod ublox;
 
 use std::collections::BTreeMap;
 use std::time::Duration;

@@ -3,7 +3,10 @@
 //! seen, or the reason and the fix. The probes only listen, except the drives' SDO read,
 //! the Daly BMS's poll and the broker's connection.
 //!
-//! - A serial port opens and valid NMEA sentences (GNSS) or frames (IMU) arrive.
+//! - A serial port opens and valid NMEA sentences or UBX frames (GNSS) or frames (IMU) arrive.
+//! - A u-blox receiver (`gnss.receiver = "ublox"`) answers MON-VER with its firmware and
+//!   protocol; with `--configure`, takes CFG-VALSET of the messages chassisd reads and reads
+//!   them back (RAM only, unless flash is asked for).
 //! - A CAN interface exists and is up.
 //! - Each drive answers an SDO read of its device type (0x1000).
 //! - The BMS answers its poll (Daly) or its messages arrive (DBC).
@@ -19,16 +22,18 @@ use tokio_serial::SerialPortBuilderExt;
 
 use std::net::ToSocketAddrs;
 
-use crate::config::VehicleConfig;
 use crate::config::imu::ImuProtocol;
 use crate::config::zones::ZonesConfig;
+use crate::config::{GnssConfig, ReceiverKind, VehicleConfig};
 use crate::devices::can::Received;
 use crate::devices::canopen::sdo::{SdoRequest, SdoResponse, decode_response};
 use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::GnssReceiver;
 use crate::devices::gnss::encode::GgaFix;
+use crate::devices::gnss::ubx::config::Layers;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
 use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::runtime::drivers::ublox::{Dialogue, port_name};
 use crate::runtime::links::broker::BrokerHealth;
 use crate::time::Timestamp;
 use crate::zones::ZoneKind;
@@ -94,12 +99,20 @@ fn fail(reason: impl Into<String>, fix: impl Into<String>) -> Result<String, (St
     Err((reason.into(), fix.into()))
 }
 
-/// Runs every probe the configuration calls for.
-pub async fn run(config: &VehicleConfig) -> Vec<Probe> {
+/// Runs every probe the configuration calls for; `configure` sets a u-blox receiver's
+/// messages in those layers.
+pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe> {
     let mut probes = Vec::new();
     if let Some(g) = &config.gnss {
         let result = probe_serial(&g.port, g.baud, Listener::Nmea(Box::default())).await;
-        probes.push(Probe::new("gnss", &format!("NMEA on {}", g.port), result));
+        probes.push(Probe::new(
+            "gnss",
+            &format!("NMEA/UBX on {}", g.port),
+            result,
+        ));
+        if g.receiver == ReceiverKind::Ublox {
+            probes.extend(probe_ublox(g, configure).await);
+        }
     }
     if let Some(i) = &config.imu {
         let decoder = match i.protocol {
@@ -288,24 +301,26 @@ async fn probe_serial(
                 .iter()
                 .map(|(k, n)| format!("{k} {n}"))
                 .collect();
-            if stats.framer.sentences > 0 {
+            if stats.framer.sentences + stats.framer.ubx_frames > 0 {
                 Ok(format!(
-                    "{} valid sentences in {secs:.0} s ({})",
+                    "{} valid sentences and {} UBX frames in {secs:.0} s ({})",
                     stats.framer.sentences,
+                    stats.framer.ubx_frames,
                     kinds.join(", ")
                 ))
             } else if bytes == 0 {
                 fail(
                     format!("no data in {secs:.0} s"),
-                    "is the receiver powered, and set to send NMEA on this port?",
+                    "is the receiver powered, and set to send NMEA or UBX on this port?",
                 )
             } else {
                 fail(
                     format!(
-                        "{bytes} bytes but no valid sentence in {secs:.0} s ({} checksum errors)",
-                        stats.framer.checksum_errors
+                        "{bytes} bytes but no valid sentence or UBX frame in {secs:.0} s \
+                         ({} checksum errors, {} UBX checksum errors)",
+                        stats.framer.checksum_errors, stats.framer.ubx_checksum_errors
                     ),
-                    "check gnss.baud against the receiver's rate, and that it sends NMEA",
+                    "check gnss.baud against the receiver's rate, and that it sends NMEA or UBX",
                 )
             }
         }
@@ -322,6 +337,44 @@ async fn probe_serial(
             "check imu.baud and imu.protocol against the IMU's settings",
         ),
     }
+}
+
+/// MON-VER, and with `configure` the CFG-VALSET and its read-back, each a probe.
+async fn probe_ublox(g: &GnssConfig, configure: Option<Layers>) -> Vec<Probe> {
+    let serial = match tokio_serial::new(&g.port, g.baud).open_native_async() {
+        Ok(s) => s,
+        Err(e) => {
+            let result = fail(
+                format!("cannot open {}: {e}", g.port),
+                "check the path, the cable, and that no other program holds the port",
+            );
+            return vec![Probe::new("gnss", "u-blox MON-VER", result)];
+        }
+    };
+    let mut dialogue = Dialogue::new(serial);
+    let version = match dialogue.identify().await {
+        Ok(v) => v,
+        Err(r) => return vec![Probe::new("gnss", "u-blox MON-VER", fail(r.reason, r.fix))],
+    };
+    let mut probes = vec![Probe::new("gnss", "u-blox MON-VER", Ok(version.summary()))];
+    if let Some(layers) = configure {
+        let port = g.ublox_port();
+        let what = format!("u-blox configure ({})", port_name(port));
+        let result = match dialogue.configure(&version, port, layers).await {
+            Ok(set) => Ok(format!(
+                "{} items set in {} and read back: {}",
+                set.len(),
+                match layers {
+                    Layers::Ram => "RAM (lost at power off)",
+                    Layers::RamAndFlash => "RAM and flash",
+                },
+                set.iter().map(|w| w.name).collect::<Vec<_>>().join(", ")
+            )),
+            Err(r) => fail(r.reason, r.fix),
+        };
+        probes.push(Probe::new("gnss", &what, result));
+    }
+    probes
 }
 
 async fn probe_sdo(
