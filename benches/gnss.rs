@@ -1,4 +1,5 @@
-//! Throughput benchmarks: NMEA sentences decoded per second, and replay frames per second.
+//! Throughput benchmarks: NMEA sentences and u-blox UBX frames decoded per second, the bytes
+//! per second of each beside the other, and replay frames per second.
 //!
 //! Inputs ship with the repo (`fixtures/rtk-drive`); the shared receiver logs are used too
 //! when `../shared/data/gnss` is present.
@@ -45,6 +46,54 @@ fn shared_bytes() -> Option<Vec<u8>> {
     Some(bytes)
 }
 
+/// The shared u-blox logs that hold only UBX (comments included).
+fn shared_ubx_bytes() -> Option<Vec<u8>> {
+    let dir = repo().join("../shared/data/gnss");
+    let mut bytes = Vec::new();
+    for name in [
+        "ublox-neo-m8p.log",
+        "ublox-zed-f9p-hp.log",
+        "ublox-zed-f9p-rtk.log",
+    ] {
+        bytes.extend(std::fs::read(dir.join(name)).ok()?);
+    }
+    Some(bytes)
+}
+
+fn ubx_frames_in(bytes: &[u8]) -> u64 {
+    let mut receiver = GnssReceiver::new();
+    receiver.push(Timestamp::default(), bytes, |_| {});
+    receiver.stats().framer.ubx_frames
+}
+
+/// Decoding the whole of `bytes` through a fresh receiver.
+fn decode_all(bytes: &[u8]) -> u64 {
+    let mut receiver = GnssReceiver::new();
+    let mut fixes = 0u64;
+    receiver.push(Timestamp::default(), black_box(bytes), |_| fixes += 1);
+    black_box(fixes)
+}
+
+fn ubx(c: &mut Criterion) {
+    let Some(ubx) = shared_ubx_bytes() else {
+        return;
+    };
+    let mut group = c.benchmark_group("ubx_decode");
+    group.throughput(Throughput::Elements(ubx_frames_in(&ubx)));
+    group.bench_function("shared-ubx-logs", |b| b.iter(|| decode_all(&ubx)));
+    group.finish();
+    // NMEA and UBX side by side, in bytes.
+    let mut group = c.benchmark_group("gnss_bytes");
+    for (name, bytes) in [
+        ("nmea-rtk-drive", fixture_bytes()),
+        ("ubx-shared-logs", ubx),
+    ] {
+        group.throughput(Throughput::Bytes(bytes.len() as u64));
+        group.bench_function(name, |b| b.iter(|| decode_all(&bytes)));
+    }
+    group.finish();
+}
+
 fn sentences_in(bytes: &[u8]) -> u64 {
     let mut receiver = GnssReceiver::new();
     receiver.push(Timestamp::default(), bytes, |_| {});
@@ -59,14 +108,7 @@ fn decode(c: &mut Criterion) {
     let mut group = c.benchmark_group("nmea_decode");
     for (name, bytes) in &inputs {
         group.throughput(Throughput::Elements(sentences_in(bytes)));
-        group.bench_function(*name, |b| {
-            b.iter(|| {
-                let mut receiver = GnssReceiver::new();
-                let mut fixes = 0u64;
-                receiver.push(Timestamp::default(), black_box(bytes), |_| fixes += 1);
-                black_box(fixes)
-            })
-        });
+        group.bench_function(*name, |b| b.iter(|| decode_all(bytes)));
     }
     group.finish();
 }
@@ -91,5 +133,5 @@ fn count_frames(path: &Path) -> u64 {
     reader.count() as u64
 }
 
-criterion_group!(benches, decode, replay_fixture);
+criterion_group!(benches, decode, ubx, replay_fixture);
 criterion_main!(benches);

@@ -104,7 +104,12 @@ fn fail(reason: impl Into<String>, fix: impl Into<String>) -> Result<String, (St
 pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe> {
     let mut probes = Vec::new();
     if let Some(g) = &config.gnss {
-        let result = probe_serial(&g.port, g.baud, Listener::Nmea(Box::default())).await;
+        let listener = Listener::Gnss {
+            receiver: Box::default(),
+            // A Unicore UM98x is there for its two antennas' heading.
+            expect_heading: g.receiver == ReceiverKind::Unicore,
+        };
+        let result = probe_serial(&g.port, g.baud, listener).await;
         probes.push(Probe::new(
             "gnss",
             &format!("NMEA/UBX on {}", g.port),
@@ -257,7 +262,11 @@ const MAX_ZONE_REACH_M: f64 = 50_000.0;
 
 /// What listens on a serial port.
 enum Listener {
-    Nmea(Box<GnssReceiver>),
+    Gnss {
+        receiver: Box<GnssReceiver>,
+        /// No dual-antenna heading is a failure.
+        expect_heading: bool,
+    },
     Imu(ImuDecoder),
 }
 
@@ -279,6 +288,7 @@ async fn probe_serial(
     let end = Instant::now() + SERIAL_LISTEN;
     let mut buf = [0u8; 4096];
     let (mut bytes, mut samples) = (0usize, 0u64);
+    let mut heading = None;
     while let Some(left) = end.checked_duration_since(Instant::now()) {
         let n = match tokio::time::timeout(left, serial.read(&mut buf)).await {
             Ok(Ok(0)) | Err(_) => break,
@@ -288,26 +298,44 @@ async fn probe_serial(
         bytes += n;
         let chunk = buf.get(..n).unwrap_or_default();
         match &mut listener {
-            Listener::Nmea(r) => r.push(Timestamp::default(), chunk, |_| {}),
+            Listener::Gnss { receiver, .. } => {
+                receiver.push(Timestamp::default(), chunk, |fix| {
+                    heading = fix.heading_deg.map(|h| h.value).or(heading);
+                });
+            }
             Listener::Imu(d) => d.push(Timestamp::default(), chunk, |_| samples += 1),
         }
     }
     let secs = SERIAL_LISTEN.as_secs_f64();
     match listener {
-        Listener::Nmea(r) => {
-            let stats = r.stats();
+        Listener::Gnss {
+            receiver,
+            expect_heading,
+        } => {
+            let stats = receiver.stats();
             let kinds: Vec<String> = stats
                 .sentences_by_kind
                 .iter()
                 .map(|(k, n)| format!("{k} {n}"))
                 .collect();
+            let seen = format!(
+                "{} valid sentences and {} UBX frames in {secs:.0} s ({})",
+                stats.framer.sentences,
+                stats.framer.ubx_frames,
+                kinds.join(", ")
+            );
             if stats.framer.sentences + stats.framer.ubx_frames > 0 {
-                Ok(format!(
-                    "{} valid sentences and {} UBX frames in {secs:.0} s ({})",
-                    stats.framer.sentences,
-                    stats.framer.ubx_frames,
-                    kinds.join(", ")
-                ))
+                match heading {
+                    Some(h) => Ok(format!("{seen}; dual-antenna heading {h:.2}°")),
+                    None if expect_heading => fail(
+                        format!("{seen}; but no valid dual-antenna heading"),
+                        "enable the receiver's heading output on this port (HPR, TRA, \
+                         UNIHEADINGA or KSXT) and check that both antennas see the sky with \
+                         RTK fixed; a one-antenna receiver has none: set gnss.receiver = \
+                         \"nmea\"",
+                    ),
+                    None => Ok(seen),
+                }
             } else if bytes == 0 {
                 fail(
                     format!("no data in {secs:.0} s"),

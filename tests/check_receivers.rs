@@ -1,8 +1,9 @@
-//! `chassisd check` with a u-blox receiver on a pty: MON-VER identifies it, `--configure`
-//! sets its messages with CFG-VALSET (RAM unless `--flash`) and reads them back with
-//! CFG-VALGET, and a receiver that refuses, or predates CFG-VALSET, is reported with the
-//! reason. The receiver's side answers as the ZED-F9P interface description lays out, while
-//! it streams real NAV frames from gpsd's ZED-F9P log.
+//! `chassisd check` with the receiver profiles on a pty. u-blox: MON-VER identifies it,
+//! `--configure` sets its messages with CFG-VALSET (RAM unless `--flash`) and reads them back
+//! with CFG-VALGET, and a receiver that refuses, or predates CFG-VALSET, is reported with the
+//! reason; the receiver's side answers as the ZED-F9P interface description lays out, while
+//! it streams real NAV frames from gpsd's ZED-F9P log. Unicore: the real UM98x capture's
+//! heading is shown, and a receiver without one is a failure with the fix.
 
 mod common;
 
@@ -15,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use chassisd::devices::gnss::ubx::config::value_size;
 use chassisd::devices::gnss::ubx::frame::encode;
 use chassisd::devices::gnss::{Frame, GnssFramer};
-use common::pty::Port;
+use common::pty::{Port, Talker};
 
 /// The pty tests take turns so no child inherits another test's descriptors.
 static SERIAL: Mutex<()> = Mutex::new(());
@@ -254,4 +255,35 @@ fn a_refusal_and_a_receiver_before_valset_are_reported_with_the_reason() {
     let (code, out) = check(&dir, "nmea", &["--configure"]);
     assert_ne!(code, Some(0), "{out}");
     assert!(out.contains("set gnss.receiver = \"ublox\""), "{out}");
+}
+
+#[test]
+fn a_unicore_receiver_shows_its_heading_and_one_without_fails() {
+    let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = common::tempdir("check-unicore");
+    let capture = std::fs::read(common::shared_gnss_dir().join("unicore-um98x-nmea.log")).unwrap();
+    let mut port = Port::open_at(&dir.join("gnss-port"));
+    let running = Arc::new(AtomicBool::new(true));
+    let flag = running.clone();
+    std::thread::spawn(move || {
+        while flag.load(Ordering::Relaxed) {
+            let _ = port.master.write_all(&capture);
+            std::thread::sleep(std::time::Duration::from_millis(200));
+        }
+    });
+    let (code, table) = check(&dir, "unicore", &[]);
+    running.store(false, Ordering::Relaxed);
+    assert_eq!(code, Some(0), "{table}");
+    assert!(table.contains("GNHPR") || table.contains("HPR"), "{table}");
+    assert!(table.contains("dual-antenna heading"), "{table}");
+
+    let dir = common::tempdir("check-unicore-none");
+    let _plain = Talker::start(Port::open_at(&dir.join("gnss-port")));
+    let (code, table) = check(&dir, "unicore", &[]);
+    assert_eq!(code, Some(1), "{table}");
+    assert!(
+        table.contains("but no valid dual-antenna heading"),
+        "{table}"
+    );
+    assert!(table.contains("set gnss.receiver = \"nmea\""), "{table}");
 }
