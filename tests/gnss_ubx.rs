@@ -200,3 +200,33 @@ fn a_moving_base_heading_is_a_dual_antenna_heading() {
     };
     assert_eq!(parsed.length_m, Some(1.2));
 }
+
+/// End to end: the F9P log with a moving-base NAV-RELPOSNED after each epoch's frames,
+/// replayed as a plain log: the heading is `rtk.angle`.
+#[test]
+fn a_relposned_heading_is_the_vehicles_rtk_angle_in_a_replay() {
+    const FIXED_MOVING_VALID: u32 = 0x01 | 0x04 | (2 << 3) | 0x20 | 0x100;
+    let bytes = imported("ublox-zed-f9p-rtk.log");
+    let mut log = Vec::new();
+    let mut framer = GnssFramer::new();
+    framer.push_frames(&bytes, |frame| {
+        if let Frame::Ubx(f) = frame {
+            log.extend(ubx::frame::encode(f.class, f.id, f.payload).unwrap());
+            if (f.class, f.id) == (0x01, 0x61) {
+                log.extend(relposned(123.25, 0.4, FIXED_MOVING_VALID));
+            }
+        }
+    });
+    let dir = common::tempdir("ubx-heading");
+    let path = dir.join("f9p-moving-base.log");
+    std::fs::write(&path, &log).unwrap();
+    let out = common::replay(&path);
+    let last: serde_json::Value = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .last()
+        .expect("a status");
+    let angle = last["rtk"]["angle"].as_f64().unwrap();
+    assert!((angle - 123.25).abs() < 1e-3, "rtk.angle {angle}: {last}");
+    assert_eq!(last["rtk"]["status"], 5, "RTK float, from NAV-PVT");
+}

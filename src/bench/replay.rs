@@ -59,7 +59,7 @@ pub struct ReplayReport {
     pub tenth_peak_bytes: Option<u64>,
     /// Why gpsdecode was not compared, if it was not.
     pub gpsdecode_missing: Option<String>,
-    /// Logs left out: their receivers send no NMEA position (binary protocols only).
+    /// Logs left out: their receivers send no NMEA position and no UBX NAV-PVT.
     pub skipped: Vec<String>,
     /// The targets met.
     pub pass: bool,
@@ -146,22 +146,29 @@ fn receiver_logs(dir: &Path) -> crate::bench::error::Result<(Vec<PathBuf>, Vec<S
     let mut nmea = Vec::new();
     for log in logs {
         let bytes = std::fs::read(&log).map_err(invalid(format!("reading {}", log.display())))?;
-        if sends_nmea_positions(&bytes) {
+        if sends_nmea_positions(&bytes) || sends_nav_pvt(&bytes) {
             nmea.push(log);
         } else {
             skipped.push(format!(
-                "{}: no NMEA position (a binary protocol only)",
+                "{}: no NMEA position and no UBX NAV-PVT",
                 log.display()
             ));
         }
     }
     if nmea.is_empty() {
         return Err(BenchError::Failed(format!(
-            "no *.log receiver logs with NMEA positions in {}",
+            "no *.log receiver logs with NMEA positions or UBX NAV-PVT in {}",
             dir.display()
         )));
     }
     Ok((nmea, skipped))
+}
+
+/// Whether a log holds a u-blox NAV-PVT frame's header.
+fn sends_nav_pvt(bytes: &[u8]) -> bool {
+    bytes
+        .windows(6)
+        .any(|w| w == [0xb5, 0x62, 0x01, 0x07, 92, 0])
 }
 
 /// Whether a log holds an NMEA position sentence (GGA, RMC or GNS).
