@@ -257,26 +257,60 @@ fn a_refusal_and_a_receiver_before_valset_are_reported_with_the_reason() {
     assert!(out.contains("set gnss.receiver = \"ublox\""), "{out}");
 }
 
-#[test]
-fn a_unicore_receiver_shows_its_heading_and_one_without_fails() {
-    let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
-    let dir = common::tempdir("check-unicore");
-    let capture = std::fs::read(common::shared_gnss_dir().join("unicore-um98x-nmea.log")).unwrap();
-    let mut port = Port::open_at(&dir.join("gnss-port"));
+/// Streams `bytes` on `port` every 200 ms until the flag drops.
+fn stream(mut port: Port, bytes: Vec<u8>) -> Arc<AtomicBool> {
     let running = Arc::new(AtomicBool::new(true));
     let flag = running.clone();
     std::thread::spawn(move || {
         while flag.load(Ordering::Relaxed) {
-            let _ = port.master.write_all(&capture);
+            let _ = port.master.write_all(&bytes);
             std::thread::sleep(std::time::Duration::from_millis(200));
         }
     });
+    running
+}
+
+fn line(body: &str) -> String {
+    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+    format!("${body}*{sum:02X}\r\n")
+}
+
+#[test]
+fn a_unicore_receiver_shows_its_heading_and_one_without_fails() {
+    let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
+    // The real UM98x capture (the second antenna's `H` forms and the heading sentences)
+    // with the first antenna's GGA and RMC, as a UM982 set for a vehicle sends them.
+    let capture =
+        std::fs::read_to_string(common::shared_gnss_dir().join("unicore-um98x-nmea.log")).unwrap();
+    let first_antenna = [
+        line("GNGGA,120000.00,2301.5,N,11301.17918515,E,4,20,0.6,12.3,M,-6.1,M,1.0,0123"),
+        line("GNRMC,120000.00,A,2301.5,N,11301.17918515,E,0.0,0.0,241126,,,R"),
+    ]
+    .concat();
+    let dir = common::tempdir("check-unicore");
+    let running = stream(
+        Port::open_at(&dir.join("gnss-port")),
+        [capture.as_str(), &first_antenna].concat().into_bytes(),
+    );
     let (code, table) = check(&dir, "unicore", &[]);
     running.store(false, Ordering::Relaxed);
     assert_eq!(code, Some(0), "{table}");
-    assert!(table.contains("GNHPR") || table.contains("HPR"), "{table}");
+    assert!(table.contains("HPR"), "{table}");
     assert!(table.contains("dual-antenna heading"), "{table}");
 
+    // The capture alone holds only the second antenna's positions: not the vehicle's, and
+    // check says so.
+    let dir = common::tempdir("check-unicore-second");
+    let running = stream(Port::open_at(&dir.join("gnss-port")), capture.into_bytes());
+    let (code, table) = check(&dir, "unicore", &[]);
+    running.store(false, Ordering::Relaxed);
+    assert_eq!(code, Some(1), "{table}");
+    assert!(
+        table.contains("only the second antenna's positions"),
+        "{table}"
+    );
+
+    // Positions but no heading.
     let dir = common::tempdir("check-unicore-none");
     let _plain = Talker::start(Port::open_at(&dir.join("gnss-port")));
     let (code, table) = check(&dir, "unicore", &[]);

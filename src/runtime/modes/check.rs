@@ -289,6 +289,7 @@ async fn probe_serial(
     let mut buf = [0u8; 4096];
     let (mut bytes, mut samples) = (0usize, 0u64);
     let mut heading = None;
+    let mut located = false;
     while let Some(left) = end.checked_duration_since(Instant::now()) {
         let n = match tokio::time::timeout(left, serial.read(&mut buf)).await {
             Ok(Ok(0)) | Err(_) => break,
@@ -301,6 +302,7 @@ async fn probe_serial(
             Listener::Gnss { receiver, .. } => {
                 receiver.push(Timestamp::default(), chunk, |fix| {
                     heading = fix.heading_deg.map(|h| h.value).or(heading);
+                    located |= fix.quality.is_valid();
                 });
             }
             Listener::Imu(d) => d.push(Timestamp::default(), chunk, |_| samples += 1),
@@ -324,7 +326,21 @@ async fn probe_serial(
                 stats.framer.ubx_frames,
                 kinds.join(", ")
             );
-            if stats.framer.sentences + stats.framer.ubx_frames > 0 {
+            // Unicore's `H` forms are its second antenna's: never the vehicle's position.
+            let second_antenna_only = !located
+                && stats
+                    .sentences_by_kind
+                    .keys()
+                    .any(|k| ["GGAH", "RMCH", "GNSH"].iter().any(|h| k.ends_with(h)));
+            if second_antenna_only {
+                fail(
+                    format!(
+                        "{seen}; only the second antenna's positions (GGAH, RMCH, GNSH), which \
+                         are not the vehicle's"
+                    ),
+                    "enable GGA (or GNS) and RMC of the first antenna on this port",
+                )
+            } else if stats.framer.sentences + stats.framer.ubx_frames > 0 {
                 match heading {
                     Some(h) => Ok(format!("{seen}; dual-antenna heading {h:.2}°")),
                     None if expect_heading => fail(
