@@ -223,8 +223,8 @@ fn a_relposned_heading_is_the_vehicles_rtk_angle_in_a_replay() {
     let out = common::replay(&path);
     let last: serde_json::Value = String::from_utf8_lossy(&out.stdout)
         .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .last()
+        .rev()
+        .find_map(|l| serde_json::from_str(l).ok())
         .expect("a status");
     let angle = last["rtk"]["angle"].as_f64().unwrap();
     assert!((angle - 123.25).abs() < 1e-3, "rtk.angle {angle}: {last}");
