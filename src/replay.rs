@@ -445,6 +445,15 @@ impl ReplaySummary {
             if let Some(e) = &g.last_decode_error {
                 let _ = write!(s, " (last: {e})");
             }
+            let c = &g.corrections;
+            if c.total() > 0 {
+                let _ = write!(
+                    s,
+                    "; RTCM messages the receiver reports: used {}, not used {}, unstated {}, \
+                     CRC failed {}",
+                    c.used, c.not_used, c.unstated, c.crc_failed
+                );
+            }
         }
         if let Some(c) = &self.corrections {
             let _ = write!(

@@ -137,6 +137,12 @@ fn rxm_rtcm_counts_the_corrections_that_reach_the_receiver() {
     assert_eq!(corrections.total(), 12);
     assert_eq!(corrections.crc_failed, 0);
     assert!(corrections.last_type.is_some());
+    let out = common::replay(&common::shared_gnss_dir().join("ublox-neo-m8p.log"));
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        summary.contains("RTCM messages the receiver reports: used 0, not used 0, unstated 12"),
+        "{summary}"
+    );
 }
 
 #[test]

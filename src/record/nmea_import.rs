@@ -176,6 +176,9 @@ fn frame_time(frame: &Frame<'_>) -> Option<(NaiveTime, Option<NaiveDate>)> {
 
 /// A NAV-PVT frame's solution.
 fn nav_pvt(frame: &UbxFrame<'_>) -> Option<ubx::NavPvt> {
+    if (frame.class, frame.id) != ubx::NAV_PVT {
+        return None;
+    }
     match ubx::decode(frame) {
         Ok(Some(UbxMessage::NavPvt(pvt))) => Some(pvt),
         _ => None,

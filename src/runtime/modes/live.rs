@@ -578,6 +578,7 @@ fn summarise_faults(
                 + s.framer.truncated
                 + s.framer.overlong
                 + s.framer.ubx_checksum_errors
+                + s.corrections.crc_failed
                 + s.decode_errors
         };
         if faults(stats) != faults(&before) || f.bytes_skipped != b.bytes_skipped {
@@ -588,6 +589,8 @@ fn summarise_faults(
                 truncated = f.truncated - b.truncated,
                 overlong = f.overlong - b.overlong,
                 ubx_checksum_errors = f.ubx_checksum_errors - b.ubx_checksum_errors,
+                rtcm_crc_failed_at_receiver =
+                    stats.corrections.crc_failed - before.corrections.crc_failed,
                 bytes_skipped = f.bytes_skipped - b.bytes_skipped,
                 decode_errors = stats.decode_errors - before.decode_errors,
                 last_decode_error = ?stats.last_decode_error.as_ref().map(|e| e.to_string()),

@@ -9,6 +9,8 @@
 pub mod config;
 pub mod frame;
 
+use std::borrow::Cow;
+
 use chrono::{NaiveDate, NaiveDateTime, TimeDelta};
 
 pub use frame::UbxFrame;
@@ -47,6 +49,9 @@ pub enum UbxMessage {
     CfgValGet(config::ValGetAnswer),
 }
 
+/// NAV-PVT's class and id.
+pub const NAV_PVT: (u8, u8) = (0x01, 0x07);
+
 /// The name of a UBX message by class and id, where chassisd knows it.
 pub fn message_name(class: u8, id: u8) -> Option<&'static str> {
     Some(match (class, id) {
@@ -76,10 +81,10 @@ pub fn message_name(class: u8, id: u8) -> Option<&'static str> {
 }
 
 /// The name a frame is counted under: its message name, else `UBX cc-ii`.
-pub fn kind_of(frame: &UbxFrame<'_>) -> String {
+pub fn kind_of(frame: &UbxFrame<'_>) -> Cow<'static, str> {
     match message_name(frame.class, frame.id) {
-        Some(name) => name.to_owned(),
-        None => format!("UBX {:02X}-{:02X}", frame.class, frame.id),
+        Some(name) => Cow::Borrowed(name),
+        None => Cow::Owned(format!("UBX {:02X}-{:02X}", frame.class, frame.id)),
     }
 }
 
