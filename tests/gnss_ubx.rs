@@ -236,3 +236,52 @@ fn a_relposned_heading_is_the_vehicles_rtk_angle_in_a_replay() {
     assert!((angle - 123.25).abs() < 1e-3, "rtk.angle {angle}: {last}");
     assert_eq!(last["rtk"]["status"], 5, "RTK float, from NAV-PVT");
 }
+
+/// NAV-SOL, the solution u-blox 6 to 8 and their timing receivers send instead of NAV-PVT:
+/// ECEF in centimetres and GPS time, built from the interface description (no NAV-SOL is in
+/// the shared logs; gpsd's own logs of four such receivers agree, see docs/protocols/ubx.md).
+#[test]
+fn nav_sol_gives_the_position_from_ecef_and_utc_from_gps_time() {
+    use chassisd::fusion::geodesy::Geodetic;
+    let here = Geodetic {
+        lat_deg: 45.218_541_1,
+        lon_deg: 5.807_177_5,
+        h_m: 250.0,
+    };
+    let ecef = here.to_ecef();
+    let mut p = vec![0u8; 52];
+    // GPS week 2190, 365,174.000 s less 0.25 ms of fTOW: 2021-12-30 05:25:56 UTC.
+    p[0..4].copy_from_slice(&365_174_000u32.to_le_bytes());
+    p[4..8].copy_from_slice(&(-250_000i32).to_le_bytes());
+    p[8..10].copy_from_slice(&2190u16.to_le_bytes());
+    p[10] = 3;
+    // Fix ok, differential, week and time of week set.
+    p[11] = 0x0f;
+    for (i, v) in [ecef.x, ecef.y, ecef.z].iter().enumerate() {
+        p[12 + 4 * i..16 + 4 * i].copy_from_slice(&((v * 100.0).round() as i32).to_le_bytes());
+    }
+    p[24..28].copy_from_slice(&150u32.to_le_bytes());
+    p[47] = 9;
+    let mut receiver = GnssReceiver::new();
+    receiver.push(
+        Timestamp::from_micros(1),
+        &ubx::frame::encode(0x01, 0x06, &p).unwrap(),
+        |_| {},
+    );
+    let fix = receiver.fix();
+    assert_eq!(fix.quality, FixQuality::Dgps);
+    assert_eq!(fix.utc.unwrap().to_string(), "2021-12-30 05:25:56");
+    let position = fix.position.unwrap().value;
+    assert!((position.latitude_deg - here.lat_deg).abs() < 2e-7);
+    assert!((position.longitude_deg - here.lon_deg).abs() < 2e-7);
+    assert!((position.height_above_ellipsoid_m() - 250.0).abs() < 0.02);
+    assert_eq!(fix.satellites, Some(9));
+    // Without gpsFixOk: no fix.
+    p[11] = 0x0c;
+    receiver.push(
+        Timestamp::from_micros(2),
+        &ubx::frame::encode(0x01, 0x06, &p).unwrap(),
+        |_| {},
+    );
+    assert_eq!(receiver.fix().quality, FixQuality::Invalid);
+}

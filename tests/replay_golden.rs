@@ -180,7 +180,7 @@ fn shared_logs_replay_to_status_lines() {
         .expect("chassisd runs");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && stderr.contains("no sentence or NAV-PVT with a UTC time"),
+        !out.status.success() && stderr.contains("no sentence, NAV-PVT or NAV-SOL with a UTC time"),
         "{stderr}"
     );
 }

@@ -205,9 +205,10 @@ fn bench_replay_compares_every_receiver_with_gpsdecode() {
         serde_json::from_str(stdout.lines().last().unwrap_or_default()).expect("JSON last line");
     println!("{stdout}");
     let inputs = report["inputs"].as_array().expect("inputs");
+    // Every log with gpsd's decode: NMEA, UBX only, or both.
     assert_eq!(
         inputs.len(),
-        common::shared_gnss_logs().len() + 1,
+        common::shared_gnss_logs().len() + common::shared_binary_gnss_logs().len() + 1,
         "{report}"
     );
     assert_eq!(inputs[0]["input"], "all");

@@ -14,6 +14,8 @@ use super::{Runner, files_in, pieces, shared, signature};
 pub const TOKENS: &[&[u8]] = &[
     b"\xb5\x62",
     b"\x01\x07",
+    b"\x01\x06",
+    b"\x01\x20",
     b"\x01\x14",
     b"\x01\x36",
     b"\x01\x3c",
@@ -60,12 +62,23 @@ fn real_frames() -> Vec<Vec<u8>> {
     let mut mon_ver = vec![0u8; 100];
     mon_ver[40..54].copy_from_slice(b"FWVER=HPG 1.32");
     mon_ver[70..83].copy_from_slice(b"PROTVER=27.31");
+    let mut sol = vec![0u8; 52];
+    sol[8] = 0x8e;
+    sol[9] = 0x08;
+    sol[10] = 3;
+    sol[11] = 0x0f;
+    sol[12..16].copy_from_slice(&441_000_000i32.to_le_bytes());
+    let mut timegps = vec![0u8; 16];
+    timegps[10] = 18;
+    timegps[11] = 0x07;
     let mut valget = vec![1, 0, 0, 0];
     valget.extend_from_slice(&0x2091_0007u32.to_le_bytes());
     valget.push(1);
     for (class, id, payload) in [
         (0x01, 0x3c, relposned),
         (0x01, 0x36, cov),
+        (0x01, 0x06, sol),
+        (0x01, 0x20, timegps),
         (0x0a, 0x04, mon_ver),
         (0x06, 0x8b, valget),
         (0x05, 0x01, vec![0x06, 0x8a]),

@@ -436,7 +436,7 @@ fn score(
         let s = seconds(epoch);
         let Some(tr) = truth.at(epoch) else { continue };
         let p = &position.value;
-        let h = p.altitude_msl_m.unwrap_or(0.0) + p.geoid_separation_m.unwrap_or(0.0);
+        let h = p.height_above_ellipsoid_m();
         let enu = frame.to_enu(&Geodetic {
             lat_deg: p.latitude_deg,
             lon_deg: p.longitude_deg,

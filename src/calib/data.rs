@@ -107,8 +107,7 @@ impl Gather {
         {
             self.last_position = Some(p.rx);
             let t = self.seconds(p.rx) - self.latency_s;
-            let height =
-                p.value.altitude_msl_m.unwrap_or(0.0) + p.value.geoid_separation_m.unwrap_or(0.0);
+            let height = p.value.height_above_ellipsoid_m();
             let at = Geodetic {
                 lat_deg: p.value.latitude_deg,
                 lon_deg: p.value.longitude_deg,

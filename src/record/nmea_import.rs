@@ -3,8 +3,8 @@
 //!
 //! Such logs have `#` comment lines and no host timestamps, so time comes from the
 //! sentences: each line becomes one serial chunk stamped with the UTC time of the timed
-//! sentence or message it holds (GGA, GNS, RMC, GST, ZDA, KSXT, a UBX NAV-PVT with a valid
-//! time), or of the last one before it; but a position report that has no time (a receiver
+//! sentence or message it holds (GGA, GNS, RMC, GST, ZDA, KSXT, a UBX NAV-PVT or NAV-SOL with
+//! a valid time), or of the last one before it; but a position report that has no time (a receiver
 //! without a fix) is the receiver's next epoch, one period on, so that it never voids the
 //! fix before it. The date comes from RMC, ZDA or NAV-PVT; lines before the first date take
 //! it from the first dated sentence, and the date rolls over at midnight. Binary data and
@@ -170,17 +170,23 @@ fn is_comment(line: &[u8]) -> bool {
 fn frame_time(frame: &Frame<'_>) -> Option<(NaiveTime, Option<NaiveDate>)> {
     match frame {
         Frame::Text(body) => sentence_time(body),
-        Frame::Ubx(pvt) => nav_pvt(pvt)?.utc.map(|utc| (utc.time(), Some(utc.date()))),
+        Frame::Ubx(frame) => ubx_utc(frame).map(|utc| (utc.time(), Some(utc.date()))),
     }
 }
 
-/// A NAV-PVT frame's solution.
-fn nav_pvt(frame: &UbxFrame<'_>) -> Option<ubx::NavPvt> {
-    if (frame.class, frame.id) != ubx::NAV_PVT {
+/// A solution frame (NAV-PVT, NAV-SOL) decoded; other frames are not decoded at all.
+fn solution(frame: &UbxFrame<'_>) -> Option<UbxMessage> {
+    if ![ubx::NAV_PVT, ubx::NAV_SOL].contains(&(frame.class, frame.id)) {
         return None;
     }
-    match ubx::decode(frame) {
-        Ok(Some(UbxMessage::NavPvt(pvt))) => Some(pvt),
+    ubx::decode(frame).ok().flatten()
+}
+
+/// The UTC a solution frame states (NAV-SOL's GPS time with the leap seconds of its date).
+fn ubx_utc(frame: &UbxFrame<'_>) -> Option<NaiveDateTime> {
+    match solution(frame)? {
+        UbxMessage::NavPvt(pvt) => pvt.utc,
+        UbxMessage::NavSol(sol) => sol.utc(None),
         _ => None,
     }
 }
@@ -214,7 +220,7 @@ fn is_position_report(frame: &Frame<'_>) -> bool {
             let sentence = Sentence::parse(body);
             sentence.talker != "P" && matches!(sentence.kind, "GGA" | "GNS" | "RMC" | "KSXT")
         }
-        Frame::Ubx(frame) => nav_pvt(frame).is_some(),
+        Frame::Ubx(frame) => solution(frame).is_some(),
     }
 }
 
@@ -240,7 +246,7 @@ fn find_start(input: Box<dyn BufRead>) -> Result<Start, RecordError> {
         return Err(RecordError::Import(format!("reading the log: {e}")));
     }
     let (first_time, first_date) = first.ok_or_else(|| {
-        RecordError::Import("no sentence or NAV-PVT with a UTC time in the log".into())
+        RecordError::Import("no sentence, NAV-PVT or NAV-SOL with a UTC time in the log".into())
     })?;
     let date = match first_dated {
         // Lines before the first date that show a later time of day were on the day before.

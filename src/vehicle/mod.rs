@@ -1427,7 +1427,7 @@ impl Vehicle {
         let here = Geodetic {
             lat_deg: p.value.latitude_deg,
             lon_deg: p.value.longitude_deg,
-            h_m: p.value.altitude_msl_m.unwrap_or(0.0) + p.value.geoid_separation_m.unwrap_or(0.0),
+            h_m: p.value.height_above_ellipsoid_m(),
         };
         // Without a configured datum the first valid fix of any quality is the origin.
         if self.localizer.offer_datum(here) {
@@ -1524,6 +1524,7 @@ mod tests {
                     longitude_deg: 113.0,
                     altitude_msl_m: None,
                     geoid_separation_m: None,
+                    ellipsoid_height_m: None,
                 },
                 rx: at(ms),
             }),

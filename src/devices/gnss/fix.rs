@@ -10,8 +10,9 @@ use chrono::{NaiveDateTime, NaiveTime};
 use super::decode::{
     FixQuality, GnssSentence, GroundVelocity, GstAccuracy, PositionReport, TrueHeading,
 };
-use super::ubx::{NavPvt, UbxMessage};
+use super::ubx::{NavPvt, NavSol, UbxMessage};
 use super::utc::UtcTracker;
+use crate::fusion::geodesy::Geodetic;
 use crate::time::Timestamp;
 
 /// A value with the host time at which it was received.
@@ -34,6 +35,19 @@ pub struct GeoPosition {
     pub altitude_msl_m: Option<f64>,
     /// Geoid separation (ellipsoid minus MSL), metres.
     pub geoid_separation_m: Option<f64>,
+    /// Height above the ellipsoid, metres, where the receiver states it apart (UBX NAV-SOL
+    /// gives no MSL height).
+    pub ellipsoid_height_m: Option<f64>,
+}
+
+impl GeoPosition {
+    /// Height above the ellipsoid, m: as stated, else MSL height plus geoid separation
+    /// (either taken as 0 when absent).
+    pub fn height_above_ellipsoid_m(&self) -> f64 {
+        self.ellipsoid_height_m.unwrap_or_else(|| {
+            self.altitude_msl_m.unwrap_or(0.0) + self.geoid_separation_m.unwrap_or(0.0)
+        })
+    }
 }
 
 /// The receiver's current solution, as far as the sentences so far describe it.
@@ -79,6 +93,8 @@ pub struct FixAssembler {
     ubx_epoch: Option<u32>,
     /// ... when that NAV-PVT gave a valid position.
     ubx_located: bool,
+    /// The receiver's GPS−UTC leap seconds (NAV-TIMEGPS), once valid.
+    leap_s: Option<i8>,
 }
 
 impl FixAssembler {
@@ -171,6 +187,13 @@ impl FixAssembler {
     pub fn apply_ubx(&mut self, rx: Timestamp, message: &UbxMessage) -> bool {
         match message {
             UbxMessage::NavPvt(pvt) => self.apply_pvt(rx, pvt),
+            // A receiver that sends both: NAV-SOL comes first in the epoch, and NAV-PVT,
+            // with its own UTC and MSL height, then describes the same solution.
+            UbxMessage::NavSol(sol) => self.apply_sol(rx, sol),
+            UbxMessage::NavTimeGps(time) => {
+                self.leap_s = time.leap_s.or(self.leap_s);
+                return false;
+            }
             UbxMessage::NavHpPosLlh(hp) => {
                 let refines = self.ubx_located && self.ubx_epoch == Some(hp.itow_ms);
                 let Some(position) = self.fix.position.as_mut().filter(|_| refines) else {
@@ -186,6 +209,7 @@ impl FixAssembler {
                     longitude_deg: hp.longitude_deg,
                     altitude_msl_m: Some(hp.height_msl_m),
                     geoid_separation_m: Some(hp.height_m - hp.height_msl_m),
+                    ellipsoid_height_m: Some(hp.height_m),
                 };
             }
             UbxMessage::NavCov(cov) => {
@@ -270,6 +294,50 @@ impl FixAssembler {
         });
     }
 
+    fn apply_sol(&mut self, rx: Timestamp, sol: &NavSol) {
+        self.ubx_epoch = Some(sol.itow_ms);
+        let utc = sol.utc(self.leap_s);
+        if let Some(utc) = utc {
+            self.enter_epoch(Some(utc.time()));
+            self.utc.observe(utc.time(), Some(utc.date()));
+        }
+        self.epoch_has_position_report = true;
+        let quality = sol.quality();
+        let [x, y, z] = sol.ecef_m;
+        let here = Geodetic::from_ecef(&nalgebra::Vector3::new(x, y, z));
+        let located = matches!(sol.fix_type, 1..=4) && (x, y, z) != (0.0, 0.0, 0.0);
+        self.ubx_located = located && quality.is_valid();
+        self.apply_report(
+            rx,
+            &PositionReport {
+                time: utc.map(|t| t.time()),
+                quality,
+                latitude: located.then_some(here.lat_deg),
+                longitude: located.then_some(here.lon_deg),
+                satellites: Some(u16::from(sol.satellites)),
+                ..PositionReport::default()
+            },
+        );
+        if let Some(p) = self.fix.position.as_mut().filter(|p| p.rx == rx && located) {
+            p.value.ellipsoid_height_m = Some(here.h_m);
+        }
+        if !quality.is_valid() {
+            return;
+        }
+        // pAcc is three-dimensional: a third of its square on each axis.
+        let per_axis = sol.p_acc_m / 3f64.sqrt();
+        self.fix.accuracy = Some(Timed {
+            value: GstAccuracy {
+                time: self.fix.utc_time,
+                latitude_sd_m: Some(per_axis),
+                longitude_sd_m: Some(per_axis),
+                altitude_sd_m: Some(per_axis),
+                ..GstAccuracy::default()
+            },
+            rx,
+        });
+    }
+
     fn apply_heading(&mut self, rx: Timestamp, heading: TrueHeading) {
         let TrueHeading {
             heading_deg,
@@ -294,6 +362,7 @@ impl FixAssembler {
                 longitude_deg,
                 altitude_msl_m: report.altitude_msl,
                 geoid_separation_m: report.geoid_separation,
+                ellipsoid_height_m: None,
             }),
             _ => None,
         };

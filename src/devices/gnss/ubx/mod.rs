@@ -22,6 +22,10 @@ use super::decode::{DecodeError, FixQuality, TrueHeading};
 pub enum UbxMessage {
     /// NAV-PVT: the navigation solution.
     NavPvt(NavPvt),
+    /// NAV-SOL: the navigation solution in ECEF with GPS time (u-blox 6 to 8).
+    NavSol(NavSol),
+    /// NAV-TIMEGPS: GPS time and the leap seconds.
+    NavTimeGps(NavTimeGps),
     /// NAV-HPPOSLLH: the position at full precision.
     NavHpPosLlh(NavHpPosLlh),
     /// NAV-COV: the position's covariance.
@@ -51,6 +55,8 @@ pub enum UbxMessage {
 
 /// NAV-PVT's class and id.
 pub const NAV_PVT: (u8, u8) = (0x01, 0x07);
+/// NAV-SOL's class and id.
+pub const NAV_SOL: (u8, u8) = (0x01, 0x06);
 
 /// The name of a UBX message by class and id, where chassisd knows it.
 pub fn message_name(class: u8, id: u8) -> Option<&'static str> {
@@ -58,6 +64,7 @@ pub fn message_name(class: u8, id: u8) -> Option<&'static str> {
         (0x01, 0x01) => "NAV-POSECEF",
         (0x01, 0x03) => "NAV-STATUS",
         (0x01, 0x04) => "NAV-DOP",
+        (0x01, 0x06) => "NAV-SOL",
         (0x01, 0x07) => "NAV-PVT",
         (0x01, 0x11) => "NAV-VELECEF",
         (0x01, 0x13) => "NAV-HPPOSECEF",
@@ -93,6 +100,8 @@ pub fn decode(frame: &UbxFrame<'_>) -> Result<Option<UbxMessage>, DecodeError> {
     let p = Fields::new(frame);
     Ok(Some(match (frame.class, frame.id) {
         (0x01, 0x07) => UbxMessage::NavPvt(NavPvt::decode(p)?),
+        (0x01, 0x06) => UbxMessage::NavSol(NavSol::decode(p)?),
+        (0x01, 0x20) => UbxMessage::NavTimeGps(NavTimeGps::decode(p)?),
         (0x01, 0x14) => UbxMessage::NavHpPosLlh(NavHpPosLlh::decode(p)?),
         (0x01, 0x36) => UbxMessage::NavCov(NavCov::decode(p)?),
         (0x01, 0x3c) => UbxMessage::NavRelPosNed(NavRelPosNed::decode(p)?),
@@ -347,6 +356,145 @@ fn utc_of(
         + TimeDelta::seconds(i64::from(second));
     let ms = (i64::from(nano) + if nano < 0 { -500_000 } else { 500_000 }) / 1_000_000;
     Some(whole + TimeDelta::milliseconds(ms))
+}
+
+/// NAV-SOL (`01 06`, 52 bytes): the solution as u-blox 6 to 8 (and their timing receivers)
+/// send it, in ECEF with GPS time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NavSol {
+    /// GPS time of week, ms.
+    pub itow_ms: u32,
+    /// GPS week and time of week (s, with `fTOW`), when the receiver marks both set.
+    pub gps_time: Option<(u16, f64)>,
+    /// Fix type, as NAV-PVT's.
+    pub fix_type: u8,
+    /// The fix is within the receiver's limits (`gpsFixOk`).
+    pub fix_ok: bool,
+    /// Differential corrections applied.
+    pub differential: bool,
+    /// ECEF position, m.
+    pub ecef_m: [f64; 3],
+    /// 3D position accuracy, m.
+    pub p_acc_m: f64,
+    /// ECEF velocity, m/s.
+    pub ecef_velocity_mps: [f64; 3],
+    /// Position DOP.
+    pub pdop: f64,
+    /// Satellites used.
+    pub satellites: u8,
+}
+
+impl NavSol {
+    fn decode(p: Fields<'_>) -> Result<Self, DecodeError> {
+        let p = p.need(52)?;
+        let flags = p.u8(11);
+        let itow_ms = p.u32(0);
+        // Week number and time of week both set.
+        let gps_time = (flags & 0x0c == 0x0c).then(|| {
+            (
+                p.u16(8),
+                f64::from(itow_ms) * 1e-3 + f64::from(p.i32(4)) * 1e-9,
+            )
+        });
+        let cm = |at: usize| f64::from(p.i32(at)) * 1e-2;
+        Ok(Self {
+            itow_ms,
+            gps_time,
+            fix_type: p.u8(10),
+            fix_ok: flags & 0x01 != 0,
+            differential: flags & 0x02 != 0,
+            ecef_m: [cm(12), cm(16), cm(20)],
+            p_acc_m: f64::from(p.u32(24)) * 1e-2,
+            ecef_velocity_mps: [cm(28), cm(32), cm(36)],
+            pdop: f64::from(p.u16(44)) * 0.01,
+            satellites: p.u8(47),
+        })
+    }
+
+    /// The fix quality, as GGA would state it (NAV-SOL has no carrier solution).
+    pub fn quality(&self) -> FixQuality {
+        quality_of(
+            self.fix_type,
+            self.fix_ok,
+            self.differential,
+            CarrierSolution::None,
+        )
+    }
+
+    /// UTC of the epoch, to the millisecond, with `leap_s` GPS−UTC leap seconds (the
+    /// receiver's from NAV-TIMEGPS, else [`leap_seconds_at`]).
+    pub fn utc(&self, leap_s: Option<i8>) -> Option<NaiveDateTime> {
+        let (week, tow) = self.gps_time?;
+        let gps = gps_epoch()
+            + TimeDelta::weeks(i64::from(week))
+            + TimeDelta::milliseconds((tow * 1e3).round() as i64);
+        let leap = leap_s.map_or_else(|| leap_seconds_at(gps), i64::from);
+        Some(gps - TimeDelta::seconds(leap))
+    }
+}
+
+/// NAV-TIMEGPS (`01 20`, 16 bytes): GPS time and GPS−UTC leap seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NavTimeGps {
+    /// GPS time of week, ms.
+    pub itow_ms: u32,
+    /// GPS−UTC leap seconds, when the receiver marks them valid (from the almanac, not its
+    /// firmware's default).
+    pub leap_s: Option<i8>,
+}
+
+impl NavTimeGps {
+    fn decode(p: Fields<'_>) -> Result<Self, DecodeError> {
+        let p = p.need(16)?;
+        Ok(Self {
+            itow_ms: p.u32(0),
+            leap_s: (p.u8(11) & 0x04 != 0).then(|| p.i8(10)),
+        })
+    }
+}
+
+/// The GPS time scale's start, 1980-01-06 00:00:00.
+fn gps_epoch() -> NaiveDateTime {
+    NaiveDate::from_ymd_opt(1980, 1, 6)
+        .and_then(|d| d.and_hms_opt(0, 0, 0))
+        .unwrap_or_default()
+}
+
+/// GPS−UTC at GPS time `gps`, from the leap seconds IERS has announced (the last at the end
+/// of 2016; none since, to the Bulletin C of 2026). A receiver's NAV-TIMEGPS, when valid,
+/// takes precedence.
+pub fn leap_seconds_at(gps: NaiveDateTime) -> i64 {
+    // UTC dates from which GPS−UTC is 1, 2, ...; a GPS time passes each date that many
+    // seconds after UTC does.
+    const STEPS: [(i32, u32); 18] = [
+        (1981, 7),
+        (1982, 7),
+        (1983, 7),
+        (1985, 7),
+        (1988, 1),
+        (1990, 1),
+        (1991, 1),
+        (1992, 7),
+        (1993, 7),
+        (1994, 7),
+        (1996, 1),
+        (1997, 7),
+        (1999, 1),
+        (2006, 1),
+        (2009, 1),
+        (2012, 7),
+        (2015, 7),
+        (2017, 1),
+    ];
+    STEPS
+        .iter()
+        .enumerate()
+        .take_while(|(i, (year, month))| {
+            NaiveDate::from_ymd_opt(*year, *month, 1)
+                .and_then(|d| d.and_hms_opt(0, 0, 0))
+                .is_some_and(|step| gps - TimeDelta::seconds(*i as i64 + 1) >= step)
+        })
+        .count() as i64
 }
 
 /// NAV-HPPOSLLH (`01 14`, 36 bytes).
@@ -776,6 +924,35 @@ mod tests {
         let mut sat = vec![0u8; 8 + 12];
         sat[5] = 2;
         assert!(decode(&frame(1, 0x35, &sat)).is_err());
+    }
+
+    #[test]
+    fn gps_time_becomes_utc_across_leap_seconds() {
+        let at = |s: &str| NaiveDateTime::parse_from_str(s, "%Y-%m-%d %H:%M:%S").unwrap();
+        assert_eq!(leap_seconds_at(at("1980-01-06 00:00:00")), 0);
+        assert_eq!(leap_seconds_at(at("2016-12-31 23:59:59")), 17);
+        // UTC 2017-01-01 00:00:00 is GPS 00:00:18.
+        assert_eq!(leap_seconds_at(at("2017-01-01 00:00:17")), 17);
+        assert_eq!(leap_seconds_at(at("2017-01-01 00:00:18")), 18);
+        assert_eq!(leap_seconds_at(at("2026-11-28 12:00:00")), 18);
+        let sol = NavSol {
+            itow_ms: 0,
+            gps_time: Some((2190, 365_174.0)),
+            fix_type: 3,
+            fix_ok: true,
+            differential: false,
+            ecef_m: [0.0; 3],
+            p_acc_m: 1.0,
+            ecef_velocity_mps: [0.0; 3],
+            pdop: 1.0,
+            satellites: 9,
+        };
+        // GPS week 2190, 365,174 s: 2021-12-30 05:26:14 GPS, 05:25:56 UTC.
+        assert_eq!(sol.utc(None).unwrap().to_string(), "2021-12-30 05:25:56");
+        assert_eq!(
+            sol.utc(Some(17)).unwrap().to_string(),
+            "2021-12-30 05:25:57"
+        );
     }
 
     #[test]
