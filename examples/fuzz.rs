@@ -40,7 +40,7 @@ use chassisd::devices::imu::ImuDecoder;
 use chassisd::devices::imu::{hipnuc::HiPnuc, witmotion::WitMotion};
 use chassisd::engine::EngineOutput;
 use chassisd::engine::drivetrain::Drivetrain;
-use chassisd::fusion::geodesy::{Enu, Geodetic};
+use chassisd::geodesy::{Enu, Geodetic};
 use chassisd::record::meta::Meta;
 use chassisd::record::reader::parse_line;
 use chassisd::record::{Payload, Record, RecordingReader, SourceKind};

@@ -13,6 +13,7 @@ pub mod control;
 pub mod devices;
 pub mod engine;
 pub mod fusion;
+pub mod geodesy;
 pub mod ntrip;
 pub mod record;
 pub mod replay;

@@ -15,7 +15,7 @@ use chassisd::bench::real::recording::Epoch;
 use chassisd::devices::gnss::FixQuality;
 use chassisd::devices::gnss::encode::sentence;
 use chassisd::engine::EngineOutput;
-use chassisd::fusion::geodesy::{Enu, Geodetic};
+use chassisd::geodesy::{Enu, Geodetic};
 use chassisd::record::{Payload, Record};
 use chassisd::sim::lockstep::{GNSS_SOURCE, Lockstep, PLANT_STEP, Sink};
 use chassisd::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};

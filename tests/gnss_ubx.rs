@@ -242,7 +242,7 @@ fn a_relposned_heading_is_the_vehicles_rtk_angle_in_a_replay() {
 /// the shared logs; gpsd's own logs of four such receivers agree, see docs/protocols/ubx.md).
 #[test]
 fn nav_sol_gives_the_position_from_ecef_and_utc_from_gps_time() {
-    use chassisd::fusion::geodesy::Geodetic;
+    use chassisd::geodesy::Geodetic;
     let here = Geodetic {
         lat_deg: 45.218_541_1,
         lon_deg: 5.807_177_5,

@@ -10,7 +10,7 @@ use std::path::Path;
 /// layers below its own, never those of its own layer or above. The binary (`src/main.rs`,
 /// `src/cli/`) sits above them all.
 const LAYERS: &[&[&str]] = &[
-    &["time", "secret"],
+    &["time", "secret", "geodesy"],
     &["devices", "fusion", "broker"],
     &["ntrip", "control", "zones"],
     &["config"],

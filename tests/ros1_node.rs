@@ -434,7 +434,7 @@ fn set_shape_adds_a_wall_that_refuses_a_task_and_a_move_through_it_the_file_keep
 
     // A task through it, started over MQTT (rtk dialect), is refused naming it: a path
     // from 0.5 m to 2.8 m east (short of the pond), saved first.
-    let frame = chassisd::fusion::geodesy::Enu::new(plant.datum());
+    let frame = chassisd::geodesy::Enu::new(plant.datum());
     let points: Vec<serde_json::Value> = (5..=28)
         .map(|i| {
             let x = f64::from(i) * 0.1;

@@ -4,8 +4,8 @@
 
 use chassisd::devices::gnss::FixQuality;
 use chassisd::engine::EngineOutput;
-use chassisd::fusion::geodesy::Enu;
 use chassisd::fusion::planar::wrap;
+use chassisd::geodesy::Enu;
 use chassisd::record::Record;
 use chassisd::sim::lockstep::{Lockstep, Sink};
 use chassisd::sim::plant::{GnssCondition, PlantConfig, Truth};

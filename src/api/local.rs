@@ -47,7 +47,7 @@ use serde::Deserialize;
 use super::adapter::RequestAdapter;
 
 use super::requests;
-use crate::fusion::geodesy::Geodetic;
+use crate::geodesy::Geodetic;
 use crate::vehicle::{Command, PathPoints, PathRequest};
 
 /// Topic of velocity commands.

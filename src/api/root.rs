@@ -24,7 +24,7 @@ use super::mqtt::{CoreAccess, Dialect, Publish};
 use crate::control::mission::{MAX_STEPS, MissionEvent, MissionStep};
 use crate::control::{MotionTag, Outcome};
 use crate::devices::bms::ChargeState;
-use crate::fusion::geodesy::Geodetic;
+use crate::geodesy::Geodetic;
 use crate::time::Timestamp;
 use crate::vehicle::{Command, DriveMode, Localization, VehicleStatus, chassis::status_bits};
 

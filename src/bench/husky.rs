@@ -10,9 +10,9 @@ use std::path::Path;
 use crate::bench::error::BenchError;
 use serde::Serialize;
 
-use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::map_filter::{Fix, MapFilter, MapFilterConfig, PointPair, Trust, rigid_fit};
 use crate::fusion::odometry::{OdomPose, Odometry, WheelReading};
+use crate::geodesy::{Enu, Geodetic};
 use crate::time::Timestamp;
 
 /// The Husky's track, m (its README).

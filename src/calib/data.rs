@@ -9,7 +9,7 @@ use nalgebra::Vector3;
 use crate::config::{ConfigError, VehicleConfig};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::engine::{EngineOutput, Measured};
-use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::geodesy::{Enu, Geodetic};
 use crate::record::RecordError;
 use crate::replay::{self, Consumer, ReplayError, ReplayOptions};
 use crate::time::Timestamp;

@@ -6,8 +6,8 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use super::{ConfigError, VehicleConfig, check_range};
-use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::LocalizerConfig;
+use crate::geodesy::Geodetic;
 
 /// `[localization]`
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
@@ -184,7 +184,7 @@ impl LocalizationConfig {
                 file,
                 "localization.datum[2]",
                 h,
-                crate::fusion::geodesy::PLAUSIBLE_HEIGHT_M,
+                crate::geodesy::PLAUSIBLE_HEIGHT_M,
                 "m",
             )?;
         }

@@ -11,7 +11,6 @@ use std::time::Duration;
 use nalgebra::Vector3;
 
 use super::course::{self, CourseLag, CourseNoise};
-use super::geodesy::{Enu, Geodetic};
 use super::gnss_only::GnssOnly;
 use super::gyro_drift::{Drift, GyroDrift};
 use super::map_filter::{Fix, FixOutcome, MapFilter, MapFilterConfig, Trust};
@@ -19,6 +18,7 @@ use super::odometry::OdomPose;
 pub use super::planar::heading_deg_of_yaw;
 use super::planar::wrap;
 use super::wheel_scale::WheelScale;
+use crate::geodesy::{Enu, Geodetic};
 use crate::time::Timestamp;
 
 /// A vehicle slower than [`crate::fusion::odometry::STILL_MPS`] and turning slower than this

@@ -3,7 +3,6 @@
 
 pub mod course;
 pub mod epoch_clock;
-pub mod geodesy;
 pub mod gnss_only;
 pub mod gyro_drift;
 pub mod localizer;

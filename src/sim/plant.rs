@@ -34,8 +34,8 @@ use crate::devices::can::Frame;
 use crate::devices::canopen::NodeId;
 use crate::devices::gnss::FixQuality;
 use crate::devices::imu::{G, hipnuc, witmotion};
-use crate::fusion::geodesy::{Enu, Geodetic};
 use crate::fusion::planar::wrap;
+use crate::geodesy::{Enu, Geodetic};
 use crate::record::{Payload, Record};
 use crate::time::Timestamp;
 

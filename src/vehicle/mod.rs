@@ -28,12 +28,12 @@ use crate::devices::bms::{BmsReading, is_stale};
 use crate::devices::gnss::{FixQuality, GnssFix};
 use crate::devices::imu::ImuSample;
 use crate::fusion::epoch_clock::EpochClock;
-use crate::fusion::geodesy::Geodetic;
 use crate::fusion::localizer::{
     Localizer, LocalizerConfig, LocateState, Measurement, yaw_of_heading_deg,
 };
 use crate::fusion::map_filter::Trust;
 use crate::fusion::odometry::{OdomPose, Odometry, WheelReading};
+use crate::geodesy::Geodetic;
 use crate::time::Timestamp;
 pub use chassis::DriveMode;
 use chassis::{Chassis, ChassisFeedback, CommandRejected, WheelCommand};
@@ -219,7 +219,7 @@ fn plausible_pose(x: f64, y: f64, yaw: f64, radius_m: f64) -> Result<(), Command
 
 /// A place on the Earth: latitude ±90°, longitude ±180°, a height a ground vehicle can have.
 fn plausible_place(p: &Geodetic) -> Result<(), CommandRejected> {
-    let height = crate::fusion::geodesy::PLAUSIBLE_HEIGHT_M;
+    let height = crate::geodesy::PLAUSIBLE_HEIGHT_M;
     for (what, value, min, max, unit) in [
         ("latitude", p.lat_deg, -90.0, 90.0, "degrees"),
         ("longitude", p.lon_deg, -180.0, 180.0, "degrees"),

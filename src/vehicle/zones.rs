@@ -301,7 +301,7 @@ impl ZoneGuard {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fusion::geodesy::{Enu, Geodetic};
+    use crate::geodesy::{Enu, Geodetic};
     use crate::zones::{Shape, ZoneKind};
     use nalgebra::Vector3;
 

@@ -330,7 +330,7 @@ fn conflict(zone: &LocalZone, at: (f64, f64), clearance_m: f64) -> Conflict {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fusion::geodesy::{Enu, Geodetic};
+    use crate::geodesy::{Enu, Geodetic};
     use nalgebra::Vector3;
 
     fn frame() -> Enu {

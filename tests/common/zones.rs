@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use chassisd::api::trajectory::MemoryStore;
 use chassisd::config::zones::ZonesConfig;
-use chassisd::fusion::geodesy::Enu;
+use chassisd::geodesy::Enu;
 use chassisd::sim::lockstep::{Lockstep, Sections};
 use chassisd::sim::plant::PlantConfig;
 use chassisd::vehicle::Localization;

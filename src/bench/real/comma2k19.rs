@@ -19,7 +19,7 @@ use nalgebra::Vector3;
 use crate::bench::error::{BenchError, Result};
 use crate::config::chassis::WheelRadius;
 use crate::devices::gnss::FixQuality;
-use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::geodesy::{Enu, Geodetic};
 use crate::record::Record;
 use crate::sim::plant::{ForcedMotion, PlantConfig};
 

@@ -12,7 +12,7 @@ use super::decode::{
 };
 use super::ubx::{NavPvt, NavSol, UbxMessage};
 use super::utc::UtcTracker;
-use crate::fusion::geodesy::Geodetic;
+use crate::geodesy::Geodetic;
 use crate::time::Timestamp;
 
 /// A value with the host time at which it was received.

@@ -32,7 +32,7 @@ use crate::devices::gnss::GnssReceiver;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::ubx::config::Layers;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
-use crate::fusion::geodesy::{Enu, Geodetic};
+use crate::geodesy::{Enu, Geodetic};
 use crate::runtime::drivers::ublox::{Dialogue, port_name};
 use crate::runtime::links::broker::BrokerHealth;
 use crate::time::Timestamp;
