@@ -7,7 +7,6 @@
 
 mod common;
 
-use std::process::Command;
 use std::sync::Mutex;
 
 use common::mqtt::{Mosquitto, free_port};
@@ -17,21 +16,7 @@ use common::pty::{Port, Talker};
 static SERIAL: Mutex<()> = Mutex::new(());
 
 fn check(config: &str, dir: &std::path::Path) -> (Option<i32>, String) {
-    let path = dir.join("vehicle.toml");
-    std::fs::write(&path, config).expect("config");
-    let out = Command::new(common::chassisd())
-        .args(["check", "--config"])
-        .arg(&path)
-        .output()
-        .expect("chassisd runs");
-    (
-        out.status.code(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        ),
-    )
+    common::check(config, dir, &[])
 }
 
 /// The table's line for `device`, and the line after it.

@@ -9,7 +9,6 @@ mod common;
 
 use std::collections::BTreeMap;
 use std::io::{Read, Write};
-use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -151,26 +150,11 @@ fn start(port: Port, behaviour: Behaviour) -> Receiver {
 }
 
 fn check(dir: &std::path::Path, receiver: &str, args: &[&str]) -> (Option<i32>, String) {
-    let path = dir.join("vehicle.toml");
     let config = format!(
         "[gnss]\nport = \"{}\"\nreceiver = \"{receiver}\"\n",
         dir.join("gnss-port").display()
     );
-    std::fs::write(&path, config).expect("config");
-    let out = Command::new(common::chassisd())
-        .args(["check", "--config"])
-        .arg(&path)
-        .args(args)
-        .output()
-        .expect("chassisd runs");
-    (
-        out.status.code(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        ),
-    )
+    common::check(&config, dir, args)
 }
 
 const F9P: Behaviour = Behaviour {

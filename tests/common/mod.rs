@@ -20,6 +20,27 @@ pub fn replay(path: &Path) -> Output {
     replay_with(&[], path)
 }
 
+/// `chassisd check --config DIR/vehicle.toml ARGS` with `config` written there: the exit
+/// status, and stdout and stderr together.
+pub fn check(config: &str, dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let path = dir.join("vehicle.toml");
+    std::fs::write(&path, config).expect("config");
+    let out = Command::new(chassisd())
+        .args(["check", "--config"])
+        .arg(&path)
+        .args(args)
+        .output()
+        .expect("chassisd runs");
+    (
+        out.status.code(),
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        ),
+    )
+}
+
 /// `chassisd replay OPTIONS PATH`, which must succeed.
 fn replay_with(options: &[&str], path: &Path) -> Output {
     let out = Command::new(chassisd())
