@@ -312,6 +312,8 @@ struct CoreAt<'a> {
     /// What a command put out beside its answer (a log event, the zones changed), for the
     /// engine's outputs once the adapter is done.
     aside: Vec<EngineOutput>,
+    /// The core refused a command (its refusal went out in the protocol's reply).
+    refused: bool,
 }
 
 impl<'a> CoreAt<'a> {
@@ -320,6 +322,7 @@ impl<'a> CoreAt<'a> {
             vehicle,
             t,
             aside: Vec::new(),
+            refused: false,
         }
     }
 }
@@ -329,7 +332,10 @@ impl CoreAccess for CoreAt<'_> {
         let mut result = Ok(());
         for output in self.vehicle.handle(self.t, Input::Command(command)) {
             match output {
-                Output::CommandResult(r) => result = r,
+                Output::CommandResult(r) => {
+                    self.refused |= r.is_err();
+                    result = r;
+                }
                 Output::Event(event) => self.aside.push(EngineOutput::Event(event)),
                 Output::ZonesChanged(text) => self.aside.push(EngineOutput::ZonesChanged(text)),
                 _ => {}
@@ -583,6 +589,8 @@ impl Engine {
                 let mut core = CoreAt::new(&mut self.vehicle, t);
                 let mut replies = Vec::new();
                 match adapter.on_request(t, topic, payload, &mut core, &mut replies) {
+                    // The core's refusal goes out in the protocol's own reply, and counts.
+                    Handled::Taken if core.refused => self.stats.commands_rejected += 1,
                     Handled::Taken => {}
                     Handled::Refused => self.stats.commands_rejected += 1,
                     Handled::NotOwned => self.stats.commands_without_dialect += 1,
@@ -943,6 +951,37 @@ mod tests {
                 _ => None,
             })
             .collect()
+    }
+
+    /// A refusal the core answers in the protocol's own reply is a refused command in the
+    /// engine's counts, and so in the run's summary.
+    #[test]
+    fn a_command_the_core_refuses_counts_as_refused() {
+        let config = VehicleConfig::from_toml(
+            "[mqtt]\nhost = \"127.0.0.1\"\n\n[mqtt.root]\nvehicle_id = \"v1\"\n",
+            std::path::Path::new("vehicle.toml"),
+        )
+        .expect("configuration");
+        let mut e = Engine::new(&config, &[]);
+        let mut out = Vec::new();
+        let request = |us: u64, topic: &str, payload: &str| Record {
+            t: Timestamp::from_micros(us),
+            source: MQTT_SOURCE.into(),
+            payload: Payload::Command {
+                topic: topic.into(),
+                payload: bytes::Bytes::from(payload.to_owned()),
+            },
+        };
+        e.handle(
+            &request(1_000, "/root/v1/heartbeat/set", r#"{"clientId": "op"}"#),
+            &mut out,
+        );
+        assert_eq!((e.stats().commands, e.stats().commands_rejected), (1, 0));
+        // No drives: the core refuses a DRIVE, and the reply says so with its code.
+        let drive =
+            r#"{"messageId": 1, "messageType": 100, "data": {"linear": 0.1, "angular": 0}}"#;
+        e.handle(&request(2_000, "/root/v1/cmd/chassis/set", drive), &mut out);
+        assert_eq!((e.stats().commands, e.stats().commands_rejected), (2, 1));
     }
 
     fn serial(us: u64, source: &str, bytes: &[u8]) -> Record {
