@@ -194,6 +194,22 @@ fn bad_input_paths_fail_clearly() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("/nonexistent/recording"), "{stderr}");
+    // The operating system's reason, once.
+    assert_eq!(
+        stderr.matches("No such file or directory").count(),
+        1,
+        "{stderr}"
+    );
+    // A folder without meta.toml is named for what it is not.
+    let empty = common::tempdir("not-a-recording");
+    let out = Command::new(common::chassisd())
+        .arg("replay")
+        .arg(&empty)
+        .output()
+        .expect("chassisd runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("not a recording: no meta.toml"), "{stderr}");
 }
 
 /// A CAN session recorded on vcan0 in the VM (tests/vm/record-can-fixture): two CiA 402

@@ -118,7 +118,20 @@ impl Meta {
     /// Reads and checks `dir/meta.toml`.
     pub fn load(dir: &Path) -> Result<Self, RecordError> {
         let path = dir.join(META_FILE);
-        let text = super::read_small(&path, MAX_META_BYTES)?;
+        let text = match super::read_small(&path, MAX_META_BYTES) {
+            Err(RecordError::Io { error, .. })
+                if error.kind() == std::io::ErrorKind::NotFound && dir.is_dir() =>
+            {
+                return Err(RecordError::Meta {
+                    path: dir.to_path_buf(),
+                    message: format!(
+                        "not a recording: no {META_FILE} in this folder (`chassisd record` \
+                         writes one; a plain receiver log is a file: give its path)"
+                    ),
+                });
+            }
+            other => other?,
+        };
         let meta: Meta = toml::from_str(&text).map_err(|e| RecordError::Meta {
             path: path.clone(),
             message: e.to_string(),

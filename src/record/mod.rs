@@ -54,7 +54,7 @@ pub enum Payload {
 pub fn open_regular(path: &std::path::Path) -> Result<std::fs::File, RecordError> {
     let io = |source| RecordError::Io {
         path: path.to_path_buf(),
-        source,
+        error: source,
     };
     let kind = std::fs::metadata(path).map_err(io)?.file_type();
     if !kind.is_file() {
@@ -72,7 +72,7 @@ pub fn read_small(path: &std::path::Path, limit: u64) -> Result<String, RecordEr
     use std::io::Read as _;
     let io = |source| RecordError::Io {
         path: path.to_path_buf(),
-        source,
+        error: source,
     };
     let too_big = || {
         io(std::io::Error::new(
@@ -98,12 +98,14 @@ pub fn read_small(path: &std::path::Path, limit: u64) -> Result<String, RecordEr
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
     /// File system trouble.
-    #[error("{path}: {source}")]
+    /// (The reason is in the message, not a source too: a chain of causes would print it
+    /// twice.)
+    #[error("{path}: {error}")]
     Io {
         /// The file or folder.
         path: std::path::PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// `meta.toml` is missing or invalid.
     #[error("{path}: {message}")]

@@ -368,7 +368,7 @@ fn read_covered(dir: &Path) -> Result<Option<Timestamp>, RecordError> {
     let path = dir.join(COVERED_FILE);
     let text = match super::read_small(&path, MAX_COVERED_BYTES) {
         Ok(text) => text,
-        Err(RecordError::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+        Err(RecordError::Io { error, .. }) if error.kind() == std::io::ErrorKind::NotFound => {
             return Ok(None);
         }
         Err(e) => return Err(e),

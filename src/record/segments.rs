@@ -77,7 +77,7 @@ impl SegmentedWriter {
         if not_empty {
             return Err(RecordError::Io {
                 path: root.to_owned(),
-                source: std::io::Error::new(
+                error: std::io::Error::new(
                     std::io::ErrorKind::AlreadyExists,
                     "recording folder is not empty; choose a new one",
                 ),
@@ -155,7 +155,7 @@ impl SegmentedWriter {
         if dir.exists() {
             std::fs::remove_dir_all(&dir).map_err(|source| RecordError::Io {
                 path: dir.clone(),
-                source,
+                error: source,
             })?;
         }
         let next = RecordingWriter::create(

@@ -53,14 +53,17 @@ impl RecordingWriter {
         }
         let io = |path: &Path| {
             let path = path.to_owned();
-            move |source| RecordError::Io { path, source }
+            move |source| RecordError::Io {
+                path,
+                error: source,
+            }
         };
         if dir.exists() {
             let mut entries = std::fs::read_dir(dir).map_err(io(dir))?;
             if entries.next().is_some() {
                 return Err(RecordError::Io {
                     path: dir.to_owned(),
-                    source: std::io::Error::new(
+                    error: std::io::Error::new(
                         std::io::ErrorKind::AlreadyExists,
                         "recording folder is not empty; choose a new one",
                     ),
@@ -124,13 +127,16 @@ impl RecordingWriter {
         let path = self.dir.join(TRAJECTORIES_FILE);
         std::fs::write(&path, json).map_err(|source| RecordError::Io {
             path: path.clone(),
-            source,
+            error: source,
         })?;
         self.meta.trajectories = Some(TRAJECTORIES_FILE.to_owned());
         let meta = self.dir.join(META_FILE);
         self.meta
             .store(&self.dir)
-            .map_err(|source| RecordError::Io { path: meta, source })
+            .map_err(|source| RecordError::Io {
+                path: meta,
+                error: source,
+            })
     }
 
     /// Appends one record to its source's file (a CAN source's link events to its events
@@ -201,7 +207,7 @@ impl RecordingWriter {
         out.write_all(line.as_bytes())
             .map_err(|source| RecordError::Io {
                 path: self.dir.clone(),
-                source,
+                error: source,
             })?;
         self.latest = self.latest.max(Some(record.t));
         self.written += line.len() as u64;
@@ -232,7 +238,7 @@ impl RecordingWriter {
             .write_all_at(line.as_bytes(), 0)
             .map_err(|source| RecordError::Io {
                 path: self.dir.join(COVERED_FILE),
-                source,
+                error: source,
             })?;
         self.noted = Some(latest);
         Ok(())
@@ -244,7 +250,7 @@ impl RecordingWriter {
             for out in files.all() {
                 out.flush().map_err(|source| RecordError::Io {
                     path: self.dir.clone(),
-                    source,
+                    error: source,
                 })?;
             }
         }
@@ -260,7 +266,7 @@ impl RecordingWriter {
             for out in files.all() {
                 out.get_ref().sync_all().map_err(|source| RecordError::Io {
                     path: self.dir.clone(),
-                    source,
+                    error: source,
                 })?;
             }
         }
@@ -269,7 +275,7 @@ impl RecordingWriter {
             .store(&self.dir)
             .map_err(|source| RecordError::Io {
                 path: self.dir.join(META_FILE),
-                source,
+                error: source,
             })
     }
 }
