@@ -173,26 +173,31 @@ fn shared_logs_replay_to_status_lines() {
         b"$GPGSA,A,3,04,09,,,,,,,,,,,1.21,0.94,0.76*01\r\n",
     )
     .unwrap();
-    let out = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(&untimed)
-        .output()
-        .expect("chassisd runs");
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let stderr = replay_failing(&untimed);
     assert!(
-        !out.status.success() && stderr.contains("no sentence, NAV-PVT or NAV-SOL with a UTC time"),
+        stderr.contains("no sentence, NAV-PVT or NAV-SOL with a UTC time"),
         "{stderr}"
     );
 }
 
-#[test]
-fn bad_input_paths_fail_clearly() {
+/// `chassisd replay PATH`, which must fail: what it says.
+fn replay_failing(path: &std::path::Path) -> String {
     let out = Command::new(common::chassisd())
-        .args(["replay", "/nonexistent/recording"])
+        .arg("replay")
+        .arg(path)
         .output()
         .expect("chassisd runs");
-    assert!(!out.status.success());
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "replay of {} succeeded",
+        path.display()
+    );
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn bad_input_paths_fail_clearly() {
+    let stderr = replay_failing(std::path::Path::new("/nonexistent/recording"));
     assert!(stderr.contains("/nonexistent/recording"), "{stderr}");
     // The operating system's reason, once.
     assert_eq!(
@@ -201,14 +206,7 @@ fn bad_input_paths_fail_clearly() {
         "{stderr}"
     );
     // A folder without meta.toml is named for what it is not.
-    let empty = common::tempdir("not-a-recording");
-    let out = Command::new(common::chassisd())
-        .arg("replay")
-        .arg(&empty)
-        .output()
-        .expect("chassisd runs");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let stderr = replay_failing(&common::tempdir("not-a-recording"));
     assert!(stderr.contains("not a recording: no meta.toml"), "{stderr}");
 }
 
