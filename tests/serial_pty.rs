@@ -160,6 +160,30 @@ fn a_missing_port_is_retried_not_fatal() {
     daemon.wait_status("a fix", |l| is_status(l, 4, 23.0 + 8.98071170 / 60.0));
 }
 
+/// `check` while a running chassisd holds the receiver's port says so, and does not send
+/// the person to the cable or the dialout group.
+#[test]
+fn check_names_a_running_chassisd_holding_the_port() {
+    let _turn = one_at_a_time();
+    let dir = common::tempdir("pty-held");
+    let link = dir.join("gnss-port");
+    let _port = Port::open_at(&link);
+    let mut daemon = Daemon::start(&dir, &link, &[]);
+    daemon.wait_log("link up", "link up");
+    let checking = dir.join("check");
+    std::fs::create_dir_all(&checking).unwrap();
+    let config = format!("[gnss]\nport = \"{}\"\nbaud = 115200\n", link.display());
+    let (code, table) = common::check(&config, &checking, &[]);
+    assert_eq!(code, Some(1), "{table}");
+    assert!(table.contains("another program holds"), "{table}");
+    assert!(table.contains("systemctl stop chassisd"), "{table}");
+    assert!(
+        !table.contains("dialout") && !table.contains("cable"),
+        "{table}"
+    );
+    daemon.stop();
+}
+
 #[test]
 fn imu_over_pty_reports_health() {
     let _turn = one_at_a_time();

@@ -26,7 +26,7 @@ use serde::Serialize;
 use serde_json::Value;
 
 use super::log_budget::{self, LogBudget, SharedBudget};
-use super::mqtt::{CoreAccess, Dialect, Publish};
+use super::mqtt::{CoreAccess, Dialect, Handled, Publish};
 use crate::control::goal::GoalPose;
 use crate::control::{MotionResult, MotionTag, Outcome};
 use crate::fusion::planar::wrap;
@@ -94,7 +94,7 @@ impl DeviceDialect {
         msg_id: &Value,
         failure: Option<(u32, &str)>,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
         if let Some((code, reason)) = failure {
             static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
             if let Some(left_out) = log_budget::allow(&REFUSALS, t) {
@@ -102,6 +102,11 @@ impl DeviceDialect {
             }
         }
         self.publish_ack(t, command, msg_id, failure, out);
+        if failure.is_some() {
+            Handled::Refused
+        } else {
+            Handled::Taken
+        }
     }
 
     /// Publishes an ack (a goal's end, which the core has logged already).
@@ -191,14 +196,14 @@ impl Dialect for DeviceDialect {
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
         // The navigation stack's answer to a forwarded request: relayed as it is.
         if let Some(command) = self.forwarded_ack(topic) {
             out.push(Publish::reply(
                 format!("{}{command}/ack", self.prefix),
                 payload.to_vec(),
             ));
-            return;
+            return Handled::Taken;
         }
         let command = topic.strip_prefix(&self.prefix).unwrap_or(topic).to_owned();
         if payload.len() > self.max_payload {
@@ -227,9 +232,7 @@ impl Dialect for DeviceDialect {
         }
         match command.as_str() {
             "goal" => match parse_goal(&request["data"]) {
-                Err(reason) => {
-                    self.ack(t, &command, &msg_id, Some((BAD_REQUEST, &reason)), out);
-                }
+                Err(reason) => self.ack(t, &command, &msg_id, Some((BAD_REQUEST, &reason)), out),
                 Ok(goal) => {
                     self.next_goal += 1;
                     let tag = MotionTag {
@@ -246,10 +249,11 @@ impl Dialect for DeviceDialect {
                                 self.goals.pop_front();
                             }
                             self.goals.push_back((tag.id, msg_id));
+                            Handled::Taken
                         }
                         Err(e) => {
                             let reason = e.to_string();
-                            self.ack(t, &command, &msg_id, Some((FAILED, &reason)), out);
+                            self.ack(t, &command, &msg_id, Some((FAILED, &reason)), out)
                         }
                     }
                 }
@@ -263,7 +267,7 @@ impl Dialect for DeviceDialect {
                         .map(|e| (FAILED, e.to_string())),
                 };
                 let failure = failure.as_ref().map(|(c, m)| (*c, m.as_str()));
-                self.ack(t, &command, &msg_id, failure, out);
+                self.ack(t, &command, &msg_id, failure, out)
             }
             "reset" => {
                 let failure = core
@@ -271,10 +275,13 @@ impl Dialect for DeviceDialect {
                     .err()
                     .map(|e| (FAILED, e.to_string()));
                 let failure = failure.as_ref().map(|(c, m)| (*c, m.as_str()));
-                self.ack(t, &command, &msg_id, failure, out);
+                self.ack(t, &command, &msg_id, failure, out)
             }
             c if MAPPING.contains(&c) => match &self.forward {
-                Some(f) => out.push(Publish::reply(format!("{f}/{c}"), payload.to_vec())),
+                Some(f) => {
+                    out.push(Publish::reply(format!("{f}/{c}"), payload.to_vec()));
+                    Handled::Taken
+                }
                 None => self.ack(
                     t,
                     &command,
@@ -289,7 +296,7 @@ impl Dialect for DeviceDialect {
             },
             _ => {
                 let reason = format!("unknown command {command:?}");
-                self.ack(t, &command, &msg_id, Some((UNKNOWN, &reason)), out);
+                self.ack(t, &command, &msg_id, Some((UNKNOWN, &reason)), out)
             }
         }
     }
@@ -421,6 +428,27 @@ mod tests {
         assert_eq!(out[0].payload, ack.as_bytes());
         // Its own ack topics are not commands.
         assert!(!d.owns("device/SN1/start_mapping/ack"));
+    }
+
+    /// Every error ack is a refusal the run counts; a taken goal or a forward is not.
+    #[test]
+    fn error_acks_are_refusals() {
+        let mut d = DeviceDialect::new("SN1", None, 1 << 20);
+        let t = Timestamp::from_micros(1_757_403_776_000_000);
+        let mut handled = |topic: &str, payload: &str| {
+            d.on_message(t, topic, payload.as_bytes(), &mut NoCore, &mut Vec::new())
+        };
+        let goal = r#"{"msg_id":"a","timestamp":1757403776,"data":{"x":1,"y":2,"z":0}}"#;
+        assert_eq!(handled("device/SN1/goal", goal), Handled::Taken);
+        for (topic, payload) in [
+            ("device/SN1/goal", r#"{"data":{"x":1,"y":2,"z":0}}"#),
+            ("device/SN1/goal", "{"),
+            ("device/SN1/goal", r#"{"msg_id":"b","data":{"x":1}}"#),
+            ("device/SN1/start_mapping", r#"{"msg_id":"c","data":{}}"#),
+            ("device/SN1/fly", r#"{"msg_id":"d","data":{}}"#),
+        ] {
+            assert_eq!(handled(topic, payload), Handled::Refused, "{payload}");
+        }
     }
 
     #[test]

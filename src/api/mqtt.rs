@@ -3,7 +3,8 @@
 //! Dialects are sans-IO like the core: messages in, messages out; the runtime moves them.
 
 pub use crate::api::adapter::CoreAccess;
-use crate::api::adapter::{Adapter, Handled, Reply};
+pub use crate::api::adapter::Handled;
+use crate::api::adapter::{Adapter, Reply};
 pub use crate::api::publish::{Publish, Qos};
 use crate::api::trajectory::TrajectoryStore;
 use crate::config::mqtt::MqttConfig;
@@ -29,7 +30,8 @@ pub trait Dialect: Send {
     fn topics(&self) -> Vec<String>;
     /// Whether an incoming message on `topic` is for this dialect.
     fn owns(&self, topic: &str) -> bool;
-    /// Handles an incoming message at `t`; replies go to `out`.
+    /// Handles an incoming message at `t`; replies go to `out`. `Refused` when it answered
+    /// with an error (malformed, unknown, or refused by the core), so the run counts it.
     fn on_message(
         &mut self,
         t: Timestamp,
@@ -37,7 +39,7 @@ pub trait Dialect: Send {
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
-    );
+    ) -> Handled;
     /// Publishes what is due at a status tick, and acts on what the time says (a
     /// heartbeat that stopped).
     fn on_status(
@@ -90,8 +92,9 @@ impl Adapter for Dialects {
         let Some(d) = self.dialects.iter_mut().find(|d| d.owns(topic)) else {
             return Handled::NotOwned;
         };
-        publishing(out, |p| d.on_message(t, topic, payload, core, p));
-        Handled::Taken
+        let mut handled = Handled::Taken;
+        publishing(out, |p| handled = d.on_message(t, topic, payload, core, p));
+        handled
     }
 
     fn on_status(

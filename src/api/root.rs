@@ -20,7 +20,7 @@ use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::log_budget::{self, LogBudget, SharedBudget};
-use super::mqtt::{CoreAccess, Dialect, Publish};
+use super::mqtt::{CoreAccess, Dialect, Handled, Publish};
 use crate::control::mission::{MAX_STEPS, MissionEvent, MissionStep};
 use crate::control::{MotionTag, Outcome};
 use crate::devices::bms::ChargeState;
@@ -289,7 +289,12 @@ impl RootDialect {
         suffix: &str,
         outcome: Result<(), (u32, &str)>,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
+        let handled = if outcome.is_ok() {
+            Handled::Taken
+        } else {
+            Handled::Refused
+        };
         let (code, message) = match outcome {
             Ok(()) => (OK, None),
             Err((code, reason)) => {
@@ -310,6 +315,7 @@ impl RootDialect {
             self.topic(&format!("{}/{suffix}", to.base)),
             body.to_string(),
         ));
+        handled
     }
 
     fn event(&self, t: Timestamp, key: &str, detail: &str, out: &mut Vec<Publish>) {
@@ -336,7 +342,7 @@ impl RootDialect {
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
         let null = Value::Null;
         let unknown = Request {
             base,
@@ -431,6 +437,7 @@ impl RootDialect {
                 if base == "cmd/navigation" && kind.as_u64() == Some(0) {
                     self.answer(t, &to, "notify", Ok(()), out);
                 }
+                Handled::Taken
             }
             Err((code, reason)) => self.answer(t, &to, "ack", Err((code, &reason)), out),
         }
@@ -890,7 +897,7 @@ impl Dialect for RootDialect {
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
         let base = topic
             .strip_prefix(&self.prefix)
             .and_then(|rest| rest.strip_suffix("/set"))
@@ -912,7 +919,7 @@ impl Dialect for RootDialect {
                         "root heartbeat ignored: not a JSON object (neither answered nor counted)"
                     );
                 }
-                return;
+                return Handled::Taken;
             };
             let sender = beat.get("clientId").and_then(Value::as_str);
             if self
@@ -926,9 +933,9 @@ impl Dialect for RootDialect {
                 self.topic("heartbeat/notify"),
                 json!({ "timestamp": timestamp(t) }).to_string(),
             ));
-            return;
+            return Handled::Taken;
         }
-        self.set(t, &base, payload, core, out);
+        self.set(t, &base, payload, core, out)
     }
 
     fn on_status(

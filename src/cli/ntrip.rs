@@ -101,11 +101,13 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             ),
             (None, Some(port)) => {
                 use tokio_serial::SerialPortBuilderExt;
-                Box::new(
-                    tokio_serial::new(port, a.baud)
-                        .open_native_async()
-                        .with_context(|| format!("cannot open {port}"))?,
-                )
+                let serial = tokio_serial::new(port, a.baud)
+                    .open_native_async()
+                    .map_err(|e| {
+                        let advice = chassisd::runtime::drivers::serial_open::advice(port, &e);
+                        anyhow::anyhow!("cannot open {port}: {e}; {advice}")
+                    })?;
+                Box::new(serial)
             }
             (None, None) => Box::new(tokio::io::stdout()),
         };

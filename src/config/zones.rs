@@ -117,6 +117,18 @@ pub enum GateQuality {
     Single,
 }
 
+/// As the configuration writes it (`rtk_fixed`).
+impl std::fmt::Display for GateQuality {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::RtkFixed => "rtk_fixed",
+            Self::RtkFloat => "rtk_float",
+            Self::Dgps => "dgps",
+            Self::Single => "single",
+        })
+    }
+}
+
 impl GateQuality {
     /// Whether a fix of `quality` passes.
     pub fn admits(self, quality: FixQuality) -> bool {

@@ -90,8 +90,10 @@ pub enum MotionKind {
     Path {
         /// Its length from where the vehicle started, m.
         length_m: f64,
-        /// The speed asked for, m/s.
+        /// The top speed it planned with (the one asked for, under the limit), m/s.
         speed: f64,
+        /// The speed asked for, m/s.
+        asked: f64,
     },
 }
 
@@ -106,8 +108,16 @@ impl fmt::Display for MotionKind {
                 g.y,
                 g.yaw.to_degrees()
             ),
-            Self::Path { length_m, speed } => {
-                write!(f, "path of {length_m:.2} m at {speed:.2} m/s")
+            Self::Path {
+                length_m,
+                speed,
+                asked,
+            } => {
+                write!(f, "path of {length_m:.2} m at up to {speed:.2} m/s")?;
+                if asked > speed {
+                    write!(f, " (asked {asked} m/s: capped by the speed limit)")?;
+                }
+                Ok(())
             }
         }
     }
@@ -416,7 +426,8 @@ impl Motion {
                 id,
                 kind: MotionKind::Path {
                     length_m: p.length(),
-                    speed: p.requested_speed(),
+                    speed: p.top_speed(),
+                    asked: p.requested_speed(),
                 },
                 tag,
                 duration_s: t.saturating_since(p.started()).as_secs_f64(),

@@ -224,6 +224,12 @@ impl PathFollow {
         self.speed_request
     }
 
+    /// The top speed it plans with: the one asked for, under the speed limit, m/s.
+    pub fn top_speed(&self) -> f64 {
+        self.speed_request
+            .min(planning_limits(self.settings.linear).speed)
+    }
+
     /// Its length from where it started, m.
     pub fn length(&self) -> f64 {
         self.track.length()
@@ -653,6 +659,32 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A speed over the limit is driven at the limit, and said so where the task is logged.
+    #[test]
+    fn a_speed_over_the_limit_is_capped_and_reported_capped() {
+        let s = settings();
+        let t0 = Timestamp::from_micros(0);
+        let view = view(OdomPose::default(), t0, MinGnss::RtkFixed);
+        let line = [(0.0, 0.0), (4.0, 0.0)];
+        let f = PathFollow::new(t0, &line, 1e9, &view, &s).expect("starts");
+        let cap = s.linear.speed * 0.95;
+        assert!((f.top_speed() - cap).abs() < 1e-12, "{}", f.top_speed());
+        let kind = crate::control::MotionKind::Path {
+            length_m: f.length(),
+            speed: f.top_speed(),
+            asked: f.requested_speed(),
+        };
+        assert_eq!(
+            kind.to_string(),
+            format!(
+                "path of 4.00 m at up to {cap:.2} m/s (asked 1000000000 m/s: capped by the \
+                 speed limit)"
+            )
+        );
+        let slow = PathFollow::new(t0, &line, 0.2, &view, &s).expect("starts");
+        assert_eq!(slow.top_speed(), 0.2);
     }
 
     #[test]

@@ -312,8 +312,6 @@ struct CoreAt<'a> {
     /// What a command put out beside its answer (a log event, the zones changed), for the
     /// engine's outputs once the adapter is done.
     aside: Vec<EngineOutput>,
-    /// The core refused a command (its refusal went out in the protocol's reply).
-    refused: bool,
 }
 
 impl<'a> CoreAt<'a> {
@@ -322,7 +320,6 @@ impl<'a> CoreAt<'a> {
             vehicle,
             t,
             aside: Vec::new(),
-            refused: false,
         }
     }
 }
@@ -332,10 +329,7 @@ impl CoreAccess for CoreAt<'_> {
         let mut result = Ok(());
         for output in self.vehicle.handle(self.t, Input::Command(command)) {
             match output {
-                Output::CommandResult(r) => {
-                    self.refused |= r.is_err();
-                    result = r;
-                }
+                Output::CommandResult(r) => result = r,
                 Output::Event(event) => self.aside.push(EngineOutput::Event(event)),
                 Output::ZonesChanged(text) => self.aside.push(EngineOutput::ZonesChanged(text)),
                 _ => {}
@@ -589,8 +583,6 @@ impl Engine {
                 let mut core = CoreAt::new(&mut self.vehicle, t);
                 let mut replies = Vec::new();
                 match adapter.on_request(t, topic, payload, &mut core, &mut replies) {
-                    // The core's refusal goes out in the protocol's own reply, and counts.
-                    Handled::Taken if core.refused => self.stats.commands_rejected += 1,
                     Handled::Taken => {}
                     Handled::Refused => self.stats.commands_rejected += 1,
                     Handled::NotOwned => self.stats.commands_without_dialect += 1,
@@ -953,8 +945,9 @@ mod tests {
             .collect()
     }
 
-    /// A refusal the core answers in the protocol's own reply is a refused command in the
-    /// engine's counts, and so in the run's summary.
+    /// A refusal answered in the protocol's own reply (the core's, or the dialect's for a
+    /// malformed request) is a refused command in the engine's counts, and so in the run's
+    /// summary.
     #[test]
     fn a_command_the_core_refuses_counts_as_refused() {
         let config = VehicleConfig::from_toml(
@@ -982,6 +975,14 @@ mod tests {
             r#"{"messageId": 1, "messageType": 100, "data": {"linear": 0.1, "angular": 0}}"#;
         e.handle(&request(2_000, "/root/v1/cmd/chassis/set", drive), &mut out);
         assert_eq!((e.stats().commands, e.stats().commands_rejected), (2, 1));
+        // Malformed, and an unknown messageType: the dialect answers each with its code.
+        e.handle(&request(3_000, "/root/v1/cmd/chassis/set", "{"), &mut out);
+        let unknown = r#"{"messageId": 2, "messageType": 77, "data": 0}"#;
+        e.handle(
+            &request(4_000, "/root/v1/cmd/chassis/set", unknown),
+            &mut out,
+        );
+        assert_eq!((e.stats().commands, e.stats().commands_rejected), (4, 3));
     }
 
     fn serial(us: u64, source: &str, bytes: &[u8]) -> Record {

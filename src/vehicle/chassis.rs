@@ -168,8 +168,11 @@ pub enum CommandRejected {
     /// An edit of the zones cannot be made: why.
     #[error("the zones are not changed: {0}")]
     ZoneEdit(String),
-    /// The GNSS gate is closed: autonomous work waits for a good fix.
-    #[error("the GNSS gate is closed ({0}): autonomous work waits for a good fix")]
+    /// The GNSS gate is closed: autonomous work is refused (not queued) until it opens.
+    #[error(
+        "the GNSS gate is closed ({0}): autonomous work is refused until zones.resume_after_s \
+         of good fixes open it; send the command again then"
+    )]
     GnssGate(super::gate::GateReason),
     /// Manual velocity commands are refused in navigation mode.
     #[error("manual velocity commands are refused in navigation mode (switch to manual)")]
@@ -785,7 +788,7 @@ mod tests {
         // A non-zero command does not re-arm.
         assert!(matches!(
             c.command(ms(40), 0.1, 0.0),
-            Err(CommandRejected::Safety(Refusal::Latched(_)))
+            Err(CommandRejected::Safety(Refusal::Latched { .. }))
         ));
         assert!(!c.tick(ms(50)).reset_faults);
         // A zero command does: the fault is reset once, then the drive reports it cleared.

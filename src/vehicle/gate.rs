@@ -101,10 +101,7 @@ impl fmt::Display for GateReason {
         match self {
             Self::NoFix => write!(f, "no valid GNSS fix"),
             Self::Quality { have, need } => {
-                write!(
-                    f,
-                    "fix quality {have:?}, below {need:?} (zones.min_quality)"
-                )
+                write!(f, "fix quality {have}, below zones.min_quality = {need}")
             }
             Self::FixAge { age_s, max_s } => {
                 write!(
@@ -243,6 +240,24 @@ pub fn horizontal_sigma(xx: f64, xy: f64, yy: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The refusal speaks the configuration's words and says the command is not kept.
+    #[test]
+    fn the_refusal_names_the_key_in_its_own_words_and_is_not_a_queue() {
+        let reason = GateReason::Quality {
+            have: FixQuality::RtkFloat,
+            need: GateQuality::RtkFixed,
+        };
+        let refusal = crate::vehicle::chassis::CommandRejected::GnssGate(reason).to_string();
+        assert!(
+            refusal.starts_with(
+                "the GNSS gate is closed (fix quality RTK float, below zones.min_quality = \
+                 rtk_fixed): autonomous work is refused"
+            ),
+            "{refusal}"
+        );
+        assert!(refusal.contains("send the command again"), "{refusal}");
+    }
 
     fn config() -> GateConfig {
         GateConfig {

@@ -129,15 +129,46 @@ impl fmt::Display for Cause {
     }
 }
 
-/// Why a command was refused by the supervisor.
+impl Cause {
+    /// What clears the cause, so that a deliberate act may then re-arm (`None`: the act
+    /// itself does, as it resets drive faults).
+    pub fn remedy(&self) -> Option<&'static str> {
+        match self {
+            Self::Drive { .. } | Self::Operator | Self::ResetFailed { .. } => None,
+            Self::BusDown => Some("bring the CAN interface up"),
+            Self::ControlLink { ever_heard: true } => Some("send heartbeats again"),
+            Self::ControlLink { ever_heard: false } => Some("send heartbeats"),
+            Self::EStop { silent: false, .. } => Some("release the emergency stop"),
+            Self::EStop { silent: true, .. } => Some("restore the emergency stop's signal"),
+            Self::SoftwareEStop => Some("release the software emergency stop"),
+            Self::Zone { .. } => Some("wait until the vehicle stands"),
+        }
+    }
+}
+
+/// Why a command was refused by the supervisor. Each says what to do, in order.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum Refusal {
-    /// Latched: only a zero velocity command or a reset re-arms.
-    #[error("stopped ({0}): send a zero velocity command or a reset to re-arm, then drive again")]
-    Latched(String),
+    /// Latched: only a zero velocity command or a reset re-arms, once what holds (`first`,
+    /// its remedy) has cleared.
+    #[error(
+        "stopped ({reason}): {}send a zero velocity command or a reset to re-arm, then drive again",
+        first.as_deref().map(|f| format!("{f}, then ")).unwrap_or_default()
+    )]
+    Latched {
+        /// Why it latched.
+        reason: String,
+        /// What must clear first, when a cause still holds.
+        first: Option<String>,
+    },
     /// A deliberate act came while a cause is still there.
-    #[error("cannot re-arm while {0}")]
-    CauseActive(String),
+    #[error("cannot re-arm while {cause}: {remedy} first")]
+    CauseActive {
+        /// The cause that holds.
+        cause: String,
+        /// What clears it.
+        remedy: &'static str,
+    },
     /// A fault reset is under way.
     #[error("a fault reset is under way; drive again once it is done")]
     Resetting,
@@ -314,7 +345,7 @@ impl Safety {
                 self.command = Some((t, vx, wz));
                 Ok(())
             }
-            State::Latched { reason, .. } if !zero => Err(Refusal::Latched(reason.to_string())),
+            State::Latched { reason, .. } if !zero => Err(self.refuse_latched(reason)),
             State::Latched { .. } => {
                 self.deliberate(t)?;
                 self.command = Some((t, 0.0, 0.0));
@@ -339,7 +370,7 @@ impl Safety {
     pub fn may_move(&self) -> Result<(), Refusal> {
         match &self.state {
             State::Standby | State::Armed => Ok(()),
-            State::Latched { reason, .. } => Err(Refusal::Latched(reason.to_string())),
+            State::Latched { reason, .. } => Err(self.refuse_latched(reason)),
             State::Resetting { .. } => Err(Refusal::Resetting),
         }
     }
@@ -388,19 +419,37 @@ impl Safety {
         };
     }
 
-    /// A deliberate act while latched: re-arm, or reset the drives first.
-    fn deliberate(&mut self, t: Timestamp) -> Result<(), Refusal> {
-        if let Some(cause) = self
+    /// The refusal of a move while latched for `reason`, naming what must clear first.
+    fn refuse_latched(&self, reason: &Cause) -> Refusal {
+        Refusal::Latched {
+            reason: reason.to_string(),
+            first: self
+                .holding()
+                .map(|(cause, remedy)| format!("{remedy} ({cause})")),
+        }
+    }
+
+    /// The first cause a deliberate act cannot clear itself, and what clears it.
+    fn holding(&self) -> Option<(String, &'static str)> {
+        if let Some((cause, remedy)) = self
             .active
             .iter()
-            .find(|c| !matches!(c, Cause::Drive { .. }))
+            .find_map(|c| c.remedy().map(|remedy| (c, remedy)))
         {
-            return Err(Refusal::CauseActive(cause.to_string()));
+            return Some((cause.to_string(), remedy));
         }
-        if let Some(name) = &self.not_running {
-            return Err(Refusal::CauseActive(format!(
-                "drive {name} is not ready (booting or unreachable)"
-            )));
+        self.not_running.as_ref().map(|name| {
+            (
+                format!("drive {name} is not ready (booting or unreachable)"),
+                "wait until it answers",
+            )
+        })
+    }
+
+    /// A deliberate act while latched: re-arm, or reset the drives first.
+    fn deliberate(&mut self, t: Timestamp) -> Result<(), Refusal> {
+        if let Some((cause, remedy)) = self.holding() {
+            return Err(Refusal::CauseActive { cause, remedy });
         }
         let State::Latched { reason, since } = &self.state else {
             return Ok(());
@@ -622,7 +671,7 @@ mod tests {
         for i in 3..50 {
             assert!(matches!(
                 s.velocity(ms(i * 10), 0.5, 0.0),
-                Err(Refusal::Latched(_))
+                Err(Refusal::Latched { .. })
             ));
             assert!(
                 !s.tick(ms(i * 10), &feedback(Some("over-current")))
@@ -670,10 +719,52 @@ mod tests {
         assert_eq!(s.state(), &State::Armed);
         s.tick(ms(1010), &feedback(None));
         assert_eq!(s.latched(), Some(&Cause::ControlLink { ever_heard: false }));
-        assert!(matches!(s.reset(ms(1020)), Err(Refusal::CauseActive(_))));
+        assert!(matches!(
+            s.reset(ms(1020)),
+            Err(Refusal::CauseActive { .. })
+        ));
         s.control_heartbeat(ms(1100));
         s.tick(ms(1110), &feedback(None));
         s.reset(ms(1120)).unwrap();
+        assert_eq!(s.state(), &State::Armed);
+    }
+
+    /// After a heartbeat loss, each refusal says what to do next, and doing it works.
+    #[test]
+    fn refusals_after_a_heartbeat_loss_give_advice_that_works() {
+        let mut c = config();
+        c.control_link = Some(ControlLinkConfig {
+            timeout: Duration::from_secs(1),
+            required_from_start: false,
+        });
+        let mut s = Safety::new(c);
+        s.control_heartbeat(ms(0));
+        s.tick(ms(0), &feedback(None));
+        s.velocity(ms(0), 0.3, 0.0).unwrap();
+        s.tick(ms(1010), &feedback(None));
+        let drive = s.velocity(ms(1020), 0.3, 0.0).unwrap_err().to_string();
+        assert_eq!(
+            drive,
+            "stopped (control link heartbeat lost): send heartbeats again (control link \
+             heartbeat lost), then send a zero velocity command or a reset to re-arm, then \
+             drive again"
+        );
+        let rearm = s.velocity(ms(1030), 0.0, 0.0).unwrap_err().to_string();
+        assert_eq!(
+            rearm,
+            "cannot re-arm while control link heartbeat lost: send heartbeats again first"
+        );
+        // As told: heartbeats, then a zero command, then drive.
+        s.control_heartbeat(ms(1040));
+        s.tick(ms(1050), &feedback(None));
+        let drive = s.velocity(ms(1060), 0.3, 0.0).unwrap_err().to_string();
+        assert!(
+            drive
+                .ends_with(": send a zero velocity command or a reset to re-arm, then drive again"),
+            "{drive}"
+        );
+        s.velocity(ms(1070), 0.0, 0.0).unwrap();
+        s.velocity(ms(1080), 0.3, 0.0).unwrap();
         assert_eq!(s.state(), &State::Armed);
     }
 

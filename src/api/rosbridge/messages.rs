@@ -188,7 +188,7 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
         },
         "gnss",
         if g.ok { "fix" } else { "no valid fix" },
-        &[("quality", format!("{:?}", g.quality))],
+        &[("quality", g.quality.to_string())],
     )];
     all.push(diagnostic(
         if status.imu_ok { OK } else { WARN },

@@ -25,7 +25,7 @@ use super::trajectory::{self, Trajectory, TrajectoryError, TrajectoryStore};
 pub use status::BaseStatus;
 
 use super::log_budget::{self, LogBudget, SharedBudget};
-use super::mqtt::{CoreAccess, Dialect, Publish};
+use super::mqtt::{CoreAccess, Dialect, Handled, Publish};
 use crate::control::MotionTag;
 use crate::time::Timestamp;
 use crate::vehicle::chassis::CommandRejected;
@@ -71,7 +71,7 @@ impl RtkDialect {
         self.store = store;
     }
 
-    fn feedback(&self, cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) {
+    fn feedback(&self, cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) -> Handled {
         let (suffix, message) = match &result {
             Ok(()) => ("success", None),
             Err(m) => ("failse", Some(m.as_str())),
@@ -89,9 +89,19 @@ impl RtkDialect {
             }
         }
         out.push(Publish::reply(FEEDBACK, json));
+        if result.is_ok() {
+            Handled::Taken
+        } else {
+            Handled::Refused
+        }
     }
 
-    fn control(&mut self, payload: &[u8], core: &mut dyn CoreAccess, out: &mut Vec<Publish>) {
+    fn control(
+        &mut self,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Publish>,
+    ) -> Handled {
         if payload.len() > self.max_payload {
             let reason = format!(
                 "payload of {} bytes exceeds {}",
@@ -140,6 +150,7 @@ impl RtkDialect {
                 Ok(all) => {
                     let json = serde_json::to_string(&all).unwrap_or_default();
                     out.push(Publish::reply(TRAJECTORY_DATA, json));
+                    Handled::Taken
                 }
                 Err(e) => self.feedback(&cmd, Err(e.to_string()), out),
             },
@@ -155,7 +166,7 @@ impl RtkDialect {
                         t.check().map_err(|e| e.to_string())?;
                         self.store.save(&t).map_err(|e| e.to_string())
                     });
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
             "delete_trajectory" => {
                 let result = match message.get("name").and_then(Value::as_str) {
@@ -164,7 +175,7 @@ impl RtkDialect {
                         .and_then(|name| self.store.delete(&name))
                         .map_err(|e: TrajectoryError| e.to_string()),
                 };
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
             "delete_all_trajectory" => {
                 let result = self
@@ -172,7 +183,7 @@ impl RtkDialect {
                     .delete_all()
                     .map(|_| ())
                     .map_err(|e| e.to_string());
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
             "start_task" => {
                 let result = self.start_task(&message).and_then(|request| {
@@ -185,7 +196,7 @@ impl RtkDialect {
                     })
                     .map_err(|e| e.to_string())
                 });
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
             "cancel_task" => {
                 let result = match core.command(Command::CancelMotion) {
@@ -193,13 +204,13 @@ impl RtkDialect {
                     Ok(()) | Err(CommandRejected::NoDrives) => Ok(()),
                     Err(e) => Err(e.to_string()),
                 };
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
             _ => {
                 let result = core
                     .command(Command::ZeroLocalFrame)
                     .map_err(|e| e.to_string());
-                self.feedback(&cmd, result, out);
+                self.feedback(&cmd, result, out)
             }
         }
     }
@@ -299,9 +310,9 @@ impl Dialect for RtkDialect {
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
-    ) {
+    ) -> Handled {
         self.now = t;
-        self.control(payload, core, out);
+        self.control(payload, core, out)
     }
 
     fn on_status(

@@ -113,6 +113,23 @@ impl FixQuality {
     }
 }
 
+/// In plain words, for people (logs, refusals, the live page).
+impl std::fmt::Display for FixQuality {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Invalid => "no fix",
+            Self::Single => "single (no corrections)",
+            Self::Dgps => "DGPS",
+            Self::Pps => "PPS",
+            Self::RtkFixed => "RTK fixed",
+            Self::RtkFloat => "RTK float",
+            Self::DeadReckoning => "dead reckoning",
+            Self::Manual => "entered by hand",
+            Self::Simulation => "simulated",
+        })
+    }
+}
+
 impl From<FixType> for FixQuality {
     fn from(fix: FixType) -> Self {
         match fix {

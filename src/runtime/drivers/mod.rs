@@ -3,6 +3,7 @@
 
 pub mod can;
 pub mod serial;
+pub mod serial_open;
 pub mod serial_tx;
 pub mod ublox;
 

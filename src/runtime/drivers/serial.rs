@@ -82,7 +82,8 @@ pub async fn run(spec: SerialSpec, clock: RecordClock, tx: mpsc::Sender<Record>)
                 let since = *outage_since.get_or_insert_with(Instant::now);
                 match outage.failed(since.elapsed()) {
                     Say::First => {
-                        tracing::warn!(device = %spec.source, port = %spec.port, error = %e, "cannot open port; retrying");
+                        let advice = super::serial_open::advice(&spec.port, &e);
+                        tracing::warn!(device = %spec.source, port = %spec.port, error = %e, %advice, "cannot open port; retrying");
                     }
                     Say::Still(attempts) => {
                         tracing::warn!(device = %spec.source, port = %spec.port, error = %e,

@@ -33,6 +33,7 @@ use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::ubx::config::Layers;
 use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
 use crate::geodesy::{Enu, Geodetic};
+use crate::runtime::drivers::serial_open;
 use crate::runtime::drivers::ublox::{Dialogue, port_name};
 use crate::runtime::links::broker::BrokerHealth;
 use crate::time::Timestamp;
@@ -280,8 +281,7 @@ async fn probe_serial(
         Err(e) => {
             return fail(
                 format!("cannot open {port}: {e}"),
-                "check the path (`ls -l /dev/serial/by-id/`), the cable, and that this user \
-                 may open it (group dialout)",
+                serial_open::advice(port, &e),
             );
         }
     };
@@ -390,7 +390,7 @@ async fn probe_ublox(g: &GnssConfig, configure: Option<Layers>) -> Vec<Probe> {
         Err(e) => {
             let result = fail(
                 format!("cannot open {}: {e}", g.port),
-                "check the path, the cable, and that no other program holds the port",
+                serial_open::advice(&g.port, &e),
             );
             return vec![Probe::new("gnss", "u-blox MON-VER", result)];
         }
