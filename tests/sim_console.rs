@@ -83,11 +83,15 @@ fn ctrl_c_ends_with_a_summary_too() {
 }
 
 /// The start line's `mosquitto_sub` and `mosquitto_pub` lines work when pasted into a shell:
-/// base_status arrives at 10 Hz, and the goal drives the vehicle there.
+/// base_status arrives at 10 Hz, and the goal drives the vehicle there. The simulator runs
+/// as the README's first command starts it (on a free broker port), scenario and all: the
+/// scenario yields to the goal.
 #[test]
 fn the_printed_mosquitto_lines_watch_and_drive_the_vehicle() {
     let port = common::mqtt::free_port().to_string();
-    let mut sim = Proc::start(&["sim", "--broker-port", &port]);
+    let mut args = readme_main_command();
+    args.extend(["--broker-port".to_owned(), port]);
+    let mut sim = Proc::start(&args);
     sim.wait_log(Duration::from_secs(10), "Ctrl-C stops");
     let start = sim
         .log
@@ -129,11 +133,29 @@ fn the_printed_mosquitto_lines_watch_and_drive_the_vehicle() {
         .status()
         .expect("sh runs");
     assert!(sent.success(), "{drive}");
-    sim.wait_out(Duration::from_secs(30), "the pose at the goal", |l| {
+    sim.wait_log(Duration::from_secs(10), "scripted driving stops");
+    sim.wait_out(Duration::from_secs(60), "the pose at the goal", |l| {
         serde_json::from_str::<serde_json::Value>(l).is_ok_and(|s| {
             let (x, y) = (s["pose"]["x"].as_f64(), s["pose"]["y"].as_f64());
             matches!((x, y), (Some(x), Some(y)) if (x - 2.0).hypot(y - 1.0) < 0.05)
         })
     });
     sim.stop();
+}
+
+/// The arguments of the README's first command, `cargo run --release -- ARGS`.
+fn readme_main_command() -> Vec<String> {
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
+        .expect("README.md");
+    let line = readme
+        .lines()
+        .find(|l| l.starts_with("cargo run --release -- "))
+        .expect("a `cargo run --release -- ...` line in the README");
+    let args: Vec<String> = line
+        .trim_start_matches("cargo run --release -- ")
+        .split_whitespace()
+        .map(str::to_owned)
+        .collect();
+    assert_eq!(args.first().map(String::as_str), Some("sim"), "{line}");
+    args
 }

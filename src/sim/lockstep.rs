@@ -498,6 +498,13 @@ impl Lockstep {
             let twist = format!(r#"{{"linear":{{"x":{v}}},"angular":{{"z":{w}}}}}"#);
             self.command("cmd_vel", &twist, &mut ScriptSink(sink));
         }
+        self.step_conditions(scenario, sink);
+    }
+
+    /// Advances one plant step under `scenario`'s gyro drift and GNSS condition, without
+    /// its driving (an operator has taken over).
+    pub fn step_conditions(&mut self, scenario: &Scenario, sink: &mut impl Sink) {
+        let s = self.steps as f64 * PLANT_STEP.as_secs_f64();
         self.vehicle
             .add_gyro_bias(scenario.gyro_bias_ramp * PLANT_STEP.as_secs_f64());
         self.step(scenario.gnss_at(s), sink);

@@ -150,7 +150,7 @@ impl Vehicle {
             }
             Some(GateChange::Opened) => {
                 out.push(Output::Event(
-                    "GNSS gate open: the fix has been good for zones.resume_after_s".into(),
+                    "GNSS gate open: the fix has been good for zones.resume_after_s; autonomous work is taken".into(),
                 ));
                 self.resume_after_gate(t);
             }

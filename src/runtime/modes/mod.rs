@@ -14,7 +14,7 @@ fn log_zones(config: &crate::config::VehicleConfig) {
         tracing::info!(
             zones = z.set.zones().len(),
             "zones: every motion's way is checked before it starts and the braking way every \
-             tick, autonomous work waits on the GNSS gate; ROS1 /set_shape and /set_region \
+             tick, autonomous work runs only while the GNSS gate is open; ROS1 /set_shape and /set_region \
              edit them, the WebSocket's /zones and /safety_envelope and the live page show them"
         );
     }

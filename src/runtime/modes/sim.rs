@@ -319,6 +319,7 @@ async fn run_marked(
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut summary = Summary::new(sim.vehicle().truth());
     let mut faults = SimFaults::default();
+    let mut scripted = Script::new(options.scenario.as_ref());
     'run: loop {
         tokio::select! {
             _ = pace.tick() => {
@@ -335,7 +336,8 @@ async fn run_marked(
                         break 'run;
                     }
                     match &options.scenario {
-                        Some(scenario) => sim.step_scripted(scenario, &mut sink),
+                        Some(scenario) if scripted.drives() => sim.step_scripted(scenario, &mut sink),
+                        Some(scenario) => sim.step_conditions(scenario, &mut sink),
                         None => sim.step(gnss, &mut sink),
                     }
                     summary.track(sim.vehicle().truth());
@@ -356,7 +358,17 @@ async fn run_marked(
                     if matches!(record.payload, Payload::Command { .. }) && crate::runtime::panics::inject("control") {
                         panic!("injected panic ({}=control)", crate::runtime::panics::INJECT_PANIC);
                     }
-                    sim.input(&record.source, record.payload, &mut sink)
+                    let taken_before = taken(sim.engine().stats());
+                    let command = match &record.payload {
+                        Payload::Command { topic, .. } => Some(topic.clone()),
+                        _ => None,
+                    };
+                    sim.input(&record.source, record.payload, &mut sink);
+                    if let Some(topic) = command
+                        && taken(sim.engine().stats()) > taken_before
+                    {
+                        scripted.operator_took(&record.source, &topic);
+                    }
                 }
                 None => commands_open = false,
             },
@@ -378,6 +390,42 @@ async fn run_marked(
         writer.finish(Duration::from_millis(500));
     }
     Ok(())
+}
+
+/// Whether a scenario's script still drives: it yields, for the rest of the run, to the
+/// first command an operator's link sends that the vehicle takes (a goal, a velocity, a
+/// heartbeat); its GNSS conditions and the run's length go on.
+struct Script {
+    /// The scenario's name while it drives.
+    driving: Option<String>,
+}
+
+impl Script {
+    fn new(scenario: Option<&Scenario>) -> Self {
+        Self {
+            driving: scenario.map(|s| s.name.to_owned()),
+        }
+    }
+
+    fn drives(&self) -> bool {
+        self.driving.is_some()
+    }
+
+    /// An operator's command from `source` on `topic` was taken.
+    fn operator_took(&mut self, source: &str, topic: &str) {
+        if let Some(name) = self.driving.take() {
+            tracing::info!(
+                scenario = %name, %source, %topic,
+                "an operator's command was taken: the scenario's scripted driving stops for \
+                 the rest of the run (its GNSS conditions and length go on)"
+            );
+        }
+    }
+}
+
+/// Commands the engine took (received, not refused).
+fn taken(stats: &crate::engine::EngineStats) -> u64 {
+    stats.commands.saturating_sub(stats.commands_rejected)
 }
 
 /// How long a simulation runs: `--duration` wins over the scenario's own length; neither
@@ -413,9 +461,17 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
             m.host, m.port
         );
         if let Some(device) = &m.device {
-            // A goal is one message: pasted once, it drives the vehicle 2.2 m and turns it.
+            // A goal is one message: pasted once, it drives the vehicle to (2, 1) m facing
+            // north; the answer comes on the goal's ack topic when it ends.
+            let mut about = format!("answered on device/{}/goal/ack", device.serial_number);
+            if options.scenario.is_some() {
+                about += ", and the scenario's scripted driving stops at the first command taken";
+            }
+            if options.zones.is_some() {
+                about += ", taken once the log says \"GNSS gate open\"";
+            }
             line += &format!(
-                "; drive it: mosquitto_pub -h {} -p {} -t device/{}/goal -m '{{\"msg_id\": \"1\", \"timestamp\": 1757403776, \"data\": {{\"x\": 2.0, \"y\": 1.0, \"z\": 0.7071}}}}'",
+                "; drive it to x 2 m, y 1 m facing north ({about}): mosquitto_pub -h {} -p {} -t device/{}/goal -m '{{\"msg_id\": \"1\", \"timestamp\": 1757403776, \"data\": {{\"x\": 2.0, \"y\": 1.0, \"z\": 0.7071}}}}'",
                 m.host, m.port, device.serial_number
             );
         }
