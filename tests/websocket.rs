@@ -30,7 +30,12 @@ fn python() -> PathBuf {
 fn sim(port: u16) -> Proc {
     let bind = format!("127.0.0.1:{port}");
     let mut sim = Proc::start(&["sim", "--no-mqtt", "--websocket", &bind]);
-    sim.wait_log(Duration::from_secs(10), "rosbridge v2 server listening");
+    // The banner gives the page's address, which a browser opens.
+    sim.wait_log(
+        Duration::from_secs(10),
+        &format!("live page: http://{bind}/"),
+    );
+    sim.wait_log_seen(Duration::from_secs(10), "rosbridge v2 server listening");
     sim
 }
 
@@ -431,7 +436,78 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
     assert!(number(&seen, "/blur_stop_s") < 1.5, "{seen}");
     assert_eq!(seen["gnss"], "fix", "{seen}");
     assert!(number(&seen, "/battery") > 40.0, "{seen}");
+    // For a person: numbers on the axes and a scale bar; every panel in plain words, no
+    // protocol or Rust enum names; green only where all is well.
+    assert!(
+        seen["axis"]["x"].as_array().is_some_and(|a| a.len() >= 3),
+        "{seen}"
+    );
+    assert!(
+        seen["axis"]["y"].as_array().is_some_and(|a| a.len() >= 3),
+        "{seen}"
+    );
+    assert!(number(&seen, "/scale/metres") >= 1.0, "{seen}");
+    let panels = &seen["panels"];
+    assert_eq!(panels["gnss"], "fix: RTK fixed", "{seen}");
+    assert_eq!(
+        panels["nav"], "the last motion succeeded; located",
+        "{seen}"
+    );
+    let drives = panels["drives"].as_str().unwrap_or_default();
+    assert!(drives.starts_with("ready") || drives == "driving", "{seen}");
+    for (name, text) in panels.as_object().expect("panels") {
+        let text = text.as_str().unwrap_or_default();
+        let enum_like = text
+            .split(|c: char| !c.is_alphanumeric() && c != '_')
+            .any(|w| {
+                w.contains('_')
+                    || w.chars().skip(1).any(char::is_uppercase)
+                        && w.chars().any(char::is_lowercase)
+            });
+        assert!(!enum_like, "{name}: {text:?}");
+    }
+    let green = "rgb(42, 122, 59)";
+    for part in ["gnss", "drives", "nav", "battery"] {
+        assert_eq!(seen["colours"][part], green, "{part} is well: {seen}");
+    }
+    // The last minutes: a sample a second, the speed and the position's σ known.
+    let history = &seen["history"];
+    for series in ["speed", "sigma", "fix", "battery"] {
+        let values = history[series].as_array().expect("a series");
+        assert!(values.len() >= 5, "{series}: {history}");
+        assert!(values.iter().any(Value::is_number), "{series}: {history}");
+    }
     drop(sim);
+}
+
+/// A page that cannot connect says why, in chassisd's words (a wrong token, none, too many
+/// clients), and connects by itself once it can.
+#[test]
+fn the_live_page_says_why_it_cannot_connect_and_connects_once_it_can() {
+    let port = free_port();
+    let token = "page-token-5678";
+    let (mut daemon, _receiver) = run_with_token(
+        "websocket-page-refused",
+        "ws-page",
+        port,
+        token,
+        "max_clients = 1\n",
+    );
+    let dir = common::tempdir("websocket-page-refused-out");
+    let seen = live_page(port, &dir, &["refused", token]);
+    let said = |key: &str| seen[key].as_str().unwrap_or_default().to_owned();
+    assert!(
+        said("wrong").starts_with("wrong token (websocket.token)"),
+        "{seen}"
+    );
+    assert!(said("none").contains("wants its token"), "{seen}");
+    assert!(
+        said("full").contains("too many WebSocket clients (websocket.max_clients)"),
+        "{seen}"
+    );
+    assert_eq!(said("after"), "connected", "{seen}");
+    assert!(number(&seen, "/reconnect_s") < 12.0, "{seen}");
+    daemon.stop();
 }
 
 #[test]

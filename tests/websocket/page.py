@@ -9,6 +9,11 @@ clicks the plot to set a goal, waits for the vehicle to reach it, releases a hel
 taking the focus away, and prints one JSON object with what it saw, with every request the
 page made (the DevTools Network domain: documents, scripts, WebSockets).
 
+With `refused TOKEN` (a daemon run with that token and `max_clients = 1`): opens the page
+with a wrong token, with none, and with the right one while another client holds the only
+place, and prints what the page said each time, then how long it took to connect by itself
+once the place was free.
+
 With `zones` (a daemon run with tests/common/zones.rs's yard): waits for the zones and the
 safety envelope, reads the plot's pixels inside the pond and beside it, then holds forward
 towards the pond until the vehicle stops, and prints what the page showed.
@@ -75,6 +80,8 @@ def pose(page):
 
 def open_page(page, port):
     """Loads the daemon's page and waits for it to connect and show a pose."""
+    # A laptop's screen: the whole page, the time plots under the map included.
+    page.call("Emulation.setDeviceMetricsOverride", width=1280, height=800, deviceScaleFactor=1, mobile=False)
     page.call("Page.enable")
     page.call("Network.enable")
     page.call("Page.navigate", url="http://127.0.0.1:%d/" % port)
@@ -123,13 +130,50 @@ def run(page, port, out):
     blur_stop_s = time.monotonic() - blurred_at
     page.mouse("mouseReleased", *forward)
     events = page.js("window.chassisdPage.events")
+    # The last minutes: a sample a second of each series, speed and σ among them.
+    page.wait("window.chassisdPage.history.speed.length >= 5", 10, "five history samples")
+    history = page.js("window.chassisdPage.history")
+    panels = page.js("Object.fromEntries(['link', 'pose', 'gnss', 'battery', 'drives', 'nav', 'envelope'].map((id) => [id, document.getElementById(id).textContent]))")
+    colours = page.js("Object.fromEntries(['gnss', 'drives', 'nav', 'battery'].map((id) => { const e = document.getElementById(id); const s = e.querySelector('span') || e; return [id, getComputedStyle(s).color]; }))")
     print(json.dumps({
         "start": start, "held": held, "jogged": jogged, "stop_s": stop_s,
         "target": target, "arrived": arrived, "blur_stop_s": blur_stop_s,
         "events": events, "gnss": page.js("window.chassisdPage.diagnostics.gnss.message"),
         "battery": page.js("window.chassisdPage.battery && window.chassisdPage.battery.voltage"),
+        "axis": page.js("window.chassisdPage.axisLabels"), "scale": page.js("window.chassisdPage.scaleBar"),
+        "history": history, "panels": panels, "colours": colours,
         "requests": page.requests,
     }), flush=True)
+
+
+def run_refused(page, port, token):
+    """The page told why it cannot connect: a wrong token, none, too many clients; and it
+    connects by itself once a place is free."""
+    page.call("Page.enable")
+
+    def fresh(url):
+        # Through a blank page, so no wait is answered by the last page's state.
+        page.call("Page.navigate", url="about:blank")
+        page.wait("!window.chassisdPage", 10, "a blank page")
+        page.call("Page.navigate", url=url)
+
+    seen = {}
+    for name, query in [("wrong", "?token=not-it"), ("none", "")]:
+        fresh("http://127.0.0.1:%d/%s" % (port, query))
+        page.wait("window.chassisdPage && window.chassisdPage.link.includes('trying again')", 10, "the page's reason (%s)" % name)
+        seen[name] = page.js("document.getElementById('link').textContent")
+    # Another client with the token takes the only place (websocket.max_clients = 1).
+    with connect("ws://127.0.0.1:%d/?token=%s" % (port, token)) as other:
+        fresh("http://127.0.0.1:%d/?token=%s" % (port, token))
+        page.wait("window.chassisdPage && window.chassisdPage.link.includes('trying again')", 10, "the page's reason (full)")
+        seen["full"] = page.js("document.getElementById('link').textContent")
+        page.screenshot(os.path.join(sys.argv[3], "page-refused.png"))
+    # The place is free again: the page, asking every 5 s, connects by itself.
+    began = time.monotonic()
+    page.wait("window.chassisdPage && window.chassisdPage.connected", 20, "the page to connect once a place is free")
+    seen["reconnect_s"] = time.monotonic() - began
+    seen["after"] = page.js("document.getElementById('link').textContent")
+    print(json.dumps(seen), flush=True)
 
 
 def pixel(page, x, y):
@@ -178,7 +222,7 @@ def run_zones(page, port, out):
 
 def main():
     chromium, port, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
-    zones = sys.argv[4:] == ["zones"]
+    mode = sys.argv[4:]
     profile = tempfile.mkdtemp(prefix="chassisd-page-")
     browser = subprocess.Popen([
         chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
@@ -197,7 +241,12 @@ def main():
         targets = json.load(urllib.request.urlopen("http://127.0.0.1:%s/json/list" % debug_port))
         url = [t for t in targets if t["type"] == "page"][0]["webSocketDebuggerUrl"]
         with connect(url, max_size=None) as ws:
-            (run_zones if zones else run)(Page(ws), port, out)
+            if mode == ["zones"]:
+                run_zones(Page(ws), port, out)
+            elif mode[:1] == ["refused"]:
+                run_refused(Page(ws), port, mode[1])
+            else:
+                run(Page(ws), port, out)
     finally:
         browser.terminate()
         browser.wait(timeout=10)

@@ -201,11 +201,7 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
         &[],
     ));
     if let Some(c) = &status.chassis {
-        let stopped = status_bits::FAULT
-            | status_bits::HEARTBEAT_LOST
-            | status_bits::ESTOP
-            | status_bits::BUS_DOWN
-            | status_bits::CONTROL_LINK_LOST;
+        let stopped = STOPPING_BITS;
         // A latched stop (a zone, an obstacle, a watchdog) is a warning until it re-arms.
         let level = if c.status_bits & stopped != 0 {
             ERROR
@@ -214,15 +210,12 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
         } else {
             WARN
         };
-        let message = c
-            .stop_reason
-            .clone()
-            .unwrap_or_else(|| status_bits::describe(c.status_bits));
         all.push(diagnostic(
             level,
             "drive train",
-            &message,
+            &drive_train_words(c.status_bits, c.stop_reason.as_deref()),
             &[
+                ("state", status_bits::describe(c.status_bits)),
                 ("status_bits", c.status_bits.to_string()),
                 ("vx", format!("{:.3}", c.vx)),
                 ("wz", format!("{:.3}", c.wz)),
@@ -284,10 +277,45 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
             OK
         },
         "navigation",
-        navigation,
+        match status.navigation {
+            Navigation::Idle => "idle",
+            Navigation::Running => "under way",
+            Navigation::Succeeded => "the last motion succeeded",
+            Navigation::Failed => "the last motion failed",
+        },
         &[("nav.status", navigation.into())],
     ));
     json!({"header": header(status.time, ""), "status": all})
+}
+
+/// The status bits that stop the drive train.
+const STOPPING_BITS: u32 = status_bits::FAULT
+    | status_bits::HEARTBEAT_LOST
+    | status_bits::ESTOP
+    | status_bits::BUS_DOWN
+    | status_bits::CONTROL_LINK_LOST;
+
+/// The drive train's state in plain words: why it is stopped, or what it does now.
+fn drive_train_words(bits: u32, stop_reason: Option<&str>) -> String {
+    if let Some(reason) = stop_reason {
+        return format!("stopped: {reason}");
+    }
+    let faults = bits & STOPPING_BITS;
+    if faults != 0 {
+        return format!("stopped: {}", status_bits::describe(faults));
+    }
+    let words = if bits & status_bits::NOT_READY != 0 {
+        "a drive is not ready (booting or unreachable)"
+    } else if bits & status_bits::RESETTING != 0 {
+        "resetting a drive fault"
+    } else if bits & status_bits::MOVING != 0 {
+        "driving"
+    } else if bits & status_bits::ENABLED != 0 {
+        "ready, standing (no velocity command)"
+    } else {
+        "ready (power stage off until the first command)"
+    };
+    words.to_owned()
 }
 
 /// rcl_interfaces/msg/Log's level of an event.
@@ -383,6 +411,27 @@ mod tests {
             .cloned()
     }
 
+    /// People read the drive train's state in words, never bit names that sound like faults
+    /// when all is well.
+    #[test]
+    fn the_drive_train_speaks_plain_words() {
+        use status_bits::*;
+        assert_eq!(
+            drive_train_words(ENABLED | COMMAND_TIMEOUT, None),
+            "ready, standing (no velocity command)"
+        );
+        assert_eq!(drive_train_words(ENABLED | MOVING, None), "driving");
+        assert_eq!(
+            drive_train_words(ENABLED | ESTOP, Some("emergency stop body pressed")),
+            "stopped: emergency stop body pressed"
+        );
+        assert_eq!(
+            drive_train_words(BUS_DOWN | AWAITING_COMMAND, None),
+            "stopped: CAN interface down"
+        );
+        assert!(drive_train_words(NOT_READY, None).contains("not ready"));
+    }
+
     #[test]
     fn a_latched_stop_is_a_warning_with_its_reason_and_the_envelope_has_its_own_status() {
         use crate::vehicle::chassis::ChassisStatus;
@@ -401,7 +450,7 @@ mod tests {
         let drives = part(&status, "drive train").unwrap();
         assert_eq!(
             (drives["level"].clone(), drives["message"].clone()),
-            (json!(WARN), json!(reason))
+            (json!(WARN), json!(format!("stopped: {reason}")))
         );
         assert!(
             part(&status, "safety envelope").is_none(),

@@ -483,7 +483,10 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
         );
     }
     if let Some(w) = &options.websocket {
-        line += &format!("; rosbridge WebSocket server on ws://{}/", w.bind);
+        line += &format!(
+            "; live page: http://{0}/ (rosbridge WebSocket on ws://{0}/)",
+            w.bind
+        );
     }
     if let Some(dir) = &options.record {
         line += &format!("; recording into {}", dir.display());

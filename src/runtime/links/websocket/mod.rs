@@ -196,12 +196,14 @@ pub fn start(
     ));
     let router = axum::Router::new()
         .route("/", axum::routing::get(root))
+        .route("/connection", axum::routing::get(connection_check))
         .route(
             "/roslib.min.js",
             axum::routing::get(|| async { page(ROSLIB, "text/javascript; charset=utf-8") }),
         )
         .with_state(shared);
-    tracing::info!(%address, token = config.token.is_some(), "websocket: rosbridge v2 server listening");
+    let page = format!("http://{address}/");
+    tracing::info!(%address, %page, token = config.token.is_some(), "websocket: rosbridge v2 server listening; the live page is at the same address over http");
     // Both kinds of places, authenticated or not.
     let limits = Limits::new(2 * config.max_clients, refusals);
     tokio::spawn(serve::serve(listener, router, limits));
@@ -255,6 +257,69 @@ fn page(body: &'static str, content_type: &'static str) -> Response {
         .into_response()
 }
 
+/// What a WebSocket client is let in as: with the token (or none is set), or still to
+/// present it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Entry {
+    Authenticated,
+    Waiting,
+}
+
+/// Who the client of a request would be let in as, or its refusal as an HTTP answer (an
+/// Origin of another page, a wrong token), counted.
+fn admission(
+    shared: &Shared,
+    peer: std::net::SocketAddr,
+    query: &BTreeMap<String, String>,
+    headers: &axum::http::HeaderMap,
+) -> Result<Entry, Response> {
+    let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
+    if let Some(origin) = header(axum::http::header::ORIGIN)
+        && !origin_allowed(
+            origin,
+            header(axum::http::header::HOST),
+            &shared.allowed_origins,
+        )
+    {
+        shared.refusals.count("foreign_origin", Some(peer));
+        return Err((
+            StatusCode::FORBIDDEN,
+            "chassisd: WebSocket connections from other web pages are refused; add the \
+             page's origin to websocket.allowed_origins to let it in",
+        )
+            .into_response());
+    }
+    match (shared.token.as_deref(), query.get("token")) {
+        (None, _) => Ok(Entry::Authenticated),
+        (Some(token), Some(given)) if token_matches(Some(token), given) => Ok(Entry::Authenticated),
+        (Some(_), Some(_)) => {
+            shared.refusals.count("bad_token", Some(peer));
+            Err((
+                StatusCode::UNAUTHORIZED,
+                "chassisd: wrong token (websocket.token): open the page as /?token=TOKEN with \
+                 the configured one",
+            )
+                .into_response())
+        }
+        (Some(_), None) => Ok(Entry::Waiting),
+    }
+}
+
+/// The answer to a client refused for want of a place of `entry`'s kind.
+fn no_place(entry: Entry) -> Response {
+    let text = match entry {
+        Entry::Authenticated => {
+            "chassisd: too many WebSocket clients (websocket.max_clients); close another \
+             page or client, or raise the limit"
+        }
+        Entry::Waiting => {
+            "chassisd: too many WebSocket clients waiting to authenticate; connect with \
+             ?token=TOKEN"
+        }
+    };
+    (StatusCode::SERVICE_UNAVAILABLE, text).into_response()
+}
+
 /// `GET /`: a WebSocket upgrade becomes a rosbridge client. With a token set, a wrong
 /// `?token=` is refused here, and a client without one gets a place of those waiting to
 /// authenticate, never an authenticated client's.
@@ -268,37 +333,13 @@ async fn root(
     let Some(ws) = ws else {
         return page(PAGE, "text/html; charset=utf-8");
     };
-    let peer = Some(held.peer);
-    let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
-    if let Some(origin) = header(axum::http::header::ORIGIN)
-        && !origin_allowed(
-            origin,
-            header(axum::http::header::HOST),
-            &shared.allowed_origins,
-        )
-    {
-        shared.refusals.count("foreign_origin", peer);
-        return (
-            StatusCode::FORBIDDEN,
-            "chassisd: WebSocket connections from other web pages are refused; add the \
-             page's origin to websocket.allowed_origins to let it in",
-        )
-            .into_response();
-    }
-    let slot = match (shared.token.as_deref(), query.get("token")) {
-        (None, _) => shared.slots.authenticated().ok_or("full"),
-        (Some(token), Some(given)) if token_matches(Some(token), given) => {
-            shared.slots.authenticated().ok_or("full")
-        }
-        (Some(_), Some(_)) => {
-            shared.refusals.count("bad_token", peer);
-            return (
-                StatusCode::UNAUTHORIZED,
-                "chassisd: wrong token (websocket.token)",
-            )
-                .into_response();
-        }
-        (Some(_), None) => shared
+    let entry = match admission(&shared, held.peer, &query, &headers) {
+        Ok(entry) => entry,
+        Err(refused) => return refused,
+    };
+    let slot = match entry {
+        Entry::Authenticated => shared.slots.authenticated().ok_or("full"),
+        Entry::Waiting => shared
             .slots
             .unauthenticated(held.peer.ip())
             .ok_or("unauthenticated_full"),
@@ -306,18 +347,47 @@ async fn root(
     let slot = match slot {
         Ok(slot) => slot,
         Err(reason) => {
-            shared.refusals.count(reason, peer);
-            let text = if reason == "full" {
-                "chassisd: too many WebSocket clients (websocket.max_clients)"
-            } else {
-                "chassisd: too many WebSocket clients waiting to authenticate; connect with \
-                 ?token=TOKEN"
-            };
-            return (StatusCode::SERVICE_UNAVAILABLE, text).into_response();
+            shared.refusals.count(reason, Some(held.peer));
+            return no_place(entry);
         }
     };
     ws.max_message_size(ops::MAX_MESSAGE + 1024)
         .on_upgrade(move |socket| connection(socket, shared, slot, held))
+}
+
+/// `GET /connection`: what a WebSocket client with the same address, Origin and `?token=`
+/// would meet now, in words, without taking a place: a browser learns nothing of a refused
+/// handshake, so the live page asks here why it could not connect.
+async fn connection_check(
+    State(shared): State<Arc<Shared>>,
+    Extension(held): Extension<Held>,
+    Query(query): Query<BTreeMap<String, String>>,
+    headers: axum::http::HeaderMap,
+) -> Response {
+    let entry = match admission(&shared, held.peer, &query, &headers) {
+        Ok(entry) => entry,
+        Err(refused) => return refused,
+    };
+    if !shared
+        .slots
+        .has_room(entry == Entry::Authenticated, held.peer.ip())
+    {
+        return no_place(entry);
+    }
+    match entry {
+        Entry::Authenticated => (
+            StatusCode::OK,
+            "chassisd: a WebSocket client would be let in now",
+        )
+            .into_response(),
+        // Let in to authenticate, which the page does only by its address.
+        Entry::Waiting => (
+            StatusCode::UNAUTHORIZED,
+            "chassisd: this server wants its token (websocket.token): open the page as \
+             /?token=TOKEN",
+        )
+            .into_response(),
+    }
 }
 
 /// One client: its queue to the socket, its operations to the server task.

@@ -64,6 +64,18 @@ impl Slots {
     }
 }
 
+impl Slots {
+    /// Whether a place of the kind would be free now (without taking it).
+    pub fn has_room(&self, authenticated: bool, address: IpAddr) -> bool {
+        if authenticated {
+            self.authenticated.available_permits() > 0
+        } else {
+            self.unauthenticated.available_permits() > 0
+                && self.per_address.held(address) < UNAUTHENTICATED_PER_ADDRESS
+        }
+    }
+}
+
 impl Slot {
     /// Whether the client has still to authenticate.
     pub fn is_unauthenticated(&self) -> bool {
