@@ -486,7 +486,7 @@ fn the_live_page_in_headless_chromium_shows_the_vehicle_jogs_it_and_sets_a_goal(
 fn the_live_page_says_why_it_cannot_connect_and_connects_once_it_can() {
     let port = free_port();
     let token = "page-token-5678";
-    let (mut daemon, _receiver) = run_with_token(
+    let (daemon, _receiver) = run_with_token(
         "websocket-page-refused",
         "ws-page",
         port,

@@ -272,7 +272,7 @@ fn admission(
     peer: std::net::SocketAddr,
     query: &BTreeMap<String, String>,
     headers: &axum::http::HeaderMap,
-) -> Result<Entry, Response> {
+) -> Result<Entry, (StatusCode, &'static str)> {
     let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
     if let Some(origin) = header(axum::http::header::ORIGIN)
         && !origin_allowed(
@@ -286,8 +286,7 @@ fn admission(
             StatusCode::FORBIDDEN,
             "chassisd: WebSocket connections from other web pages are refused; add the \
              page's origin to websocket.allowed_origins to let it in",
-        )
-            .into_response());
+        ));
     }
     match (shared.token.as_deref(), query.get("token")) {
         (None, _) => Ok(Entry::Authenticated),
@@ -298,8 +297,7 @@ fn admission(
                 StatusCode::UNAUTHORIZED,
                 "chassisd: wrong token (websocket.token): open the page as /?token=TOKEN with \
                  the configured one",
-            )
-                .into_response())
+            ))
         }
         (Some(_), None) => Ok(Entry::Waiting),
     }
@@ -335,7 +333,7 @@ async fn root(
     };
     let entry = match admission(&shared, held.peer, &query, &headers) {
         Ok(entry) => entry,
-        Err(refused) => return refused,
+        Err(refused) => return refused.into_response(),
     };
     let slot = match entry {
         Entry::Authenticated => shared.slots.authenticated().ok_or("full"),
@@ -366,7 +364,7 @@ async fn connection_check(
 ) -> Response {
     let entry = match admission(&shared, held.peer, &query, &headers) {
         Ok(entry) => entry,
-        Err(refused) => return refused,
+        Err(refused) => return refused.into_response(),
     };
     if !shared
         .slots
