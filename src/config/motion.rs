@@ -140,38 +140,53 @@ impl MotionConfig {
             ));
         };
         // A move may be gentler than the drive train, never harsher.
-        let capped = |cap: f64| 0.001..=cap;
-        for (key, value, range, unit) in [
+        for (key, value, cap, unit) in [
             (
                 "max_speed_mps",
                 self.max_speed_mps,
-                capped(chassis.max_speed_mps),
+                chassis.max_speed_mps,
                 "m/s",
             ),
             (
                 "max_accel_mps2",
                 self.max_accel_mps2,
-                capped(chassis.max_accel_mps2),
+                chassis.max_accel_mps2,
                 "m/s²",
             ),
             (
                 "max_decel_mps2",
                 self.max_decel_mps2,
-                capped(chassis.max_decel_mps2),
+                chassis.max_decel_mps2,
                 "m/s²",
             ),
             (
                 "max_yaw_rate_rps",
                 self.max_yaw_rate_rps,
-                capped(chassis.max_yaw_rate_rps),
+                chassis.max_yaw_rate_rps,
                 "rad/s",
             ),
             (
                 "max_yaw_accel_rps2",
                 self.max_yaw_accel_rps2,
-                capped(chassis.max_yaw_accel_rps2),
+                chassis.max_yaw_accel_rps2,
                 "rad/s²",
             ),
+        ] {
+            let Some(v) = value else { continue };
+            check_range(file, &format!("motion.{key}"), v, 0.001..=f64::MAX, unit)?;
+            if v > cap {
+                return Err(ConfigError::invalid(
+                    file,
+                    &format!("motion.{key}"),
+                    format!("{v} {unit} is above chassis.{key} = {cap} {unit}"),
+                    &format!(
+                        "a move may be gentler than the drive train, never harsher: lower it, \
+                         or raise chassis.{key}"
+                    ),
+                ));
+            }
+        }
+        for (key, value, range, unit) in [
             ("max_jerk_mps3", self.max_jerk_mps3, 0.01..=1000.0, "m/s³"),
             (
                 "max_yaw_jerk_rps3",
@@ -280,6 +295,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("motion.max_speed_mps"), "{e}");
+        // The bound is named by its own key, and the fix says which way to go.
+        assert!(e.contains("above chassis.max_speed_mps = 1 m/s"), "{e}");
+        assert!(e.contains("raise chassis.max_speed_mps"), "{e}");
         assert!(m.validate(None, file).is_err());
     }
 }

@@ -150,8 +150,8 @@ impl NtripConfig {
         if let Some(file) = &self.password_file {
             let text = std::fs::read_to_string(file).map_err(|e| {
                 format!(
-                    "ntrip.password_file {}: cannot read: {e} (put the caster's password on \
-                     its first line)",
+                    "ntrip.password_file {}: cannot read: {e} (the file must exist, be readable \
+                     by this user, and hold the caster's password on its first line)",
                     file.display()
                 )
             })?;

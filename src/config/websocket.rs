@@ -101,8 +101,14 @@ impl WebsocketConfig {
                     "is not set, and the server would listen on {address} beyond this \
                      computer: anyone on the network could drive the vehicle"
                 ),
-                "set websocket.token to a long random string (e.g. from `openssl rand -hex \
-                 16`), or bind = \"127.0.0.1:9090\" to keep it to this computer",
+                if file == Path::new("--websocket") {
+                    // The simulator's flag: it has no configuration to hold a token.
+                    "use --websocket 127.0.0.1:PORT to keep it to this computer, or \
+                     `chassisd run` with websocket.token set in its configuration"
+                } else {
+                    "set websocket.token to a long random string (e.g. from `openssl rand -hex \
+                     16`), or bind = \"127.0.0.1:9090\" to keep it to this computer"
+                },
             ));
         }
         for origin in &self.allowed_origins {

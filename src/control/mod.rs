@@ -115,7 +115,11 @@ impl fmt::Display for MotionKind {
             } => {
                 write!(f, "path of {length_m:.2} m at up to {speed:.2} m/s")?;
                 if asked > speed {
-                    write!(f, " (asked {asked} m/s: capped by the speed limit)")?;
+                    write!(
+                        f,
+                        " (asked {asked} m/s: capped at 95 % of motion.max_speed_mps, which is \
+                         chassis.max_speed_mps unless set)"
+                    )?;
                 }
                 Ok(())
             }

@@ -199,9 +199,16 @@ impl fmt::Display for AbortReason {
                 quality,
                 min,
                 waited_s,
-            } => write!(f, "GNSS quality {quality} below {min} for {waited_s:.0} s"),
+            } => write!(
+                f,
+                "GNSS quality {quality} below motion.task_min_gnss = {min} for {waited_s:.0} s \
+                 (motion.task_gnss_wait_s)"
+            ),
             Self::OffPath { off_m, limit_m } => {
-                write!(f, "left the path by {off_m:.2} m (limit {limit_m} m)")
+                write!(
+                    f,
+                    "left the path by {off_m:.2} m (motion.max_cross_track_m = {limit_m} m)"
+                )
             }
             Self::GoalMissed {
                 distance_m,
@@ -209,7 +216,8 @@ impl fmt::Display for AbortReason {
                 tolerance_m,
             } => write!(
                 f,
-                "ended {:.0} mm from the goal after {approaches} approaches (tolerance {:.0} mm)",
+                "ended {:.0} mm from the goal after {approaches} approaches \
+                 (motion.goal_position_tolerance_m = {:.0} mm)",
                 distance_m * 1000.0,
                 tolerance_m * 1000.0
             ),
@@ -221,7 +229,8 @@ impl fmt::Display for AbortReason {
             Self::NoDock => f.write_str("no dock is configured (mission.dock)"),
             Self::NotCharging { timeout_s } => write!(
                 f,
-                "the BMS has not reported charging for {timeout_s} s at the dock"
+                "the BMS has not reported charging for {timeout_s} s at the dock \
+                 (mission.charge_timeout_s)"
             ),
             Self::StepTimedOut(step) => write!(f, "{step} timed out"),
             Self::Step(step, why) => write!(f, "{step}: {why}"),

@@ -679,8 +679,8 @@ mod tests {
         assert_eq!(
             kind.to_string(),
             format!(
-                "path of 4.00 m at up to {cap:.2} m/s (asked 1000000000 m/s: capped by the \
-                 speed limit)"
+                "path of 4.00 m at up to {cap:.2} m/s (asked 1000000000 m/s: capped at 95 % \
+                 of motion.max_speed_mps, which is chassis.max_speed_mps unless set)"
             )
         );
         let slow = PathFollow::new(t0, &line, 0.2, &view, &s).expect("starts");

@@ -54,7 +54,10 @@ pub fn toml_fix(message: &str) -> &'static str {
     if message.contains("unknown field") {
         "remove the key or correct its spelling; the keys allowed there are listed above"
     } else if message.contains("missing field") {
-        "add the key; devices/vehicle.example.toml shows every key with a working value"
+        "add the key; docs/configuration.md lists every key, and devices/ has an example of \
+         each kind of file"
+    } else if message.contains("unknown variant") {
+        "use one of the values listed above, spelt as there"
     } else if message.contains("invalid type") || message.contains("invalid value") {
         "give the value the type named above (text in quotes, numbers and true/false without)"
     } else {

@@ -95,8 +95,14 @@ pub enum CommandRejected {
     #[error("no drives are configured")]
     NoDrives,
     /// A drive cannot take commands yet.
-    #[error("drive {0} is not ready")]
+    #[error("drive {0} is not ready (booting, being set up, or unreachable)")]
     NotReady(String),
+    /// The CAN interface of the drives is down.
+    #[error(
+        "the CAN interface of the drives is down: bring it up (`ip link set IFACE up`) or \
+         reconnect the adapter"
+    )]
+    BusDown,
     /// The command's values are not finite numbers or out of range.
     #[error("a value is not a finite number in range")]
     NotFinite,
@@ -351,7 +357,7 @@ impl Chassis {
             return Err(CommandRejected::NoDrives);
         }
         if self.feedback.bus_down {
-            return Err(CommandRejected::NotReady("bus".into()));
+            return Err(CommandRejected::BusDown);
         }
         if let Some(d) = self.feedback.drives.iter().find(|d| !d.running) {
             return Err(CommandRejected::NotReady(d.name.clone()));
@@ -812,6 +818,12 @@ mod tests {
             c.command(ms(0), 0.1, 0.0),
             Err(CommandRejected::NotReady(_))
         ));
+        let mut fb = ok_feedback();
+        fb.bus_down = true;
+        c.feedback(fb);
+        let refused = c.command(ms(0), 0.1, 0.0).unwrap_err();
+        assert_eq!(refused, CommandRejected::BusDown);
+        assert!(refused.to_string().contains("CAN interface"), "{refused}");
         c.feedback(ok_feedback());
         assert_eq!(
             c.command(ms(0), f64::NAN, 0.0),

@@ -144,7 +144,8 @@ impl Vehicle {
         match envelope.gate.update(t, &signals) {
             Some(GateChange::Closed(reason)) => {
                 out.push(Output::Event(format!(
-                    "GNSS gate closed: {reason}; autonomous motion and the blade pause"
+                    "GNSS gate closed: {reason}; the blade stops, a path task or a mission \
+                     pauses until it opens, a goal or a move under way ends"
                 )));
                 self.pause_for_gate(t, &reason);
             }

@@ -1432,7 +1432,7 @@ impl Vehicle {
         // Without a configured datum the first valid fix of any quality is the origin.
         if self.localizer.offer_datum(here) {
             self.localizer.add_event(format!(
-                "datum: the first fix ({:?}) at {:.8}, {:.8}, {:.2} m is the local frame's origin \
+                "datum: the first fix ({}) at {:.8}, {:.8}, {:.2} m is the local frame's origin \
                  (no localization.datum configured)",
                 fix.quality, here.lat_deg, here.lon_deg, here.h_m
             ));

@@ -136,8 +136,14 @@ impl Cause {
         match self {
             Self::Drive { .. } | Self::Operator | Self::ResetFailed { .. } => None,
             Self::BusDown => Some("bring the CAN interface up"),
-            Self::ControlLink { ever_heard: true } => Some("send heartbeats again"),
-            Self::ControlLink { ever_heard: false } => Some("send heartbeats"),
+            Self::ControlLink { ever_heard: true } => Some(
+                "send heartbeats again (root heartbeat/set, with the clientId of \
+                 mqtt.root.heartbeat_client_id when it is set)",
+            ),
+            Self::ControlLink { ever_heard: false } => Some(
+                "send heartbeats (root heartbeat/set, with the clientId of \
+                 mqtt.root.heartbeat_client_id when it is set)",
+            ),
             Self::EStop { silent: false, .. } => Some("release the emergency stop"),
             Self::EStop { silent: true, .. } => Some("restore the emergency stop's signal"),
             Self::SoftwareEStop => Some("release the software emergency stop"),
@@ -743,16 +749,20 @@ mod tests {
         s.velocity(ms(0), 0.3, 0.0).unwrap();
         s.tick(ms(1010), &feedback(None));
         let drive = s.velocity(ms(1020), 0.3, 0.0).unwrap_err().to_string();
+        let heartbeats = "send heartbeats again (root heartbeat/set, with the clientId of \
+                          mqtt.root.heartbeat_client_id when it is set)";
         assert_eq!(
             drive,
-            "stopped (control link heartbeat lost): send heartbeats again (control link \
-             heartbeat lost), then send a zero velocity command or a reset to re-arm, then \
-             drive again"
+            format!(
+                "stopped (control link heartbeat lost): {heartbeats} (control link heartbeat \
+                 lost), then send a zero velocity command or a reset to re-arm, then drive \
+                 again"
+            )
         );
         let rearm = s.velocity(ms(1030), 0.0, 0.0).unwrap_err().to_string();
         assert_eq!(
             rearm,
-            "cannot re-arm while control link heartbeat lost: send heartbeats again first"
+            format!("cannot re-arm while control link heartbeat lost: {heartbeats} first")
         );
         // As told: heartbeats, then a zero command, then drive.
         s.control_heartbeat(ms(1040));

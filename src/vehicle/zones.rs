@@ -139,7 +139,13 @@ impl ZoneGuard {
                 *id
             }
             ZoneEdit::Add { name, kind, shape } => {
-                let placement = placement.ok_or(CommandRejected::ZonesUnplaced)?;
+                let placement = placement.ok_or_else(|| {
+                    CommandRejected::ZoneEdit(
+                        "a zone given in the map frame cannot be placed yet: there is no datum \
+                         (localization.datum, SET_LNG_LAT, or the first valid fix sets it)"
+                            .into(),
+                    )
+                })?;
                 let at = |&(x, y): &(f64, f64)| -> LonLat {
                     let (lat, lon) = placement.geodetic(x, y);
                     [lon, lat]

@@ -94,10 +94,11 @@ impl BmsProfile {
         }
         for (i, a) in p.alarm.iter().enumerate() {
             if alarm::by_name(&a.bit).is_none() {
+                let names: Vec<&str> = alarm::NAMES.iter().map(|(name, _)| *name).collect();
                 return Err(invalid(
                     &format!("alarm[{i}].bit"),
                     format!("{:?} is not an alarm bit", a.bit),
-                    "use a name from the bms.error table in docs/protocols/mqtt.md",
+                    &format!("use one of: {}", names.join(", ")),
                 ));
             }
         }

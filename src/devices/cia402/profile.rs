@@ -276,6 +276,20 @@ pub enum ValueType {
     I32,
 }
 
+/// As the profile writes it (`u16`), with its range.
+impl std::fmt::Display for ValueType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::U8 => "u8 (0 to 255)",
+            Self::I8 => "i8 (-128 to 127)",
+            Self::U16 => "u16 (0 to 65535)",
+            Self::I16 => "i16 (-32768 to 32767)",
+            Self::U32 => "u32 (0 to 4294967295)",
+            Self::I32 => "i32 (-2147483648 to 2147483647)",
+        })
+    }
+}
+
 /// One vendor set-up write.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -359,7 +373,7 @@ impl DriveProfile {
             {
                 return err(
                     "master_loss.type",
-                    format!("{value_type:?}"),
+                    format!("{value_type} is not a timeout's type"),
                     "a timeout in ms is u16 or u32",
                 );
             }
@@ -486,7 +500,7 @@ impl DriveProfile {
             if w.data().is_none() {
                 return err(
                     &format!("setup[{i}].value"),
-                    format!("{} does not fit {:?}", w.value, w.value_type),
+                    format!("{} does not fit {}", w.value, w.value_type),
                     "use a value within the type's range",
                 );
             }

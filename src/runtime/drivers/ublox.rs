@@ -115,7 +115,9 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Dialogue<S> {
                     "the receiver refused CFG-VALSET (ACK-NAK): a key it does not know, or a \
                      layer it cannot write; nothing was changed",
                     format!(
-                        "check gnss.ublox_port ({}) against the port this cable reaches",
+                        "with --flash, try without it (a receiver without flash refuses that \
+                         layer); else check gnss.ublox_port ({}) against the port this cable \
+                         reaches",
                         port_name(port)
                     ),
                 ));
@@ -126,7 +128,8 @@ impl<S: AsyncRead + AsyncWrite + Unpin> Dialogue<S> {
                         "no answer to CFG-VALSET in {:.0} s",
                         ANSWER_WAIT.as_secs_f64()
                     ),
-                    "does this port take UBX input? Check the baud rate",
+                    "the receiver answered MON-VER on this port but did not acknowledge the \
+                     change (a busy output can crowd out the ACK): run check --configure again",
                 ));
             }
         }

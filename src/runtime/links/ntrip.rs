@@ -272,16 +272,41 @@ impl Body {
     }
 }
 
+/// Why the caster's table could not be had: it did not answer, or answered otherwise.
+struct NoTable {
+    /// The caster answered (a status other than its table, or a broken table).
+    answered: bool,
+    why: String,
+}
+
+impl std::fmt::Display for NoTable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.why)
+    }
+}
+
 /// The caster's mountpoints (for a report), or why they cannot be had.
-async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, String> {
-    let mut stream = open(spec, true).await?;
+async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, NoTable> {
+    let unreachable = |why: String| NoTable {
+        answered: false,
+        why,
+    };
+    let mut stream = open(spec, true).await.map_err(unreachable)?;
     let mut buf = Vec::new();
-    let head = read_head(&mut stream, &mut buf, spec.timeout).await?;
-    if !matches!(
-        head.status,
-        Status::Sourcetable | Status::Icy | Status::Http
-    ) {
-        return Err("the caster does not give its table".into());
+    let head = read_head(&mut stream, &mut buf, spec.timeout)
+        .await
+        .map_err(unreachable)?;
+    let answered = |why: String| NoTable {
+        answered: true,
+        why,
+    };
+    match &head.status {
+        Status::Sourcetable | Status::Icy | Status::Http => {}
+        Status::Error(code, reason) => {
+            return Err(answered(format!(
+                "the caster answered {code} {reason} instead of its table"
+            )));
+        }
     }
     let deadline = Instant::now() + spec.timeout;
     let mut body = Vec::new();
@@ -290,7 +315,7 @@ async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, Strin
     loop {
         decoder
             .take(&mut pending, &mut body)
-            .map_err(|e| format!("the table's body: {e}"))?;
+            .map_err(|e| answered(format!("the table's body: {e}")))?;
         let text = String::from_utf8_lossy(&body);
         if sourcetable::is_complete(&text) || body.len() > MAX_TABLE {
             return Ok(sourcetable::parse(&text));
@@ -299,7 +324,7 @@ async fn mountpoints(spec: &NtripSpec) -> Result<Vec<sourcetable::Stream>, Strin
         match tokio::time::timeout_at(deadline, stream.read(&mut chunk)).await {
             Ok(Ok(0)) | Err(_) => return Ok(sourcetable::parse(&text)),
             Ok(Ok(n)) => pending = chunk[..n].to_vec(),
-            Ok(Err(e)) => return Err(format!("reading the table: {e}")),
+            Ok(Err(e)) => return Err(answered(format!("reading the table: {e}"))),
         }
     }
 }
@@ -541,8 +566,12 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
     let not_probed = |why: &str| Err((format!("not probed: {why}"), "fix the step above".into()));
     let mut steps = Vec::new();
     let table = match mountpoints(spec).await {
-        Ok(t) => t,
+        Ok(t) => Ok(t),
+        // It answered, without its table (401 for a table behind the login, or none): the
+        // mountpoint is probed on.
+        Err(e) if e.answered => Err(e.why),
         Err(e) => {
+            let e = e.why;
             steps.push((
                 REACHABLE,
                 Err((
@@ -559,31 +588,52 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
             return steps;
         }
     };
-    steps.push((
-        REACHABLE,
-        Ok(format!(
-            "{} answers, {} mountpoints listed",
-            spec.url.address(),
-            table.len()
-        )),
-    ));
     let mount = &spec.url.mountpoint;
+    let withheld = table.is_err();
+    let table = match table {
+        Ok(table) => table,
+        Err(why) => {
+            steps.push((REACHABLE, Ok(format!("{} answers", spec.url.address()))));
+            steps.push((
+                LISTED_STEP,
+                Err((
+                    why,
+                    format!(
+                        "a 401 or 403: {CREDENTIALS_FIX}; otherwise the caster keeps its table \
+                         to itself, and the mountpoint is tried below"
+                    ),
+                )),
+            ));
+            Vec::new()
+        }
+    };
     let listed = table.iter().find(|s| &s.mountpoint == mount);
     let wants_gga = listed.is_some_and(|s| s.wants_gga);
-    steps.push((
-        LISTED_STEP,
-        match listed {
-            Some(s) => Ok(format!(
-                "{mount}{}",
-                if s.wants_gga { " (wants GGA)" } else { "" }
+    if !withheld {
+        steps.push((
+            REACHABLE,
+            Ok(format!(
+                "{} answers, {} mountpoints listed",
+                spec.url.address(),
+                table.len()
             )),
-            None => Err((
-                not_found(spec).await,
-                "fix the URL's mountpoint (some casters list only a few: then this may be right)"
-                    .into(),
-            )),
-        },
-    ));
+        ));
+        steps.push((
+            LISTED_STEP,
+            match listed {
+                Some(s) => Ok(format!(
+                    "{mount}{}",
+                    if s.wants_gga { " (wants GGA)" } else { "" }
+                )),
+                None => Err((
+                    not_found(spec).await,
+                    "fix the URL's mountpoint (some casters list only a few: then this may be \
+                     right)"
+                        .into(),
+                )),
+            },
+        ));
+    }
     let mut stream = match open(spec, false).await {
         Ok(s) => s,
         Err(e) => {
@@ -602,7 +652,8 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
         }
     };
     match &head.status {
-        Status::Icy | Status::Http => steps.push((AUTH, Ok(format!("{:?} 200", head.status)))),
+        Status::Icy => steps.push((AUTH, Ok("ICY 200 OK (NTRIP 1.0)".into()))),
+        Status::Http => steps.push((AUTH, Ok("HTTP 200 (NTRIP 2.0)".into()))),
         Status::Error(code @ (401 | 403), reason) => {
             steps.push((
                 AUTH,
@@ -615,11 +666,25 @@ pub async fn probe(spec: &NtripSpec, position: Option<GgaFix>) -> Vec<ProbeStep>
             return steps;
         }
         other => {
+            let (answer, fix) = match other {
+                Status::Error(code @ 500.., reason) => (
+                    format!("{code} {reason}"),
+                    "the caster is failing or busy: try again later, or ask its operator",
+                ),
+                Status::Error(code, reason) => (
+                    format!("{code} {reason}"),
+                    "fix the URL's mountpoint (the caster's table lists them)",
+                ),
+                _ => (
+                    "its table instead".into(),
+                    "fix the URL's mountpoint (the caster's table lists them)",
+                ),
+            };
             steps.push((
                 AUTH,
                 Err((
-                    format!("the caster did not serve the mountpoint ({other:?})"),
-                    "fix the URL's mountpoint".into(),
+                    format!("the caster did not serve the mountpoint: it answered {answer}"),
+                    fix.into(),
                 )),
             ));
             steps.push((FRAMES, not_probed("no stream")));

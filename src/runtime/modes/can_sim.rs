@@ -79,8 +79,12 @@ pub async fn run(config: VehicleConfig) -> crate::runtime::error::Result<()> {
             line = lines.next() => {
                 let line = match line {
                     Ok(Some(InputLine::Text(line))) => line,
-                    Ok(Some(refused)) => {
-                        eprintln!("can-sim: line refused: {refused:?}");
+                    Ok(Some(InputLine::NotUtf8(number))) => {
+                        eprintln!("can-sim: line {number} refused: not UTF-8");
+                        continue;
+                    }
+                    Ok(Some(InputLine::TooLong(number, bytes))) => {
+                        eprintln!("can-sim: line {number} refused: {bytes} bytes, over the limit");
                         continue;
                     }
                     _ => break,

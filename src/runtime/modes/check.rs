@@ -134,18 +134,7 @@ pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe
         let socket = match crate::runtime::drivers::can::open(name) {
             Ok(s) => s,
             Err(e) => {
-                probes.push(Probe::new(
-                    name,
-                    "interface up",
-                    fail(
-                        e,
-                        format!(
-                            "bring it up: `ip link set {name} up type can bitrate 500000` \
-                             (the drives' rate), or for a virtual bus `ip link add dev {name} \
-                             type vcan && ip link set {name} up`"
-                        ),
-                    ),
-                ));
+                probes.push(Probe::new(name, "interface up", fail(e, can_fix(name))));
                 // What sits on it cannot be reached: said, not left out.
                 for drive in config.drive.iter().filter(|d| d.bus == name) {
                     let what = format!("SDO read, node {}", drive.node);
@@ -193,8 +182,12 @@ pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe
             }
             Err(e) => probes.push(Probe::new(
                 "ntrip",
-                "password file",
-                fail(e, "put the password on the file's first line"),
+                "settings",
+                fail(
+                    e,
+                    "check the [ntrip] key the message names (ntrip.password_file, \
+                     ntrip.ca_file as PEM, or the system's CA roots: install ca-certificates)",
+                ),
             )),
         }
     }
@@ -229,7 +222,8 @@ fn probe_zones(config: &VehicleConfig, zones: &ZonesConfig) -> Result<String, (S
     );
     let Some([lat_deg, lon_deg, h_m]) = config.localization.as_ref().and_then(|l| l.datum) else {
         return Ok(format!(
-            "{seen} (no datum configured: placed at the first RTK fix)"
+            "{seen} (no localization.datum configured: placed where the first valid fix, of \
+             any quality, becomes the origin)"
         ));
     };
     let frame = Enu::new(Geodetic {
@@ -269,6 +263,49 @@ enum Listener {
         expect_heading: bool,
     },
     Imu(ImuDecoder),
+}
+
+/// A broker's refusal of the connection in words, and what to do about it.
+fn connack_words(code: rumqttc::ConnectReturnCode) -> (&'static str, &'static str) {
+    use rumqttc::ConnectReturnCode as C;
+    match code {
+        C::BadUserNamePassword | C::NotAuthorized => (
+            "user name or password not accepted",
+            "check mqtt.username and mqtt.password against the broker's users",
+        ),
+        C::ServiceUnavailable => (
+            "the broker is unavailable or full",
+            "the embedded broker takes mqtt.embedded_max_clients at once: close a client or \
+             raise it; another broker: see its log",
+        ),
+        C::BadClientId => (
+            "client id refused",
+            "check mqtt.client_id (the broker may limit its length or characters)",
+        ),
+        C::RefusedProtocolVersion => (
+            "MQTT 3.1.1 not spoken",
+            "point mqtt.host and mqtt.port at an MQTT 3.1.1 or 5 broker",
+        ),
+        C::Success => ("accepted", ""),
+    }
+}
+
+/// What to do about the CAN interface `name` that did not open: it may be missing (an
+/// adapter unplugged, a name misspelt) or down, and only its devices know its bit rate.
+fn can_fix(name: &str) -> String {
+    if std::path::Path::new("/sys/class/net").join(name).exists() {
+        format!(
+            "bring it up at the bit rate its devices use (chassisd does not set it): `sudo ip \
+             link set {name} type can bitrate RATE && sudo ip link set {name} up` (a vcan \
+             needs only `ip link set {name} up`)"
+        )
+    } else {
+        format!(
+            "no interface {name}: check can[].interface against `ip -br link` and that the \
+             CAN adapter is plugged in (for a test bus: `sudo ip link add dev {name} type vcan \
+             && sudo ip link set {name} up`)"
+        )
+    }
 }
 
 async fn probe_serial(
@@ -458,7 +495,10 @@ async fn probe_sdo(
                     format!("the drive aborted the read ({code})"),
                     "the node answers but refuses 0x1000: is it a CiA 402 drive?",
                 ),
-                Ok(other) => fail(format!("unexpected answer {other:?}"), "check the node id"),
+                Ok(_) => fail(
+                    "the node answered with another SDO reply than a read's",
+                    "check drive[].node: another device may have this id",
+                ),
                 Err(e) => fail(format!("malformed answer: {e}"), "check the node id"),
             };
         }
@@ -596,10 +636,8 @@ async fn probe_broker(
                         }
                     },
                     code => {
-                        return fail(
-                            format!("refused: {code:?}"),
-                            "check mqtt.username and mqtt.password",
-                        );
+                        let (why, fix) = connack_words(code);
+                        return fail(format!("refused: {why}"), fix);
                     }
                 },
                 Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
