@@ -15,6 +15,7 @@ use crate::engine::drivetrain::BusStats;
 use crate::engine::{Decoder, Engine, EngineStats, RTCM_PROTOCOL, STATUS_PERIOD};
 use crate::record::nmea_import::{IMPORT_SOURCE, ImportOptions, ImportReport, NmeaLogReader};
 use crate::record::{Record, RecordError, RecordingReader, SkippedLine, SourceKind};
+use crate::runtime::progress::Progress;
 use crate::time::Timestamp;
 
 /// Why a replay could not run.
@@ -77,6 +78,8 @@ pub struct ReplayOptions {
     pub import: ImportOptions,
     /// Where the corrections relayed to the receiver go (what live mode wrote to its port).
     pub corrections_out: Option<std::path::PathBuf>,
+    /// Draw a progress bar on stderr when it is a terminal.
+    pub progress: bool,
 }
 
 /// What takes a replay's engine outputs as they come.
@@ -173,8 +176,70 @@ pub fn replay_into(
     let store = Box::new(MemoryStore::with(trajectories));
     let mut engine = Engine::with_trajectories(&vehicle, &sources, store);
     setup(&mut engine);
-    run(reader, engine, span, consumer, &mut summary)?;
+    let progress = if options.progress {
+        Progressing::of(path, &reader, span)
+    } else {
+        Progressing::none()
+    };
+    run(reader, engine, span, consumer, &mut summary, &progress)?;
     Ok(summary)
+}
+
+/// How far a replay has come: in recorded time between a recording's start and end, or in
+/// bytes of a log.
+struct Progressing {
+    bar: Progress,
+    /// The recording's start (time is counted from it), or none (bytes are counted).
+    start: Option<Timestamp>,
+}
+
+/// Records between two updates of the bar.
+const PROGRESS_EVERY: u64 = 1024;
+
+impl Progressing {
+    fn none() -> Self {
+        Self {
+            bar: Progress::none(),
+            start: None,
+        }
+    }
+
+    /// The bar of replaying `path` from `input`, when its length is known.
+    fn of(path: &Path, input: &Input, span: SessionSpan) -> Self {
+        let name = path.file_name().unwrap_or(path.as_os_str());
+        let what = format!("replaying {}", name.to_string_lossy());
+        match (input, span.start, span.end) {
+            (Input::Recording(_), Some(start), Some(end)) if start < end => Self {
+                bar: Progress::bar(&what, millis(end.saturating_since(start))),
+                start: Some(start),
+            },
+            (Input::Log(_), _, _) => match std::fs::metadata(path) {
+                Ok(m) => Self {
+                    bar: Progress::bar(&what, m.len()),
+                    start: None,
+                },
+                Err(_) => Self::none(),
+            },
+            // A recording cut short (no end in its meta.toml): its length is not known.
+            _ => Self::none(),
+        }
+    }
+
+    /// The replay has read up to `record` of `input`.
+    fn at(&self, input: &Input, record: &Record) {
+        if !self.bar.is_drawn() {
+            return;
+        }
+        match (self.start, input) {
+            (Some(start), _) => self.bar.set(millis(record.t.saturating_since(start))),
+            (None, Input::Log(reader)) => self.bar.set(reader.bytes_read()),
+            (None, Input::Recording(_)) => {}
+        }
+    }
+}
+
+fn millis(d: std::time::Duration) -> u64 {
+    u64::try_from(d.as_millis()).unwrap_or(u64::MAX)
 }
 
 /// Ticks up to `until` in batches of [`TICK_BATCH`], writing each batch's lines.
@@ -304,8 +369,10 @@ fn run(
     session: SessionSpan,
     out: &mut impl Consumer,
     summary: &mut ReplaySummary,
+    progress: &Progressing,
 ) -> Result<(), ReplayError> {
     engine.check_recorded_transmissions();
+    let mut records: u64 = 0;
     let mut outputs = Vec::new();
     let mut span: Option<(Timestamp, Timestamp)> = None;
     // Ticks before a record belong to the segment of the record before it.
@@ -338,6 +405,10 @@ fn run(
         span = Some(span.map_or((t, t), |(first, _)| (first, t)));
         out.take(&mut outputs, offset)?;
         offset = input.logged_offset_ns();
+        records += 1;
+        if records.is_multiple_of(PROGRESS_EVERY) {
+            progress.at(&input, &record);
+        }
     }
     // Tick to the session's recorded end, else to where an unclean end's files all end,
     // else to the period boundary after the last record.

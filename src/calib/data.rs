@@ -91,8 +91,6 @@ struct Gather {
     last_heading: Option<Timestamp>,
     last_wheels: Option<Timestamp>,
     truncated: bool,
-    /// Shows how far the reading has come, in ms of the recording.
-    progress: Option<indicatif::ProgressBar>,
 }
 
 impl Gather {
@@ -145,9 +143,6 @@ impl Consumer for Gather {
                         accel: s.accel,
                     });
                     self.truncated = t > MAX_SPAN_S;
-                    if let Some(bar) = &self.progress {
-                        bar.set_position((t * 1000.0) as u64);
-                    }
                 }
                 Measured::Gnss(_, fix) => self.gnss(&fix),
                 Measured::Wheels { left, right } => {
@@ -208,24 +203,12 @@ impl Dataset {
         config: Option<VehicleConfig>,
         progress: bool,
     ) -> Result<Self, GatherError> {
-        let (stored, span_ms) = stored_config(path)?;
+        let stored = stored_config(path)?;
         let vehicle = match (config, stored) {
             (Some(c), _) => c,
             (None, Some(c)) => c,
             (None, None) => return Err(GatherError::NoConfiguration(path.to_owned())),
         };
-        let progress = progress.then(|| {
-            let bar = indicatif::ProgressBar::new(span_ms.unwrap_or(0));
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "reading {msg} [{bar:40}] {percent:>3}% ({elapsed} / about {duration})",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-                .progress_chars("=> "),
-            );
-            bar.set_message(path.display().to_string());
-            bar
-        });
         let latency_s = vehicle.localization.map_or(0.0, |l| l.gnss_latency_s);
         let mut gather = Gather {
             latency_s,
@@ -238,16 +221,13 @@ impl Dataset {
             last_heading: None,
             last_wheels: None,
             truncated: false,
-            progress,
         };
         let options = ReplayOptions {
             config: Some(vehicle.clone()),
+            progress,
             ..ReplayOptions::default()
         };
         replay::replay_into(path, &options, |e| e.emit_measurements(), &mut gather)?;
-        if let Some(bar) = gather.progress.take() {
-            bar.finish_and_clear();
-        }
         let datum = vehicle
             .localization
             .and_then(|l| l.datum)
@@ -294,21 +274,16 @@ impl Dataset {
     }
 }
 
-/// The configuration stored with the recording at `path`, and its length in ms when it
-/// ended cleanly.
-fn stored_config(path: &Path) -> Result<(Option<VehicleConfig>, Option<u64>), GatherError> {
+/// The configuration stored with the recording at `path`.
+fn stored_config(path: &Path) -> Result<Option<VehicleConfig>, GatherError> {
     let (meta, _) =
         crate::record::RecordingReader::open(path).map_err(|error| GatherError::Open {
             path: path.to_owned(),
             error,
         })?;
-    let span_ms = meta
-        .start_us
-        .zip(meta.end_us)
-        .map(|(a, b)| b.saturating_sub(a) / 1000);
     let config = meta
         .vehicle_config
         .map(|file| VehicleConfig::load_within(&path.join(file), path))
         .transpose()?;
-    Ok((config, span_ms))
+    Ok(config)
 }

@@ -45,6 +45,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         stamped: a.stamped,
         import: ImportOptions { max_gap: a.max_gap },
         corrections_out: a.corrections_out,
+        progress: true,
     };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());

@@ -120,12 +120,15 @@ struct Lines {
     in_comment: bool,
     comment_lines: usize,
     read_error: Option<String>,
+    /// Bytes read so far.
+    bytes: u64,
 }
 
 impl Lines {
     fn new(input: Box<dyn BufRead>) -> Self {
         Self {
             input,
+            bytes: 0,
             line_no: 0,
             mid_line: false,
             in_comment: false,
@@ -142,7 +145,7 @@ impl Lines {
             let mut bounded = Read::take(&mut self.input, MAX_CHUNK as u64);
             match bounded.read_until(b'\n', &mut buf) {
                 Ok(0) => return None,
-                Ok(_) => {}
+                Ok(n) => self.bytes += n as u64,
                 Err(e) => {
                     self.read_error = Some(e.to_string());
                     return None;
@@ -320,6 +323,11 @@ impl NmeaLogReader {
                 ..ImportReport::default()
             },
         })
+    }
+
+    /// Bytes of the log read as records so far.
+    pub fn bytes_read(&self) -> u64 {
+        self.lines.bytes
     }
 
     /// What the import found so far (all of it once the reader is exhausted).

@@ -24,6 +24,7 @@ pub mod modes;
 pub mod notify;
 pub mod outage_log;
 pub mod panics;
+pub mod progress;
 pub mod recorder;
 pub mod refusals;
 pub mod status_out;
