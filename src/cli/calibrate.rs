@@ -21,26 +21,28 @@ use chassisd::sim::scenario::{CalibrationPattern, Scenario};
 /// recording (--from) or live on the vehicle (--config alone: collect, then fit).
 /// Writes or updates the calibration file and prints a report.
 #[derive(clap::Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).multiple(true).args(["from", "config"])))]
 pub struct Args {
     /// What to calibrate.
     #[arg(value_enum)]
     procedure: CalibrateProcedure,
     /// The recording folder (`chassisd run --record`, `chassisd record` segment, or
-    /// `chassisd sim --record`).
-    #[arg(long, required_unless_present = "config")]
+    /// `chassisd sim --record`); without it, --config collects live.
+    #[arg(long)]
     from: Option<PathBuf>,
     /// Vehicle configuration: with --from, used instead of the one stored with the
     /// recording; without, the vehicle to collect from live.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Calibration file to write or update (default calib/<vehicle>.toml).
+    /// Calibration file to write or update (default calib/<vehicle>.toml under the
+    /// current folder).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Standing still must last this long, s.
     #[arg(long, default_value = "20", value_parser = seconds_arg)]
     still: Duration,
-    /// The report plot (SVG; default: beside the calibration file, named
-    /// <vehicle>.<procedure>.svg).
+    /// The report plot (SVG; default: beside the calibration file, named after it:
+    /// <calibration file's stem>.<procedure>.svg).
     #[arg(long)]
     plot: Option<PathBuf>,
     /// Live: collect this long, s (default: --still and 10 s for imu, 900 s otherwise;

@@ -58,6 +58,7 @@ pub struct Args {
     websocket: Option<String>,
     /// Run in lockstep as fast as the machine allows: no wall clock, no MQTT, no
     /// standard input. Needs --scenario or --duration; --record works as without it.
+    /// Not with the links that need the wall clock: --websocket, --ntrip, --zones.
     #[arg(long, conflicts_with_all = ["mqtt", "broker_port", "commands_stdin", "trajectory_dir", "ros_master"])]
     fast: bool,
     /// A calibration file for the simulated vehicle's configuration (as `[vehicle]
