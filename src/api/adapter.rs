@@ -167,8 +167,10 @@ pub fn decode_request<T: DeserializeOwned>(
     }
 }
 
-/// Largest recorded ROS request, bytes (a pose or a twist is some 300).
-pub const MAX_REQUEST: usize = 4096;
+/// Largest recorded ROS request, bytes: a pose or a twist is some 300, a `/set_shape` or
+/// `/set_region` zone edit of some thousand points needs the room (the zones' own caps
+/// apply after); rosbridge's message limit, so one size holds on both links.
+pub const MAX_REQUEST: usize = 256 * 1024;
 
 /// The answer a request gets from `core`, with the request's id.
 pub fn answer(

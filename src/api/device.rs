@@ -49,6 +49,11 @@ pub const TOO_LARGE: u32 = 4013;
 /// Commands that go to the navigation stack when one is configured.
 const MAPPING: [&str; 3] = ["start_mapping", "stop_mapping", "use_map"];
 
+/// Commands chassisd carries out itself. Each is a command topic: it has a rate bucket of
+/// its own (an e-stop never waits behind invented topics) and the embedded broker keeps it
+/// for chassisd's commands (no client's last will may release an e-stop).
+const OWN_COMMANDS: [&str; 3] = ["goal", "estop", "reset"];
+
 #[derive(Serialize)]
 struct Ack<'a> {
     msg_id: &'a Value,
@@ -159,7 +164,7 @@ impl Dialect for DeviceDialect {
     fn command_topics(&self) -> Vec<String> {
         let mut topics: Vec<String> = MAPPING
             .iter()
-            .chain(&["goal"])
+            .chain(&OWN_COMMANDS)
             .map(|c| format!("{}{c}", self.prefix))
             .collect();
         if let Some(f) = &self.forward {
@@ -173,7 +178,7 @@ impl Dialect for DeviceDialect {
         topics.extend(
             MAPPING
                 .iter()
-                .chain(&["goal"])
+                .chain(&OWN_COMMANDS)
                 .map(|c| format!("{}{c}/ack", self.prefix)),
         );
         if let Some(f) = &self.forward {
@@ -428,6 +433,21 @@ mod tests {
         assert_eq!(out[0].payload, ack.as_bytes());
         // Its own ack topics are not commands.
         assert!(!d.owns("device/SN1/start_mapping/ack"));
+    }
+
+    /// The safety commands are command topics like the goal, with their acks: the link
+    /// rate-limits them apart from invented topics, and the broker reserves them.
+    #[test]
+    fn estop_and_reset_are_command_topics() {
+        let d = DeviceDialect::new("SN1", None, 1 << 20);
+        let commands = d.command_topics();
+        for c in ["goal", "estop", "reset", "start_mapping"] {
+            assert!(
+                commands.contains(&format!("device/SN1/{c}")),
+                "{c}: {commands:?}"
+            );
+            assert!(d.topics().contains(&format!("device/SN1/{c}/ack")), "{c}");
+        }
     }
 
     /// Every error ack is a refusal the run counts; a taken goal or a forward is not.
