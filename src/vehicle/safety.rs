@@ -712,14 +712,19 @@ mod tests {
         );
     }
 
-    #[test]
-    fn control_link_required_from_start() {
+    /// A supervisor watching a control link of 1 s, `required_from_start` or not.
+    fn with_control_link(required_from_start: bool) -> Safety {
         let mut c = config();
         c.control_link = Some(ControlLinkConfig {
             timeout: Duration::from_secs(1),
-            required_from_start: true,
+            required_from_start,
         });
-        let mut s = Safety::new(c);
+        Safety::new(c)
+    }
+
+    #[test]
+    fn control_link_required_from_start() {
+        let mut s = with_control_link(true);
         s.tick(ms(0), &feedback(None));
         s.tick(ms(1000), &feedback(None));
         assert_eq!(s.state(), &State::Armed);
@@ -738,12 +743,7 @@ mod tests {
     /// After a heartbeat loss, each refusal says what to do next, and doing it works.
     #[test]
     fn refusals_after_a_heartbeat_loss_give_advice_that_works() {
-        let mut c = config();
-        c.control_link = Some(ControlLinkConfig {
-            timeout: Duration::from_secs(1),
-            required_from_start: false,
-        });
-        let mut s = Safety::new(c);
+        let mut s = with_control_link(false);
         s.control_heartbeat(ms(0));
         s.tick(ms(0), &feedback(None));
         s.velocity(ms(0), 0.3, 0.0).unwrap();
