@@ -14,11 +14,15 @@
 //! A UBX frame starts at `B5 62` between sentences. Its class must be one u-blox uses and its
 //! length at most [`MAX_PAYLOAD`]; a frame whose checksum fails gives back every byte after
 //! its first, which is skipped, so a false sync in binary noise never swallows what follows.
+//! A frame still in progress when the input runs out, that already holds a whole sentence or a
+//! whole UBX frame, gives its bytes back then ([`super::false_sync`]), so what follows a false
+//! sync is not held back for a length's worth of bytes either.
 
 use std::collections::VecDeque;
 
 use crc::{Algorithm, Crc};
 
+use super::false_sync::FalseSyncWitness;
 use super::ubx::frame::{
     HEADER_LEN, MAX_PAYLOAD, OVERHEAD, SYNC, UbxFrame, fletcher, is_known_class,
 };
@@ -104,6 +108,8 @@ pub struct GnssFramer {
     log: bool,
     /// The UBX frame in progress, from its sync.
     ubx: Vec<u8>,
+    /// Watches `ubx` for proof of a false sync.
+    witness: FalseSyncWitness,
     /// Bytes of a failed UBX frame to be framed again before new input.
     replay: VecDeque<u8>,
     stats: FramerStats,
@@ -124,6 +130,7 @@ impl GnssFramer {
             xor: 0,
             log: false,
             ubx: Vec::new(),
+            witness: FalseSyncWitness::default(),
             replay: VecDeque::new(),
             stats: FramerStats::default(),
         }
@@ -153,9 +160,18 @@ impl GnssFramer {
         self.stats.bytes_in += data.len() as u64;
         for &byte in data {
             self.step(byte, &mut on_frame);
-            while let Some(again) = self.replay.pop_front() {
-                self.step(again, &mut on_frame);
-            }
+            self.step_replayed(&mut on_frame);
+        }
+        while self.state == State::Ubx && self.witness.proves_false(&self.ubx) {
+            self.resync_ubx();
+            self.step_replayed(&mut on_frame);
+        }
+    }
+
+    /// Frames again the bytes a failed UBX frame gave back.
+    fn step_replayed(&mut self, on_frame: &mut impl FnMut(Frame<'_>)) {
+        while let Some(again) = self.replay.pop_front() {
+            self.step(again, on_frame);
         }
     }
 
@@ -294,6 +310,7 @@ impl GnssFramer {
         self.state = State::Ubx;
         self.ubx.clear();
         self.ubx.push(SYNC[0]);
+        self.witness.clear();
     }
 
     /// Not a UBX frame after all: its first byte is skipped and the rest framed again.
@@ -354,7 +371,7 @@ impl GnssFramer {
     }
 }
 
-fn hex_value(byte: u8) -> Option<u8> {
+pub(super) fn hex_value(byte: u8) -> Option<u8> {
     match byte {
         b'0'..=b'9' => Some(byte - b'0'),
         b'a'..=b'f' => Some(byte - b'a' + 10),
@@ -427,6 +444,55 @@ mod tests {
         // 7 garbage bytes, a lone `$` cut short by the real `$`, then 4 trailing bytes.
         assert_eq!(stats.bytes_skipped, 7 + 1 + 4);
         assert_eq!(stats.truncated, 1);
+    }
+
+    /// A sync, a known class and a length of 4,096: a false frame that would swallow 4 KiB.
+    const FALSE_SYNC: [u8; 6] = [0xb5, 0x62, 0x01, 0x00, 0x00, 0x10];
+
+    #[test]
+    fn a_sentence_after_a_false_sync_is_not_held_back() {
+        let mut stream = FALSE_SYNC.to_vec();
+        stream.extend_from_slice(GGA);
+        for cut in 0..stream.len() {
+            let (out, stats) = frame_all(&[&stream[..cut], &stream[cut..]]);
+            assert_eq!(out.len(), 1, "cut at {cut}");
+            assert_eq!(stats.bytes_skipped, FALSE_SYNC.len() as u64);
+        }
+        // Without its line end the sentence is no proof yet: the frame may still be real.
+        let (out, _) = frame_all(&[&stream[..stream.len() - 2]]);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn a_ubx_frame_after_a_false_sync_is_not_held_back() {
+        let real = crate::devices::gnss::ubx::frame::encode(0x01, 0x07, &[7; 92]).unwrap();
+        let mut stream = FALSE_SYNC.to_vec();
+        stream.extend_from_slice(&real);
+        let mut framer = GnssFramer::new();
+        let mut payloads = Vec::new();
+        framer.push_frames(&stream, |frame| {
+            if let Frame::Ubx(ubx) = frame {
+                payloads.push((ubx.class, ubx.id, ubx.payload.len()));
+            }
+        });
+        assert_eq!(payloads, vec![(0x01, 0x07, 92)]);
+        assert_eq!(framer.pending(), 0);
+        assert_eq!(framer.stats().bytes_skipped, FALSE_SYNC.len() as u64);
+    }
+
+    #[test]
+    fn a_real_frame_holding_sentence_like_text_is_delivered() {
+        // An INF-NOTICE whose text looks like a sentence but fails its checksum, and one with a
+        // sync pattern whose inner frame fails its own: neither is proof, both frames arrive.
+        let mut text = b"$GPGGA,1*00\r\n".to_vec();
+        text.extend_from_slice(&[0xb5, 0x62, 0x01, 0x07, 0x01, 0x00, 0x00, 0x00, 0x00]);
+        let real = crate::devices::gnss::ubx::frame::encode(0x04, 0x02, &text).unwrap();
+        let mut framer = GnssFramer::new();
+        let mut frames = 0;
+        framer.push_frames(&real, |frame| {
+            frames += usize::from(matches!(frame, Frame::Ubx(_)))
+        });
+        assert_eq!((frames, framer.stats().bytes_skipped), (1, 0));
     }
 
     #[test]

@@ -2,6 +2,7 @@
 
 pub mod decode;
 pub mod encode;
+mod false_sync;
 pub mod fix;
 pub mod framer;
 pub mod rtcm;
