@@ -550,3 +550,71 @@ fn silent_malformed_and_unread_clients_cost_the_broker_nothing() {
     drop(lazy);
     daemon.stop();
 }
+
+/// A `save_trajectory` of `points` points called `name` (some 100 bytes a point).
+fn save_message(name: &str, points: usize) -> String {
+    let data: Vec<Value> = (0..points)
+        .map(|i| {
+            serde_json::json!({"angle": 0.0, "latitude": 47.397742 + i as f64 * 1e-7,
+                "longitude": 8.5455966, "x": 0.0, "y": i as f64 * 0.01, "yaw": 0.0})
+        })
+        .collect();
+    serde_json::json!({"cmd": "save_trajectory", "cmd_type": "trajectory_control",
+        "data": {"name": name, "data": data}})
+    .to_string()
+}
+
+#[test]
+fn a_trajectory_listing_larger_than_a_packet_is_refused_and_the_session_survives() {
+    let port = free_port();
+    let mut daemon = Proc::start(&["sim", "--broker-port", &port.to_string()]);
+    daemon.wait_log(WAIT, "MQTT subscribed");
+    let clients = Mosquitto::clients_for(port);
+    let answers = clients.subscribe(&["feedback", "trajectory_data"]);
+    let dir = common::tempdir("big-trajectories");
+    // Seven saves of 0.7 MB, each within max_payload (1 MiB): 4.7 MB together, more than
+    // the 4 MiB a packet may carry.
+    for k in 0..7 {
+        let file = dir.join(format!("t{k}.json"));
+        std::fs::write(&file, save_message(&format!("t{k}"), 7000)).expect("write");
+        clients.publish_file("mqtt_control", &file);
+        let answer = answers.next_on("feedback", WAIT).expect("save answered");
+        assert!(answer.contains("save_trajectory_success"), "{answer}");
+    }
+    let list = r#"{"cmd": "get_all_trajectory", "cmd_type": "trajectory_control"}"#;
+    clients.publish("mqtt_control", list);
+    let (topic, answer) = answers.next(WAIT).expect("listing answered");
+    let answer: Value = serde_json::from_str(&answer).expect("JSON");
+    assert_eq!(
+        (topic.as_str(), answer["cmd"].as_str()),
+        ("feedback", Some("get_all_trajectory_failse")),
+        "{answer}"
+    );
+    let reason = answer["message"].as_str().expect("a reason");
+    assert!(
+        reason.contains("7 trajectories stored (49000 points)")
+            && reason.contains("mqtt.max_payload")
+            && reason.contains("delete trajectories"),
+        "{reason}"
+    );
+    // The link was never lost, and with one trajectory fewer the listing fits and comes.
+    clients.publish(
+        "mqtt_control",
+        r#"{"cmd": "delete_trajectory", "cmd_type": "trajectory_control", "name": "t0"}"#,
+    );
+    let answer = answers.next_on("feedback", WAIT).expect("delete answered");
+    assert!(answer.contains("delete_trajectory_success"), "{answer}");
+    clients.publish("mqtt_control", list);
+    let listing = answers
+        .next_on("trajectory_data", WAIT)
+        .expect("the listing");
+    let listing: Value = serde_json::from_str(&listing).expect("JSON");
+    assert_eq!(listing.as_array().map(Vec::len), Some(6));
+    assert_eq!(
+        daemon.log_count("MQTT connection lost"),
+        0,
+        "{:?}",
+        daemon.log
+    );
+    daemon.stop();
+}

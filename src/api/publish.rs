@@ -25,6 +25,12 @@ pub struct Publish {
 }
 
 impl Publish {
+    /// The bytes of its MQTT PUBLISH packet, at most: fixed header (up to five bytes), topic
+    /// with its length, packet id, payload.
+    pub fn packet_len(&self) -> usize {
+        5 + 2 + self.topic.len() + 2 + self.payload.len()
+    }
+
     /// Telemetry: QoS 0, not retained.
     pub fn telemetry(topic: impl Into<String>, payload: impl Into<Bytes>) -> Self {
         Self {

@@ -218,7 +218,18 @@ impl Default for MqttConfig {
     }
 }
 
+/// The largest MQTT packet chassisd takes or sends on a link whose messages are at most
+/// `max_payload`: four times that (a reply may carry more than a request), at least 1 MiB.
+pub fn packet_limit(max_payload: usize) -> usize {
+    max_payload.saturating_mul(4).max(1 << 20)
+}
+
 impl MqttConfig {
+    /// The largest packet taken or sent on this link ([`packet_limit`]).
+    pub fn packet_limit(&self) -> usize {
+        packet_limit(self.max_payload)
+    }
+
     /// The keep-alive interval.
     pub fn keep_alive(&self) -> Duration {
         Duration::from_secs_f64(self.keep_alive_s)

@@ -26,6 +26,7 @@ pub use status::BaseStatus;
 
 use super::log_budget::{self, LogBudget, SharedBudget};
 use super::mqtt::{CoreAccess, Dialect, Handled, Publish};
+use crate::config::mqtt::packet_limit;
 use crate::control::MotionTag;
 use crate::time::Timestamp;
 use crate::vehicle::chassis::CommandRejected;
@@ -149,7 +150,18 @@ impl RtkDialect {
             "get_all_trajectory" => match self.store.all() {
                 Ok(all) => {
                     let json = serde_json::to_string(&all).unwrap_or_default();
-                    out.push(Publish::reply(TRAJECTORY_DATA, json));
+                    let answer = Publish::reply(TRAJECTORY_DATA, json);
+                    let limit = packet_limit(self.max_payload);
+                    if answer.packet_len() > limit {
+                        let points: usize = all.iter().map(|t| t.data.len()).sum();
+                        let reason = format!(
+                            "the {} trajectories stored ({points} points) make a trajectory_data of {} bytes, more than an MQTT packet may carry here ({limit} bytes: 4 × mqtt.max_payload); raise mqtt.max_payload, or delete trajectories",
+                            all.len(),
+                            answer.payload.len()
+                        );
+                        return self.feedback(&cmd, Err(reason), out);
+                    }
+                    out.push(answer);
                     Handled::Taken
                 }
                 Err(e) => self.feedback(&cmd, Err(e.to_string()), out),

@@ -69,6 +69,8 @@ struct Dropped {
     telemetry: u64,
     replies: u64,
     retained_commands: u64,
+    /// Messages larger than a packet may be, never sent.
+    oversized: u64,
 }
 
 /// The two outgoing queues, and the replies handed to rumqttc but not yet acknowledged.
@@ -81,11 +83,41 @@ struct Outbox {
     unacked: VecDeque<(u16, Publish)>,
     telemetry_max: usize,
     replies_max: usize,
+    /// The largest packet the broker takes from chassisd.
+    packet_max: usize,
     dropped: Dropped,
 }
 
 impl Outbox {
+    fn new(telemetry_max: usize, replies_max: usize, packet_max: usize) -> Self {
+        Self {
+            telemetry: VecDeque::new(),
+            replies: VecDeque::new(),
+            handed: VecDeque::new(),
+            unacked: VecDeque::new(),
+            telemetry_max,
+            replies_max,
+            packet_max,
+            dropped: Dropped::default(),
+        }
+    }
+
     fn push(&mut self, message: Publish) {
+        // The broker would end chassisd's session for it, and the reply, queued again on
+        // the reconnect, would end the next one too.
+        if message.packet_len() > self.packet_max {
+            self.dropped.oversized += 1;
+            if self.dropped.oversized.is_power_of_two() {
+                tracing::error!(
+                    topic = %message.topic,
+                    bytes = message.packet_len(),
+                    limit = self.packet_max,
+                    dropped = self.dropped.oversized,
+                    "MQTT message not sent: larger than a packet may be (4 × mqtt.max_payload, at least 1 MiB); raise mqtt.max_payload"
+                );
+            }
+            return;
+        }
         let (queue, max, dropped) = match message.qos {
             Qos::AtMostOnce => (
                 &mut self.telemetry,
@@ -258,8 +290,9 @@ pub(crate) fn client_options(
     o.set_keep_alive(c.keep_alive());
     o.set_clean_session(true);
     // Oversized commands get an error reply from their dialect; only far larger packets
-    // are refused by the client itself (and cost a reconnect).
-    o.set_max_packet_size(c.max_payload.saturating_mul(4).max(1 << 20), 64 << 20);
+    // are refused by the client itself (and cost a reconnect). The outbox never hands over
+    // a larger one.
+    o.set_max_packet_size(c.packet_limit(), c.packet_limit());
     if let (Some(user), password) = (&c.username, &c.password) {
         o.set_credentials(user.clone(), password.clone().unwrap_or_default());
     }
@@ -300,15 +333,7 @@ async fn run(
     let c = &spec.config;
     let broker = format!("{}:{}", c.host, c.port);
     let status_topic = c.status_topic(&spec.vehicle);
-    let mut outbox = Outbox {
-        telemetry: VecDeque::new(),
-        replies: VecDeque::new(),
-        handed: VecDeque::new(),
-        unacked: VecDeque::new(),
-        telemetry_max: c.telemetry_queue,
-        replies_max: c.reply_queue,
-        dropped: Dropped::default(),
-    };
+    let mut outbox = Outbox::new(c.telemetry_queue, c.reply_queue, c.packet_limit());
     let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst)
         .with_known_topics(spec.command_topics.iter().cloned());
     let mut connected = false;
@@ -548,15 +573,7 @@ mod tests {
     use super::*;
 
     fn outbox(telemetry_max: usize, replies_max: usize) -> Outbox {
-        Outbox {
-            telemetry: VecDeque::new(),
-            replies: VecDeque::new(),
-            handed: VecDeque::new(),
-            unacked: VecDeque::new(),
-            telemetry_max,
-            replies_max,
-            dropped: Dropped::default(),
-        }
+        Outbox::new(telemetry_max, replies_max, 1 << 20)
     }
 
     fn topics(queue: &VecDeque<Publish>) -> Vec<&str> {
@@ -585,6 +602,23 @@ mod tests {
         }
         assert_eq!(topics(&o.replies), ["ack3", "ack4"]);
         assert_eq!(o.dropped.replies, 3);
+    }
+
+    #[test]
+    fn a_message_larger_than_a_packet_is_never_queued() {
+        let mut o = outbox(10, 10);
+        let limit = o.packet_max;
+        let fits = Publish::reply(
+            "t",
+            vec![b'x'; limit - Publish::reply("t", "").packet_len()],
+        );
+        assert_eq!(fits.packet_len(), limit);
+        o.push(fits);
+        o.push(Publish::reply("t", vec![b'x'; limit]));
+        o.push(Publish::telemetry("t", vec![b'x'; limit]));
+        assert_eq!(o.replies.len(), 1);
+        assert!(o.telemetry.is_empty());
+        assert_eq!(o.dropped.oversized, 2);
     }
 
     #[tokio::test]

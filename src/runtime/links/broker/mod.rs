@@ -140,7 +140,7 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, Run
     Ok(ChildSettings {
         listen,
         max_clients: config.embedded_max_clients,
-        max_packet: config.max_payload.saturating_mul(4).max(1 << 20),
+        max_packet: config.packet_limit(),
         credentials: config
             .username
             .clone()
