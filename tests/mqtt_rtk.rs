@@ -547,3 +547,81 @@ fn names_that_look_alike_are_one_trajectory_and_invisible_ones_are_refused() {
         "delete_trajectory_success"
     );
 }
+
+/// A `save_trajectory` of `name`: points every 0.1 m from 0.5 m to 3 m straight ahead of the
+/// antenna, as base_status `s` places it.
+fn straight_ahead(s: &Value, name: &str) -> String {
+    let (lat, lon) = (
+        s["rtk"]["latitude"].as_f64().unwrap(),
+        s["rtk"]["longitude"].as_f64().unwrap(),
+    );
+    let (sin, cos) = s["pose"]["yaw"].as_f64().unwrap().sin_cos();
+    let points: Vec<Value> = (5..=30)
+        .map(|i| {
+            let along = f64::from(i) * 0.1;
+            let (plat, plon) = offset(lat, lon, along * cos, along * sin);
+            serde_json::json!({"longitude": plon, "latitude": plat, "angle": 0, "x": 0, "y": 0, "yaw": 0})
+        })
+        .collect();
+    serde_json::json!({"cmd_type": "trajectory_control", "cmd": "save_trajectory",
+        "data": {"name": name, "data": points}})
+    .to_string()
+}
+
+#[test]
+fn after_an_emergency_stop_cancel_task_re_arms_and_each_refusal_says_what_to_do() {
+    let broker = Mosquitto::start();
+    let status = broker.subscribe(&["base_status"]);
+    let answers = broker.subscribe(&["feedback"]);
+    let _d = daemon(&broker);
+    wait_localised(&status);
+    let save = straight_ahead(&fresh_status(&status), "ahead");
+    assert_eq!(
+        feedback(&broker, &answers, &save)["cmd"],
+        "save_trajectory_success"
+    );
+    let start =
+        r#"{"cmd_type":"task_control","cmd":"start_task","name":"ahead","id":0,"speed":0.3}"#;
+    let cancel = r#"{"cmd_type":"task_control","cmd":"cancel_task"}"#;
+    // The site's e-stop (root's, as rtk has none) is engaged: start_task names it.
+    assert_eq!(broker.sim_estop(1), 0);
+    let refused = feedback(&broker, &answers, start);
+    let reason = refused["message"].as_str().unwrap_or_default().to_owned();
+    assert_eq!(refused["cmd"], "start_task_failse", "{refused}");
+    assert!(
+        reason.contains("release the software emergency stop")
+            && reason.ends_with("send cancel_task to re-arm, then start_task again"),
+        "{reason}"
+    );
+    // cancel_task while it holds cancels, but cannot re-arm.
+    assert_eq!(
+        feedback(&broker, &answers, cancel)["cmd"],
+        "cancel_task_success"
+    );
+    assert_eq!(
+        feedback(&broker, &answers, start)["cmd"],
+        "start_task_failse"
+    );
+    // Released: the advice is rtk's own act, and following it works.
+    assert_eq!(broker.sim_estop(0), 0);
+    let refused = feedback(&broker, &answers, start);
+    assert_eq!(
+        refused["message"],
+        "stopped (software emergency stop engaged): send cancel_task to re-arm, then start_task again",
+        "{refused}"
+    );
+    assert_eq!(
+        feedback(&broker, &answers, cancel)["cmd"],
+        "cancel_task_success"
+    );
+    let answer = feedback(&broker, &answers, start);
+    assert_eq!(answer["cmd"], "start_task_success", "{answer}");
+    let deadline = Instant::now() + WAIT;
+    while next_status(&status)["nav"]["status"] != "NAV_RUN" {
+        assert!(Instant::now() < deadline, "the task never ran");
+    }
+    assert_eq!(
+        feedback(&broker, &answers, cancel)["cmd"],
+        "cancel_task_success"
+    );
+}

@@ -14,7 +14,8 @@
 //! force when the task starts, so the path stays where it was recorded on the ground after
 //! `init_rtk_data` or SET_LNG_LAT moved the frame; the stored `x`, `y`, `yaw` and `angle` are
 //! kept as recorded and not driven on. `cancel_task` ends the motion under way and brings the
-//! vehicle to rest (done when none is under way).
+//! vehicle to rest (done when none is under way); it is also rtk's deliberate act that
+//! re-arms a latched stop once its causes have cleared (rtk has no reset).
 
 pub mod status;
 
@@ -30,6 +31,7 @@ use crate::config::mqtt::packet_limit;
 use crate::control::MotionTag;
 use crate::time::Timestamp;
 use crate::vehicle::chassis::CommandRejected;
+use crate::vehicle::safety::Refusal;
 use crate::vehicle::{Command, PathPoints, PathRequest, VehicleStatus};
 
 /// Status topic.
@@ -206,7 +208,7 @@ impl RtkDialect {
                             id: 0,
                         }),
                     })
-                    .map_err(|e| e.to_string())
+                    .map_err(in_rtk_words)
                 });
                 self.feedback(&cmd, result, out)
             }
@@ -216,6 +218,12 @@ impl RtkDialect {
                     Ok(()) | Err(CommandRejected::NoDrives) => Ok(()),
                     Err(e) => Err(e.to_string()),
                 };
+                // rtk has no velocity command and no reset: its deliberate stop is the act
+                // that re-arms a latched stop whose causes have cleared. While one holds,
+                // the task is still cancelled; the next start_task's refusal names the cause.
+                if result.is_ok() {
+                    let _ = core.command(Command::Reset);
+                }
                 self.feedback(&cmd, result, out)
             }
             _ => {
@@ -225,6 +233,18 @@ impl RtkDialect {
                 self.feedback(&cmd, result, out)
             }
         }
+    }
+}
+
+/// A refusal as an rtk client can act on it: a latched stop is re-armed by `cancel_task`, as
+/// rtk has neither a velocity command nor a reset.
+fn in_rtk_words(refusal: CommandRejected) -> String {
+    match refusal {
+        CommandRejected::Safety(Refusal::Latched { reason, first }) => format!(
+            "stopped ({reason}): {}send cancel_task to re-arm, then start_task again",
+            first.map(|f| format!("{f}, then ")).unwrap_or_default()
+        ),
+        other => other.to_string(),
     }
 }
 
