@@ -564,6 +564,61 @@ fn an_ntrips_caster_is_checked_against_its_authority_and_streams_over_tls() {
 }
 
 #[test]
+fn the_ntrip_command_names_its_own_ca_file_option() {
+    let dir = common::tempdir("ntrip-cli-tls");
+    let pki = common::mqtt::TestPki::create(&dir, "caster");
+    let (served, expected) = corrupted_stream();
+    let caster = Caster::start_tls(
+        Behaviour::Stream {
+            head: "HTTP/1.1 200 OK\r\n\r\n".into(),
+            body: served,
+            chunks: vec![900],
+            every: Duration::from_millis(5),
+            repeat: true,
+        },
+        &pki.cert,
+        &pki.key,
+    );
+    let url = caster.url().replace("ntrip://", "ntrips://");
+    let out = dir.join("out.rtcm");
+    let ntrip = |extra: &[&std::ffi::OsStr]| {
+        let mut command = std::process::Command::new(common::chassisd());
+        command.args(["ntrip", &url, "--duration", "2", "--out"]);
+        command.arg(&out).args(extra);
+        command.output().expect("chassisd ntrip runs")
+    };
+    let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    // A file that is not there is named as the option that named it.
+    let missing = ntrip(&["--ca-file".as_ref(), "/nonexistent/ca.pem".as_ref()]);
+    assert!(!missing.status.success());
+    assert!(
+        stderr(&missing).contains("--ca-file /nonexistent/ca.pem: cannot read"),
+        "{}",
+        stderr(&missing)
+    );
+    // An authority not trusted: the advice names the option, not the configuration's key.
+    let untrusted = ntrip(&[]);
+    assert!(
+        stderr(&untrusted).contains("or named as --ca-file?")
+            && !stderr(&untrusted).contains("ntrip.ca_file"),
+        "{}",
+        stderr(&untrusted)
+    );
+    // Following it works.
+    let trusted = ntrip(&["--ca-file".as_ref(), pki.ca.as_os_str()]);
+    assert!(trusted.status.success(), "{}", stderr(&trusted));
+    let written = std::fs::read(&out).expect("the output file");
+    // The caster's valid frames from the start of its stream.
+    let n = written.len().min(expected.len());
+    assert!(
+        n > 0 && written[..n] == expected[..n],
+        "{} bytes written: {}",
+        written.len(),
+        stderr(&trusted)
+    );
+}
+
+#[test]
 fn a_receiver_that_takes_no_corrections_never_holds_up_its_fixes() {
     let dir = common::tempdir("ntrip-stalled");
     let (served, _) = corrupted_stream();

@@ -85,12 +85,13 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         timeout: a.timeout,
         tls: if url_tls {
             Some(
-                chassisd::ntrip::tls::client_config(a.ca_file.as_deref())
+                chassisd::ntrip::tls::client_config(a.ca_file.as_deref(), "--ca-file")
                     .map_err(anyhow::Error::msg)?,
             )
         } else {
             None
         },
+        ca_setting: "--ca-file",
     };
     let report = block_on(1, async {
         let out: Box<dyn tokio::io::AsyncWrite + Unpin + Send> = match (&a.out, &a.port) {

@@ -12,6 +12,9 @@ use crate::ntrip::NtripSpec;
 use crate::ntrip::request::Version;
 use crate::ntrip::url::{NtripUrl, Password};
 
+/// The key of the caster's authority file, as errors name it.
+const CA_SETTING: &str = "ntrip.ca_file";
+
 /// `[ntrip]`
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -158,7 +161,10 @@ impl NtripConfig {
             url.password = Password::new(text.lines().next().unwrap_or("").trim_end());
         }
         let tls = if url.tls {
-            Some(crate::ntrip::tls::client_config(self.ca_file.as_deref())?)
+            Some(crate::ntrip::tls::client_config(
+                self.ca_file.as_deref(),
+                CA_SETTING,
+            )?)
         } else {
             None
         };
@@ -173,6 +179,7 @@ impl NtripConfig {
             gga_interval: (self.gga_interval_s > 0.0)
                 .then(|| Duration::from_secs_f64(self.gga_interval_s)),
             timeout: self.timeout(),
+            ca_setting: CA_SETTING,
         })
     }
 

@@ -36,4 +36,7 @@ pub struct NtripSpec {
     pub timeout: Duration,
     /// TLS, for `ntrips://`.
     pub tls: Option<std::sync::Arc<rustls::ClientConfig>>,
+    /// How the user names the caster's authority (`ntrip.ca_file`, `--ca-file`), for the
+    /// advice when a TLS handshake fails.
+    pub ca_setting: &'static str,
 }

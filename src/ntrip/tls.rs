@@ -9,8 +9,13 @@ use std::sync::Arc;
 use rustls::pki_types::CertificateDer;
 use rustls::pki_types::pem::PemObject;
 
-/// The client configuration for `ntrips://`, or why there is none.
-pub fn client_config(ca_file: Option<&Path>) -> Result<Arc<rustls::ClientConfig>, String> {
+/// The client configuration for `ntrips://`, or why there is none. `setting` is how the user
+/// names the authority's file (`ntrip.ca_file` in a configuration, `--ca-file` on the
+/// command line), so the reason names what they wrote.
+pub fn client_config(
+    ca_file: Option<&Path>,
+    setting: &str,
+) -> Result<Arc<rustls::ClientConfig>, String> {
     // rustls needs a process-wide crypto provider; ring is the one compiled in.
     let _ = rustls::crypto::ring::default_provider().install_default();
     let mut roots = rustls::RootCertStore::empty();
@@ -20,28 +25,26 @@ pub fn client_config(ca_file: Option<&Path>) -> Result<Arc<rustls::ClientConfig>
     let mut from_file = 0;
     if let Some(file) = ca_file {
         let certs = CertificateDer::pem_file_iter(file)
-            .map_err(|e| format!("ntrip.ca_file {}: cannot read: {e}", file.display()))?;
+            .map_err(|e| format!("{setting} {}: cannot read: {e}", file.display()))?;
         for cert in certs {
-            let cert =
-                cert.map_err(|e| format!("ntrip.ca_file {}: bad PEM: {e}", file.display()))?;
+            let cert = cert.map_err(|e| format!("{setting} {}: bad PEM: {e}", file.display()))?;
             roots
                 .add(cert)
-                .map_err(|e| format!("ntrip.ca_file {}: bad certificate: {e}", file.display()))?;
+                .map_err(|e| format!("{setting} {}: bad certificate: {e}", file.display()))?;
             from_file += 1;
         }
         if from_file == 0 {
             return Err(format!(
-                "ntrip.ca_file {}: no certificate in it (PEM, BEGIN CERTIFICATE)",
+                "{setting} {}: no certificate in it (PEM, BEGIN CERTIFICATE)",
                 file.display()
             ));
         }
     }
     if added + from_file == 0 {
-        return Err(
+        return Err(format!(
             "no trusted root certificate to check the caster's with: install the \
-                    ca-certificates package, or name the caster's authority as ntrip.ca_file"
-                .into(),
-        );
+             ca-certificates package, or name the caster's authority as {setting}"
+        ));
     }
     let config = rustls::ClientConfig::builder()
         .with_root_certificates(roots)
@@ -55,15 +58,15 @@ mod tests {
 
     #[test]
     fn a_missing_or_empty_authority_file_is_named() {
-        let e = client_config(Some(Path::new("/nonexistent/ca.pem"))).unwrap_err();
+        let e = client_config(Some(Path::new("/nonexistent/ca.pem")), "--ca-file").unwrap_err();
         assert!(
-            e.contains("/nonexistent/ca.pem") && e.contains("cannot read"),
+            e.starts_with("--ca-file /nonexistent/ca.pem: cannot read"),
             "{e}"
         );
         let dir = std::env::temp_dir().join(format!("chassisd-ntrip-tls-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("empty.pem"), "not a certificate\n").unwrap();
-        let e = client_config(Some(&dir.join("empty.pem"))).unwrap_err();
+        let e = client_config(Some(&dir.join("empty.pem")), "ntrip.ca_file").unwrap_err();
         assert!(e.contains("no certificate"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -192,7 +192,8 @@ async fn open(spec: &NtripSpec, sourcetable: bool) -> Result<Conn, String> {
                 Ok(Err(e)) => {
                     return Err(format!(
                         "TLS with {address} failed: {e} (is it a TLS port? is its \
-                         certificate's authority trusted, or named as ntrip.ca_file?)"
+                         certificate's authority trusted, or named as {}?)",
+                        spec.ca_setting
                     ));
                 }
                 Err(_) => {
