@@ -100,6 +100,15 @@ pub enum ZonesError {
         /// Its size.
         bytes: usize,
     },
+    /// An added zone would make the set's file larger than a zones file may be: written
+    /// back, it would not load at the next start.
+    #[error(
+        "with it the zones file would be {bytes} bytes, more than the {MAX_TEXT_BYTES} a zones file may have; remove zones or simplify their shapes first"
+    )]
+    WouldOutgrowFile {
+        /// The file's size with the zone.
+        bytes: usize,
+    },
     /// More zones than a set may hold.
     #[error("{count} zones, more than the {MAX_ZONES} a set may hold")]
     TooMany {
@@ -136,6 +145,10 @@ impl ZonesError {
             Self::NotGeoJson(_) => (
                 self.to_string(),
                 "write the zones as a GeoJSON FeatureCollection (RFC 7946)",
+            ),
+            Self::WouldOutgrowFile { .. } => (
+                self.to_string(),
+                "remove zones or simplify their shapes, then add it again",
             ),
             Self::TooLarge { .. } | Self::TooMany { .. } => (
                 self.to_string(),
@@ -256,6 +269,12 @@ impl ZoneSet {
             kind,
             shape,
         });
+        // The set is written back as the zones file, which must load at the next start.
+        let bytes = self.to_geojson().len();
+        if bytes > MAX_TEXT_BYTES {
+            self.zones.pop();
+            return Err(ZonesError::WouldOutgrowFile { bytes });
+        }
         Ok(id)
     }
 
@@ -655,6 +674,38 @@ mod tests {
                 .contains("self-intersection"),
         );
         assert_eq!(set.zones().len(), 4);
+    }
+
+    #[test]
+    fn edits_never_make_a_file_that_would_not_load() {
+        let mut set = ZoneSet::from_geojson(POND).unwrap();
+        // Walls of 10,000 positions (some 400 KB of GeoJSON each) until the file is full.
+        let wall: Vec<[f64; 2]> = (0..MAX_POSITIONS)
+            .map(|i| {
+                [
+                    8.5 + i as f64 * 1e-7,
+                    47.3 + (i % 2) as f64 * 1.234_567_8e-5,
+                ]
+            })
+            .collect();
+        let refused = (0..MAX_ZONES)
+            .find_map(|n| {
+                set.add(
+                    &format!("wall {n}"),
+                    ZoneKind::Wall,
+                    Shape::Line(wall.clone()),
+                )
+                .err()
+            })
+            .expect("the file fills up before the zones do");
+        assert!(
+            matches!(refused, ZonesError::WouldOutgrowFile { bytes } if bytes > MAX_TEXT_BYTES),
+            "{refused}"
+        );
+        assert!(refused.to_string().contains("remove zones"), "{refused}");
+        let text = set.to_geojson();
+        assert!(text.len() <= MAX_TEXT_BYTES);
+        assert_eq!(ZoneSet::from_geojson(&text).unwrap(), set);
     }
 
     #[test]
