@@ -11,7 +11,6 @@
 //! completes within the bytes at hand costs nothing, and a sentence held by a false sync is
 //! released with the read that brought its line end.
 
-use super::framer::hex_value;
 use super::ubx::frame::{HEADER_LEN, MAX_PAYLOAD, OVERHEAD, SYNC, fletcher, is_known_class};
 
 /// Inner syncs watched at once. A real payload rarely holds one; noise that holds many is
@@ -101,9 +100,10 @@ fn ends_with_checksum(text: &[u8], xor: u8) -> bool {
     let Some(&[star, high, low]) = text.last_chunk::<3>() else {
         return false;
     };
-    match (star, hex_value(high), hex_value(low)) {
+    let digit = |byte: u8| char::from(byte).to_digit(16);
+    match (star, digit(high), digit(low)) {
         (b'*', Some(high_value), Some(low_value)) => {
-            xor ^ star ^ high ^ low == (high_value << 4) | low_value
+            u32::from(xor ^ star ^ high ^ low) == (high_value << 4) | low_value
         }
         _ => false,
     }
