@@ -579,19 +579,24 @@ fn canplayer_session_decodes_like_replay() {
     );
 }
 
-/// `vehicle-vcan.toml` with an e-stop module (`devices/estop-canopen-di.toml`, node 10) on
-/// vcan0, written to `dir`.
 /// `vehicle-vcan.toml` with `more` appended, written to `dir` as `name`.
 fn config_with(dir: &Path, name: &str, more: &str) -> PathBuf {
+    config_edited(dir, name, |text| text + more)
+}
+
+/// `vehicle-vcan.toml` as `edit` makes it, written to `dir` as `name`.
+fn config_edited(dir: &Path, name: &str, edit: impl FnOnce(String) -> String) -> PathBuf {
     let devices = common::repo().join("devices");
     let text = std::fs::read_to_string(config("vehicle-vcan.toml"))
         .expect("vehicle-vcan.toml")
         .replace("../../devices/", &format!("{}/", devices.display()));
     let path = dir.join(name);
-    std::fs::write(&path, text + more).expect("config written");
+    std::fs::write(&path, edit(text)).expect("config written");
     path
 }
 
+/// `vehicle-vcan.toml` with an e-stop module (`devices/estop-canopen-di.toml`, node 10) on
+/// vcan0, written to `dir`.
 fn estop_config(dir: &Path) -> PathBuf {
     let profile = common::repo().join("devices/estop-canopen-di.toml");
     let estop = format!(
@@ -1025,7 +1030,15 @@ fn record_listens_to_a_driven_bus_and_sends_nothing_of_its_own() {
 fn calibrate_drive_moves_only_with_yes_and_a_safety_stop_abandons_the_pattern() {
     let _turn = one_at_a_time();
     let dir = common::tempdir("vcan-calibrate-drive");
-    let vehicle = config("vehicle-vcan.toml");
+    // The pattern's commands come from inside chassisd every 0.1 s, so only a stall of the
+    // whole process lets 0.5 s pass without one; under an emulated CPU on a loaded host
+    // that happened once (CI's run of 281462d). A stall is not what this test is about, and
+    // a longer timeout keeps a safety stop (the heartbeat below) as its only way to end.
+    let vehicle = config_edited(&dir, "vehicle-slow-cpu.toml", |text| {
+        let edited = text.replace("cmd_timeout_s = 0.5", "cmd_timeout_s = 2.0");
+        assert_ne!(edited, text, "vehicle-vcan.toml has no cmd_timeout_s = 0.5");
+        edited
+    });
     let mut sim = Proc::start(&["can-sim".as_ref(), "--config".as_ref(), vehicle.as_os_str()]);
     let calibrate = |extra: &[&str], record: &Path| {
         let mut args: Vec<&std::ffi::OsStr> = vec![
