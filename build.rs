@@ -12,7 +12,7 @@ fn ros1_interfaces() {
     use std::path::PathBuf;
 
     let root = PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("set by cargo"));
-    let interfaces = root.join("src/api/ros1/interfaces");
+    let interfaces = root.join("crates/core/src/api/ros1/interfaces");
     let (source, files) =
         roslibrust_codegen::find_and_generate_ros_messages_without_ros_package_path(vec![
             interfaces.clone(),

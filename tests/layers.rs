@@ -1,7 +1,11 @@
 //! The layer rules of docs/architecture.md, read from the source: every `crate::`, `super::`
-//! and `self::` path in `src/` (comments and test modules left out) is an arrow from the
-//! module that writes it to the module it names. An arrow must point to a lower layer of
-//! [`LAYERS`], and no modules at any depth may import each other round a cycle.
+//! and `self::` path in the library's crates (comments and test modules left out) is an arrow
+//! from the module that writes it to the module it names. An arrow must point to a lower
+//! layer of [`LAYERS`], and no modules at any depth may import each other round a cycle.
+//!
+//! Between crates the compiler holds the order: the core crate cannot name the daemon's
+//! modules at all. What this file checks is the order inside each crate, and that each
+//! module sits in the crate its layer belongs to.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -22,6 +26,20 @@ const LAYERS: &[&[&str]] = &[
     &["replay"],
     &["calib"],
     &["bench"],
+];
+
+/// The library's crates, each with the top-level modules it holds, lowest first: the core
+/// (`crates/core`, sans-IO) holds the layers up to the engine, and the daemon's library (`src`)
+/// re-exports them under the same names and adds the rest.
+const CRATES: &[(&str, &[&str])] = &[
+    (
+        "crates/core/src",
+        &[
+            "time", "secret", "geodesy", "devices", "fusion", "broker", "ntrip", "control",
+            "zones", "config", "vehicle", "record", "api", "engine",
+        ],
+    ),
+    ("src", &["sim", "runtime", "replay", "calib", "bench"]),
 ];
 
 type ModulePath = Vec<String>;
@@ -63,6 +81,64 @@ fn every_import_points_down_the_layers() {
 }
 
 #[test]
+fn each_module_lives_in_the_crate_of_its_layer() {
+    let mut wrong = Vec::new();
+    for (root, modules) in CRATES {
+        let src = repo().join(root);
+        for module in *modules {
+            let dir = src.join(module);
+            if !dir.is_dir() && !dir.with_extension("rs").is_file() {
+                wrong.push(format!("{module} is not in {root}"));
+            }
+        }
+        for entry in std::fs::read_dir(&src).expect("readable crate") {
+            let path = entry.expect("directory entry").path();
+            let name = path.file_stem().unwrap_or_default().to_string_lossy();
+            let placed = modules.contains(&name.as_ref());
+            if !placed && !matches!(name.as_ref(), "lib" | "main" | "cli") {
+                wrong.push(format!("{root}/{name} is in no crate of CRATES"));
+            }
+        }
+    }
+    // The crates' order is the layers' order: no layer of the core above one of the daemon.
+    let order: Vec<&str> = CRATES.iter().flat_map(|(_, m)| m.iter().copied()).collect();
+    let rank = |module: &str| LAYERS.iter().position(|layer| layer.contains(&module));
+    for pair in order.windows(2) {
+        if rank(pair[0]) > rank(pair[1]) {
+            wrong.push(format!("{} sits above {} in LAYERS", pair[0], pair[1]));
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
+
+#[test]
+fn the_core_crate_has_no_async_runtime() {
+    // The core is sans-IO: the daemon brings tokio, sockets and clocks.
+    let manifest = std::fs::read_to_string(repo().join("crates/core/Cargo.toml"))
+        .expect("the core's manifest");
+    let dependencies = manifest
+        .split("[dependencies]")
+        .nth(1)
+        .expect("a [dependencies] table")
+        .split("\n[")
+        .next()
+        .unwrap_or("");
+    for runtime in ["tokio", "async-std", "smol", "mio"] {
+        assert!(
+            !dependencies
+                .lines()
+                .any(|l| l.trim_start().starts_with(&format!("{runtime} "))
+                    || l.trim_start().starts_with(&format!("{runtime}="))),
+            "the core depends on {runtime}"
+        );
+    }
+    assert!(
+        dependencies.contains("socketcan") && dependencies.contains("features = [\"dump\"]"),
+        "the core takes socketcan's frame and dump types only, not its tokio sockets"
+    );
+}
+
+#[test]
 fn no_modules_import_each_other_round_a_cycle() {
     let imports = library_imports();
     let deepest = imports.iter().map(|i| i.from.len()).max().unwrap_or(1);
@@ -94,11 +170,10 @@ const ALLOWED_TEXT_SEARCHES: &[&str] = &["name.contains(\"..\")"];
 fn no_code_is_chosen_by_searching_text() {
     // A protocol code chosen by searching a reason's words changes when the words do; the
     // reasons are enums (control::outcome, vehicle::safety) to be matched instead.
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut searches = Vec::new();
     for module in DECIDING_MODULES {
         let mut files = Vec::new();
-        collect_rs_files(&src.join(module), &mut files);
+        collect_rs_files(&module_dir(module), &mut files);
         for file in files {
             let text = std::fs::read_to_string(&file).expect("readable source");
             let library = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
@@ -112,13 +187,8 @@ fn no_code_is_chosen_by_searching_text() {
                 .iter()
                 .any(|s| line.contains(s));
                 if searching && !ALLOWED_TEXT_SEARCHES.iter().any(|a| line.contains(a)) {
-                    let shown = file.strip_prefix(&src).unwrap_or(&file);
-                    searches.push(format!(
-                        "src/{}:{}: {}",
-                        shown.display(),
-                        n + 1,
-                        line.trim()
-                    ));
+                    let shown = file.strip_prefix(repo()).unwrap_or(&file);
+                    searches.push(format!("{}:{}: {}", shown.display(), n + 1, line.trim()));
                 }
             }
         }
@@ -133,9 +203,8 @@ fn no_code_is_chosen_by_searching_text() {
 #[test]
 fn the_engine_routes_records_by_a_lookup_not_by_comparing_names() {
     // Each source's route is resolved once, when the engine is built (engine::Route).
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/engine");
     let mut files = Vec::new();
-    collect_rs_files(&src, &mut files);
+    collect_rs_files(&module_dir("engine"), &mut files);
     let mut compared = Vec::new();
     for file in files {
         let text = std::fs::read_to_string(&file).expect("readable source");
@@ -194,21 +263,17 @@ const ANYHOW_ALLOWED: &[&str] = &["runtime/links/ros1/graph.rs"];
 
 #[test]
 fn anyhow_stays_at_the_binarys_edge() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    collect_rs_files(&src, &mut files);
     let mut found = Vec::new();
-    for file in files {
-        let relative = file.strip_prefix(&src).expect("under src");
+    for (src, relative, file) in library_files() {
         let shown = relative.display().to_string();
-        if module_of(relative).is_none() || ANYHOW_ALLOWED.contains(&shown.as_str()) {
+        if module_of(&relative).is_none() || ANYHOW_ALLOWED.contains(&shown.as_str()) {
             continue;
         }
         let text = std::fs::read_to_string(&file).expect("readable source");
         let library = text.split("#[cfg(test)]\nmod tests").next().unwrap_or("");
         for (n, line) in without_comments(library).lines().enumerate() {
             if line.contains("anyhow") {
-                found.push(format!("src/{shown}:{}: {}", n + 1, line.trim()));
+                found.push(format!("{src}/{shown}:{}: {}", n + 1, line.trim()));
             }
         }
     }
@@ -303,13 +368,9 @@ fn cut(path: &ModulePath, depth: usize) -> ModulePath {
 /// Every arrow written in the library's source, each named module cut to the module files
 /// that exist (a path's tail is an item, not a module).
 fn library_imports() -> Vec<Import> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    collect_rs_files(&src, &mut files);
     let mut imports = Vec::new();
-    for file in files {
-        let relative = file.strip_prefix(&src).expect("under src");
-        let Some(from) = module_of(relative) else {
+    for (src, relative, file) in library_files() {
+        let Some(from) = module_of(&relative) else {
             continue; // the binary's own files
         };
         let text = std::fs::read_to_string(&file).expect("readable source");
@@ -319,18 +380,50 @@ fn library_imports() -> Vec<Import> {
         let mut named = Vec::new();
         arrows_in(&code, &from, &mut named);
         for (offset, path) in named {
-            let to = existing_module(&src, &path);
+            let to = existing_module(&path);
             if !to.is_empty() {
                 let line = code[..offset].matches('\n').count() + 1;
                 imports.push(Import {
                     from: from.clone(),
                     to,
-                    at: format!("src/{}:{line}", relative.display()),
+                    at: format!("{src}/{}:{line}", relative.display()),
                 });
             }
         }
     }
     imports
+}
+
+fn repo() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Every Rust file of the library's crates: its crate's source folder (as written in
+/// [`CRATES`]), its path under that folder, and its full path.
+fn library_files() -> Vec<(&'static str, std::path::PathBuf, std::path::PathBuf)> {
+    let mut out = Vec::new();
+    for (src, _) in CRATES {
+        let root = repo().join(src);
+        let mut files = Vec::new();
+        collect_rs_files(&root, &mut files);
+        for file in files {
+            let relative = file
+                .strip_prefix(&root)
+                .expect("under its crate")
+                .to_path_buf();
+            out.push((*src, relative, file));
+        }
+    }
+    out
+}
+
+/// The folder (or file, without `.rs`) of a top-level module, in whichever crate holds it.
+fn module_dir(module: &str) -> std::path::PathBuf {
+    CRATES
+        .iter()
+        .map(|(src, _)| repo().join(src).join(module))
+        .find(|p| p.is_dir() || p.with_extension("rs").is_file())
+        .unwrap_or_else(|| panic!("no crate holds the module {module}"))
 }
 
 fn collect_rs_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
@@ -360,12 +453,15 @@ fn module_of(relative: &Path) -> Option<ModulePath> {
     Some(parts)
 }
 
-/// The longest prefix of `path` that is a module file or folder under `src`.
-fn existing_module(src: &Path, path: &[String]) -> ModulePath {
+/// The longest prefix of `path` that is a module file or folder in one of the crates.
+fn existing_module(path: &[String]) -> ModulePath {
     let mut keep = 0;
     for n in 1..=path.len() {
-        let base = src.join(path[..n].join("/"));
-        if base.is_dir() || base.with_extension("rs").is_file() {
+        let exists = CRATES.iter().any(|(src, _)| {
+            let base = repo().join(src).join(path[..n].join("/"));
+            base.is_dir() || base.with_extension("rs").is_file()
+        });
+        if exists {
             keep = n;
         } else {
             break;

@@ -71,7 +71,7 @@ fn python_classes() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         let dir = common::tempdir("ros1-python");
-        let interfaces = common::repo().join("src/api/ros1/interfaces");
+        let interfaces = common::repo().join("crates/core/src/api/ros1/interfaces");
         let include = |package: &str| {
             format!(
                 "-I{package}:{}",

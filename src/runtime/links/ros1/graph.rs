@@ -153,7 +153,7 @@ impl TopicPublisher {
             .get(topic.msg_type)
             .ok_or_else(|| {
                 roslibrust::ros1::NodeError::IoError(std::io::Error::other(format!(
-                    "{}: no interface {} in src/api/ros1/interfaces",
+                    "{}: no interface {} in crates/core/src/api/ros1/interfaces",
                     topic.name, topic.msg_type
                 )))
             })?;

@@ -1,4 +1,4 @@
-//! The ROS1 types generated from `src/api/ros1/interfaces` (build.rs), and the wire form of
+//! The ROS1 types generated from `crates/core/src/api/ros1/interfaces` (build.rs), and the wire form of
 //! a message given as JSON (`api::ros1::messages` builds them), checked by its type.
 
 include!(concat!(env!("OUT_DIR"), "/ros1_interfaces.rs"));
@@ -210,7 +210,7 @@ mod tests {
         for topic in crate::api::ros1::publisher::advertised() {
             assert!(
                 MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
-                "{}: no {} in src/api/ros1/interfaces",
+                "{}: no {} in crates/core/src/api/ros1/interfaces",
                 topic.name,
                 topic.msg_type
             );
@@ -222,7 +222,7 @@ mod tests {
         for topic in crate::api::ros1::published::STATUS_TOPICS {
             assert!(
                 MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
-                "{}: no {} in src/api/ros1/interfaces",
+                "{}: no {} in crates/core/src/api/ros1/interfaces",
                 topic.name,
                 topic.msg_type
             );

@@ -350,7 +350,7 @@ mod tests {
 
     #[test]
     fn estop_frames_reach_the_feedback() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices");
         let text = "[[can]]\ninterface = \"can0\"\n\
                     [[estop]]\nname = \"body\"\nprofile = \"estop-canopen-di.toml\"\nbus = \"can0\"\n";
         let config = VehicleConfig::from_toml(text, &dir.join("test.toml")).unwrap();
@@ -386,7 +386,7 @@ mod tests {
     /// A drive train with one generic drive whose profile watches `watch`; frames of the
     /// first 100 ms of polling.
     fn deadman_frames(watch: &str) -> Vec<Frame> {
-        let devices = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let devices = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices");
         let dir =
             std::env::temp_dir().join(format!("chassisd-deadman-{watch}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();

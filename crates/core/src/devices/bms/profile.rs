@@ -119,7 +119,7 @@ mod tests {
 
     /// A shipped profile, its DBC read from beside it.
     fn shipped(name: &str) -> BmsProfile {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices");
         let text = std::fs::read_to_string(dir.join(name)).unwrap();
         BmsProfile::from_toml::<ProfileError>(&text, Path::new(name), |dbc| {
             Ok(std::fs::read_to_string(dir.join(dbc)).unwrap())

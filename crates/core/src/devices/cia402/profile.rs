@@ -516,7 +516,7 @@ mod tests {
 
     fn shipped(name: &str) -> DriveProfile {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("devices")
+            .join("../../devices")
             .join(name);
         let text = std::fs::read_to_string(&path).unwrap();
         DriveProfile::from_toml(&text, &path).unwrap()
@@ -547,7 +547,7 @@ mod tests {
 
     #[test]
     fn errors_name_the_key() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/cia402-generic.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices/cia402-generic.toml");
         let text = std::fs::read_to_string(&path).unwrap();
         let bad = text.replace("axes = 1", "axes = 2");
         let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))

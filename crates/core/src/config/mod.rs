@@ -651,7 +651,7 @@ impl VehicleConfig {
     }
 }
 
-pub(crate) fn check_range(
+pub fn check_range(
     file: &Path,
     key: &str,
     value: f64,
@@ -696,7 +696,7 @@ mod tests {
 
     #[test]
     fn shipped_example_is_valid() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices/vehicle.example.toml");
         let c = VehicleConfig::load(&path).unwrap();
         assert!(c.gnss.is_some());
         let mqtt = c.mqtt.expect("[mqtt]");
@@ -714,7 +714,7 @@ mod tests {
 
     #[test]
     fn a_missing_file_is_named_once_with_its_full_path_and_the_key_that_named_it() {
-        let devices = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices");
+        let devices = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices");
         let example = std::fs::read_to_string(devices.join("vehicle.example.toml")).unwrap();
         let text = example.replace("profile = \"zlac8015d.toml\"", "profile = \"nope.toml\"");
         let config = devices.join("vehicle.example.toml");
@@ -789,7 +789,7 @@ mod tests {
 
     #[test]
     fn drive_train_errors_name_the_key() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices/vehicle.example.toml");
         let text = std::fs::read_to_string(&path).unwrap();
         let check = |from: &str, to: &str, key: &str| {
             let bad = text.replace(from, to);
@@ -875,7 +875,7 @@ mod tests {
 
     #[test]
     fn effective_configuration_is_self_contained() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("devices/vehicle.example.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices/vehicle.example.toml");
         let config = VehicleConfig::load(&path).unwrap();
         let effective = config.to_effective_toml();
         // Loaded from anywhere: the profiles are inline.
