@@ -1,7 +1,7 @@
 //! A small NTRIP caster for the client's tests: it serves one behaviour on 127.0.0.1 (a
 //! stream paced in chunks of odd sizes, a head and then silence, a refusal, a close at
 //! once) to every mountpoint, a sourcetable naming MOUNT to `GET /`, and keeps when each client connected and what each sent after its request (the
-//! GGA sentences). The real casters' tests are `tests/ntrip_casters.rs`.
+//! GGA sentences). The real casters' tests are `tests/suite/ntrip_casters.rs`.
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

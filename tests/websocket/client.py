@@ -1,4 +1,4 @@
-"""A rosbridge client (roslibpy, from PyPI) for tests/websocket.rs.
+"""A rosbridge client (roslibpy, from PyPI) for tests/suite/websocket.rs.
 
     client.py PORT CHECK [ARGS...]
 

@@ -1,5 +1,5 @@
 """Drives chassisd's live page in headless Chromium over the DevTools protocol, for
-tests/websocket.rs.
+tests/suite/websocket.rs.
 
     page.py CHROMIUM DAEMON_PORT OUT_DIR [zones]
 
