@@ -40,7 +40,7 @@ const SCRIPT_COMMANDS_FROM_S: f64 = 1.0;
 /// Source name of the GNSS receiver.
 pub use crate::engine::GNSS_SOURCE;
 /// Source name of the simulated IMU.
-pub const IMU_SOURCE: &str = "imu";
+pub const IMU_SOURCE: &str = crate::sources::IMU;
 
 /// The drive profile of the simulated drives.
 const DRIVE_PROFILE: &str = include_str!("../../devices/cia402-generic.toml");

@@ -14,7 +14,7 @@ use std::path::Path;
 /// layers below its own, never those of its own layer or above. The binary (`src/main.rs`,
 /// `src/cli/`) sits above them all.
 const LAYERS: &[&[&str]] = &[
-    &["time", "secret", "geodesy"],
+    &["time", "secret", "geodesy", "sources"],
     &["devices", "fusion", "broker"],
     &["ntrip", "control", "zones"],
     &["config"],
@@ -35,8 +35,8 @@ const CRATES: &[(&str, &[&str])] = &[
     (
         "crates/core/src",
         &[
-            "time", "secret", "geodesy", "devices", "fusion", "broker", "ntrip", "control",
-            "zones", "config", "vehicle", "record", "api", "engine",
+            "time", "secret", "geodesy", "sources", "devices", "fusion", "broker", "ntrip",
+            "control", "zones", "config", "vehicle", "record", "api", "engine",
         ],
     ),
     ("src", &["sim", "runtime", "replay", "calib", "bench"]),

@@ -15,6 +15,7 @@ pub mod geodesy;
 pub mod ntrip;
 pub mod record;
 pub mod secret;
+pub mod sources;
 pub mod time;
 pub mod vehicle;
 pub mod zones;

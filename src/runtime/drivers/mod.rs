@@ -23,7 +23,7 @@ use serial_tx::SerialTx;
 /// Source name of the GNSS receiver.
 pub use crate::engine::GNSS_SOURCE;
 /// Source name of the IMU.
-pub const IMU_SOURCE: &str = "imu";
+pub const IMU_SOURCE: &str = crate::sources::IMU;
 
 /// The running drivers of a configuration's devices.
 pub struct Devices {

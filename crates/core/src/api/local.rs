@@ -118,7 +118,7 @@ struct Pose {
 
 /// Source name of the local command channel (`chassisd run --commands-stdin`) in
 /// recordings and the engine.
-pub const SOURCE: &str = "stdin";
+pub const SOURCE: &str = crate::sources::LOCAL_COMMANDS;
 
 /// The local channel's adapter: each line's command to the core, and its answer.
 pub const ADAPTER: RequestAdapter =

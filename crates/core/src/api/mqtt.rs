@@ -14,7 +14,7 @@ use crate::time::Timestamp;
 use crate::vehicle::VehicleStatus;
 
 /// Source name of MQTT messages in recordings and the engine.
-pub const MQTT_SOURCE: &str = "mqtt";
+pub const MQTT_SOURCE: &str = crate::sources::MQTT;
 
 /// One protocol dialect.
 pub trait Dialect: Send {

@@ -42,20 +42,20 @@ use drivetrain::{BusStats, Drivetrain};
 pub const STATUS_PERIOD: Duration = Duration::from_millis(100);
 
 /// Source name of the host load samples (topic `usage`, payload [`HostUsage`] JSON).
-pub const HOST_SOURCE: &str = "host";
+pub const HOST_SOURCE: &str = crate::sources::HOST;
 
 /// Source name of the local command channel (`chassisd run --commands-stdin`).
-pub const LOCAL_COMMANDS: &str = crate::api::local::SOURCE;
+pub const LOCAL_COMMANDS: &str = crate::sources::LOCAL_COMMANDS;
 
 /// Source name of process events: a `shutdown` record (topic `shutdown`, payload the signal's
 /// name) marks where live mode stopped the drives on exit, so a replay stops them too.
-pub const PROCESS_SOURCE: &str = "process";
+pub const PROCESS_SOURCE: &str = crate::sources::PROCESS;
 
 /// Source name of the GNSS receiver (its NMEA bytes in, its corrections out).
-pub const GNSS_SOURCE: &str = "gnss";
+pub const GNSS_SOURCE: &str = crate::sources::GNSS;
 
 /// Source name of the RTCM 3 corrections from an NTRIP caster (the bytes as it sent them).
-pub const CORRECTIONS_SOURCE: &str = "rtcm";
+pub const CORRECTIONS_SOURCE: &str = crate::sources::CORRECTIONS;
 
 /// The protocol name recordings give the corrections' source.
 pub const RTCM_PROTOCOL: &str = "rtcm3";

@@ -36,7 +36,7 @@ use crate::devices::gnss::{Frame, GnssFramer, Sentence, UbxMessage};
 use crate::time::Timestamp;
 
 /// Source name given to imported chunks.
-pub const IMPORT_SOURCE: &str = "gnss";
+pub const IMPORT_SOURCE: &str = crate::sources::GNSS;
 /// Steps back up to this long are the order of sentences within an epoch, not a new clock.
 pub const BACKSTEP_TOLERANCE: Duration = Duration::from_secs(1);
 /// The default largest forward step within one segment.

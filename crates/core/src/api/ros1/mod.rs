@@ -30,7 +30,7 @@ pub mod status;
 use serde_json::json;
 
 /// Source name of the node's commands in recordings and the engine.
-pub const SOURCE: &str = "ros1";
+pub const SOURCE: &str = crate::sources::ROS1;
 
 /// The owner of the motions and missions the node asks for.
 pub const OWNER: &str = "ros1";

@@ -13,4 +13,4 @@ pub mod topics;
 
 /// The command source of what WebSocket clients publish (`/cmd_vel`, `/goal_pose`), so a
 /// recording keeps it and replays without a client ([`adapter`]).
-pub const SOURCE: &str = "websocket";
+pub const SOURCE: &str = crate::sources::WEBSOCKET;
