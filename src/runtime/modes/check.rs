@@ -22,7 +22,6 @@ use tokio_serial::SerialPortBuilderExt;
 
 use std::net::ToSocketAddrs;
 
-use crate::config::imu::ImuProtocol;
 use crate::config::zones::ZonesConfig;
 use crate::config::{GnssConfig, ReceiverKind, VehicleConfig};
 use crate::devices::can::Received;
@@ -31,7 +30,7 @@ use crate::devices::canopen::{DEVICE_TYPE, NodeId};
 use crate::devices::gnss::GnssReceiver;
 use crate::devices::gnss::encode::GgaFix;
 use crate::devices::gnss::ubx::config::Layers;
-use crate::devices::imu::{ImuDecoder, hipnuc::HiPnuc, witmotion::WitMotion};
+use crate::devices::imu::ImuDecoder;
 use crate::geodesy::{Enu, Geodetic};
 use crate::runtime::drivers::serial_open;
 use crate::runtime::drivers::ublox::{Dialogue, port_name};
@@ -121,10 +120,7 @@ pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe
         }
     }
     if let Some(i) = &config.imu {
-        let decoder = match i.protocol {
-            ImuProtocol::Witmotion => ImuDecoder::WitMotion(WitMotion::new()),
-            ImuProtocol::Hipnuc => ImuDecoder::HiPnuc(HiPnuc::new()),
-        };
+        let decoder = crate::engine::imu_decoder(i.protocol);
         let result = probe_serial(&i.port, i.baud, Listener::Imu(decoder)).await;
         let what = format!("{} on {}", i.protocol.name(), i.port);
         probes.push(Probe::new("imu", &what, result));

@@ -78,15 +78,30 @@ pub enum Decoder {
     Imu(ImuProtocol),
 }
 
+/// Every serial device kind chassisd decodes, by the protocol name recordings and
+/// configurations give it: a new serial protocol is a line here and an arm of
+/// [`imu_decoder`] (for an IMU), and both the engine and `chassisd check` build it from them.
+pub const SERIAL_KINDS: &[Decoder] = &[
+    Decoder::Nmea,
+    Decoder::Imu(ImuProtocol::Witmotion),
+    Decoder::Imu(ImuProtocol::Hipnuc),
+];
+
+/// A fresh decoder for an IMU speaking `protocol`.
+pub fn imu_decoder(protocol: ImuProtocol) -> ImuDecoder {
+    match protocol {
+        ImuProtocol::Witmotion => ImuDecoder::WitMotion(WitMotion::new()),
+        ImuProtocol::Hipnuc => ImuDecoder::HiPnuc(HiPnuc::new()),
+    }
+}
+
 impl Decoder {
     /// The decoder for a recording's `protocol` name.
     pub fn for_protocol(protocol: &str) -> Option<Self> {
-        match protocol {
-            "nmea0183" => Some(Self::Nmea),
-            "witmotion" => Some(Self::Imu(ImuProtocol::Witmotion)),
-            "hipnuc" => Some(Self::Imu(ImuProtocol::Hipnuc)),
-            _ => None,
-        }
+        SERIAL_KINDS
+            .iter()
+            .copied()
+            .find(|d| d.protocol() == protocol)
     }
 
     /// The protocol name recordings use.
@@ -404,13 +419,7 @@ impl Engine {
         let imu = sources
             .iter()
             .filter_map(|(name, d)| match d {
-                Decoder::Imu(ImuProtocol::Witmotion) => Some((
-                    name.clone(),
-                    (ImuDecoder::WitMotion(WitMotion::new()), mounting),
-                )),
-                Decoder::Imu(ImuProtocol::Hipnuc) => {
-                    Some((name.clone(), (ImuDecoder::HiPnuc(HiPnuc::new()), mounting)))
-                }
+                Decoder::Imu(protocol) => Some((name.clone(), (imu_decoder(*protocol), mounting))),
                 Decoder::Nmea => None,
             })
             .collect();
@@ -920,6 +929,27 @@ impl Engine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn each_serial_kind_is_found_by_the_name_recordings_give_it() {
+        let mut names = std::collections::BTreeSet::new();
+        for kind in SERIAL_KINDS {
+            assert!(names.insert(kind.protocol()), "{} twice", kind.protocol());
+            assert_eq!(Decoder::for_protocol(kind.protocol()), Some(*kind));
+        }
+        assert_eq!(Decoder::for_protocol("nmea"), None);
+        // Every IMU protocol a configuration may name has its line (the match stops compiling
+        // when a protocol is added, so this list cannot fall behind).
+        let listed = |p: ImuProtocol| match p {
+            ImuProtocol::Witmotion | ImuProtocol::Hipnuc => p,
+        };
+        for protocol in [ImuProtocol::Witmotion, ImuProtocol::Hipnuc].map(listed) {
+            assert!(
+                SERIAL_KINDS.contains(&Decoder::Imu(protocol)),
+                "{protocol:?}"
+            );
+        }
+    }
 
     fn rec(us: u64, source: &str) -> Record {
         Record {
