@@ -2,13 +2,13 @@
 
 use std::fs::File;
 use std::io::Write;
-use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::os::fd::{AsFd, FromRawFd, IntoRawFd, OwnedFd};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::Path;
 
-use nix::fcntl::{FcntlArg, FdFlag, fcntl};
-use nix::pty::openpty;
+use nix::fcntl::OFlag;
+use nix::pty::{grantpt, posix_openpt, ptsname_r, unlockpt};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
-use nix::unistd::ttyname;
 
 /// A pty whose slave is reachable at `link`, like `/dev/serial/by-id/...`.
 pub struct Port {
@@ -18,23 +18,32 @@ pub struct Port {
 
 impl Port {
     pub fn open_at(link: &Path) -> Port {
-        let pty = openpty(None, None).expect("openpty");
-        // Children must not inherit the master, or closing it here would not hang up the
-        // line. (Tests in this file hold SERIAL while they open ptys and spawn, so no other
-        // thread forks in between.)
-        for fd in [pty.master.as_fd(), pty.slave.as_fd()] {
-            fcntl(fd.as_raw_fd(), FcntlArg::F_SETFD(FdFlag::FD_CLOEXEC)).expect("cloexec");
-        }
-        let mut termios = tcgetattr(pty.slave.as_fd()).expect("tcgetattr");
+        // Both ends open close-on-exec at once: tests of other modules spawn children from
+        // other threads of the same binary at any moment, and a child that inherited the
+        // master would keep the line from hanging up when the test closes it.
+        let master =
+            posix_openpt(OFlag::O_RDWR | OFlag::O_NOCTTY | OFlag::O_CLOEXEC).expect("posix_openpt");
+        grantpt(&master).expect("grantpt");
+        unlockpt(&master).expect("unlockpt");
+        let path = ptsname_r(&master).expect("ptsname");
+        // std opens with O_CLOEXEC.
+        let slave = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            // Not the test process's controlling terminal.
+            .custom_flags(OFlag::O_NOCTTY.bits())
+            .open(&path)
+            .expect("open the pty's slave");
+        let mut termios = tcgetattr(slave.as_fd()).expect("tcgetattr");
         cfmakeraw(&mut termios);
-        tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &termios).expect("tcsetattr");
-        let path = ttyname(pty.slave.as_fd()).expect("ttyname");
+        tcsetattr(slave.as_fd(), SetArg::TCSANOW, &termios).expect("tcsetattr");
         let _ = std::fs::remove_file(link);
         std::os::unix::fs::symlink(&path, link).expect("symlink");
         // The daemon opens the slave by path; the test keeps only the master.
-        drop::<OwnedFd>(pty.slave);
+        drop(slave);
         Port {
-            master: File::from(pty.master),
+            // SAFETY: the descriptor was just taken out of `master`, which owned it alone.
+            master: File::from(unsafe { OwnedFd::from_raw_fd(master.into_raw_fd()) }),
         }
     }
 

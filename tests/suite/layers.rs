@@ -116,25 +116,41 @@ fn the_core_crate_has_no_async_runtime() {
     // The core is sans-IO: the daemon brings tokio, sockets and clocks.
     let manifest = std::fs::read_to_string(repo().join("crates/core/Cargo.toml"))
         .expect("the core's manifest");
-    let dependencies = manifest
-        .split("[dependencies]")
-        .nth(1)
-        .expect("a [dependencies] table")
-        .split("\n[")
-        .next()
-        .unwrap_or("");
+    let manifest: toml::Table = toml::from_str(&manifest).expect("the core's manifest is TOML");
+    let dependencies = manifest["dependencies"]
+        .as_table()
+        .expect("a [dependencies] table");
     for runtime in ["tokio", "async-std", "smol", "mio"] {
         assert!(
-            !dependencies
-                .lines()
-                .any(|l| l.trim_start().starts_with(&format!("{runtime} "))
-                    || l.trim_start().starts_with(&format!("{runtime}="))),
+            !dependencies.contains_key(runtime),
             "the core depends on {runtime}"
         );
     }
+    // No dependency may switch on its own async support either, in the core's manifest or
+    // in the workspace's shared entry it takes.
+    let root: toml::Table = toml::from_str(
+        &std::fs::read_to_string(repo().join("Cargo.toml")).expect("the root manifest"),
+    )
+    .expect("the root manifest is TOML");
+    let shared = &root["workspace"]["dependencies"];
+    for (name, spec) in dependencies {
+        let own = spec.get("features").and_then(toml::Value::as_array);
+        let from_workspace = spec
+            .get("workspace")
+            .and_then(|_| shared.get(name))
+            .and_then(|s| s.get("features"))
+            .and_then(toml::Value::as_array);
+        for feature in own.into_iter().chain(from_workspace).flatten() {
+            let feature = feature.as_str().unwrap_or_default();
+            assert!(
+                !feature.contains("tokio") && !feature.contains("async"),
+                "the core takes {name} with its {feature} feature"
+            );
+        }
+    }
     assert!(
-        dependencies.contains("socketcan") && dependencies.contains("features = [\"dump\"]"),
-        "the core takes socketcan's frame and dump types only, not its tokio sockets"
+        dependencies.contains_key("socketcan"),
+        "the core's CAN frames and candump logs come from socketcan: the check above read nothing"
     );
 }
 
