@@ -8,15 +8,15 @@
 //!   only reports it.
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use super::chassis::{CONTROL_PERIOD, Chassis, CommandRejected};
 use super::gate::{Gate, GateChange, GateConfig, GateReason, GateSignals, horizontal_sigma};
+use super::localisation::Localisation;
+use super::messages::Output;
 use super::safety::Cause;
 use super::zones::{Braking, NearestZone, ZoneGuard};
-use super::{Output, Vehicle};
 use crate::config::zones::ManualPolicy;
-use crate::control::Outcome;
-use crate::control::outcome::AbortReason;
 use crate::fusion::localizer::Localizer;
 use crate::time::Timestamp;
 use crate::zones::local::ZoneOutline;
@@ -119,105 +119,50 @@ impl Envelope {
     }
 }
 
-impl Vehicle {
-    /// The gate's signals at `t`: the ones the status shows.
-    fn gate_signals(&self, t: Timestamp) -> GateSignals {
-        let position = self.gnss_fix.as_ref().and_then(|f| f.position);
-        GateSignals {
-            quality: self.fresh_fix_quality(t),
-            fix_age: position.map(|p| t.saturating_since(p.rx)),
-            sigma_m: map_sigma(&self.localizer, t),
-            correction_age: self.correction_age(t),
-        }
+impl Envelope {
+    /// The gate's judgement of `signals` at `t`: whether it closed or opened.
+    pub(super) fn update_gate(
+        &mut self,
+        t: Timestamp,
+        signals: &GateSignals,
+    ) -> Option<GateChange> {
+        self.gate.update(t, signals)
     }
 
-    /// The gate's part of a control tick, before any motion steps: pauses the work when it
-    /// closes, and goes on with it when it opens.
-    pub(super) fn gate_tick(&mut self, t: Timestamp, out: &mut Vec<Output>) {
-        if self.envelope.is_none() {
-            return;
-        }
-        let signals = self.gate_signals(t);
-        let Some(envelope) = &mut self.envelope else {
-            return;
-        };
-        match envelope.gate.update(t, &signals) {
-            Some(GateChange::Closed(reason)) => {
-                out.push(Output::Event(format!(
-                    "GNSS gate closed: {reason}; the blade stops, a path task or a mission \
-                     pauses until it opens, a goal or a move under way ends"
-                )));
-                self.pause_for_gate(t, &reason);
-            }
-            Some(GateChange::Opened) => {
-                out.push(Output::Event(
-                    "GNSS gate open: the fix has been good for zones.resume_after_s; autonomous work is taken".into(),
-                ));
-                self.resume_after_gate(t);
-            }
-            None => {}
-        }
+    /// Notes whether the gate's closing paused work that goes on when it opens.
+    pub(super) fn hold_paused(&mut self, paused: bool) {
+        self.paused = paused;
     }
 
-    /// Holds what runs: a task or a mission pauses at rest; a goal or a move ends (a
-    /// mission's step starts again when the gate opens).
-    fn pause_for_gate(&mut self, t: Timestamp, reason: &GateReason) {
-        let mission = self.mission.is_some();
-        if let Some(m) = &mut self.mission {
-            m.pause();
-        }
-        let held = self.motion.as_mut().is_some_and(|m| m.pause(t));
-        if !held {
-            if let Some(m) = &mut self.mission {
-                m.restart_step();
-            }
-            self.end_motion(
-                t,
-                Outcome::Aborted(AbortReason::GnssGate(reason.to_string())),
-            );
-        }
-        if let Some(envelope) = &mut self.envelope {
-            envelope.paused = held || mission;
-        }
+    /// Whether the gate paused work, forgetting it: asked once, when the gate opens.
+    pub(super) fn take_paused(&mut self) -> bool {
+        std::mem::take(&mut self.paused)
     }
+}
 
-    /// Goes on with what the gate paused, unless a stop latched meanwhile (the operator's
-    /// CONTINUE, or a reset and a new start, go on from there).
-    fn resume_after_gate(&mut self, t: Timestamp) {
-        let Some(envelope) = &mut self.envelope else {
-            return;
-        };
-        if !std::mem::take(&mut envelope.paused) {
-            return;
-        }
-        if self
-            .chassis
-            .as_ref()
-            .is_some_and(|c| c.safety().latched().is_some())
-        {
-            return;
-        }
-        if let Some(view) = self.pose_view(t)
-            && let Some(m) = &mut self.motion
-        {
-            m.resume(t, &view);
-        }
-        if let Some(m) = &mut self.mission {
-            m.resume();
-        }
+/// The gate's signals at `t`: the ones the status shows.
+pub(super) fn gate_signals(
+    place: &Localisation,
+    correction_age: Option<Duration>,
+    t: Timestamp,
+) -> GateSignals {
+    let position = place.gnss_fix().and_then(|f| f.position);
+    GateSignals {
+        quality: place.fresh_fix_quality(t),
+        fix_age: position.map(|p| t.saturating_since(p.rx)),
+        sigma_m: map_sigma(place.localizer(), t),
+        correction_age,
     }
+}
 
-    /// Whether the gate lets the blade run now (always, without zones).
-    pub(super) fn gate_lets_blade_run(&self) -> bool {
-        self.envelope
-            .as_ref()
-            .is_none_or(|e| e.gate_closed().is_none())
-    }
+/// Whether the gate lets the blade run now (always, without zones).
+pub(super) fn lets_blade_run(envelope: Option<&Envelope>) -> bool {
+    envelope.is_none_or(|e| e.gate_closed().is_none())
+}
 
-    /// Refuses autonomous work while the gate is closed (without zones, nothing to refuse).
-    pub(super) fn gate_may_start(&self) -> Result<(), CommandRejected> {
-        self.envelope.as_ref().map_or(Ok(()), Envelope::may_start)
-    }
+/// Refuses autonomous work while the gate is closed (without zones, nothing to refuse).
+pub(super) fn may_start(envelope: Option<&Envelope>) -> Result<(), CommandRejected> {
+    envelope.map_or(Ok(()), Envelope::may_start)
 }
 
 /// How the drives brake, as the zone checks take it: from the decision (the pose's age and
