@@ -8,12 +8,9 @@
 //!   only reports it.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use super::chassis::{CONTROL_PERIOD, Chassis, CommandRejected};
 use super::gate::{Gate, GateChange, GateConfig, GateReason, GateSignals, horizontal_sigma};
-use super::localisation::Localisation;
-use super::messages::Output;
 use super::safety::Cause;
 use super::zones::{Braking, NearestZone, ZoneGuard};
 use crate::config::zones::ManualPolicy;
@@ -140,21 +137,6 @@ impl Envelope {
     }
 }
 
-/// The gate's signals at `t`: the ones the status shows.
-pub(super) fn gate_signals(
-    place: &Localisation,
-    correction_age: Option<Duration>,
-    t: Timestamp,
-) -> GateSignals {
-    let position = place.gnss_fix().and_then(|f| f.position);
-    GateSignals {
-        quality: place.fresh_fix_quality(t),
-        fix_age: position.map(|p| t.saturating_since(p.rx)),
-        sigma_m: map_sigma(place.localizer(), t),
-        correction_age,
-    }
-}
-
 /// Whether the gate lets the blade run now (always, without zones).
 pub(super) fn lets_blade_run(envelope: Option<&Envelope>) -> bool {
     envelope.is_none_or(|e| e.gate_closed().is_none())
@@ -186,13 +168,14 @@ pub(super) fn map_sigma(localizer: &Localizer, t: Timestamp) -> Option<f64> {
 /// The run-time zone check of a control tick, just before the supervisor's tick: the
 /// braking ways from the map pose, at the speeds the wheels measure and are about to be
 /// sent, with the footprint grown by the position's σ. What it finds becomes the
-/// supervisor's zone cause; under `zones.manual = "warn"` a manual driver is told instead.
+/// supervisor's zone cause; under `zones.manual = "warn"` a manual driver is told instead
+/// (what is said goes into `events`).
 pub(super) fn zone_tick(
     envelope: &mut Envelope,
     localizer: &Localizer,
     chassis: &mut Chassis,
     t: Timestamp,
-    out: &mut Vec<Output>,
+    events: &mut Vec<String>,
 ) {
     let (Some(placement), Some(pose)) = (localizer.map_placement(), localizer.published(t)) else {
         // Not placed: no way can be checked. Autonomous work is held by the gate; a manual
@@ -213,14 +196,14 @@ pub(super) fn zone_tick(
     let zone = match conflict {
         Some(c) if manual && envelope.manual == ManualPolicy::Warn => {
             if envelope.warned.as_deref() != Some(c.name.as_str()) {
-                out.push(Output::Event(format!(
+                events.push(format!(
                     "the {} zone {:?} is in the braking way at ({:.2}, {:.2}) m; driving on \
                      (zones.manual = \"warn\")",
                     c.kind.name(),
                     c.name,
                     c.at.0,
                     c.at.1
-                )));
+                ));
                 envelope.warned = Some(c.name);
             }
             None
@@ -233,14 +216,14 @@ pub(super) fn zone_tick(
                 Some(Cause::Zone { name, .. }) if *name == c.name
             );
             if !latched_for_it {
-                out.push(Output::Event(format!(
+                events.push(format!(
                     "stopping: the {} zone {:?} is in the braking way at ({:.2}, {:.2}) m \
                      (σ {sigma:.3} m)",
                     c.kind.name(),
                     c.name,
                     c.at.0,
                     c.at.1
-                )));
+                ));
             }
             Some((c.kind.name(), c.name))
         }

@@ -423,7 +423,9 @@ impl Executive {
             results = motion.take_results();
         }
         if let Some(envelope) = plant.envelope.as_deref_mut() {
-            envelope::zone_tick(envelope, plant.place.localizer(), chassis, t, &mut out);
+            let mut events = Vec::new();
+            envelope::zone_tick(envelope, plant.place.localizer(), chassis, t, &mut events);
+            out.extend(events.into_iter().map(Output::Event));
         }
         out.insert(0, Output::Wheels(chassis.tick(t)));
         self.mission_tick(t, plant, &results, charging, &mut out);

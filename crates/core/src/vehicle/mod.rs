@@ -231,13 +231,21 @@ impl Vehicle {
     /// One control step (with drives): the executive steps the work under the envelope,
     /// and the drive train decides what reaches the wheels.
     fn control_tick(&mut self, t: Timestamp) -> Vec<Output> {
-        let gate = self
-            .envelope
-            .is_some()
-            .then(|| envelope::gate_signals(&self.place, self.correction_age(t), t));
+        let gate = self.envelope.is_some().then(|| self.gate_signals(t));
         let charging = self.charging(t);
         let (executive, mut plant) = self.executive_and_plant();
         executive.control_tick(t, &mut plant, gate.as_ref(), charging)
+    }
+
+    /// The GNSS gate's signals at `t`: the ones the status shows.
+    fn gate_signals(&self, t: Timestamp) -> gate::GateSignals {
+        let position = self.place.gnss_fix().and_then(|f| f.position);
+        gate::GateSignals {
+            quality: self.place.fresh_fix_quality(t),
+            fix_age: position.map(|p| t.saturating_since(p.rx)),
+            sigma_m: envelope::map_sigma(self.place.localizer(), t),
+            correction_age: self.correction_age(t),
+        }
     }
 
     /// The status tick: the corrections' watch, then the status.
