@@ -3,12 +3,9 @@
 
 mod cli;
 
-use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use tracing_subscriber::layer::SubscriberExt;
-use tracing_subscriber::util::SubscriberInitExt;
 
 #[derive(Parser)]
 #[command(version, about = "Chassis daemon for RTK ground robots")]
@@ -44,9 +41,6 @@ enum Command {
 /// Exit status of a configuration error (sysexits' EX_CONFIG).
 const EX_CONFIG: u8 = 78;
 
-/// Log lines waiting for stderr before new ones are dropped.
-const LOG_QUEUE: usize = 4096;
-
 fn main() -> ExitCode {
     // Before any thread exists: see runtime::heap.
     chassisd::runtime::heap::tune_allocator();
@@ -60,35 +54,7 @@ fn main() -> ExitCode {
         unsafe { std::env::set_var("RUST_LIB_BACKTRACE", "0") };
     }
     // The guard writes what is queued when main returns.
-    let (log_writer, _log_guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
-        .lossy(true)
-        .buffered_lines_limit(LOG_QUEUE)
-        .thread_name("log-out")
-        .finish(std::io::stderr());
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
-        tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
-    });
-    let logs = tracing_subscriber::fmt()
-        .with_writer(log_writer)
-        .with_env_filter(filter);
-    // Libraries that log per connection are held to a budget (runtime::foreign_log); it is
-    // asked before the level filter, so only the levels shown by default are counted.
-    let budget = tracing_subscriber::filter::filter_fn(|meta| {
-        !meta.is_event()
-            || *meta.level() > tracing::Level::WARN
-            || chassisd::runtime::foreign_log::allow(meta.target())
-    });
-    if chassisd::runtime::journal::to_journal() {
-        logs.event_format(chassisd::runtime::journal::JournalFormat::default())
-            .finish()
-            .with(budget)
-            .init();
-    } else {
-        logs.with_ansi(std::io::stderr().is_terminal())
-            .finish()
-            .with(budget)
-            .init();
-    }
+    let _log_guard = chassisd::runtime::logging::init();
     match run(Cli::parse()) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),

@@ -1,59 +1,28 @@
 //! The subcommands, one file each: its arguments (a `clap::Args` struct whose doc comment is
 //! its `--help` text) and `execute`, which runs it and returns `Ok(false)` when it ran but its
-//! verdict is negative (a benchmark missed a target, a probe failed). Errors are `anyhow`
-//! here and nowhere in the library: this is where they become a message and an exit status.
+//! verdict is negative (a probe failed). Errors are `anyhow` here and nowhere in the library:
+//! this is where they become a message and an exit status. The benchmarks are a binary of
+//! their own (`src/bin/chassisd-bench`); `chassisd bench` hands over to it.
 
 pub mod bench;
 pub mod calibrate;
 pub mod can_sim;
 pub mod check;
+pub mod common;
 pub mod ntrip;
 pub mod record;
 pub mod replay;
 pub mod run;
 pub mod sim;
 
-use std::future::Future;
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::path::Path;
 
-use anyhow::Context;
-
-use chassisd::config::calibration::CalibrationFile;
-use chassisd::config::mqtt::{
-    DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
+pub use common::{
+    block_on, describe, find_scenario, load_calibration, load_plant, scenario_names, seconds_arg,
+    sim_mqtt,
 };
+
 use chassisd::config::ntrip::NtripConfig;
-use chassisd::sim::plant::PlantConfig;
-use chassisd::sim::scenario::Scenario;
-
-/// Runs `task` to its end on a multi-threaded tokio runtime of `threads` workers (timers and
-/// I/O enabled), then shuts the runtime down without waiting: a read of standard input may
-/// still be blocked in one of its threads. Every async subcommand goes through here.
-pub fn block_on<T>(threads: usize, task: impl Future<Output = T>) -> anyhow::Result<T> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(threads)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
-    let result = runtime.block_on(task);
-    runtime.shutdown_background();
-    Ok(result)
-}
-
-/// An error and its causes joined by ": ", as `{:#}` shows them, leaving out a cause whose
-/// words its wrapper already said (a library error that only carries another, such as
-/// `RuntimeError::Config`, keeps it as its source so the exit status can find it).
-pub fn describe(error: &anyhow::Error) -> String {
-    let mut said: Vec<String> = Vec::new();
-    for cause in error.chain() {
-        let text = cause.to_string();
-        if said.last() != Some(&text) {
-            said.push(text);
-        }
-    }
-    said.join(": ")
-}
 
 /// Refuses a ROS1 node in a build without the `ros1` feature, saying how to get one.
 pub fn ensure_ros1_built(wanted: bool) -> anyhow::Result<()> {
@@ -63,40 +32,6 @@ pub fn ensure_ros1_built(wanted: bool) -> anyhow::Result<()> {
          features (cargo build --release) to join a ROS1 graph"
     );
     Ok(())
-}
-
-/// The `{vehicleId}` of the simulated vehicle's root dialect.
-const SIM_VEHICLE_ID: &str = "sim";
-/// The `{serial_number}` of the simulated vehicle's device dialect.
-const SIM_SERIAL_NUMBER: &str = "SIM0001";
-
-/// The MQTT settings of the simulated vehicle (`sim`, `bench mqtt`, `bench soak`): every
-/// dialect, on the broker at `external`, or on an embedded one at 127.0.0.1:1883.
-pub fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
-    let mut config = MqttConfig {
-        embedded_broker: external.is_none(),
-        rtk: Some(RtkDialectConfig::default()),
-        root: Some(RootDialectConfig {
-            vehicle_id: SIM_VEHICLE_ID.into(),
-            heartbeat_timeout_s: 3.0,
-            require_heartbeat: false,
-            heartbeat_client_id: None,
-        }),
-        device: Some(DeviceDialectConfig {
-            serial_number: SIM_SERIAL_NUMBER.into(),
-            mapping_forward: None,
-        }),
-        ..MqttConfig::default()
-    };
-    if let Some(address) = external {
-        let (host, port) = address
-            .rsplit_once(':')
-            .and_then(|(h, p)| Some((h, p.parse::<u16>().ok()?)))
-            .with_context(|| format!("--mqtt {address:?}: expected HOST:PORT"))?;
-        config.host = host.to_owned();
-        config.port = port;
-    }
-    Ok(config)
 }
 
 /// `[ntrip]` with `--ntrip URL`'s caster (the rest of the section kept); a password in the
@@ -111,86 +46,4 @@ pub fn ntrip_override(configured: Option<NtripConfig>, url: &str) -> anyhow::Res
     }
     n.validate(Path::new("--ntrip"))?;
     Ok(n)
-}
-
-/// The calibration file at `path`, if one is given.
-pub fn load_calibration(path: Option<&Path>) -> anyhow::Result<Option<CalibrationFile>> {
-    Ok(path.map(CalibrationFile::load).transpose()?)
-}
-
-/// The plant at `path`, or the built-in one.
-pub fn load_plant(path: Option<PathBuf>) -> anyhow::Result<PlantConfig> {
-    Ok(match path {
-        Some(path) => PlantConfig::load(&path)?,
-        None => PlantConfig::builtin()?,
-    })
-}
-
-/// The scenarios' names, each with what it drives, for `--help` and argument checking.
-pub fn scenario_names() -> clap::builder::PossibleValuesParser {
-    clap::builder::PossibleValuesParser::new(
-        Scenario::every()
-            .into_iter()
-            .map(|s| clap::builder::PossibleValue::new(s.name).help(s.about)),
-    )
-}
-
-/// The scenario called `name`.
-pub fn find_scenario(name: &str) -> anyhow::Result<Scenario> {
-    Scenario::named(name).ok_or_else(|| {
-        let names: Vec<&str> = Scenario::every().iter().map(|s| s.name).collect();
-        anyhow::anyhow!("no scenario {name:?}; there are {}", names.join(", "))
-    })
-}
-
-/// The longest span a seconds argument may give: about 31 years.
-const MAX_SECONDS_ARG: f64 = 1e9;
-
-/// Parses a positive, finite number of seconds (up to [`MAX_SECONDS_ARG`]).
-pub fn seconds_arg(s: &str) -> Result<Duration, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
-    if !(v > 0.0 && v <= MAX_SECONDS_ARG) {
-        return Err(format!(
-            "{s:?}: give a positive number of seconds, at most {MAX_SECONDS_ARG:e}"
-        ));
-    }
-    Ok(Duration::from_secs_f64(v))
-}
-
-/// Parses a positive number of minutes (up to a week).
-pub fn minutes_arg(s: &str) -> Result<Duration, String> {
-    match s.trim().parse::<f64>() {
-        Ok(v) if v > 0.0 && v <= 7.0 * 24.0 * 60.0 => Ok(Duration::from_secs_f64(v * 60.0)),
-        _ => Err(format!(
-            "{s:?}: give a positive number of minutes, at most a week"
-        )),
-    }
-}
-
-/// Parses a receiver rate: 0.1 to 50 Hz.
-pub fn gnss_rate_arg(s: &str) -> Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(v) if (0.1..=50.0).contains(&v) => Ok(v),
-        _ => Err(format!("{s:?}: give a rate from 0.1 to 50 Hz")),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use chassisd::config::ConfigError;
-    use chassisd::runtime::error::RuntimeError;
-
-    #[test]
-    fn a_wrapped_configuration_error_is_said_once_and_still_found() {
-        let config = ConfigError::invalid(Path::new("v.toml"), "gnss.baud", "0", "use 9600");
-        let said = config.to_string();
-        let e = anyhow::Error::from(RuntimeError::from(config)).context("starting the vehicle");
-        assert_eq!(describe(&e), format!("starting the vehicle: {said}"));
-        // main's exit status 78 looks for it among the causes.
-        assert!(e.chain().any(|c| c.downcast_ref::<ConfigError>().is_some()));
-    }
 }

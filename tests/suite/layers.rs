@@ -11,8 +11,8 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
 /// The library's top-level modules, lowest layer first. A module may use the modules of the
-/// layers below its own, never those of its own layer or above. The binary (`src/main.rs`,
-/// `src/cli/`) sits above them all.
+/// layers below its own, never those of its own layer or above. The binaries (`src/main.rs`,
+/// `src/cli/`, `src/bin/`) sit above them all.
 const LAYERS: &[&[&str]] = &[
     &["time", "secret", "geodesy", "sources"],
     &["devices", "fusion", "broker"],
@@ -95,7 +95,7 @@ fn each_module_lives_in_the_crate_of_its_layer() {
             let path = entry.expect("directory entry").path();
             let name = path.file_stem().unwrap_or_default().to_string_lossy();
             let placed = modules.contains(&name.as_ref());
-            if !placed && !matches!(name.as_ref(), "lib" | "main" | "cli") {
+            if !placed && !matches!(name.as_ref(), "lib" | "main" | "cli" | "bin") {
                 wrong.push(format!("{root}/{name} is in no crate of CRATES"));
             }
         }
@@ -460,7 +460,7 @@ fn module_of(relative: &Path) -> Option<ModulePath> {
         .iter()
         .map(|p| p.to_string_lossy().into_owned())
         .collect();
-    if matches!(parts[0].as_str(), "main" | "cli") {
+    if matches!(parts[0].as_str(), "main" | "cli" | "bin") {
         return None;
     }
     if matches!(parts.last().map(String::as_str), Some("mod" | "lib")) {

@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::runtime::error::{RuntimeError, invalid, io};
+use crate::runtime::error::{RuntimeError, io};
 use bytes::Bytes;
 use tokio::sync::mpsc;
 
@@ -17,22 +17,17 @@ use crate::api::rtk::BaseStatus;
 use crate::api::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssStats;
-use crate::engine::{
-    CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, PROCESS_SOURCE, RTCM_PROTOCOL,
-};
-use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
+use crate::engine::{Engine, EngineOutput, PROCESS_SOURCE};
+use crate::record::{Payload, Record, SourceMeta};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::drivers;
 use crate::runtime::drivers::can::CanTx;
 use crate::runtime::drivers::serial_tx::SerialTx;
 use crate::runtime::heap;
-use crate::runtime::host;
-use crate::runtime::links::broker;
-use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
-use crate::runtime::links::ros1::Ros1Link;
 use crate::runtime::notify::{InjectedStall, ServiceManager};
 use crate::runtime::panics;
 use crate::runtime::recorder::Recorder;
+use crate::runtime::session::{self, Links};
 use crate::runtime::status_out::StatusOut;
 use crate::runtime::trajectory_writer;
 use crate::sim::scenario::Scenario;
@@ -111,14 +106,8 @@ async fn run_marked(
         .config
         .require_devices(std::path::Path::new("the configuration"))?;
     log_calibration(&options.config);
-    super::log_zones(&options.config);
-    let zones = super::zones_writer(&options.config);
-    // The broker first: its process takes a moment to start on a slow PC, and nothing that
-    // keeps time (the drives' set-up) should be waiting meanwhile.
-    let embedded = match &options.config.mqtt {
-        Some(m) => broker::start_if_embedded(m, &options.config.vehicle.name)?,
-        None => None,
-    };
+    session::log_zones(&options.config);
+    let broker = session::start_broker(&options.config)?;
     let mut out = StatusOut::start(out);
     let clock = RecordClock::start();
     let start = clock.now();
@@ -130,13 +119,6 @@ async fn run_marked(
     let mut source_meta = devices.sources;
     let can_tx = devices.can_tx;
     let serial_tx = devices.serial_tx;
-    let corrections = match &config.ntrip {
-        Some(n) => {
-            source_meta.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
-            Some(crate::runtime::links::ntrip::spawn(n, clock, tx.clone())?)
-        }
-        None => None,
-    };
     if !config.drive.is_empty() {
         source_meta.push(SourceMeta::commands(
             PROCESS_SOURCE,
@@ -160,91 +142,22 @@ async fn run_marked(
     {
         tracing::warn!("mqtt.rtk.trajectory_dir is not set: trajectory commands will be refused");
     }
-    let mut trajectories = trajectory_writer::open(config, Box::new(Unconfigured))?;
+    let trajectories = trajectory_writer::open(config, Box::new(Unconfigured))?;
     let mut engine = Engine::with_trajectories(config, &sources, trajectories.store);
     engine.start_at(start);
     panics::install(engine.drivetrain().stop_frames());
-    let mqtt = match &config.mqtt {
-        Some(m) => {
-            source_meta.push(SourceMeta::commands(
-                MQTT_SOURCE,
-                &format!("{MQTT_SOURCE}.log"),
-            ));
-            let spec = MqttSpec {
-                config: m.clone(),
-                vehicle: config.vehicle.name.clone(),
-                subscriptions: engine.subscriptions(),
-                command_topics: engine.command_topics(),
-            };
-            if m.root.is_some() {
-                source_meta.push(SourceMeta::commands(
-                    HOST_SOURCE,
-                    &format!("{HOST_SOURCE}.log"),
-                ));
-                host::spawn(clock, tx.clone());
-            }
-            let sender = mqtt::spawn(spec, clock, tx.clone())?;
-            if let Some(b) = embedded {
-                broker::spawn_health_reports(
-                    b,
-                    sender.clone(),
-                    m.broker_health_topic(&config.vehicle.name),
-                );
-            }
-            Some(sender)
-        }
-        None => None,
-    };
-    let mut ros1 = match config.ros1.clone() {
-        Some(r) => {
-            source_meta.push(crate::runtime::links::ros1::source_meta());
-            Some(crate::runtime::links::ros1::start(
-                &mut engine,
-                config,
-                r,
-                clock,
-                tx.clone(),
-            )?)
-        }
-        None => None,
-    };
-    let mut websocket = match config.websocket.clone() {
-        Some(w) => {
-            source_meta.push(crate::runtime::links::websocket::source_meta());
-            Some(crate::runtime::links::websocket::start(
-                &mut engine,
-                config,
-                w,
-                clock,
-                tx.clone(),
-            )?)
-        }
-        None => None,
-    };
+    let mut links = Links::start(&mut engine, config, broker, clock, &tx, &mut source_meta)?;
     let drivers_running = !source_meta.is_empty();
     drop(tx);
 
     let mut recorder = match &options.record {
-        Some(dir) => {
-            let mut writer = RecordingWriter::create(
-                dir,
-                &config.vehicle.name,
-                start,
-                Some(&config.to_effective_toml()),
-                source_meta,
-            )
-            .map_err(invalid(format!(
-                "cannot start recording in {}",
-                dir.display()
-            )))?;
-            if let Some(snapshot) = trajectories.snapshot.take() {
-                writer
-                    .attach_trajectories(&snapshot)
-                    .map_err(invalid("cannot record the stored trajectories"))?;
-            }
-            tracing::info!(folder = %dir.display(), "recording");
-            Some(Recorder::start(writer))
-        }
+        Some(dir) => Some(session::start_recorder(
+            dir,
+            config,
+            start,
+            source_meta,
+            trajectories.snapshot.as_deref(),
+        )?),
         None => None,
     };
 
@@ -312,19 +225,12 @@ async fn run_marked(
             _ = finished(&mut pattern) => break Ok("pattern complete"),
         }
         let t = now.unwrap_or_else(|| clock.now());
-        if let Some(c) = &corrections {
-            c.update_position(engine.gnss_fix());
-        }
+        links.update_position(engine.gnss_fix());
         let bits = dispatch(
             &mut outputs,
             t,
             (&can_tx, &serial_tx),
-            (
-                mqtt.as_ref(),
-                ros1.as_mut(),
-                websocket.as_mut(),
-                zones.as_ref(),
-            ),
+            &mut links,
             recorder.as_mut(),
             &mut out,
         );
@@ -375,12 +281,7 @@ async fn run_marked(
         &mut outputs,
         end,
         (&can_tx, &serial_tx),
-        (
-            mqtt.as_ref(),
-            ros1.as_mut(),
-            websocket.as_mut(),
-            zones.as_ref(),
-        ),
+        &mut links,
         recorder.as_mut(),
         &mut out,
     );
@@ -414,31 +315,20 @@ async fn run_marked(
     result.map(|_| ())
 }
 
-/// Routes the engine's outputs: status lines to `out`, frames to their interface (and the
-/// recording), command answers to the log. Returns the drive train's status bits of the
+/// Routes the engine's outputs: the links' to them, status lines to `out`, frames to their
+/// interface (and the recording). Returns the drive train's status bits of the
 /// last status, if there was one.
 fn dispatch(
     outputs: &mut Vec<EngineOutput>,
     t: Timestamp,
     (can_tx, serial_tx): (&BTreeMap<String, CanTx>, &BTreeMap<String, SerialTx>),
-    (mqtt, mut ros1, mut websocket, zones): (
-        Option<&MqttSender>,
-        Option<&mut Ros1Link>,
-        Option<&mut crate::runtime::links::websocket::WebsocketLink>,
-        Option<&crate::runtime::zones_writer::ZonesWriter>,
-    ),
+    links: &mut Links,
     mut recorder: Option<&mut Recorder>,
     out: &mut StatusOut,
 ) -> Option<u32> {
     let mut bits = None;
     for output in outputs.drain(..) {
-        let Some(output) = crate::runtime::modes::forward_common(
-            output,
-            mqtt,
-            ros1.as_deref_mut(),
-            websocket.as_deref_mut(),
-            zones,
-        ) else {
+        let Some(output) = links.route(output) else {
             continue;
         };
         match output {

@@ -7,23 +7,20 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use crate::runtime::error::{invalid, io};
+use crate::runtime::error::io;
 use tokio::sync::{mpsc, watch};
 
 use crate::api::rtk::BaseStatus;
 use crate::api::trajectory::MemoryStore;
 use crate::config::mqtt::MqttConfig;
 use crate::devices::gnss::FixQuality;
-use crate::engine::{CORRECTIONS_SOURCE, EngineOutput, EngineStats, RTCM_PROTOCOL};
-use crate::record::{Payload, Record, RecordingWriter, SourceMeta};
+use crate::engine::{EngineOutput, EngineStats};
+use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::heap;
-use crate::runtime::host;
-use crate::runtime::links::broker;
-use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
-use crate::runtime::links::ros1::Ros1Link;
 use crate::runtime::modes::live::read_commands;
 use crate::runtime::recorder::Recorder;
+use crate::runtime::session::{self, Links};
 use crate::runtime::status_out::StatusOut;
 use crate::runtime::trajectory_writer;
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sections, Sink};
@@ -131,14 +128,12 @@ fn apply_faults(sim: &mut Lockstep, now: SimFaults, was: &mut SimFaults, sink: &
     *was = now;
 }
 
-/// Status lines to `out` (from its own thread), records to the recorder.
+/// Status lines to `out` (from its own thread), records to the recorder, the rest to the
+/// links.
 struct Output {
     out: StatusOut,
     recorder: Option<Recorder>,
-    mqtt: Option<MqttSender>,
-    ros1: Option<Ros1Link>,
-    websocket: Option<crate::runtime::links::websocket::WebsocketLink>,
-    zones: Option<crate::runtime::zones_writer::ZonesWriter>,
+    links: Links,
 }
 
 impl Sink for Output {
@@ -150,13 +145,7 @@ impl Sink for Output {
 
     fn output(&mut self, output: EngineOutput) {
         // Frames go to the simulated drives inside the lockstep, not here.
-        if let Some(EngineOutput::Status(status)) = crate::runtime::modes::forward_common(
-            output,
-            self.mqtt.as_ref(),
-            self.ros1.as_mut(),
-            self.websocket.as_mut(),
-            self.zones.as_ref(),
-        ) {
+        if let Some(EngineOutput::Status(status)) = self.links.route(output) {
             let mut line = BaseStatus::from_status(&status).to_json();
             line.push('\n');
             self.out.send(line);
@@ -198,114 +187,38 @@ async fn run_marked(
     };
     let mut sim =
         Lockstep::with_sections(options.plant.clone(), options.seed, start, sections, store)?;
-    let mut sources = lockstep::sources(&options.plant);
-    if options.ntrip.is_some() {
-        sources.push(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
-    }
-    if options.ros1.is_some() {
-        sources.push(crate::runtime::links::ros1::source_meta());
-    }
-    if options.websocket.is_some() {
-        sources.push(crate::runtime::links::websocket::source_meta());
-    }
-    let recorder = match &options.record {
-        Some(dir) => {
-            let mut writer = RecordingWriter::create(
-                dir,
-                &sim.config().vehicle.name,
-                start,
-                Some(&sim.config().to_effective_toml()),
-                sources,
-            )
-            .map_err(invalid(format!(
-                "cannot start recording in {}",
-                dir.display()
-            )))?;
-            if let Some(snapshot) = &snapshot {
-                writer
-                    .attach_trajectories(snapshot)
-                    .map_err(invalid("cannot record the stored trajectories"))?;
-            }
-            tracing::info!(folder = %dir.display(), "recording");
-            Some(Recorder::start(writer))
-        }
-        None => None,
-    };
-    super::log_zones(sim.config());
+    session::log_zones(sim.config());
     heap::spawn();
     let (tx, mut commands) = mpsc::channel(COMMAND_QUEUE);
-    let mqtt = match &options.mqtt {
-        Some(m) => {
-            let embedded = broker::start_if_embedded(m, &sim.config().vehicle.name)?;
-            let spec = MqttSpec {
-                config: m.clone(),
-                vehicle: sim.config().vehicle.name.clone(),
-                subscriptions: sim.engine().subscriptions(),
-                command_topics: sim.engine().command_topics(),
-            };
-            if m.root.is_some() {
-                host::spawn(clock, tx.clone());
-            }
-            let sender = mqtt::spawn(spec, clock, tx.clone())?;
-            if let Some(b) = embedded {
-                broker::spawn_health_reports(
-                    b,
-                    sender.clone(),
-                    m.broker_health_topic(&sim.config().vehicle.name),
-                );
-            }
-            Some(sender)
-        }
+    // The plant's configuration with the session's sections, and the links the options ask
+    // for.
+    let mut config = sim.config().clone();
+    config.ros1 = options.ros1.clone();
+    config.websocket = options.websocket.clone();
+    let broker = session::start_broker(&config)?;
+    let mut sources = lockstep::sources(&options.plant);
+    let links = Links::start(sim.engine_mut(), &config, broker, clock, &tx, &mut sources)?;
+    let recorder = match &options.record {
+        Some(dir) => Some(session::start_recorder(
+            dir,
+            sim.config(),
+            start,
+            sources,
+            snapshot.as_deref(),
+        )?),
         None => None,
     };
-    let ros1 = match options.ros1.clone() {
-        Some(ros1) => {
-            let config = sim.config().clone();
-            Some(crate::runtime::links::ros1::start(
-                sim.engine_mut(),
-                &config,
-                ros1,
-                clock,
-                tx.clone(),
-            )?)
-        }
-        None => None,
-    };
-    let websocket = match options.websocket.clone() {
-        Some(w) => {
-            let config = sim.config().clone();
-            Some(crate::runtime::links::websocket::start(
-                sim.engine_mut(),
-                &config,
-                w,
-                clock,
-                tx.clone(),
-            )?)
-        }
-        None => None,
-    };
+    let mut commands_open = options.commands_stdin || links.any();
     let mut sink = Output {
         out: StatusOut::start(out),
         recorder,
-        mqtt,
-        ros1,
-        websocket,
-        zones: super::zones_writer(sim.config()),
-    };
-    let corrections = match &options.ntrip {
-        Some(n) => Some(crate::runtime::links::ntrip::spawn(n, clock, tx.clone())?),
-        None => None,
+        links,
     };
     if options.commands_stdin {
         tokio::spawn(read_commands(clock, tx));
     } else {
         drop(tx);
     }
-    let mut commands_open = options.commands_stdin
-        || options.ntrip.is_some()
-        || options.mqtt.is_some()
-        || options.ros1.is_some()
-        || options.websocket.is_some();
     crate::runtime::stderr::line(start_line(&options, sim.config().vehicle.name.as_str()));
     let end =
         run_length(options.duration, options.scenario.as_ref()).map(|d| start.saturating_add(d));
@@ -342,9 +255,7 @@ async fn run_marked(
                     }
                     summary.track(sim.vehicle().truth());
                 }
-                if let Some(c) = &corrections {
-                    c.update_position(sim.engine().gnss_fix());
-                }
+                sink.links.update_position(sim.engine().gnss_fix());
                 if let Some(h) = &options.handle {
                     h.probe.send_replace(SimProbe {
                         truth: sim.vehicle().truth(),

@@ -1,0 +1,433 @@
+//! The benchmarks that print figures, each ending with a JSON line.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+
+use crate::common::{
+    block_on, find_scenario, load_calibration, load_plant, scenario_names, seconds_arg, sim_mqtt,
+};
+use chassisd::bench::Broker;
+use chassisd::bench::fusion;
+use chassisd::bench::mosquitto::Mosquitto;
+use chassisd::bench::mqtt::{BrokerRun, MqttBenchOptions, MqttComparison};
+use chassisd::bench::soak::SoakOptions;
+use chassisd::sim::plant::PlantConfig;
+use chassisd::sim::scenario::Scenario;
+
+/// Run a benchmark that prints figures.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    which: BenchCommand,
+}
+
+#[derive(clap::Subcommand)]
+enum BenchCommand {
+    /// The map filter on a real robot's recording (a Husky's SBAS fixes, wheels and gyro:
+    /// ../shared/data/ekf/husky-test1): GNSS outages against the odom frame's dead
+    /// reckoning, distance to the fixes, the parked pose and wild fixes; the last line is
+    /// a JSON object with every figure.
+    Husky {
+        /// The recording's folder (gps.csv, odom.csv, imu.csv).
+        #[arg(long, default_value = "../shared/data/ekf/husky-test1")]
+        data: PathBuf,
+        /// The plant whose simulated GNSS errors are compared with the data's (default: the
+        /// built-in mower).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+    },
+    /// Every real vehicle's recording of ../shared/data/ekf (the Husky, with and without a
+    /// course; the comma2k19 car; the Jackal) turned into a chassisd recording and replayed
+    /// through the whole core: one table of each figure beside its target and the naive dead
+    /// reckoning's; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Real {
+        /// The shared data's ekf/ folder.
+        #[arg(long, default_value = "../shared/data/ekf")]
+        data: PathBuf,
+        /// Replays run on this many threads.
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+        jobs: u32,
+        /// Write each vehicle's whole run as CSV into this folder (time, map pose, heading
+        /// 1σ, the scored point and its truth), to plot.
+        #[arg(long)]
+        trace: Option<PathBuf>,
+    },
+    /// Score the fusion filter on scripted drives of the simulated vehicle against its
+    /// truth; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Fusion {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Monte Carlo runs of each scenario, each with its own noise; figures pool them
+        /// (the outage drift is the RMS over runs, the jump figure the worst run's).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=1000))]
+        runs: u32,
+        /// Run only these scenarios (repeatable).
+        #[arg(long, value_parser = scenario_names())]
+        scenario: Vec<String>,
+        /// The receiver's rate, Hz, instead of the plant's.
+        #[arg(long, value_parser = gnss_rate_arg)]
+        gnss_rate: Option<f64>,
+        /// One antenna (heading from course over ground) or two (dual-antenna heading),
+        /// instead of the plant's.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=2))]
+        antennas: Option<u8>,
+    },
+    /// Score closed-loop moves and the command watchdog on the simulated vehicle against
+    /// its truth; the last line is a JSON object with every figure and "pass". Exits with
+    /// status 1 when a target is missed.
+    Control {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// A calibration file for the simulated vehicle's configuration.
+        #[arg(long, value_name = "FILE")]
+        calibration: Option<PathBuf>,
+    },
+    /// The safety envelope on the simulated vehicle against its truth: randomised
+    /// approaches towards keep-out zones and walls (manual and autonomous, with RTK-float
+    /// jumps), the blade at every gate closing, a covering mission under clean RTK, and
+    /// plans through zones. A table, then a JSON line with "pass"; exits with status 1 when
+    /// a target is missed.
+    Envelope {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Noise seed (each approach draws its own from it).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Randomised approaches.
+        #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        approaches: u32,
+        /// The covering mission's length.
+        #[arg(long, default_value = "30", value_parser = minutes_arg)]
+        minutes: Duration,
+        /// Plans through zones (and as many clear of them).
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+        plans: u32,
+    },
+    /// Time plain-log replay against gpsd's gpsdecode on real receiver logs repeated to a
+    /// size (all concatenated, then each receiver alone), with peak memory; the last line
+    /// is JSON with "pass". Exits with status 1 when a target is missed.
+    Replay {
+        /// Folder of receiver logs (*.log).
+        #[arg(long, default_value = "../shared/data/gnss")]
+        data: PathBuf,
+        /// Size each input is repeated up to, MB.
+        #[arg(long, default_value_t = 70, value_parser = clap::value_parser!(u64).range(1..=10_000))]
+        megabytes: u64,
+        /// Timed runs of each command (the fastest counts).
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+        runs: u32,
+    },
+    /// Run the simulated vehicle on its brokers for minutes while faults come round
+    /// (command floods, broker restarts, GNSS outage, IMU stall, lost drive heartbeats, CAN
+    /// down, hostile MQTT, HTTP and TCPROS clients): memory slope, base_status gaps, each
+    /// fault's detection, recovery and stop.
+    /// The last line is JSON with "pass"; exits with status 1 when a target is missed.
+    Soak {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Total length, minutes, shared between the brokers.
+        #[arg(long, default_value = "10", value_parser = minutes_arg)]
+        minutes: Duration,
+        /// The embedded broker, mosquitto, or each for half the time.
+        #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
+        broker: BenchBroker,
+        /// Leave the ROS1 node and its TCPROS attack out (by default the soak starts a
+        /// rosmaster, Debian's ros-core, for them).
+        #[arg(long)]
+        without_ros1: bool,
+    },
+    /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
+    /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
+    Mqtt {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// How long to measure, s.
+        #[arg(long, default_value = "60", value_parser = seconds_arg)]
+        seconds: Duration,
+        /// Use the MQTT broker at HOST:PORT instead of starting one.
+        #[arg(long, value_name = "HOST:PORT", conflicts_with = "broker")]
+        mqtt: Option<String>,
+        /// The broker to start on a free port: the embedded one, mosquitto, or each in turn.
+        #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
+        broker: BenchBroker,
+    },
+}
+
+/// Brokers `chassisd bench mqtt` can start.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum BenchBroker {
+    /// The embedded rumqttd.
+    Embedded,
+    /// mosquitto (with set_tcp_nodelay).
+    Mosquitto,
+    /// The embedded broker, then mosquitto.
+    Both,
+}
+
+pub fn execute(a: Args) -> anyhow::Result<bool> {
+    match a.which {
+        BenchCommand::Husky { data, plant } => {
+            use chassisd::bench::{gnss_fit, husky};
+            let data = husky::HuskyData::load(&data)?;
+            let plant = load_plant(plant)?;
+            let fit = gnss_fit::fit(&data, &plant, 1);
+            let report = husky::report(&data, Default::default());
+            print!("{report}");
+            print!("{fit}");
+            println!(
+                "{}",
+                serde_json::json!({ "filter": report, "gnss_errors": fit })
+            );
+            Ok(true)
+        }
+        BenchCommand::Real { data, jobs, trace } => {
+            let options = chassisd::bench::real::Options {
+                workers: jobs as usize,
+                trace,
+            };
+            let table = chassisd::bench::real::run(&data, &options)?;
+            print!("{table}");
+            let pass = table.pass();
+            println!(
+                "{}",
+                serde_json::json!({ "figures": table.figures, "pass": pass })
+            );
+            Ok(pass)
+        }
+        BenchCommand::Fusion {
+            plant,
+            seed,
+            runs,
+            scenario,
+            gnss_rate,
+            antennas,
+        } => {
+            let mut plant = load_plant(plant)?;
+            if let Some(rate) = gnss_rate {
+                plant.gnss.rate_hz = rate;
+            }
+            if let Some(n) = antennas {
+                plant.gnss.dual_antenna = n == 2;
+            }
+            bench_fusion(plant, seed, runs, &scenario)
+        }
+        BenchCommand::Control {
+            plant,
+            seed,
+            calibration,
+        } => {
+            let mut plant = load_plant(plant)?;
+            plant.calibration = load_calibration(calibration.as_deref())?;
+            let report = chassisd::bench::control::run(&plant, seed)?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
+        BenchCommand::Envelope {
+            plant,
+            seed,
+            approaches,
+            minutes,
+            plans,
+        } => {
+            let plant = load_plant(plant)?;
+            let options = chassisd::bench::envelope::EnvelopeOptions {
+                approaches,
+                coverage_s: minutes.as_secs_f64(),
+                plans,
+            };
+            let report = chassisd::bench::envelope::run(&plant, seed, options)?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
+        BenchCommand::Soak {
+            plant,
+            minutes,
+            broker,
+            without_ros1,
+        } => bench_soak(plant, minutes, broker, !without_ros1),
+        BenchCommand::Replay {
+            data,
+            megabytes,
+            runs,
+        } => {
+            let exe = std::env::current_exe().context("finding this program")?;
+            let report = chassisd::bench::replay::run(
+                &chassisd::bench::replay::ReplayBenchOptions {
+                    data,
+                    bytes: megabytes * 1_000_000,
+                    runs,
+                },
+                &exe,
+            )?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
+        BenchCommand::Mqtt {
+            plant,
+            seconds,
+            mqtt,
+            broker,
+        } => bench_mqtt(plant, seconds, mqtt.as_deref(), broker),
+    }
+}
+
+fn bench_fusion(
+    plant: PlantConfig,
+    seed: u64,
+    runs: u32,
+    names: &[String],
+) -> anyhow::Result<bool> {
+    let scenarios = if names.is_empty() {
+        Scenario::all()
+    } else {
+        names
+            .iter()
+            .map(|n| find_scenario(n))
+            .collect::<anyhow::Result<Vec<_>>>()?
+    };
+    // At the plant's own speed: a car drives the laps at ten times a mower's.
+    let scenarios: Vec<Scenario> = scenarios
+        .iter()
+        .map(|s| s.at_speed(plant.drive.scenario_speed))
+        .collect();
+    let started = std::time::Instant::now();
+    let report = fusion::run(&plant, &scenarios, seed, runs)?;
+    let elapsed = started.elapsed();
+    let simulated = fusion::simulated_time(&scenarios).as_secs_f64() * f64::from(runs);
+    print!("{}", report.table());
+    println!(
+        "simulated {simulated:.0} s in {:.1} s of wall time ({:.0}x real time)",
+        elapsed.as_secs_f64(),
+        simulated / elapsed.as_secs_f64().max(1e-9),
+    );
+    println!("{}", report.json());
+    Ok(report.pass)
+}
+
+/// The brokers `--broker` names, in the order they run.
+fn bench_brokers(choice: BenchBroker) -> Vec<Broker> {
+    match choice {
+        BenchBroker::Embedded => vec![Broker::Embedded],
+        BenchBroker::Mosquitto => vec![Broker::Mosquitto],
+        BenchBroker::Both => vec![Broker::Embedded, Broker::Mosquitto],
+    }
+}
+
+fn bench_mqtt(
+    plant: Option<PathBuf>,
+    seconds: Duration,
+    external: Option<&str>,
+    choice: BenchBroker,
+) -> anyhow::Result<bool> {
+    let plant = load_plant(plant)?;
+    // An outside broker (`--mqtt`) runs alone; else each broker asked for, mosquitto left
+    // out with the reason when it is missing and both were asked for.
+    let mut brokers: Vec<Option<Broker>> = Vec::new();
+    let mut skipped = None;
+    if external.is_some() {
+        brokers.push(None);
+    } else {
+        for broker in bench_brokers(choice) {
+            let missing = (broker == Broker::Mosquitto)
+                .then(Mosquitto::missing)
+                .flatten();
+            match missing {
+                Some(why) if choice == BenchBroker::Both => skipped = Some(why),
+                Some(why) => anyhow::bail!(why),
+                None => brokers.push(Some(broker)),
+            }
+        }
+    }
+    let mut runs = Vec::new();
+    for broker in brokers {
+        let mut mqtt = sim_mqtt(external)?;
+        let mosquitto = broker.map(|b| b.start(&mut mqtt)).transpose()?.flatten();
+        let name = broker.map_or("external", Broker::name);
+        let options = MqttBenchOptions {
+            plant: plant.clone(),
+            duration: seconds,
+            mqtt,
+        };
+        let report = block_on(2, chassisd::bench::mqtt::run(options))?;
+        drop(mosquitto);
+        let run = BrokerRun::new(name, report?);
+        println!("broker: {name}");
+        print!("{}", run.report.table());
+        runs.push(run);
+    }
+    let comparison = MqttComparison::new(runs, skipped);
+    if let Some(why) = &comparison.skipped {
+        println!("mosquitto not compared: {why}");
+    }
+    println!("{}", comparison.json());
+    Ok(comparison.pass)
+}
+
+fn bench_soak(
+    plant: Option<PathBuf>,
+    total: Duration,
+    choice: BenchBroker,
+    ros1: bool,
+) -> anyhow::Result<bool> {
+    let brokers = bench_brokers(choice);
+    if brokers.contains(&Broker::Mosquitto)
+        && let Some(why) = Mosquitto::missing()
+    {
+        anyhow::bail!(why);
+    }
+    if ros1 && !cfg!(feature = "ros1") {
+        anyhow::bail!("this build has no ROS1 node (feature ros1): pass --without-ros1");
+    }
+    if ros1 && let Some(why) = chassisd::bench::rosmaster::Rosmaster::missing() {
+        anyhow::bail!("{why}; or pass --without-ros1");
+    }
+    let options = SoakOptions {
+        plant: load_plant(plant)?,
+        mqtt: sim_mqtt(None)?,
+        run_for: total / brokers.len() as u32,
+        brokers,
+        ros1,
+    };
+    let report = block_on(2, chassisd::bench::soak::run(options))??;
+    for run in &report.runs {
+        print!("{}", run.table());
+    }
+    println!("{}", report.json());
+    Ok(report.pass)
+}
+
+/// Parses a positive number of minutes (up to a week).
+pub fn minutes_arg(s: &str) -> Result<Duration, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 7.0 * 24.0 * 60.0 => Ok(Duration::from_secs_f64(v * 60.0)),
+        _ => Err(format!(
+            "{s:?}: give a positive number of minutes, at most a week"
+        )),
+    }
+}
+
+/// Parses a receiver rate: 0.1 to 50 Hz.
+pub fn gnss_rate_arg(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.1..=50.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: give a rate from 0.1 to 50 Hz")),
+    }
+}

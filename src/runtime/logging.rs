@@ -1,0 +1,45 @@
+//! The process's log: lines leave through a bounded, lossy queue to their own thread (a
+//! stalled stderr never holds up the control loop), to the journal's format under systemd,
+//! and libraries that log per connection are held to a budget ([`super::foreign_log`]).
+
+use std::io::IsTerminal;
+
+use tracing_appender::non_blocking::WorkerGuard;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+
+/// Log lines waiting for stderr before new ones are dropped.
+const LOG_QUEUE: usize = 4096;
+
+/// Starts the log (`RUST_LOG` filters it); what is queued is written when the guard drops.
+pub fn init() -> WorkerGuard {
+    let (log_writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+        .lossy(true)
+        .buffered_lines_limit(LOG_QUEUE)
+        .thread_name("log-out")
+        .finish(std::io::stderr());
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
+    });
+    let logs = tracing_subscriber::fmt()
+        .with_writer(log_writer)
+        .with_env_filter(filter);
+    // Asked before the level filter, so only the levels shown by default are counted.
+    let budget = tracing_subscriber::filter::filter_fn(|meta| {
+        !meta.is_event()
+            || *meta.level() > tracing::Level::WARN
+            || super::foreign_log::allow(meta.target())
+    });
+    if super::journal::to_journal() {
+        logs.event_format(super::journal::JournalFormat::default())
+            .finish()
+            .with(budget)
+            .init();
+    } else {
+        logs.with_ansi(std::io::stderr().is_terminal())
+            .finish()
+            .with(budget)
+            .init();
+    }
+    guard
+}

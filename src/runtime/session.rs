@@ -1,0 +1,234 @@
+//! What every mode that runs the engine shares (`run`, `calibrate --drive` and `sim`): the
+//! links a configuration names, started in one order beside the engine, the recorder, and
+//! one route for every engine output. A new link is a module of `runtime::links` and a line
+//! in [`Links::start`] and [`Links::route`]; the modes do not change.
+
+use std::path::Path;
+
+use tokio::sync::mpsc;
+
+use crate::api::mqtt::MQTT_SOURCE;
+use crate::config::VehicleConfig;
+use crate::devices::gnss::GnssFix;
+use crate::engine::{CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, RTCM_PROTOCOL};
+use crate::record::{Record, RecordingWriter, SourceMeta};
+use crate::runtime::clock::RecordClock;
+use crate::runtime::error::{Result, invalid};
+use crate::runtime::host;
+use crate::runtime::links::broker::{self, EmbeddedBroker};
+use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
+use crate::runtime::links::ntrip::{self, CorrectionsClient};
+use crate::runtime::links::ros1::{self, Ros1Link};
+use crate::runtime::links::websocket::{self, WebsocketLink};
+use crate::runtime::recorder::Recorder;
+use crate::runtime::zones_writer::ZonesWriter;
+use crate::time::Timestamp;
+
+/// The embedded broker, when the configuration asks for one. Started first, before the
+/// drivers: its process takes a moment to start on a slow PC, and nothing that keeps time
+/// (the drives' set-up) should wait meanwhile.
+pub fn start_broker(config: &VehicleConfig) -> Result<Option<EmbeddedBroker>> {
+    match &config.mqtt {
+        Some(m) => broker::start_if_embedded(m, &config.vehicle.name),
+        None => Ok(None),
+    }
+}
+
+/// The links of a running engine: where its outputs go beyond the mode's own (status lines,
+/// frames), and where commands and corrections come from.
+pub struct Links {
+    mqtt: Option<MqttSender>,
+    ros1: Option<Ros1Link>,
+    websocket: Option<WebsocketLink>,
+    corrections: Option<CorrectionsClient>,
+    zones: Option<ZonesWriter>,
+}
+
+impl Links {
+    /// Starts every link `config` names for `engine`: NTRIP corrections, MQTT (on `broker`
+    /// when it is embedded, with the host monitor for the root dialect), the ROS1 node, the
+    /// rosbridge WebSocket, and the zones file's writer. Their records go to `tx`; each
+    /// recorded source is added to `sources` unless already there.
+    pub fn start(
+        engine: &mut Engine,
+        config: &VehicleConfig,
+        broker: Option<EmbeddedBroker>,
+        clock: RecordClock,
+        tx: &mpsc::Sender<Record>,
+        sources: &mut Vec<SourceMeta>,
+    ) -> Result<Self> {
+        let mut add = |meta: SourceMeta| {
+            if !sources.iter().any(|s| s.name == meta.name) {
+                sources.push(meta);
+            }
+        };
+        let corrections = match &config.ntrip {
+            Some(n) => {
+                add(SourceMeta::serial(CORRECTIONS_SOURCE, RTCM_PROTOCOL));
+                Some(ntrip::spawn(n, clock, tx.clone())?)
+            }
+            None => None,
+        };
+        let mqtt = match &config.mqtt {
+            Some(m) => {
+                add(SourceMeta::commands(
+                    MQTT_SOURCE,
+                    &format!("{MQTT_SOURCE}.log"),
+                ));
+                let spec = MqttSpec {
+                    config: m.clone(),
+                    vehicle: config.vehicle.name.clone(),
+                    subscriptions: engine.subscriptions(),
+                    command_topics: engine.command_topics(),
+                };
+                if m.root.is_some() {
+                    add(SourceMeta::commands(
+                        HOST_SOURCE,
+                        &format!("{HOST_SOURCE}.log"),
+                    ));
+                    host::spawn(clock, tx.clone());
+                }
+                let sender = mqtt::spawn(spec, clock, tx.clone())?;
+                if let Some(b) = broker {
+                    broker::spawn_health_reports(
+                        b,
+                        sender.clone(),
+                        m.broker_health_topic(&config.vehicle.name),
+                    );
+                }
+                Some(sender)
+            }
+            None => None,
+        };
+        let ros1 = match config.ros1.clone() {
+            Some(r) => {
+                add(ros1::source_meta());
+                Some(ros1::start(engine, config, r, clock, tx.clone())?)
+            }
+            None => None,
+        };
+        let websocket = match config.websocket.clone() {
+            Some(w) => {
+                add(websocket::source_meta());
+                Some(websocket::start(engine, config, w, clock, tx.clone())?)
+            }
+            None => None,
+        };
+        Ok(Self {
+            mqtt,
+            ros1,
+            websocket,
+            corrections,
+            zones: zones_writer(config),
+        })
+    }
+
+    /// Whether any link may send records (commands, corrections).
+    pub fn any(&self) -> bool {
+        self.mqtt.is_some()
+            || self.ros1.is_some()
+            || self.websocket.is_some()
+            || self.corrections.is_some()
+    }
+
+    /// Tells the caster where the vehicle is (a VRS or nearest-base mount needs it).
+    pub fn update_position(&self, fix: Option<&GnssFix>) {
+        if let Some(c) = &self.corrections {
+            c.update_position(fix);
+        }
+    }
+
+    /// Routes one engine output: what the WebSocket server sees of it, what the ROS1 node
+    /// publishes, messages to MQTT, zones to their file, events and command answers to the
+    /// log. Returns the others (status lines and frames), which each mode routes itself.
+    pub fn route(&mut self, output: EngineOutput) -> Option<EngineOutput> {
+        if let Some(link) = &mut self.websocket {
+            link.see(&output);
+        }
+        let output = match &mut self.ros1 {
+            Some(link) => link.take(output)?,
+            None => output,
+        };
+        match output {
+            EngineOutput::Publish(message) => {
+                if let Some(link) = &self.mqtt {
+                    link.send(message);
+                }
+            }
+            EngineOutput::Event(event) => tracing::info!("{event}"),
+            EngineOutput::ZonesChanged(text) => match &self.zones {
+                Some(writer) => writer.write(text),
+                None => {
+                    tracing::warn!("the zones changed, but they have no file to be written to")
+                }
+            },
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                result: Ok(()),
+                ..
+            } => tracing::info!(%source, %topic, "command accepted"),
+            EngineOutput::CommandResult {
+                source,
+                topic,
+                result: Err(reason),
+                ..
+            } => tracing::warn!(%source, %topic, %reason, "command refused"),
+            other => return Some(other),
+        }
+        None
+    }
+}
+
+/// The recorder of a session into the new folder `dir`: the configuration in force, every
+/// source, and the stored trajectories as they were at the start.
+pub fn start_recorder(
+    dir: &Path,
+    config: &VehicleConfig,
+    start: Timestamp,
+    sources: Vec<SourceMeta>,
+    trajectories: Option<&[u8]>,
+) -> Result<Recorder> {
+    let mut writer = RecordingWriter::create(
+        dir,
+        &config.vehicle.name,
+        start,
+        Some(&config.to_effective_toml()),
+        sources,
+    )
+    .map_err(invalid(format!(
+        "cannot start recording in {}",
+        dir.display()
+    )))?;
+    if let Some(snapshot) = trajectories {
+        writer
+            .attach_trajectories(snapshot)
+            .map_err(invalid("cannot record the stored trajectories"))?;
+    }
+    tracing::info!(folder = %dir.display(), "recording");
+    Ok(Recorder::start(writer))
+}
+
+/// Says what the zones do, once at start.
+pub fn log_zones(config: &VehicleConfig) {
+    if let Some(z) = &config.zones {
+        tracing::info!(
+            zones = z.set.zones().len(),
+            "zones: every motion's way is checked before it starts and the braking way every \
+             tick, autonomous work runs only while the GNSS gate is open; ROS1 /set_shape and /set_region \
+             edit them, the WebSocket's /zones and /safety_envelope and the live page show them"
+        );
+    }
+}
+
+/// The writer of the zones file, when the configuration names one.
+fn zones_writer(config: &VehicleConfig) -> Option<ZonesWriter> {
+    let file = config.zones.as_ref()?.file.clone()?;
+    match ZonesWriter::start(file) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            tracing::error!(error = %e, "cannot start the zones writer: edits are not kept");
+            None
+        }
+    }
+}
