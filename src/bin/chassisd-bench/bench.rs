@@ -267,7 +267,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             megabytes,
             runs,
         } => {
-            let exe = std::env::current_exe().context("finding this program")?;
+            let exe = daemon_binary()?;
             let report = chassisd::bench::replay::run(
                 &chassisd::bench::replay::ReplayBenchOptions {
                     data,
@@ -430,4 +430,17 @@ pub fn gnss_rate_arg(s: &str) -> Result<f64, String> {
         Ok(v) if (0.1..=50.0).contains(&v) => Ok(v),
         _ => Err(format!("{s:?}: give a rate from 0.1 to 50 Hz")),
     }
+}
+
+/// The daemon's binary, `chassisd`, beside this one: the replay benchmark times its
+/// `replay` as a user runs it.
+fn daemon_binary() -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe().context("finding this program")?;
+    let daemon = exe.with_file_name("chassisd");
+    anyhow::ensure!(
+        daemon.is_file(),
+        "no chassisd beside {}: build both with `cargo build --release`",
+        exe.display()
+    );
+    Ok(daemon)
 }

@@ -23,6 +23,17 @@ fn main() -> ExitCode {
     chassisd::runtime::heap::tune_allocator();
     chassisd::runtime::descriptors::init();
     let _log_guard = chassisd::runtime::logging::init();
+    // The benchmarks run the links, whose helper processes (the embedded broker, the ROS1
+    // node) are this program started again with their hidden subcommand.
+    if let Some(helper) = helper(std::env::args().nth(1).as_deref()) {
+        return match helper {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("chassisd-bench: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     match bench::execute(Cli::parse().bench) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),
@@ -30,5 +41,19 @@ fn main() -> ExitCode {
             eprintln!("chassisd-bench: {}", common::describe(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Runs the helper process `subcommand` names, if it names one.
+fn helper(subcommand: Option<&str>) -> Option<Result<(), chassisd::runtime::error::RuntimeError>> {
+    match subcommand? {
+        chassisd::runtime::links::broker::CHILD_COMMAND => {
+            Some(chassisd::runtime::links::broker::child::main())
+        }
+        #[cfg(feature = "ros1")]
+        chassisd::runtime::links::ros1::CHILD_COMMAND => {
+            Some(chassisd::runtime::links::ros1::child::main())
+        }
+        _ => None,
     }
 }
