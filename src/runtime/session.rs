@@ -162,6 +162,12 @@ impl Links {
                     tracing::warn!("the zones changed, but they have no file to be written to")
                 }
             },
+            // A query (a ROS1 client asking where the vehicle is) may come often: not logged.
+            EngineOutput::CommandResult {
+                result: Ok(()),
+                data: Some(_),
+                ..
+            } => {}
             EngineOutput::CommandResult {
                 source,
                 topic,

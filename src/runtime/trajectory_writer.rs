@@ -310,6 +310,10 @@ mod tests {
         });
         struct NoCore;
         impl crate::api::mqtt::CoreAccess for NoCore {
+            fn pose_report(&self) -> crate::vehicle::PoseReport {
+                crate::vehicle::PoseReport::default()
+            }
+
             fn command(
                 &mut self,
                 _: crate::vehicle::Command,

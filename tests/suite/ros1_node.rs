@@ -214,7 +214,11 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
     );
     let master = Master::start_on(11311);
     assert_eq!(master.uri(), "http://127.0.0.1:11311");
-    let mut p = sim(&master);
+    let recording = common::tempdir("ros1-services").join("rec");
+    let mut p = sim_with(
+        &master,
+        &["--record", recording.to_str().expect("UTF-8 path")],
+    );
 
     let hz = text(&ros(
         &master,
@@ -325,14 +329,14 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
     let answer = text(&ssh);
     assert!(answer.contains("status: 1"), "{answer}");
     assert!(answer.contains("disabled for security"), "{answer}");
-    p.wait_log(Duration::from_secs(5), "/robot_ssh refused");
+    p.wait_log(Duration::from_secs(5), "topic=/robot_ssh");
     let wifi = ros(
         &master,
         &[
             "rosservice",
             "call",
             "/set_wifi",
-            "{wifi_name: 'x', wifi_pass: 'y'}",
+            "{wifi_name: 'yard-net', wifi_pass: 'secret-pass'}",
         ],
         Duration::from_secs(10),
     );
@@ -342,6 +346,70 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
         "{}",
         text(&wifi)
     );
+
+    // The services went through the engine: recorded (a Wi-Fi password never), and a
+    // replay of the recording answers them as the vehicle did.
+    drop(interrupt(p));
+    let requests = std::fs::read_to_string(recording.join("ros1.log")).expect("ros1.log");
+    for service in ["/navi_info", "/get_position", "/robot_ssh", "/set_wifi"] {
+        assert!(
+            requests.contains(service),
+            "{service} not recorded:\n{requests}"
+        );
+    }
+    assert!(requests.contains("yard-net"), "{requests}");
+    assert!(!requests.contains("secret-pass"), "{requests}");
+    let mut answers = Vec::new();
+    common::through_engine(&recording, true, |_, outputs| {
+        for output in outputs.drain(..) {
+            if let chassisd::engine::EngineOutput::CommandResult {
+                topic,
+                result,
+                data,
+                ..
+            } = output
+            {
+                answers.push((topic, result, data));
+            }
+        }
+    });
+    let answered = |service: &str| {
+        answers
+            .iter()
+            .find(|(topic, ..)| topic == service)
+            .unwrap_or_else(|| panic!("{service} not answered on replay: {answers:?}"))
+            .clone()
+    };
+    let (_, result, data) = answered("/get_position");
+    let at = data.expect("the position");
+    assert!(
+        result.is_ok() && at["x"].is_f64() && at["y"].is_f64(),
+        "{at}"
+    );
+    // The caller got the same position (as float32, the service's type).
+    let got = |key: &str| -> f32 {
+        position
+            .lines()
+            .find_map(|l| l.trim().strip_prefix(&format!("{key}: ")))
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .unwrap_or_else(|| panic!("no {key} in:\n{position}")) as f32
+    };
+    for key in ["x", "y"] {
+        assert_eq!(
+            got(key),
+            at[key].as_f64().unwrap() as f32,
+            "{key}: the replay answers {at}, the caller got:\n{position}"
+        );
+    }
+    let (_, _, about) = answered("/navi_info");
+    assert!(about.is_some_and(|a| {
+        a.as_str()
+            .is_some_and(|a| a.contains(env!("CARGO_PKG_VERSION")))
+    }));
+    for refused in ["/robot_ssh", "/set_wifi"] {
+        let (_, result, _) = answered(refused);
+        assert!(result.is_err_and(|why| why.contains("disabled for security")));
+    }
 }
 
 /// The zones on the WebSocket server at `port` as a new `/zones` subscriber gets them:

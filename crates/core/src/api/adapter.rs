@@ -17,10 +17,13 @@ use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};
 use crate::time::Timestamp;
 use crate::vehicle::chassis::CommandRejected;
-use crate::vehicle::{Command, VehicleStatus};
+use crate::vehicle::{Command, PoseReport, VehicleStatus};
 
-/// The core, as an adapter sees it: commands in, acceptance or a reason out.
+/// The core, as an adapter sees it: commands in, acceptance or a reason out; and what a
+/// query reads.
 pub trait CoreAccess {
+    /// The `odom` pose and the map pose now.
+    fn pose_report(&self) -> PoseReport;
     /// Hands `command` to the core at the current time.
     fn command(&mut self, command: Command) -> Result<(), CommandRejected>;
 }
@@ -43,6 +46,9 @@ pub struct Answer {
     pub request: Option<u64>,
     /// Accepted, or the reason it was refused.
     pub result: Result<(), String>,
+    /// What a query asked for (a position, what the build is), as JSON; `None` for a
+    /// command.
+    pub data: Option<serde_json::Value>,
 }
 
 /// What became of a request.
@@ -190,6 +196,7 @@ pub fn answer(
         topic: topic.to_owned(),
         request,
         result,
+        data: None,
     }));
     handled
 }

@@ -397,6 +397,10 @@ mod tests {
 
     struct NoCore;
     impl CoreAccess for NoCore {
+        fn pose_report(&self) -> crate::vehicle::PoseReport {
+            crate::vehicle::PoseReport::default()
+        }
+
         fn command(&mut self, _: Command) -> Result<(), CommandRejected> {
             Ok(())
         }

@@ -19,12 +19,16 @@ pub mod trajectory;
 pub const DIALECTS: &[mqtt::DialectFactory] =
     &[rtk::from_setup, root::from_setup, device::from_setup];
 
+/// Makes a channel's adapter for the vehicle of a name.
+pub type AdapterFactory = fn(&str) -> Box<dyn adapter::Adapter>;
+
 /// Every command channel's adapter but the MQTT link's (whose dialects the configuration
-/// chooses): a new channel adds its adapter here, and the engine routes its source to it.
-pub const ADAPTERS: &[fn() -> Box<dyn adapter::Adapter>] = &[
-    || Box::new(local::ADAPTER),
-    || Box::new(rosbridge::adapter::ADAPTER),
-    || Box::new(ros1::adapter::ADAPTER),
+/// chooses), made for the vehicle of a name (what a client that asks is told): a new channel
+/// adds its adapter here, and the engine routes its source to it.
+pub const ADAPTERS: &[AdapterFactory] = &[
+    |_| Box::new(local::ADAPTER),
+    |_| Box::new(rosbridge::adapter::ADAPTER),
+    |vehicle| Box::new(ros1::adapter::Ros1Adapter::new(vehicle)),
 ];
 
 /// Most points in one path.

@@ -963,6 +963,10 @@ mod tests {
     }
 
     impl CoreAccess for FakeCore {
+        fn pose_report(&self) -> crate::vehicle::PoseReport {
+            crate::vehicle::PoseReport::default()
+        }
+
         fn command(&mut self, command: Command) -> Result<(), CommandRejected> {
             self.commands.push(command);
             match self.refuse_with.take() {

@@ -166,6 +166,8 @@ pub enum EngineOutput {
         request: Option<u64>,
         /// Accepted, or why not.
         result: Result<(), String>,
+        /// What a query asked for, as JSON; `None` for a command.
+        data: Option<serde_json::Value>,
     },
 }
 
@@ -340,6 +342,10 @@ impl<'a> CoreAt<'a> {
 }
 
 impl CoreAccess for CoreAt<'_> {
+    fn pose_report(&self) -> crate::vehicle::PoseReport {
+        self.vehicle.pose_report(self.t)
+    }
+
     fn command(&mut self, command: crate::vehicle::Command) -> Result<(), CommandRejected> {
         let mut result = Ok(());
         for output in self.vehicle.handle(self.t, Input::Command(command)) {
@@ -364,6 +370,7 @@ fn emit_replies(source: &str, replies: Vec<Reply>, out: &mut Vec<EngineOutput>) 
             topic: answer.topic,
             request: answer.request,
             result: answer.result,
+            data: answer.data,
         },
     }))
 }
@@ -424,7 +431,10 @@ impl Engine {
             })
             .collect();
         let drivetrain = Drivetrain::new(config);
-        let adapters: Vec<Box<dyn Adapter>> = crate::api::ADAPTERS.iter().map(|a| a()).collect();
+        let adapters: Vec<Box<dyn Adapter>> = crate::api::ADAPTERS
+            .iter()
+            .map(|a| a(&config.vehicle.name))
+            .collect();
         let mut vehicle = Vehicle::new(CoreConfig::from_vehicle(config));
         if let Some(z) = &config.zones {
             let guard = ZoneGuard::new(z.set.clone(), z.footprint.radius_m(), z.margin_m);

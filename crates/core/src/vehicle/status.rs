@@ -60,7 +60,7 @@ pub struct FrameTree {
 
 /// The vehicle's poses at one control tick: what a 100 Hz odometry topic needs, without
 /// the rest of a status.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PoseReport {
     /// The `odom` frame's pose and speeds, once the drives report.
     pub odom: Option<crate::fusion::odometry::OdomPose>,

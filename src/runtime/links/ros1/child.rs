@@ -13,10 +13,10 @@ use std::io::BufRead;
 use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncWriteExt, BufReader};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::mpsc;
 
 use super::graph::{self, Registration, Requests};
-use super::pipe::{FromNode, Located, MAX_LINE, NodeSettings, ToNode};
+use super::pipe::{FromNode, MAX_LINE, NodeSettings, ToNode};
 use crate::runtime::child_process;
 use crate::runtime::error::{RuntimeError, invalid, io};
 use crate::runtime::links::input_lines::{InputLine, InputLines};
@@ -151,7 +151,6 @@ async fn run(settings: NodeSettings) {
     tokio::spawn(end_when_descriptors_run_out());
     tokio::spawn(read_from_chassisd(to_node_tx));
     let requests = Requests::new(up_tx.clone());
-    let (position, position_rx) = watch::channel(None);
     let mut outage = OutageLog::default();
     let mut outage_start: Option<Instant> = None;
     let mut retry = Duration::from_millis(250);
@@ -163,12 +162,12 @@ async fn run(settings: NodeSettings) {
         // Connect and register everything; meanwhile what chassisd says is taken (answers
         // reach their callers; messages wait for the registration, which brings the
         // latched ones again).
-        let building = graph::build(&settings, &requests, &position_rx);
+        let building = graph::build(&settings, &requests);
         tokio::pin!(building);
         let built = loop {
             tokio::select! {
                 built = &mut building => break built,
-                Some(message) = to_node.recv() => take(message, None, &requests, &position).await,
+                Some(message) = to_node.recv() => take(message, None, &requests).await,
             }
         };
         let graph = match built {
@@ -189,7 +188,7 @@ async fn run(settings: NodeSettings) {
                 loop {
                     tokio::select! {
                         () = &mut pause => break,
-                        Some(message) = to_node.recv() => take(message, None, &requests, &position).await,
+                        Some(message) = to_node.recv() => take(message, None, &requests).await,
                     }
                 }
                 retry = (retry * 2).min(RETRY_MAX);
@@ -220,7 +219,7 @@ async fn run(settings: NodeSettings) {
         let mut master_away = false;
         loop {
             tokio::select! {
-                Some(message) = to_node.recv() => take(message, Some(&graph), &requests, &position).await,
+                Some(message) = to_node.recv() => take(message, Some(&graph), &requests).await,
                 _ = watch.tick() => {
                     match graph::still_registered(master.as_ref(), &master_uri, &settings.config.node_name, &uri).await {
                         Registration::Known => {
@@ -247,24 +246,11 @@ async fn run(settings: NodeSettings) {
     }
 }
 
-/// Acts on one of chassisd's messages: publishes (when registered), keeps the position,
-/// gives an answer to its caller.
-async fn take(
-    message: ToNode,
-    graph: Option<&graph::Graph>,
-    requests: &Requests,
-    position: &watch::Sender<Option<[f64; 2]>>,
-) {
+/// Acts on one of chassisd's messages: publishes (when registered), gives an answer to its
+/// caller.
+async fn take(message: ToNode, graph: Option<&graph::Graph>, requests: &Requests) {
     match message {
-        ToNode::Publish {
-            messages,
-            position: at,
-        } => {
-            match at {
-                Located::Unchanged => {}
-                Located::Unknown => drop(position.send_replace(None)),
-                Located::At(xy) => drop(position.send_replace(Some(xy))),
-            }
+        ToNode::Publish { messages } => {
             if let Some(graph) = graph {
                 graph.publish(messages).await;
             }

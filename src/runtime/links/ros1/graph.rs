@@ -7,12 +7,11 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use roslibrust::ros1::{MasterClient, NodeHandle, ServiceServer};
-use tokio::sync::{mpsc, watch};
+use tokio::sync::mpsc;
 use tokio::task::JoinSet;
 
 use super::messages::{self, geometry_msgs, map_msgs, std_msgs};
-use super::pipe::{FromNode, NodeSettings};
-use crate::api::ros1;
+use super::pipe::{FromNode, NodeSettings, Verdict};
 use crate::api::ros1::adapter::{Point, RegionRequest, Ros1Request, ShapeRequest};
 use crate::api::ros1::publisher::{self, Advertised};
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
@@ -27,14 +26,11 @@ const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
 const FORGET_AFTER: Duration = Duration::from_secs(10);
 /// Messages queued per subscribed topic in roslibrust before the oldest go.
 const SUBSCRIBER_QUEUE: usize = 16;
-/// Why `/robot_ssh` and `/set_wifi` answer no.
-const DISABLED: &str = "disabled for security";
-
 /// Service calls waiting for the vehicle's answer, by call number.
 #[derive(Default)]
 struct Calls {
     last: u64,
-    by_call: HashMap<u64, (std::sync::mpsc::SyncSender<Result<(), String>>, Instant)>,
+    by_call: HashMap<u64, (std::sync::mpsc::SyncSender<Verdict>, Instant)>,
 }
 
 /// Hands requests up to chassisd; answers come back by call number.
@@ -57,7 +53,7 @@ impl Requests {
     fn submit(
         &self,
         request: Ros1Request,
-        waiter: Option<std::sync::mpsc::SyncSender<Result<(), String>>>,
+        waiter: Option<std::sync::mpsc::SyncSender<Verdict>>,
     ) -> Result<(), String> {
         let mut calls = self
             .calls
@@ -96,7 +92,7 @@ impl Requests {
 
     /// Sends `request` and waits for the vehicle's answer (on a blocking thread: roslibrust
     /// runs service callbacks there).
-    fn call(&self, request: Ros1Request) -> Result<(), String> {
+    fn call(&self, request: Ros1Request) -> Verdict {
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         self.submit(request, Some(tx))?;
         rx.recv_timeout(ANSWER_TIMEOUT)
@@ -104,7 +100,7 @@ impl Requests {
     }
 
     /// The vehicle's answer to call `call`; a caller that timed out is gone.
-    pub fn answer(&self, call: u64, result: Result<(), String>) {
+    pub fn answer(&self, call: u64, result: Verdict) {
         let waiter = match self.calls.lock() {
             Ok(mut calls) => calls.by_call.remove(&call),
             Err(_) => None,
@@ -277,7 +273,7 @@ fn points(points: &[geometry_msgs::Point]) -> Vec<Point> {
 fn zone_edit_made(requests: &Requests, request: Ros1Request) -> bool {
     let name = request.name();
     match requests.call(request) {
-        Ok(()) => true,
+        Ok(_) => true,
         Err(reason) => {
             tracing::warn!(%reason, "{name} refused");
             false
@@ -289,7 +285,6 @@ fn zone_edit_made(requests: &Requests, request: Ros1Request) -> bool {
 pub async fn build(
     spec: &NodeSettings,
     requests: &Requests,
-    position: &watch::Receiver<Option<[f64; 2]>>,
 ) -> Result<Graph, roslibrust::ros1::NodeError> {
     let node = NodeHandle::new(&spec.config.master_uri, &spec.config.node_name).await?;
     let mut publishers = Vec::new();
@@ -338,7 +333,7 @@ pub async fn build(
                     cmd: request.cmd,
                     distance: request.distance,
                 })
-                .map(|()| map_msgs::SetNaviCmdResponse {})
+                .map(|_| map_msgs::SetNaviCmdResponse {})
                 .map_err(|reason| {
                     tracing::warn!(%reason, "/set_navi_cmd refused");
                     // roslibrust's service callbacks answer with its ServiceError,
@@ -390,61 +385,75 @@ pub async fn build(
         )
         .await?,
     );
-    let p = position.clone();
+    // The queries and the refused services go through the engine too: recorded, and
+    // answered there (api::ros1::queries).
+    let r = requests.clone();
     services.push(
         node.advertise_service::<map_msgs::GetPosition, _>(
             "/get_position",
-            move |_: map_msgs::GetPositionRequest| match *p.borrow() {
-                Some([x, y]) => Ok(map_msgs::GetPositionResponse {
+            move |_: map_msgs::GetPositionRequest| {
+                let at = r
+                    .call(Ros1Request::GetPosition)
+                    .map_err(anyhow::Error::msg)?;
+                let coordinate = |key: &str| {
+                    at.as_ref()
+                        .and_then(|at| at.get(key))
+                        .and_then(serde_json::Value::as_f64)
+                        .ok_or_else(|| anyhow::anyhow!("the vehicle's answer has no {key}"))
+                };
+                Ok(map_msgs::GetPositionResponse {
                     pose: geometry_msgs::Point32 {
-                        x: x as f32,
-                        y: y as f32,
+                        x: coordinate("x")? as f32,
+                        y: coordinate("y")? as f32,
                         z: 0.0,
                     },
-                }),
-                None => Err(anyhow::anyhow!(
-                    "the vehicle is not located yet (no GNSS fix or INIT_POSITION)"
-                )),
+                })
             },
         )
         .await?,
     );
-    let info = ros1::navi_info(&spec.vehicle);
+    let r = requests.clone();
     services.push(
         node.advertise_service::<map_msgs::AboutRobot, _>(
             "/navi_info",
             move |_: map_msgs::AboutRobotRequest| {
+                let about = r.call(Ros1Request::NaviInfo).map_err(anyhow::Error::msg)?;
                 Ok(map_msgs::AboutRobotResponse {
                     status: 0,
-                    nav_info: info.clone(),
+                    nav_info: about
+                        .as_ref()
+                        .and_then(serde_json::Value::as_str)
+                        .unwrap_or_default()
+                        .to_owned(),
                 })
             },
         )
         .await?,
     );
+    let r = requests.clone();
     services.push(
         node.advertise_service::<map_msgs::RobotSsh, _>(
             "/robot_ssh",
-            |request: map_msgs::RobotSshRequest| {
-                let shown: String = request.instruction.chars().take(200).collect();
-                tracing::warn!(instruction = ?shown, "/robot_ssh refused: {DISABLED}");
-                Ok(map_msgs::RobotSshResponse {
-                    status: 1,
-                    data: DISABLED.to_owned(),
-                })
+            move |request: map_msgs::RobotSshRequest| {
+                // The spec's answer to a refusal is status 1 with the reason.
+                let data = match r.call(Ros1Request::robot_ssh(&request.instruction)) {
+                    Ok(_) => String::new(),
+                    Err(reason) => reason,
+                };
+                Ok(map_msgs::RobotSshResponse { status: 1, data })
             },
         )
         .await?,
     );
+    let r = requests.clone();
     services.push(
         node.advertise_service::<map_msgs::SetWifi, _>(
             "/set_wifi",
-            |request: map_msgs::SetWifiRequest| {
-                let shown: String = request.wifi_name.chars().take(64).collect();
-                tracing::warn!(wifi = ?shown, "/set_wifi refused: {DISABLED} (no network manager integration)");
-                Err(anyhow::anyhow!(
-                    "{DISABLED}: chassisd has no network manager integration"
-                ))
+            move |request: map_msgs::SetWifiRequest| {
+                // The password stays here: only the network's name goes up, to be recorded.
+                r.call(Ros1Request::set_wifi(&request.wifi_name))
+                    .map(|_| map_msgs::SetWifiResponse {})
+                    .map_err(anyhow::Error::msg)
             },
         )
         .await?,

@@ -61,6 +61,8 @@ pub struct Answer {
     pub request: u64,
     /// Accepted, or why not.
     pub result: Result<(), String>,
+    /// What a query asked for.
+    pub data: Option<serde_json::Value>,
 }
 
 impl Ros1Link {
@@ -110,12 +112,14 @@ impl Ros1Link {
                 topic,
                 request: Some(request),
                 result,
+                data,
             } if source == SOURCE => {
                 // Every request with an id gets exactly one answer; the queue is longer
                 // than the requests the node lets wait, so it never overflows.
                 let answer = Answer {
                     request,
                     result: result.clone(),
+                    data: data.clone(),
                 };
                 if self.answers.try_send(answer).is_err() {
                     tracing::error!("ROS1 node: an answer was lost; its caller times out");
@@ -125,6 +129,7 @@ impl Ros1Link {
                     topic,
                     request: Some(request),
                     result,
+                    data,
                 });
             }
             other => return Some(other),
@@ -146,7 +151,6 @@ pub fn spec_for(
     });
     Ros1Spec {
         config: ros1,
-        vehicle: config.vehicle.name.clone(),
         odometry_noise: crate::api::ros1::odometry::OdometryNoise::from_localizer(
             &localizer,
             config.imu.is_some(),
@@ -204,6 +208,7 @@ mod tests {
             topic: "/set_navi_cmd".into(),
             request,
             result,
+            data: None,
         }
     }
 

@@ -11,14 +11,14 @@ use tokio::io::{AsyncWriteExt, BufReader};
 use tokio::process::{Child, Command};
 use tokio::sync::mpsc;
 
-use super::pipe::{FromNode, Located, MAX_LINE, NodeSettings, ToNode};
+use super::pipe::{FromNode, MAX_LINE, NodeSettings, ToNode};
 use super::{Answer, Feed, Ros1Queues};
 use crate::api::log_budget::{self, LogBudget, SharedBudget};
 use crate::api::ros1;
 use crate::api::ros1::adapter::Ros1Request;
 use crate::api::ros1::messages::ImuNoise;
 use crate::api::ros1::odometry::OdometryNoise;
-use crate::api::ros1::publisher::{self, Messages, Publishing};
+use crate::api::ros1::publisher::{Messages, Publishing};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
 use crate::runtime::child_process;
@@ -49,8 +49,6 @@ static REFUSED: SharedBudget = SharedBudget::new(LogBudget::new());
 pub struct Ros1Spec {
     /// `[ros1]`.
     pub config: Ros1Config,
-    /// The vehicle's name (`/navi_info`).
-    pub vehicle: String,
     /// The odometry's noise (`/raw_odom`'s covariance).
     pub odometry_noise: OdometryNoise,
     /// The IMU's noise (`/imu/data`'s covariances).
@@ -150,15 +148,15 @@ impl NodeProcess {
         }
     }
 
-    fn publish(&mut self, messages: Messages, position: Located) {
-        if !self.registered || (messages.is_empty() && position == Located::Unchanged) {
+    fn publish(&mut self, messages: Messages) {
+        if !self.registered || messages.is_empty() {
             return;
         }
         let messages = messages
             .into_iter()
             .map(|(topic, msg)| (topic.to_owned(), msg))
             .collect();
-        self.send(&ToNode::Publish { messages, position });
+        self.send(&ToNode::Publish { messages });
     }
 }
 
@@ -194,7 +192,6 @@ async fn run(
     };
     let settings = NodeSettings {
         config: spec.config.clone(),
-        vehicle: spec.vehicle.clone(),
     };
     let Ok(settings) = serde_json::to_string(&settings) else {
         tracing::error!("ROS1 node not started: its settings cannot be written");
@@ -250,9 +247,8 @@ async fn serve(
     let status = loop {
         tokio::select! {
             Some(item) = feed.recv() => {
-                let position = located(&item);
                 let messages = on_feed(publishing, &item);
-                node.publish(messages, position);
+                node.publish(messages);
             }
             Some(answer) = answers.recv() => {
                 answer_pending(requests, publishing, answer, Some(&mut node));
@@ -263,7 +259,7 @@ async fn serve(
                     // The latched status codes again, for the new registrations.
                     let mut latched = Vec::new();
                     publishing.latched(&mut latched);
-                    node.publish(latched, Located::Unchanged);
+                    node.publish(latched);
                 }
                 Some(FromNode::Request { call, request }) => {
                     let result = requests.submit(&request, call.map(|c| (node.number, c)));
@@ -276,7 +272,7 @@ async fn serve(
                     if let Some(call) = call
                         && (result.is_err() || !request.awaits_answer())
                     {
-                        node.send(&ToNode::Answer { call, result });
+                        node.send(&ToNode::Answer { call, result: result.map(|()| None) });
                     }
                 }
                 None => break node.child.wait().await,
@@ -302,17 +298,6 @@ async fn serve(
         "ROS1 node's process ended; starting it again (it registers anew)"
     );
     lived
-}
-
-/// Where the feed item says the vehicle is, for `/get_position`.
-fn located(item: &Feed) -> Located {
-    match item {
-        Feed::Poses(_, report) => match publisher::position(report) {
-            Some(pose) => Located::At([pose.x, pose.y]),
-            None => Located::Unknown,
-        },
-        _ => Located::Unchanged,
-    }
 }
 
 /// The messages `item` makes due.
@@ -402,7 +387,11 @@ async fn read_requests(stdout: tokio::process::ChildStdout, up: mpsc::Sender<Fro
 fn answer_pending(
     requests: &mut Requests,
     publishing: &mut Publishing,
-    Answer { request, result }: Answer,
+    Answer {
+        request,
+        result,
+        data,
+    }: Answer,
     node: Option<&mut NodeProcess>,
 ) {
     let Some(entry) = requests.by_id.remove(&request) else {
@@ -418,11 +407,14 @@ fn answer_pending(
     let Some(node) = node else {
         return;
     };
-    node.publish(codes, Located::Unchanged);
+    node.publish(codes);
     // A caller of an earlier process is gone with it.
     if let Some((number, call)) = entry.call
         && number == node.number
     {
-        node.send(&ToNode::Answer { call, result });
+        node.send(&ToNode::Answer {
+            call,
+            result: result.map(|()| data),
+        });
     }
 }

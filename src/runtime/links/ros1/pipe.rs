@@ -19,40 +19,20 @@ pub const MAX_LINE: usize = 4 << 20;
 pub struct NodeSettings {
     /// `[ros1]`.
     pub config: Ros1Config,
-    /// The vehicle's name (`/navi_info`).
-    pub vehicle: String,
 }
 
 /// chassisd → the node's process.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ToNode {
-    /// Messages to publish, each on its topic, and where the vehicle is now
-    /// (`/get_position`'s answer).
-    Publish {
-        messages: Vec<(String, Value)>,
-        #[serde(default)]
-        position: Located,
-    },
+    /// Messages to publish, each on its topic.
+    Publish { messages: Vec<(String, Value)> },
     /// The vehicle's answer to the request the node's process numbered `call`.
-    Answer {
-        call: u64,
-        result: Result<(), String>,
-    },
+    Answer { call: u64, result: Verdict },
 }
 
-/// Where the vehicle is, as a message to publish tells it.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Located {
-    /// Not told by this message.
-    #[default]
-    Unchanged,
-    /// Not located (no GNSS fix or INIT_POSITION yet, or lost).
-    Unknown,
-    /// At x, y in the map frame, m.
-    At([f64; 2]),
-}
+/// The vehicle's answer to a request: taken (with what a query asked for), or why not.
+pub type Verdict = Result<Option<Value>, String>;
 
 /// The node's process → chassisd.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -76,7 +56,6 @@ mod tests {
     fn messages_cross_as_one_line_each_and_back() {
         let to = ToNode::Publish {
             messages: vec![("/odom".into(), serde_json::json!({"a": [1, 2]}))],
-            position: Located::At([1.5, -2.0]),
         };
         let line = serde_json::to_string(&to).unwrap();
         assert!(!line.contains('\n'));
@@ -90,11 +69,14 @@ mod tests {
         };
         let line = serde_json::to_string(&from).unwrap();
         assert_eq!(serde_json::from_str::<FromNode>(&line).unwrap(), from);
-        let answer = ToNode::Answer {
-            call: 3,
-            result: Err("refused".into()),
-        };
-        let line = serde_json::to_string(&answer).unwrap();
-        assert_eq!(serde_json::from_str::<ToNode>(&line).unwrap(), answer);
+        for result in [
+            Err("refused".into()),
+            Ok(None),
+            Ok(Some(serde_json::json!({"x": 1.5, "y": -2.0}))),
+        ] {
+            let answer = ToNode::Answer { call: 3, result };
+            let line = serde_json::to_string(&answer).unwrap();
+            assert_eq!(serde_json::from_str::<ToNode>(&line).unwrap(), answer);
+        }
     }
 }

@@ -91,10 +91,12 @@ impl WebsocketLink {
                 topic,
                 request: Some(request),
                 result,
+                data,
             } if source == SOURCE => Feed::Answer(crate::api::adapter::Answer {
                 topic: topic.clone(),
                 request: Some(*request),
                 result: result.clone(),
+                data: data.clone(),
             }),
             EngineOutput::Event(text) => Feed::Event(text.clone()),
             _ => return,

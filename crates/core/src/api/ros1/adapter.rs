@@ -4,11 +4,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{OWNER, SOURCE};
-use crate::api::adapter::{self, RequestAdapter};
+use super::{OWNER, SOURCE, queries};
+use crate::api::adapter::{self, Adapter, CoreAccess, Handled, Reply};
 use crate::api::legacy;
 use crate::api::requests::{self, Twist};
 use crate::control::MotionTag;
+use crate::time::Timestamp;
 use crate::vehicle::Command;
 use crate::vehicle::zones::{MapShape, ZoneEdit};
 use crate::zones::ZoneKind;
@@ -25,6 +26,19 @@ pub const SET_NAVI_CMD: &str = "/set_navi_cmd";
 pub const SET_SHAPE: &str = "/set_shape";
 /// `/set_region`'s name.
 pub const SET_REGION: &str = "/set_region";
+/// `/get_position`'s name.
+pub const GET_POSITION: &str = "/get_position";
+/// `/navi_info`'s name.
+pub const NAVI_INFO: &str = "/navi_info";
+/// `/robot_ssh`'s name.
+pub const ROBOT_SSH: &str = "/robot_ssh";
+/// `/set_wifi`'s name.
+pub const SET_WIFI: &str = "/set_wifi";
+
+/// Characters of a `/robot_ssh` instruction kept in the recording (and the log).
+const SHOWN_INSTRUCTION: usize = 200;
+/// Characters of a `/set_wifi` network name kept in the recording; its password never is.
+const SHOWN_WIFI_NAME: usize = 64;
 
 /// A request of the node (also as the node's process hands it to chassisd's).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -52,6 +66,22 @@ pub enum Ros1Request {
     SetShape(ShapeRequest),
     /// `/set_region` (map_msgs/SetRegion): a special region added (no `shapeId`) or removed.
     SetRegion(RegionRequest),
+    /// `/get_position` (map_msgs/GetPosition): where the vehicle is in the map frame.
+    GetPosition,
+    /// `/navi_info` (map_msgs/AboutRobot): what the build is.
+    NaviInfo,
+    /// `/robot_ssh` (map_msgs/RobotSsh): a shell command, always refused; the first
+    /// [`SHOWN_INSTRUCTION`] characters are kept, to be seen in the recording.
+    RobotSsh {
+        /// The instruction, cut.
+        instruction: String,
+    },
+    /// `/set_wifi` (map_msgs/SetWifi): a network to join, always refused; its name is kept
+    /// (cut to [`SHOWN_WIFI_NAME`] characters), its password is not.
+    SetWifi {
+        /// The network's name, cut.
+        wifi_name: String,
+    },
 }
 
 /// geometry_msgs/Point as JSON.
@@ -117,6 +147,25 @@ struct Int16 {
     data: i16,
 }
 
+/// A request without fields (`/get_position`, `/navi_info`) as JSON.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct Empty {}
+
+/// map_msgs/RobotSsh's request as chassisd records it.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RobotSsh {
+    pub(super) instruction: String,
+}
+
+/// map_msgs/SetWifi's request as chassisd records it: the name only.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SetWifi {
+    pub(super) wifi_name: String,
+}
+
 /// map_msgs/SetNaviCmd's request as JSON.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -142,6 +191,21 @@ impl Ros1Request {
         }
     }
 
+    /// `/robot_ssh` with `instruction`, cut to what is kept.
+    pub fn robot_ssh(instruction: &str) -> Self {
+        Self::RobotSsh {
+            instruction: instruction.chars().take(SHOWN_INSTRUCTION).collect(),
+        }
+    }
+
+    /// `/set_wifi` for the network `name`, cut to what is kept (the password is left out
+    /// by the caller: it is never recorded).
+    pub fn set_wifi(name: &str) -> Self {
+        Self::SetWifi {
+            wifi_name: name.chars().take(SHOWN_WIFI_NAME).collect(),
+        }
+    }
+
     /// Its topic's or service's name.
     pub fn name(&self) -> &'static str {
         match self {
@@ -151,6 +215,10 @@ impl Ros1Request {
             Self::SetNaviCmd { .. } => SET_NAVI_CMD,
             Self::SetShape(_) => SET_SHAPE,
             Self::SetRegion(_) => SET_REGION,
+            Self::GetPosition => GET_POSITION,
+            Self::NaviInfo => NAVI_INFO,
+            Self::RobotSsh { .. } => ROBOT_SSH,
+            Self::SetWifi { .. } => SET_WIFI,
         }
     }
 
@@ -166,7 +234,14 @@ impl Ros1Request {
             Self::Autocharge => true,
             // Command 5 is the stop; every other one taken is a move.
             Self::SetNaviCmd { cmd, .. } => cmd != "5",
-            Self::CmdVel { .. } | Self::NaviStop | Self::SetShape(_) | Self::SetRegion(_) => false,
+            Self::CmdVel { .. }
+            | Self::NaviStop
+            | Self::SetShape(_)
+            | Self::SetRegion(_)
+            | Self::GetPosition
+            | Self::NaviInfo
+            | Self::RobotSsh { .. }
+            | Self::SetWifi { .. } => false,
         }
     }
 
@@ -197,6 +272,19 @@ impl Ros1Request {
             ),
             Self::SetShape(m) => adapter::encode_request(id, m),
             Self::SetRegion(m) => adapter::encode_request(id, m),
+            Self::GetPosition | Self::NaviInfo => adapter::encode_request(id, &Empty {}),
+            Self::RobotSsh { instruction } => adapter::encode_request(
+                id,
+                &RobotSsh {
+                    instruction: instruction.clone(),
+                },
+            ),
+            Self::SetWifi { wifi_name } => adapter::encode_request(
+                id,
+                &SetWifi {
+                    wifi_name: wifi_name.clone(),
+                },
+            ),
         }
     }
 }
@@ -329,8 +417,53 @@ fn tagged(command: Command) -> Command {
     )
 }
 
-/// The ROS1 node's adapter.
-pub const ADAPTER: RequestAdapter = RequestAdapter::new(SOURCE, decode);
+/// The ROS1 node's adapter: commands go to the core, queries read it
+/// ([`super::queries`]).
+#[derive(Debug, Clone)]
+pub struct Ros1Adapter {
+    /// `/navi_info`'s answer.
+    about: String,
+}
+
+impl Ros1Adapter {
+    /// The adapter of the vehicle called `vehicle`.
+    pub fn new(vehicle: &str) -> Self {
+        Self {
+            about: super::navi_info(vehicle),
+        }
+    }
+}
+
+impl Adapter for Ros1Adapter {
+    fn source(&self) -> &'static str {
+        SOURCE
+    }
+
+    fn on_request(
+        &mut self,
+        _t: Timestamp,
+        topic: &str,
+        payload: &[u8],
+        core: &mut dyn CoreAccess,
+        out: &mut Vec<Reply>,
+    ) -> Handled {
+        match queries::answer(topic, payload, &self.about, core) {
+            Some(answer) => {
+                let handled = if answer.result.is_ok() {
+                    Handled::Taken
+                } else {
+                    Handled::Refused
+                };
+                out.push(Reply::Answer(answer));
+                handled
+            }
+            None => {
+                let (id, command) = decode(topic, payload);
+                adapter::answer(topic, id, command, core, out)
+            }
+        }
+    }
+}
 
 #[cfg(test)]
 mod tests {

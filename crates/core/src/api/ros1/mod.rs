@@ -4,7 +4,7 @@
 //!
 //! Requests are typed ([`adapter::Ros1Request`]) and recorded under the source [`SOURCE`]
 //! with their ROS names and fields, so a recorded session replays with them and without
-//! ROS; [`adapter::ADAPTER`] hands them to the core and answers them by id:
+//! ROS; [`adapter::Ros1Adapter`] hands them to the core and answers them by id:
 //! - `/cmd_vel` (geometry_msgs/Twist) goes through the arbiter and the command watchdog like
 //!   every velocity source;
 //! - `/navi_stop` 5 ends every move, goal, task or mission and the vehicle comes to rest
@@ -14,7 +14,10 @@
 //! - `/set_navi_cmd` is a move (or cmd 5, the stop) with the request's fields;
 //! - `/set_shape` and `/set_region` add a wall, a keep-out circle or a keep-out polygon to the
 //!   zones (map frame), or remove one by its `shapeId`; each answer also goes out on
-//!   `/androidmsg_virtualmapstatus` (62 made, 63 refused).
+//!   `/androidmsg_virtualmapstatus` (62 made, 63 refused);
+//! - `/get_position` and `/navi_info` are queries answered from the core and the build, and
+//!   `/robot_ssh` and `/set_wifi` are always refused ([`queries`]), recorded as the others
+//!   (a Wi-Fi password never is).
 //!
 //! The interface definitions the node is built from are in `interfaces/`, one folder per
 //! package: the standard ones field for field as ROS defines them, and the spec's own
@@ -25,6 +28,7 @@ pub mod messages;
 pub mod odometry;
 pub mod published;
 pub mod publisher;
+pub mod queries;
 pub mod status;
 
 use serde_json::json;
