@@ -155,11 +155,30 @@ pub fn replay_lenient(path: &Path) -> Output {
 pub fn through_engine(
     dir: &Path,
     check_transmissions: bool,
+    each: impl FnMut(chassisd::time::Timestamp, &mut Vec<chassisd::engine::EngineOutput>),
+) -> (chassisd::engine::Engine, chassisd::record::Meta) {
+    records_through_engine(dir, check_transmissions, false, each)
+}
+
+/// A recording through the library's engine as `chassisd replay` takes it: its serial
+/// sources decoded by their recorded protocol, its transmissions compared. `each` sees the
+/// time of each record and the outputs it caused.
+pub fn as_replayed(
+    dir: &Path,
+    each: impl FnMut(chassisd::time::Timestamp, &mut Vec<chassisd::engine::EngineOutput>),
+) -> (chassisd::engine::Engine, chassisd::record::Meta) {
+    records_through_engine(dir, true, true, each)
+}
+
+fn records_through_engine(
+    dir: &Path,
+    check_transmissions: bool,
+    decode_serial: bool,
     mut each: impl FnMut(chassisd::time::Timestamp, &mut Vec<chassisd::engine::EngineOutput>),
 ) -> (chassisd::engine::Engine, chassisd::record::Meta) {
     use chassisd::config::VehicleConfig;
-    use chassisd::engine::Engine;
-    use chassisd::record::RecordingReader;
+    use chassisd::engine::{Decoder, Engine};
+    use chassisd::record::{RecordingReader, SourceKind};
     use chassisd::time::Timestamp;
 
     let (meta, reader) = RecordingReader::open(dir).expect("recording opens");
@@ -168,7 +187,18 @@ pub fn through_engine(
         .as_deref()
         .expect("recording holds its configuration");
     let config = VehicleConfig::load(&dir.join(file)).expect("stored configuration loads");
-    let mut engine = Engine::new(&config, &[]);
+    let decoders: Vec<(String, Decoder)> = meta
+        .sources
+        .iter()
+        .filter(|s| decode_serial && s.kind == SourceKind::Serial)
+        .filter_map(|s| {
+            Some((
+                s.name.clone(),
+                Decoder::for_protocol(s.protocol.as_deref()?)?,
+            ))
+        })
+        .collect();
+    let mut engine = Engine::new(&config, &decoders);
     if check_transmissions {
         engine.check_recorded_transmissions();
     }

@@ -4,7 +4,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{OWNER, SOURCE, queries};
+use super::queries::{
+    self, Empty, GET_POSITION, NAVI_INFO, ROBOT_SSH, RobotSsh, SET_WIFI, SetWifi,
+};
+use super::{OWNER, SOURCE};
 use crate::api::adapter::{self, Adapter, CoreAccess, Handled, Reply};
 use crate::api::legacy;
 use crate::api::requests::{self, Twist};
@@ -26,15 +29,6 @@ pub const SET_NAVI_CMD: &str = "/set_navi_cmd";
 pub const SET_SHAPE: &str = "/set_shape";
 /// `/set_region`'s name.
 pub const SET_REGION: &str = "/set_region";
-/// `/get_position`'s name.
-pub const GET_POSITION: &str = "/get_position";
-/// `/navi_info`'s name.
-pub const NAVI_INFO: &str = "/navi_info";
-/// `/robot_ssh`'s name.
-pub const ROBOT_SSH: &str = "/robot_ssh";
-/// `/set_wifi`'s name.
-pub const SET_WIFI: &str = "/set_wifi";
-
 /// Characters of a `/robot_ssh` instruction kept in the recording (and the log).
 const SHOWN_INSTRUCTION: usize = 200;
 /// Characters of a `/set_wifi` network name kept in the recording; its password never is.
@@ -145,25 +139,6 @@ pub struct RegionRequest {
 #[serde(deny_unknown_fields)]
 struct Int16 {
     data: i16,
-}
-
-/// A request without fields (`/get_position`, `/navi_info`) as JSON.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct Empty {}
-
-/// map_msgs/RobotSsh's request as chassisd records it.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct RobotSsh {
-    pub(super) instruction: String,
-}
-
-/// map_msgs/SetWifi's request as chassisd records it: the name only.
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct SetWifi {
-    pub(super) wifi_name: String,
 }
 
 /// map_msgs/SetNaviCmd's request as JSON.

@@ -2,11 +2,41 @@
 //! request (so a recording keeps them and replays their answers): `/get_position` and
 //! `/navi_info` read the vehicle, `/robot_ssh` and `/set_wifi` are refused, always.
 
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::adapter::{Empty, GET_POSITION, NAVI_INFO, ROBOT_SSH, RobotSsh, SET_WIFI, SetWifi};
 use super::publisher;
 use crate::api::adapter::{Answer, CoreAccess, decode_request};
+
+/// `/get_position`'s name.
+pub const GET_POSITION: &str = "/get_position";
+/// `/navi_info`'s name.
+pub const NAVI_INFO: &str = "/navi_info";
+/// `/robot_ssh`'s name.
+pub const ROBOT_SSH: &str = "/robot_ssh";
+/// `/set_wifi`'s name.
+pub const SET_WIFI: &str = "/set_wifi";
+
+/// A request without fields (`/get_position`, `/navi_info`) as JSON.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Empty {}
+
+/// map_msgs/RobotSsh's request as chassisd records it.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotSsh {
+    /// The shell command, cut.
+    pub instruction: String,
+}
+
+/// map_msgs/SetWifi's request as chassisd records it: the name only.
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetWifi {
+    /// The network's name, cut.
+    pub wifi_name: String,
+}
 
 /// Why `/robot_ssh` and `/set_wifi` answer no.
 pub const DISABLED: &str = "disabled for security";
