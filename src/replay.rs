@@ -555,6 +555,9 @@ impl ReplaySummary {
                 self.engine.commands, self.engine.commands_rejected
             );
         }
+        if self.engine.queries > 0 {
+            let _ = write!(s, "; {} queries answered", self.engine.queries);
+        }
         for (bus, b) in &self.buses {
             let _ = write!(
                 s,

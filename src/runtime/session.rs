@@ -7,6 +7,7 @@ use std::path::Path;
 
 use tokio::sync::mpsc;
 
+use crate::api::log_budget::{self, LogBudget, SharedBudget};
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::VehicleConfig;
 use crate::devices::gnss::GnssFix;
@@ -24,6 +25,9 @@ use crate::runtime::recorder::Recorder;
 use crate::runtime::zones_writer::ZonesWriter;
 use crate::time::Timestamp;
 
+/// The log lines of refused commands, shared by every link.
+static REFUSED: SharedBudget = SharedBudget::new(LogBudget::new());
+
 /// The embedded broker, when the configuration asks for one. Started first, before the
 /// drivers: its process takes a moment to start on a slow PC, and nothing that keeps time
 /// (the drives' set-up) should wait meanwhile.
@@ -37,6 +41,7 @@ pub fn start_broker(config: &VehicleConfig) -> Result<Option<EmbeddedBroker>> {
 /// The links of a running engine: where its outputs go beyond the mode's own (status lines,
 /// frames), and where commands and corrections come from.
 pub struct Links {
+    clock: RecordClock,
     mqtt: Option<MqttSender>,
     ros1: Option<Ros1Link>,
     websocket: Option<WebsocketLink>,
@@ -115,6 +120,7 @@ impl Links {
             None => None,
         };
         Ok(Self {
+            clock,
             mqtt,
             ros1,
             websocket,
@@ -174,12 +180,17 @@ impl Links {
                 result: Ok(()),
                 ..
             } => tracing::info!(%source, %topic, "command accepted"),
+            // Said a few times per period: a client can be refused as fast as it asks.
             EngineOutput::CommandResult {
                 source,
                 topic,
                 result: Err(reason),
                 ..
-            } => tracing::warn!(%source, %topic, %reason, "command refused"),
+            } => {
+                if let Some(left_out) = log_budget::allow(&REFUSED, self.clock.now()) {
+                    tracing::warn!(%source, %topic, %reason, left_out, "command refused");
+                }
+            }
             other => return Some(other),
         }
         None

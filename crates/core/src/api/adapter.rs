@@ -60,6 +60,9 @@ pub enum Handled {
     Refused,
     /// Not the adapter's to take (a topic none of its parts owns).
     NotOwned,
+    /// A query answered: it read the vehicle and changed nothing, so it is no operator's
+    /// command.
+    Answered,
 }
 
 /// One protocol, as the engine drives it.

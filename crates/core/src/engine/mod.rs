@@ -194,8 +194,10 @@ pub struct EngineStats {
     pub records_by_source: BTreeMap<String, u64>,
     /// Records from sources with no decoder.
     pub undecoded: u64,
-    /// Commands received.
+    /// Commands received (a query answered is not one).
     pub commands: u64,
+    /// Queries answered (a ROS1 client asking where the vehicle is): they change nothing.
+    pub queries: u64,
     /// Commands refused (malformed, or refused by the core).
     pub commands_rejected: u64,
     /// Command records from channels without a dialect yet.
@@ -597,12 +599,17 @@ impl Engine {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
             (Some(Route::Adapter(id)), Payload::Command { topic, payload }) => {
-                self.stats.commands += 1;
                 let adapter = adapter_mut(&mut self.dialects, &mut self.adapters, id);
                 let mut core = CoreAt::new(&mut self.vehicle, t);
                 let mut replies = Vec::new();
-                match adapter.on_request(t, topic, payload, &mut core, &mut replies) {
-                    Handled::Taken => {}
+                let handled = adapter.on_request(t, topic, payload, &mut core, &mut replies);
+                if handled == Handled::Answered {
+                    self.stats.queries += 1;
+                } else {
+                    self.stats.commands += 1;
+                }
+                match handled {
+                    Handled::Taken | Handled::Answered => {}
                     Handled::Refused => self.stats.commands_rejected += 1,
                     Handled::NotOwned => self.stats.commands_without_dialect += 1,
                 }
@@ -1023,6 +1030,40 @@ mod tests {
             &mut out,
         );
         assert_eq!((e.stats().commands, e.stats().commands_rejected), (4, 3));
+    }
+
+    /// A ROS1 client asking what the build is changes nothing: a query, not an operator's
+    /// command (the simulator's script yields only to a command taken); a refused query
+    /// counts as a refused request, and the answer carries what was asked for.
+    #[test]
+    fn a_query_answered_is_no_command() {
+        let mut e = Engine::new(&VehicleConfig::default(), &[]);
+        let mut out = Vec::new();
+        let ask = |us: u64, service: &str| Record {
+            t: Timestamp::from_micros(us),
+            source: crate::api::ros1::SOURCE.into(),
+            payload: Payload::Command {
+                topic: service.into(),
+                payload: bytes::Bytes::from_static(br#"{"id":1,"msg":{}}"#),
+            },
+        };
+        e.handle(&ask(1_000, "/navi_info"), &mut out);
+        assert_eq!((e.stats().queries, e.stats().commands), (1, 0));
+        let answered = out.iter().find_map(|o| match o {
+            EngineOutput::CommandResult { request, data, .. } => Some((*request, data.clone())),
+            _ => None,
+        });
+        assert!(
+            matches!(&answered, Some((Some(1), Some(serde_json::Value::String(about)))) if about.contains("chassisd")),
+            "{answered:?}"
+        );
+        // Never placed: where it is cannot be told.
+        e.handle(&ask(2_000, "/get_position"), &mut out);
+        let stats = e.stats();
+        assert_eq!(
+            (stats.queries, stats.commands, stats.commands_rejected),
+            (1, 1, 1)
+        );
     }
 
     fn serial(us: u64, source: &str, bytes: &[u8]) -> Record {

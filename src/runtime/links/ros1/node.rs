@@ -262,6 +262,7 @@ async fn serve(
                     node.publish(latched);
                 }
                 Some(FromNode::Request { call, request }) => {
+                    let request = request.kept();
                     let result = requests.submit(&request, call.map(|c| (node.number, c)));
                     if let Err(reason) = &result
                         && let Some(left_out) = log_budget::allow(&REFUSED, requests.clock.now())

@@ -181,6 +181,16 @@ impl Ros1Request {
         }
     }
 
+    /// The request with only what chassisd keeps of its free text: the node's process cuts
+    /// it already, and chassisd does not rely on another process for what it records.
+    pub fn kept(self) -> Self {
+        match self {
+            Self::RobotSsh { instruction } => Self::robot_ssh(&instruction),
+            Self::SetWifi { wifi_name } => Self::set_wifi(&wifi_name),
+            other => other,
+        }
+    }
+
     /// Its topic's or service's name.
     pub fn name(&self) -> &'static str {
         match self {
@@ -425,7 +435,7 @@ impl Adapter for Ros1Adapter {
         match queries::answer(topic, payload, &self.about, core) {
             Some(answer) => {
                 let handled = if answer.result.is_ok() {
-                    Handled::Taken
+                    Handled::Answered
                 } else {
                     Handled::Refused
                 };
@@ -632,5 +642,29 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn free_text_is_kept_cut_whoever_sent_it_and_a_wifi_password_has_no_place() {
+        let long = "x".repeat(10_000);
+        let kept = Ros1Request::RobotSsh {
+            instruction: long.clone(),
+        }
+        .kept();
+        assert_eq!(kept, Ros1Request::robot_ssh(&long));
+        assert!(
+            matches!(&kept, Ros1Request::RobotSsh { instruction } if instruction.chars().count() == SHOWN_INSTRUCTION)
+        );
+        let wifi = Ros1Request::SetWifi { wifi_name: long }.kept();
+        assert!(
+            matches!(&wifi, Ros1Request::SetWifi { wifi_name } if wifi_name.chars().count() == SHOWN_WIFI_NAME)
+        );
+        // A recorded /set_wifi holds its name and nothing else: a password is refused.
+        let (id, asked) = adapter::decode_request::<SetWifi>(
+            SET_WIFI,
+            br#"{"id":1,"msg":{"wifi_name":"n","wifi_pass":"p"}}"#,
+        );
+        assert_eq!(id, Some(1));
+        assert!(asked.is_err());
     }
 }
