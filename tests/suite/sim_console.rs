@@ -143,6 +143,22 @@ fn the_printed_mosquitto_lines_watch_and_drive_the_vehicle() {
     sim.stop();
 }
 
+/// The README's first command is `cargo run`: the package builds two binaries (the daemon,
+/// and chassisd-bench beside it), so its manifest must say which one `cargo run` runs.
+#[test]
+fn cargo_run_runs_the_daemon() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml"))
+        .expect("Cargo.toml");
+    let manifest: toml::Table = toml::from_str(&text).expect("a TOML manifest");
+    assert_eq!(
+        manifest["package"]
+            .get("default-run")
+            .and_then(|v| v.as_str()),
+        Some("chassisd"),
+        "Cargo.toml's [package] needs default-run = \"chassisd\""
+    );
+}
+
 /// The arguments of the README's first command, `cargo run --release -- ARGS`.
 fn readme_main_command() -> Vec<String> {
     let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
