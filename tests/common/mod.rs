@@ -178,7 +178,7 @@ fn records_through_engine(
 ) -> (chassisd::engine::Engine, chassisd::record::Meta) {
     use chassisd::config::VehicleConfig;
     use chassisd::engine::{Decoder, Engine};
-    use chassisd::record::{RecordingReader, SourceKind};
+    use chassisd::record::RecordingReader;
     use chassisd::time::Timestamp;
 
     let (meta, reader) = RecordingReader::open(dir).expect("recording opens");
@@ -187,17 +187,11 @@ fn records_through_engine(
         .as_deref()
         .expect("recording holds its configuration");
     let config = VehicleConfig::load(&dir.join(file)).expect("stored configuration loads");
-    let decoders: Vec<(String, Decoder)> = meta
-        .sources
-        .iter()
-        .filter(|s| decode_serial && s.kind == SourceKind::Serial)
-        .filter_map(|s| {
-            Some((
-                s.name.clone(),
-                Decoder::for_protocol(s.protocol.as_deref()?)?,
-            ))
-        })
-        .collect();
+    let decoders = if decode_serial {
+        Decoder::of_recording(&meta)
+    } else {
+        Vec::new()
+    };
     let mut engine = Engine::new(&config, &decoders);
     if check_transmissions {
         engine.check_recorded_transmissions();

@@ -17,7 +17,7 @@ use crate::config::VehicleConfig;
 use crate::devices::gnss::FixQuality;
 use crate::devices::gnss::encode::{angle, quality_digit, sentence};
 use crate::engine::{Decoder, Engine, EngineOutput};
-use crate::record::{Payload, Record, RecordingReader, RecordingWriter, SourceKind};
+use crate::record::{Payload, Record, RecordingReader, RecordingWriter};
 use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
 use crate::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};
 use crate::time::Timestamp;
@@ -171,17 +171,7 @@ pub fn replay(dir: &Path, gnss: &[Record]) -> Result<Vec<Tick>> {
     })?;
     let config = VehicleConfig::load(&dir.join(file))?;
     // The serial ports' decoders, as the replay command takes them from the recording.
-    let decoders: Vec<(String, Decoder)> = meta
-        .sources
-        .iter()
-        .filter(|s| s.kind == SourceKind::Serial)
-        .filter_map(|s| {
-            Some((
-                s.name.clone(),
-                Decoder::for_protocol(s.protocol.as_deref()?)?,
-            ))
-        })
-        .collect();
+    let decoders = Decoder::of_recording(&meta);
     let mut engine = Engine::new(&config, &decoders);
     engine.emit_poses();
     if let Some(start) = meta.start_us {

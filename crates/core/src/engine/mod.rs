@@ -104,6 +104,16 @@ impl Decoder {
             .find(|d| d.protocol() == protocol)
     }
 
+    /// The decoders of a recording's serial sources, by their recorded protocol (a source
+    /// whose protocol has none is left out).
+    pub fn of_recording(meta: &crate::record::Meta) -> Vec<(String, Self)> {
+        meta.sources
+            .iter()
+            .filter(|s| s.kind == crate::record::SourceKind::Serial)
+            .filter_map(|s| Some((s.name.clone(), Self::for_protocol(s.protocol.as_deref()?)?)))
+            .collect()
+    }
+
     /// The protocol name recordings use.
     pub fn protocol(self) -> &'static str {
         match self {

@@ -796,15 +796,11 @@ fn within_reach(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::chassis::{ChassisConfig, WheelRadius};
+    use crate::config::chassis::WheelRadius;
     use crate::config::motion::MotionConfig;
     use crate::control::outcome::CancelReason;
-    use crate::vehicle::chassis::{ChassisFeedback, DriveSummary, WheelFeedback};
     use crate::vehicle::safety::SafetyConfig;
-
-    fn at(ms: u64) -> Timestamp {
-        Timestamp::from_micros(ms * 1_000)
-    }
+    use crate::vehicle::test_rig::{self, at, drives_at_rest};
 
     /// The executive with real parts around it: a drive train of two ready drives and the
     /// localisation of its wheels.
@@ -816,8 +812,7 @@ mod tests {
 
     impl Rig {
         fn new(has_cutter: bool) -> Self {
-            let chassis: ChassisConfig =
-                toml::from_str("wheel_radius_m = 0.1\ntrack_m = 0.5").expect("a [chassis]");
+            let chassis = test_rig::chassis();
             let config = CoreConfig {
                 chassis: Some(chassis),
                 motion: Some(MotionConfig::default().settings(&chassis)),
@@ -834,7 +829,7 @@ mod tests {
                     enable_on_start: true,
                 },
             );
-            drives.feedback(feedback(0));
+            drives.feedback(drives_at_rest(0));
             Self {
                 executive: Executive::new(&config),
                 chassis: Some(drives),
@@ -853,7 +848,7 @@ mod tests {
 
         /// The drives report standing wheels at `ms`.
         fn wheels(&mut self, ms: u64) {
-            let f = feedback(ms);
+            let f = drives_at_rest(ms);
             if let Some(c) = &mut self.chassis {
                 c.feedback(f.clone());
             }
@@ -871,31 +866,6 @@ mod tests {
 
         fn control_tick(&mut self, ms: u64) -> Vec<Output> {
             self.run(|e, p| e.control_tick(at(ms), p, None, false))
-        }
-    }
-
-    /// Two drives, ready and enabled, wheels at rest, read at `ms`.
-    fn feedback(ms: u64) -> ChassisFeedback {
-        let drive = |name: &str| DriveSummary {
-            name: name.into(),
-            ready: true,
-            running: true,
-            enabled: true,
-            fault: None,
-            heartbeat_lost: false,
-            resetting: false,
-        };
-        let wheel = WheelFeedback {
-            velocity_rad_s: Some(0.0),
-            angle_rad: Some(0.0),
-            received: Some(at(ms)),
-            velocity_received: Some(at(ms)),
-        };
-        ChassisFeedback {
-            left: wheel,
-            right: wheel,
-            drives: vec![drive("left"), drive("right")],
-            ..ChassisFeedback::default()
         }
     }
 

@@ -498,41 +498,18 @@ fn plausible_place(p: &Geodetic) -> Result<(), CommandRejected> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::chassis::ChassisConfig;
+    use crate::devices::gnss::Timed;
     use crate::devices::gnss::decode::GroundVelocity;
-    use crate::devices::gnss::{GeoPosition, Timed};
     use crate::vehicle::feedback::WheelFeedback;
-
-    fn at(ms: u64) -> Timestamp {
-        Timestamp::from_micros(ms * 1_000)
-    }
-
-    fn fixed_at(ms: u64) -> GnssFix {
-        GnssFix {
-            quality: FixQuality::RtkFixed,
-            position: Some(Timed {
-                value: GeoPosition {
-                    latitude_deg: 23.1,
-                    longitude_deg: 113.0,
-                    altitude_msl_m: None,
-                    geoid_separation_m: None,
-                    ellipsoid_height_m: None,
-                },
-                rx: at(ms),
-            }),
-            ..GnssFix::default()
-        }
-    }
+    use crate::vehicle::test_rig::{self, at, fixed_at};
 
     fn place() -> Localisation {
         Localisation::new(&CoreConfig::default())
     }
 
     fn with_drives() -> Localisation {
-        let chassis: ChassisConfig =
-            toml::from_str("wheel_radius_m = 0.1\ntrack_m = 0.5").expect("a minimal [chassis]");
         Localisation::new(&CoreConfig {
-            chassis: Some(chassis),
+            chassis: Some(test_rig::chassis()),
             ..CoreConfig::default()
         })
     }

@@ -19,6 +19,8 @@ mod localisation;
 mod messages;
 pub mod safety;
 pub mod status;
+#[cfg(test)]
+mod test_rig;
 pub mod zones;
 
 use std::time::Duration;
@@ -327,19 +329,13 @@ fn events(events: impl IntoIterator<Item = String>) -> Vec<Output> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::chassis::ChassisConfig;
     use crate::config::motion::MotionConfig;
     use crate::control::goal::GoalPose;
-    use crate::devices::gnss::{FixQuality, GeoPosition, Timed};
-    use crate::vehicle::chassis::{ChassisFeedback, DriveSummary, WheelFeedback};
-
-    fn at(ms: u64) -> Timestamp {
-        Timestamp::from_micros(ms * 1_000)
-    }
+    use crate::devices::gnss::Timed;
+    use crate::vehicle::test_rig::{self, at, drives_at_rest};
 
     fn with_drives() -> Vehicle {
-        let chassis: ChassisConfig =
-            toml::from_str("wheel_radius_m = 0.1\ntrack_m = 0.5").expect("a [chassis]");
+        let chassis = test_rig::chassis();
         Vehicle::new(CoreConfig {
             chassis: Some(chassis),
             motion: Some(MotionConfig::default().settings(&chassis)),
@@ -347,50 +343,14 @@ mod tests {
         })
     }
 
-    /// Two ready drives, wheels at rest, read at `ms`.
-    fn feedback(ms: u64) -> ChassisFeedback {
-        let drive = |name: &str| DriveSummary {
-            name: name.into(),
-            ready: true,
-            running: true,
-            enabled: true,
-            fault: None,
-            heartbeat_lost: false,
-            resetting: false,
-        };
-        let wheel = WheelFeedback {
-            velocity_rad_s: Some(0.0),
-            angle_rad: Some(0.0),
-            received: Some(at(ms)),
-            velocity_received: Some(at(ms)),
-        };
-        ChassisFeedback {
-            left: wheel,
-            right: wheel,
-            drives: vec![drive("left"), drive("right")],
-            ..ChassisFeedback::default()
-        }
-    }
-
     /// An RTK fixed epoch with a dual-antenna heading, at `ms`.
-    fn fixed_at(ms: u64) -> GnssFix {
+    fn fixed_with_heading_at(ms: u64) -> GnssFix {
         GnssFix {
-            quality: FixQuality::RtkFixed,
-            position: Some(Timed {
-                value: GeoPosition {
-                    latitude_deg: 23.1,
-                    longitude_deg: 113.0,
-                    altitude_msl_m: None,
-                    geoid_separation_m: None,
-                    ellipsoid_height_m: None,
-                },
-                rx: at(ms),
-            }),
             heading_deg: Some(Timed {
                 value: 90.0,
                 rx: at(ms),
             }),
-            ..GnssFix::default()
+            ..test_rig::fixed_at(ms)
         }
     }
 
@@ -439,10 +399,10 @@ mod tests {
     #[test]
     fn the_wheels_reach_the_odom_frame_only_through_a_drive_train() {
         let mut none = Vehicle::new(CoreConfig::default());
-        none.handle(at(0), Input::Chassis(&feedback(0)));
+        none.handle(at(0), Input::Chassis(&drives_at_rest(0)));
         assert_eq!(none.odom_pose(), None);
         let mut v = with_drives();
-        v.handle(at(0), Input::Chassis(&feedback(0)));
+        v.handle(at(0), Input::Chassis(&drives_at_rest(0)));
         assert!(v.odom_pose().is_some());
     }
 
@@ -450,8 +410,8 @@ mod tests {
     fn a_goal_under_way_keeps_the_map_frame_where_it_is() {
         let mut v = with_drives();
         for ms in (0..=2_000).step_by(100) {
-            v.handle(at(ms), Input::Chassis(&feedback(ms)));
-            v.handle(at(ms), Input::Gnss(&fixed_at(ms)));
+            v.handle(at(ms), Input::Chassis(&drives_at_rest(ms)));
+            v.handle(at(ms), Input::Gnss(&fixed_with_heading_at(ms)));
             v.handle(at(ms), Input::ControlTick);
         }
         let goal = GoalPose {
