@@ -184,7 +184,8 @@ pub fn decode(topic: &str, payload: &[u8]) -> Result<Option<Command>, String> {
         }
         MISSION => {
             let data: serde_json::Value = serde_json::from_slice(payload).map_err(parse_error)?;
-            let steps = super::root::mission(&data).map_err(|(_, e)| format!("{topic}: {e}"))?;
+            let steps =
+                super::requests::mission_steps(&data).map_err(|e| format!("{topic}: {e}"))?;
             Ok(Some(Command::Mission {
                 steps: std::sync::Arc::new(steps),
                 tag: None,

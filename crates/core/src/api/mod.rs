@@ -7,11 +7,14 @@ pub mod local;
 pub mod log_budget;
 pub mod mqtt;
 pub mod publish;
+pub mod request_body;
 pub mod requests;
 pub mod root;
 pub mod ros1;
 pub mod rosbridge;
 pub mod rtk;
+#[cfg(test)]
+mod test_core;
 pub mod trajectory;
 
 /// Every MQTT dialect's entry point, in the order incoming topics are offered to them.

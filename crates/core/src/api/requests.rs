@@ -3,10 +3,11 @@
 //! request is refused for the same reason on each, and no channel re-encodes another's.
 
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
 
 use crate::control::MoveKind;
 use crate::control::goal::GoalPose;
-use crate::control::mission::MissionStep;
+use crate::control::mission::{MAX_STEPS, MissionStep};
 use crate::fusion::planar::wrap;
 use crate::vehicle::Command;
 
@@ -77,10 +78,10 @@ pub fn velocity(twist: &Twist) -> Result<Command, String> {
 
 /// `/set_navi_cmd`: `cmd` 1 forward, 2 back (`distance` in cm), 3 left, 4 right (degrees),
 /// 5 stop. `cmd` is the service's string; a JSON number is taken too.
-pub fn navi_cmd(cmd: &serde_json::Value, distance: Option<f64>) -> Result<Command, String> {
+pub fn navi_cmd(cmd: &Value, distance: Option<f64>) -> Result<Command, String> {
     let code = match cmd {
-        serde_json::Value::String(s) => s.trim().parse::<u8>().ok(),
-        serde_json::Value::Number(n) => n.as_u64().and_then(|n| u8::try_from(n).ok()),
+        Value::String(s) => s.trim().parse::<u8>().ok(),
+        Value::Number(n) => n.as_u64().and_then(|n| u8::try_from(n).ok()),
         _ => None,
     };
     let Some(code @ 1..=5) = code else {
@@ -159,6 +160,87 @@ pub fn tagged(command: Command, tag: crate::control::MotionTag) -> Command {
         },
         other => other,
     }
+}
+
+/// A mission's steps (root's MISSION `data`, the local channel's `mission`): an array of `{action, parameters}` steps.
+///
+/// - MOVE_TO_POSITION and COVERAGE: `path` `[x0, y0, x1, y1, ...]`, m in the map frame,
+///   followed in order (the vehicle drives to the first point first);
+/// - WAIT: `seconds` ≥ 0;
+/// - OPEN_CUTTER and CLOSE_CUTTER: `cutter` true and false (optional; it must match);
+/// - CHARGING: `time`, s charged before the step is done (0: done once charging).
+pub fn mission_steps(data: &Value) -> Result<Vec<MissionStep>, String> {
+    const ACTIONS: [&str; 6] = [
+        "MOVE_TO_POSITION",
+        "WAIT",
+        "OPEN_CUTTER",
+        "CLOSE_CUTTER",
+        "COVERAGE",
+        "CHARGING",
+    ];
+    let Some(steps) = data.as_array() else {
+        return Err("data must be an array of steps".to_owned());
+    };
+    if steps.is_empty() {
+        return Err("a mission needs at least one step".to_owned());
+    }
+    if steps.len() > MAX_STEPS {
+        return Err(format!(
+            "a mission has at most {MAX_STEPS} steps, this one {}: split it",
+            steps.len()
+        ));
+    }
+    let mut out = Vec::with_capacity(steps.len());
+    for (i, step) in steps.iter().enumerate() {
+        let action = step.get("action").and_then(Value::as_str).unwrap_or("");
+        let Some(parameters) = step.get("parameters").filter(|p| p.is_object()) else {
+            return Err(format!(
+                "step {i}: needs an action (one of {}) and parameters",
+                ACTIONS.join(", ")
+            ));
+        };
+        let bad = |what: &str| format!("step {i} ({action}): {what}");
+        let seconds = |key: &str| {
+            parameters
+                .get(key)
+                .and_then(Value::as_f64)
+                .filter(|s| (0.0..=86_400.0).contains(s))
+                .ok_or_else(|| {
+                    bad(&format!(
+                        "{key} must be a number of seconds from 0 to 86400"
+                    ))
+                })
+        };
+        let path = || {
+            let values: Option<Vec<f64>> = parameters
+                .get("path")
+                .and_then(Value::as_array)
+                .and_then(|a| a.iter().map(Value::as_f64).collect());
+            let values = values
+                .ok_or_else(|| bad("path must be an array of numbers [x0, y0, x1, y1, ...]"))?;
+            super::path_points(&values).map_err(|e| bad(&e))
+        };
+        let cutter = |want: bool| match parameters.get("cutter") {
+            None => Ok(MissionStep::Cutter(want)),
+            Some(v) if v.as_bool() == Some(want) => Ok(MissionStep::Cutter(want)),
+            Some(_) => Err(bad(&format!("cutter must be {want} (or absent)"))),
+        };
+        out.push(match action {
+            "MOVE_TO_POSITION" => MissionStep::MoveTo(path()?),
+            "COVERAGE" => MissionStep::Coverage(path()?),
+            "WAIT" => MissionStep::Wait(seconds("seconds")?),
+            "OPEN_CUTTER" => cutter(true)?,
+            "CLOSE_CUTTER" => cutter(false)?,
+            "CHARGING" => MissionStep::Charge(seconds("time")?),
+            _ => {
+                return Err(format!(
+                    "step {i}: action {action:?} is not one of {}",
+                    ACTIONS.join(", ")
+                ));
+            }
+        });
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -16,23 +16,26 @@
 //! kept as recorded and not driven on. `cancel_task` ends the motion under way and brings the
 //! vehicle to rest (done when none is under way); it is also rtk's deliberate act that
 //! re-arms a latched stop once its causes have cleared (rtk has no reset).
+//!
+//! Each command is a handler in `commands/`, found in `commands::COMMANDS` by its `cmd`; the
+//! message's body is checked once here, and failures are [`RtkError`]s.
 
+mod commands;
+mod error;
 pub mod status;
 
 use serde::Serialize;
 use serde_json::Value;
 
-use super::trajectory::{self, Trajectory, TrajectoryError, TrajectoryStore};
-pub use status::BaseStatus;
-
 use super::log_budget::{self, LogBudget, SharedBudget};
 use super::mqtt::{CoreAccess, Dialect, Handled, Publish};
-use crate::config::mqtt::packet_limit;
-use crate::control::MotionTag;
+use super::request_body;
+use super::trajectory::{self, TrajectoryStore};
 use crate::time::Timestamp;
-use crate::vehicle::chassis::CommandRejected;
-use crate::vehicle::safety::Refusal;
-use crate::vehicle::{Command, PathPoints, PathRequest, VehicleStatus};
+use crate::vehicle::VehicleStatus;
+use commands::{Answered, Context};
+pub use error::RtkError;
+pub use status::BaseStatus;
 
 /// Status topic.
 pub const BASE_STATUS: &str = "base_status";
@@ -74,18 +77,22 @@ impl RtkDialect {
         self.store = store;
     }
 
-    fn feedback(&self, cmd: &str, result: Result<(), String>, out: &mut Vec<Publish>) -> Handled {
-        let (suffix, message) = match &result {
-            Ok(()) => ("success", None),
-            Err(m) => ("failse", Some(m.as_str())),
-        };
+    /// Answers `cmd` on `feedback`: `<cmd>_success`, or `<cmd>_failse` with the reason.
+    fn feedback(
+        &self,
+        cmd: &str,
+        result: Result<(), &RtkError>,
+        out: &mut Vec<Publish>,
+    ) -> Handled {
+        let reason = result.err().map(ToString::to_string);
+        let suffix = if result.is_ok() { "success" } else { "failse" };
         let body = Feedback {
             cmd: format!("{cmd}_{suffix}"),
             cmd_type: "feedback",
-            message,
+            message: reason.as_deref(),
         };
         let json = serde_json::to_string(&body).unwrap_or_default();
-        if let Err(reason) = &result {
+        if let Some(reason) = &reason {
             static REFUSALS: SharedBudget = SharedBudget::new(LogBudget::new());
             if let Some(left_out) = log_budget::allow(&REFUSALS, self.now) {
                 tracing::warn!(dialect = "rtk", %cmd, %reason, refusals_not_logged = left_out, "command refused");
@@ -99,192 +106,45 @@ impl RtkDialect {
         }
     }
 
+    /// An `mqtt_control` message: its command found, checked for its type, handled and
+    /// answered (a message whose command cannot be read as `mqtt_control`).
     fn control(
         &mut self,
         payload: &[u8],
         core: &mut dyn CoreAccess,
         out: &mut Vec<Publish>,
     ) -> Handled {
-        if payload.len() > self.max_payload {
-            let reason = format!(
-                "payload of {} bytes exceeds {}",
-                payload.len(),
-                self.max_payload
-            );
-            return self.feedback(MQTT_CONTROL, Err(reason), out);
-        }
-        let message: Value = match serde_json::from_slice(payload) {
-            Ok(v) => v,
-            Err(e) => {
-                return self.feedback(MQTT_CONTROL, Err(format!("malformed JSON: {e}")), out);
-            }
+        let message = match request_body::fields(payload, self.max_payload) {
+            Ok(message) => message,
+            Err(e) => return self.feedback(MQTT_CONTROL, Err(&e.into()), out),
         };
         let Some(cmd) = message.get("cmd").and_then(Value::as_str) else {
-            return self.feedback(
-                MQTT_CONTROL,
-                Err("no \"cmd\" string in the message".into()),
-                out,
-            );
+            return self.feedback(MQTT_CONTROL, Err(&RtkError::NoCommand), out);
         };
-        let cmd = cmd.to_owned();
-        let expected_type = match cmd.as_str() {
-            "get_all_trajectory"
-            | "save_trajectory"
-            | "delete_trajectory"
-            | "delete_all_trajectory" => "trajectory_control",
-            "start_task" | "cancel_task" | "init_rtk_data" => "task_control",
-            _ => {
-                let reason = format!("unknown command {cmd:?}");
-                return self.feedback(&safe_cmd(&cmd), Err(reason), out);
-            }
+        let command = match commands::find(cmd) {
+            Ok(command) => command,
+            Err(e) => return self.feedback(&safe_cmd(cmd), Err(&e), out),
         };
-        match message.get("cmd_type").and_then(Value::as_str) {
-            Some(t) if t == expected_type => {}
-            other => {
-                let reason = format!(
-                    "cmd_type must be {expected_type:?} for {cmd}, not {}",
-                    other.map_or("absent".to_owned(), |t| format!("{t:?}"))
-                );
-                return self.feedback(&cmd, Err(reason), out);
-            }
+        let cmd_type = message.get("cmd_type").and_then(Value::as_str);
+        if cmd_type != Some(command.cmd_type) {
+            let e = RtkError::WrongType {
+                cmd: command.cmd,
+                expected: command.cmd_type,
+                given: cmd_type.map_or("absent".to_owned(), |t| format!("{t:?}")),
+            };
+            return self.feedback(command.cmd, Err(&e), out);
         }
-        match cmd.as_str() {
-            "get_all_trajectory" => match self.store.all() {
-                Ok(all) => {
-                    let json = serde_json::to_string(&all).unwrap_or_default();
-                    let answer = Publish::reply(TRAJECTORY_DATA, json);
-                    let limit = packet_limit(self.max_payload);
-                    if answer.packet_len() > limit {
-                        let points: usize = all.iter().map(|t| t.data.len()).sum();
-                        let reason = format!(
-                            "the {} trajectories stored ({points} points) make a trajectory_data of {} bytes, more than an MQTT packet may carry here ({limit} bytes: 4 × mqtt.max_payload); raise mqtt.max_payload, or delete trajectories",
-                            all.len(),
-                            answer.payload.len()
-                        );
-                        return self.feedback(&cmd, Err(reason), out);
-                    }
-                    out.push(answer);
-                    Handled::Taken
-                }
-                Err(e) => self.feedback(&cmd, Err(e.to_string()), out),
-            },
-            "save_trajectory" => {
-                let result = message
-                    .get("data")
-                    .ok_or_else(|| "no \"data\" object".to_owned())
-                    .and_then(|d| {
-                        Trajectory::deserialize_value(d).map_err(|e| format!("data: {e}"))
-                    })
-                    .and_then(|mut t| {
-                        t.name = trajectory::canonical_name(&t.name).map_err(|e| e.to_string())?;
-                        t.check().map_err(|e| e.to_string())?;
-                        self.store.save(&t).map_err(|e| e.to_string())
-                    });
-                self.feedback(&cmd, result, out)
-            }
-            "delete_trajectory" => {
-                let result = match message.get("name").and_then(Value::as_str) {
-                    None => Err("no \"name\" string".to_owned()),
-                    Some(name) => trajectory::canonical_name(name)
-                        .and_then(|name| self.store.delete(&name))
-                        .map_err(|e: TrajectoryError| e.to_string()),
-                };
-                self.feedback(&cmd, result, out)
-            }
-            "delete_all_trajectory" => {
-                let result = self
-                    .store
-                    .delete_all()
-                    .map(|_| ())
-                    .map_err(|e| e.to_string());
-                self.feedback(&cmd, result, out)
-            }
-            "start_task" => {
-                let result = self.start_task(&message).and_then(|request| {
-                    core.command(Command::FollowPath {
-                        path: std::sync::Arc::new(request),
-                        tag: Some(MotionTag {
-                            owner: "rtk",
-                            id: 0,
-                        }),
-                    })
-                    .map_err(in_rtk_words)
-                });
-                self.feedback(&cmd, result, out)
-            }
-            "cancel_task" => {
-                let result = match core.command(Command::CancelMotion) {
-                    // Without drives no task can run: there is nothing to cancel.
-                    Ok(()) | Err(CommandRejected::NoDrives) => Ok(()),
-                    Err(e) => Err(e.to_string()),
-                };
-                // rtk has no velocity command and no reset: its deliberate stop is the act
-                // that re-arms a latched stop whose causes have cleared. While one holds,
-                // the task is still cancelled; the next start_task's refusal names the cause.
-                if result.is_ok() {
-                    let _ = core.command(Command::Reset);
-                }
-                self.feedback(&cmd, result, out)
-            }
-            _ => {
-                let result = core
-                    .command(Command::ZeroLocalFrame)
-                    .map_err(|e| e.to_string());
-                self.feedback(&cmd, result, out)
-            }
-        }
-    }
-}
-
-/// A refusal as an rtk client can act on it: a latched stop is re-armed by `cancel_task`, as
-/// rtk has neither a velocity command nor a reset.
-fn in_rtk_words(refusal: CommandRejected) -> String {
-    match refusal {
-        CommandRejected::Safety(Refusal::Latched { reason, first }) => format!(
-            "stopped ({reason}): {}send cancel_task to re-arm, then start_task again",
-            first.map(|f| format!("{f}, then ")).unwrap_or_default()
-        ),
-        other => other.to_string(),
-    }
-}
-
-impl RtkDialect {
-    /// The path of a `start_task` message: the named trajectory from point `id` on.
-    fn start_task(&mut self, message: &Value) -> Result<PathRequest, String> {
-        let name = message
-            .get("name")
-            .and_then(Value::as_str)
-            .ok_or("no \"name\" string")?;
-        let id = match message.get("id") {
-            None => 0,
-            Some(v) => v
-                .as_u64()
-                .and_then(|id| usize::try_from(id).ok())
-                .ok_or("\"id\" must be a point index (a whole number from 0)")?,
+        let mut cx = Context {
+            core,
+            store: self.store.as_mut(),
+            max_payload: self.max_payload,
+            out,
         };
-        let speed = message
-            .get("speed")
-            .and_then(Value::as_f64)
-            .ok_or("no \"speed\" number (m/s)")
-            .map_err(str::to_owned)
-            .and_then(crate::api::task_speed)?;
-        let name = &trajectory::canonical_name(name).map_err(|e| e.to_string())?;
-        let trajectory = self.store.get(name).map_err(|e| e.to_string())?;
-        if id >= trajectory.data.len() {
-            return Err(format!(
-                "trajectory {name:?} has {} points; id {id} is past its end (ids count from 0)",
-                trajectory.data.len()
-            ));
+        match (command.handle)(&message, &mut cx) {
+            Ok(Answered::Feedback) => self.feedback(command.cmd, Ok(()), out),
+            Ok(Answered::Published) => Handled::Taken,
+            Err(e) => self.feedback(command.cmd, Err(&e), out),
         }
-        Ok(PathRequest {
-            points: PathPoints::Geodetic(
-                trajectory.data[id..]
-                    .iter()
-                    .map(|p| (p.latitude, p.longitude))
-                    .collect(),
-            ),
-            speed,
-        })
     }
 }
 
@@ -294,12 +154,6 @@ fn safe_cmd(cmd: &str) -> String {
         .filter(|c| c.is_ascii_alphanumeric() || *c == '_')
         .take(64)
         .collect()
-}
-
-impl Trajectory {
-    fn deserialize_value(v: &Value) -> Result<Self, serde_json::Error> {
-        serde::Deserialize::deserialize(v)
-    }
 }
 
 /// The dialect when `[mqtt.rtk]` is configured; it takes the trajectory store.
@@ -361,12 +215,11 @@ impl Dialect for RtkDialect {
         // A change answered as done that did not reach the folder: the client hears it
         // failed, on the channel it asked on.
         for failed in self.store.failed_writes() {
-            let reason = format!(
-                "{}: kept in memory only, the trajectory folder's write failed ({}); it is lost \
-                 at the next start",
-                failed.what, failed.reason
-            );
-            self.feedback(failed.command, Err(reason), out);
+            let e = RtkError::NotWritten {
+                what: failed.what,
+                reason: failed.reason,
+            };
+            self.feedback(failed.command, Err(&e), out);
         }
     }
 }
