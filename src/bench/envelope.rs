@@ -38,9 +38,9 @@ use crate::record::{Payload, Record};
 use crate::sim::lockstep::{Lockstep, PLANT_STEP, Sections, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig};
 use crate::time::Timestamp;
-use crate::vehicle::CoreConfig;
 use crate::vehicle::chassis::CONTROL_PERIOD;
 use crate::vehicle::status::VehicleStatus;
+use crate::vehicle::{CoreConfig, Event};
 use crate::zones::local::LocalZones;
 use crate::zones::{LonLat, Shape, ZoneKind, ZoneSet};
 
@@ -177,7 +177,7 @@ pub struct EnvelopeReport {
 #[derive(Default)]
 struct Collector {
     now: Timestamp,
-    events: Vec<(Timestamp, String)>,
+    events: Vec<(Timestamp, Event)>,
     answers: Vec<Result<(), String>>,
     results: Vec<MotionResult>,
     status: Option<Box<VehicleStatus>>,
@@ -288,19 +288,19 @@ impl Run {
         let _ = self.jog(0.0, 0.0);
         for _ in 0..steps(GATE_WAIT_S) {
             self.step(FIXED);
-            if self.event("GNSS gate open").is_some() {
+            if self.event(|e| *e == Event::GateOpened).is_some() {
                 return true;
             }
         }
         false
     }
 
-    /// When an event starting with `text` came, the first.
-    fn event(&self, text: &str) -> Option<Timestamp> {
+    /// When the first event `is` took came.
+    fn event(&self, is: impl Fn(&Event) -> bool) -> Option<Timestamp> {
         self.sink
             .events
             .iter()
-            .find(|(_, e)| e.starts_with(text))
+            .find(|(_, e)| is(e))
             .map(|(t, _)| *t)
     }
 
@@ -697,7 +697,7 @@ fn approach(
         .sink
         .events
         .iter()
-        .any(|(t, e)| *t >= began && e.starts_with("stopping: the"));
+        .any(|(t, e)| *t >= began && is_zone_stop(e));
     if least <= 0.0 {
         figures.incursions += 1;
     }
@@ -728,14 +728,24 @@ fn approach(
     }
     // The blade at the gate's closing, when it was on.
     if drive == Drive::Mission
-        && let (Some(bad), Some(closed)) = (run.sink.first_unfixed, run.event("GNSS gate closed"))
+        && let (Some(bad), Some(closed)) = (
+            run.sink.first_unfixed,
+            run.event(|e| matches!(e, Event::GateClosed(_))),
+        )
         && closed >= began
     {
         let off = run
             .sink
             .events
             .iter()
-            .find(|(t, e)| *t >= closed && e == "cutter off")
+            .find(|(t, e)| {
+                *t >= closed
+                    && *e
+                        == Event::Cutter {
+                            on: false,
+                            configured: true,
+                        }
+            })
             .map(|(t, _)| *t);
         if let Some(off) = off {
             blade.closings += 1;
@@ -841,17 +851,18 @@ fn coverage(plant: &PlantConfig, seed: u64, seconds: f64) -> Result<CoverageFigu
         }
     }
     figures.seconds = elapsed;
-    figures.pauses = count_events(&run, "GNSS gate closed");
-    figures.zone_stops = count_events(&run, "stopping: the");
+    figures.pauses = count_events(&run, |e| matches!(e, Event::GateClosed(_)));
+    figures.zone_stops = count_events(&run, is_zone_stop);
     Ok(figures)
 }
 
-fn count_events(run: &Run, text: &str) -> u32 {
-    run.sink
-        .events
-        .iter()
-        .filter(|(_, e)| e.starts_with(text))
-        .count() as u32
+fn count_events(run: &Run, is: impl Fn(&Event) -> bool) -> u32 {
+    run.sink.events.iter().filter(|(_, e)| is(e)).count() as u32
+}
+
+/// The zones' guard stopping the vehicle before a boundary.
+fn is_zone_stop(event: &Event) -> bool {
+    matches!(event, Event::Zone(text) if text.starts_with("stopping: the"))
 }
 
 /// Random plans through the yard's zones, and as many clear of them.

@@ -39,7 +39,7 @@ impl Sink for Collector {
         match output {
             EngineOutput::MotionEnded(r) => self.results.push(r),
             EngineOutput::CommandResult { result, .. } => self.answers.push(result),
-            EngineOutput::Event(e) => self.events.push(e),
+            EngineOutput::Event(e) => self.events.push(e.to_string()),
             EngineOutput::Status(s) => self.status = Some(s),
             _ => {}
         }

@@ -34,7 +34,7 @@ use crate::vehicle::envelope::Envelope;
 use crate::vehicle::gate::GateConfig;
 use crate::vehicle::zones::ZoneGuard;
 use crate::vehicle::{
-    CoreConfig, Device, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
+    CoreConfig, Device, Event, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
 };
 use drivetrain::{BusStats, Drivetrain};
 
@@ -142,8 +142,9 @@ pub enum EngineOutput {
         /// The frame.
         frame: Frame,
     },
-    /// A notable change: a drive set up and running, a drive fault raised or cleared.
-    Event(String),
+    /// Something for the operator's log: a drive running, a fault raised or cleared, a stop,
+    /// a motion's end.
+    Event(Event),
     /// The zones changed (an edit): all of them as GeoJSON, for the zones file.
     ZonesChanged(String),
     /// A message for the MQTT broker (a dialect's report or reply).
@@ -569,7 +570,7 @@ impl Engine {
                         }
                     });
                     if let Some(news) = receiver.take_news() {
-                        out.push(EngineOutput::Event(news));
+                        out.push(EngineOutput::Event(Event::Receiver(news)));
                     }
                 } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
                     let emit = self.emit_poses;
@@ -826,12 +827,8 @@ impl Engine {
                         out.push(EngineOutput::MotionEnded(result));
                     }
                     Output::Cutter(on) => {
-                        let event = if self.drivetrain.set_cutter(t, on, &mut tx) {
-                            format!("cutter {}", if on { "on" } else { "off" })
-                        } else {
-                            "cutter switch asked for, but no [cutter] is configured".into()
-                        };
-                        out.push(EngineOutput::Event(event));
+                        let configured = self.drivetrain.set_cutter(t, on, &mut tx);
+                        out.push(EngineOutput::Event(Event::Cutter { on, configured }));
                     }
                     Output::Mission { tag, event } => {
                         out.extend(from_every_adapter(
@@ -858,10 +855,7 @@ impl Engine {
     ) {
         let reason = status.chassis.as_ref().and_then(|c| c.stop_reason.clone());
         if reason != self.stop_reason {
-            out.push(EngineOutput::Event(match &reason {
-                Some(r) => format!("safety stop: {r}"),
-                None => "safety stop cleared: re-armed".to_owned(),
-            }));
+            out.push(EngineOutput::Event(Event::SafetyStop(reason.clone())));
             self.stop_reason = reason;
         }
     }
@@ -878,13 +872,13 @@ impl Engine {
         for (i, d) in drives.iter().enumerate() {
             let before = self.drive_states.get(i).cloned().unwrap_or((false, None));
             if d.fault != before.1 {
-                out.push(EngineOutput::Event(match &d.fault {
-                    Some(f) => format!("drive {}: fault: {f}", d.name),
-                    None => format!("drive {}: fault cleared", d.name),
+                out.push(EngineOutput::Event(Event::DriveFault {
+                    drive: d.name.clone(),
+                    fault: d.fault.clone(),
                 }));
             }
             if d.running && !before.0 {
-                out.push(EngineOutput::Event(format!("drive {}: running", d.name)));
+                out.push(EngineOutput::Event(Event::DriveRunning(d.name.clone())));
             }
         }
         self.drive_states = now;
@@ -1131,7 +1125,7 @@ mod tests {
         let said: Vec<&String> = out
             .iter()
             .filter_map(|o| match o {
-                EngineOutput::Event(e) if e.contains("RTK corrections stopped") => Some(e),
+                EngineOutput::Event(Event::Corrections(e)) if e.contains("stopped") => Some(e),
                 _ => None,
             })
             .collect();

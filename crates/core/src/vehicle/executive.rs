@@ -6,6 +6,7 @@
 use super::chassis::{Chassis, CommandRejected, DriveMode};
 use super::core_config::CoreConfig;
 use super::envelope::{self, Envelope};
+use super::event::Event;
 use super::gate::{GateChange, GateReason, GateSignals};
 use super::localisation::Localisation;
 use super::messages::{Output, PathPoints, PathRequest};
@@ -419,19 +420,24 @@ impl Executive {
                     None => chassis.hold_zero(t),
                 }
             }
-            out.extend(motion.take_events().into_iter().map(Output::Event));
+            out.extend(
+                motion
+                    .take_events()
+                    .into_iter()
+                    .map(|e| Output::Event(Event::Motion(e))),
+            );
             results = motion.take_results();
         }
         if let Some(envelope) = plant.envelope.as_deref_mut() {
             let mut events = Vec::new();
             envelope::zone_tick(envelope, plant.place.localizer(), chassis, t, &mut events);
-            out.extend(events.into_iter().map(Output::Event));
+            out.extend(events.into_iter().map(|e| Output::Event(Event::Zone(e))));
         }
         out.insert(0, Output::Wheels(chassis.tick(t)));
         self.mission_tick(t, plant, &results, charging, &mut out);
         self.cutter_tick(plant, &mut out);
         for result in results {
-            out.push(Output::Event(result.to_string()));
+            out.push(Output::Event(Event::MotionEnded(result.clone())));
             out.push(Output::MotionEnded(result));
         }
         out
@@ -451,17 +457,12 @@ impl Executive {
         };
         match envelope.update_gate(t, signals) {
             Some(GateChange::Closed(reason)) => {
-                out.push(Output::Event(format!(
-                    "GNSS gate closed: {reason}; the blade stops, a path task or a mission \
-                     pauses until it opens, a goal or a move under way ends"
-                )));
+                out.push(Output::Event(Event::GateClosed(reason.clone())));
                 let paused = self.pause_for_gate(t, &reason);
                 envelope.hold_paused(paused);
             }
             Some(GateChange::Opened) => {
-                out.push(Output::Event(
-                    "GNSS gate open: the fix has been good for zones.resume_after_s; autonomous work is taken".into(),
-                ));
+                out.push(Output::Event(Event::GateOpened));
                 if envelope.take_paused() {
                     self.resume_after_gate(t, plant);
                 }
@@ -659,7 +660,7 @@ impl Executive {
         };
         let tag = mission.tag();
         for event in mission.take_events() {
-            out.push(Output::Event(event.to_string()));
+            out.push(Output::Event(Event::Mission(event.clone())));
             out.push(Output::Mission { tag, event });
         }
         let ended = mission.ended().cloned();

@@ -2,6 +2,7 @@
 //! link states, commands, ticks) and the outputs it returns.
 
 use super::chassis::{ChassisFeedback, CommandRejected, DriveMode, WheelCommand};
+use super::event::Event;
 use super::status::{HostUsage, VehicleStatus};
 use super::zones;
 use crate::control::goal::GoalPose;
@@ -168,7 +169,7 @@ pub enum Output {
     /// The answer to a command.
     CommandResult(Result<(), CommandRejected>),
     /// Something for the operator's log.
-    Event(String),
+    Event(Event),
     /// A closed-loop motion ended.
     MotionEnded(MotionResult),
     /// Switch the cutter on (true) or off.

@@ -12,6 +12,7 @@ pub mod chassis;
 mod core_config;
 pub mod corrections;
 pub mod envelope;
+mod event;
 mod executive;
 pub mod feedback;
 pub mod gate;
@@ -32,6 +33,7 @@ use crate::time::Timestamp;
 pub use chassis::DriveMode;
 use chassis::{Chassis, CommandRejected};
 pub use core_config::CoreConfig;
+pub use event::Event;
 use executive::{Executive, Plant};
 use localisation::Localisation;
 pub use messages::{Command, Device, Input, LinkState, Output, PathPoints, PathRequest};
@@ -125,7 +127,7 @@ impl Vehicle {
     /// part whose job it is.
     pub fn handle(&mut self, t: Timestamp, input: Input<'_>) -> Vec<Output> {
         match input {
-            Input::Gnss(fix) => events(self.place.gnss(t, fix)),
+            Input::Gnss(fix) => events(self.place.gnss(t, fix), Event::Localisation),
             Input::Link(Device::Gnss, state) => {
                 self.place.gnss_link(state == LinkState::Up);
                 Vec::new()
@@ -144,6 +146,7 @@ impl Vehicle {
                 self.corrections
                     .as_mut()
                     .and_then(|c| c.frames(t, frames, bytes)),
+                Event::Corrections,
             ),
             Input::Imu(sample) => {
                 self.place.imu(sample);
@@ -268,7 +271,7 @@ impl Vehicle {
         );
         status.corrections = corrections.map(|(s, _)| s);
         let mut outputs = vec![Output::Status(Box::new(status))];
-        outputs.extend(event.map(Output::Event));
+        outputs.extend(event.map(|e| Output::Event(Event::Corrections(e))));
         outputs
     }
 
@@ -304,7 +307,7 @@ impl Vehicle {
                 }
                 zones::ZoneEdit::Remove(_) => "zone removed".to_owned(),
             };
-            out.push(Output::Event(format!("zones: {what} (id {id})")));
+            out.push(Output::Event(Event::ZoneEdited { what, id: *id }));
             out.push(Output::ZonesChanged(envelope.guard().set().to_geojson()));
         }
         result.map(|_| ())
@@ -322,9 +325,9 @@ impl Vehicle {
     }
 }
 
-/// Events for the operator's log.
-fn events(events: impl IntoIterator<Item = String>) -> Vec<Output> {
-    events.into_iter().map(Output::Event).collect()
+/// Events for the operator's log, of the kind `kind`.
+fn events(events: impl IntoIterator<Item = String>, kind: fn(String) -> Event) -> Vec<Output> {
+    events.into_iter().map(|e| Output::Event(kind(e))).collect()
 }
 #[cfg(test)]
 mod tests {

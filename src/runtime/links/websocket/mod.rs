@@ -98,7 +98,7 @@ impl WebsocketLink {
                 result: result.clone(),
                 data: data.clone(),
             }),
-            EngineOutput::Event(text) => Feed::Event(text.clone()),
+            EngineOutput::Event(event) => Feed::Event(event.to_string()),
             _ => return,
         };
         if self.feed.try_send(item).is_err() {
