@@ -13,7 +13,7 @@ use super::topics::{
     BATTERY_STATE, DIAGNOSTICS, DRIVE_MODE, PLAN, POSE, SAFETY_ENVELOPE, TF, WHEEL_SPEEDS, ZONES,
 };
 use super::{envelope, messages};
-use crate::api::ros1::published as ros1;
+use crate::api::ros1::messages as ros1;
 use crate::control::MotionId;
 use crate::vehicle::VehicleStatus;
 use crate::zones::local::ZoneOutline;
