@@ -1,5 +1,5 @@
 //! The messages the node publishes, as JSON of their ROS1 types (the field names of
-//! `interfaces/`), built from the core's poses, samples and codes, stamped and framed by
+//! `interfaces/`), built from the core's poses, samples, status and codes, stamped and framed by
 //! REP-103/105. The node serialises each through its generated type, which checks every
 //! field.
 
