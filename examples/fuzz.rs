@@ -1430,7 +1430,7 @@ fn rosbridge_runner() -> Runner {
             return 1;
         };
         let Some(name) = topics::find(&topic)
-            .filter(|t| t.flow == topics::Flow::Subscribed)
+            .filter(|t| matches!(t.flow, topics::Flow::Subscribed))
             .map(|t| t.name)
         else {
             return 2;

@@ -17,6 +17,7 @@ mod device_dbc_bms;
 mod device_imu;
 mod device_zlac8015d;
 mod docs_book;
+mod docs_topic_tables;
 mod documented_examples;
 mod drive_latency;
 mod fusion_bench;

@@ -279,7 +279,7 @@ fn the_node_publishes_its_topics_and_answers_its_services() {
         o.contains("angular_velocity_covariance")
     });
     assert!(imu.contains("frame_id: \"base_link\""), "{imu}");
-    // A topic from the published table (api::ros1::published): the wheels, left then right.
+    // A topic published from the status (api::ros1::topics): the wheels, left then right.
     let wheels = echo_until(&master, "/wheel_speeds", Duration::from_secs(5), |o| {
         o.contains("label: \"left_right\"")
     });

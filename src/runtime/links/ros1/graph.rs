@@ -13,7 +13,7 @@ use tokio::task::JoinSet;
 use super::messages::{self, geometry_msgs, map_msgs, std_msgs};
 use super::pipe::{FromNode, NodeSettings, Verdict};
 use crate::api::ros1::adapter::{Point, RegionRequest, Ros1Request, ShapeRequest};
-use crate::api::ros1::publisher::{self, Advertised};
+use crate::api::ros1::topics::{self, Topic};
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
 
 /// How often the master is asked whether it still knows the node.
@@ -113,7 +113,7 @@ impl Requests {
 
 /// The registered graph: dropping it unregisters everything (the node handle goes last).
 pub struct Graph {
-    /// Every topic of `api::ros1::publisher::advertised`.
+    /// Every topic of `api::ros1::topics::TOPICS`.
     publishers: Vec<TopicPublisher>,
     _services: Vec<ServiceServer>,
     _subscribers: JoinSet<()>,
@@ -143,7 +143,7 @@ struct TopicPublisher {
 impl TopicPublisher {
     async fn advertise(
         node: &NodeHandle,
-        topic: &Advertised,
+        topic: &Topic,
     ) -> Result<Self, roslibrust::ros1::NodeError> {
         let descriptor = messages::MESSAGE_REGISTRY
             .get(topic.msg_type)
@@ -288,8 +288,8 @@ pub async fn build(
 ) -> Result<Graph, roslibrust::ros1::NodeError> {
     let node = NodeHandle::new(&spec.config.master_uri, &spec.config.node_name).await?;
     let mut publishers = Vec::new();
-    for topic in publisher::advertised() {
-        publishers.push(TopicPublisher::advertise(&node, &topic).await?);
+    for topic in topics::TOPICS {
+        publishers.push(TopicPublisher::advertise(&node, topic).await?);
     }
     let mut subscribers = JoinSet::new();
     let rate = (spec.config.command_rate_hz, spec.config.command_burst);

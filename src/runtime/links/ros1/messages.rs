@@ -207,19 +207,7 @@ mod tests {
 
     #[test]
     fn every_advertised_topic_has_its_interface() {
-        for topic in crate::api::ros1::publisher::advertised() {
-            assert!(
-                MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
-                "{}: no {} in crates/core/src/api/ros1/interfaces",
-                topic.name,
-                topic.msg_type
-            );
-        }
-    }
-
-    #[test]
-    fn every_published_topic_has_its_interface() {
-        for topic in crate::api::ros1::published::STATUS_TOPICS {
+        for topic in crate::api::ros1::topics::TOPICS {
             assert!(
                 MESSAGE_REGISTRY.get(topic.msg_type).is_some(),
                 "{}: no {} in crates/core/src/api/ros1/interfaces",

@@ -31,11 +31,11 @@ use tokio::sync::mpsc;
 use self::hub::{Client, ClientQueue};
 use self::serve::{Held, Limits};
 use self::slots::{AUTH_WINDOW, Slot, Slots};
-use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
+use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::rosbridge::ops::{self, Level};
+use crate::api::rosbridge::publisher::{ControlTicks, Published, Publishing};
 use crate::api::rosbridge::session::{Action, token_matches};
-use crate::api::rosbridge::topics;
-use crate::api::rosbridge::{SOURCE, adapter, messages, published};
+use crate::api::rosbridge::{SOURCE, adapter};
 use crate::config::websocket::WebsocketConfig;
 use crate::engine::{Engine, EngineOutput};
 use crate::fusion::odometry::OdomPose;
@@ -52,14 +52,13 @@ const FEED_QUEUE: usize = 256;
 const EVENT_QUEUE: usize = 1024;
 /// Commands sent to the engine and not answered yet, at most.
 const PENDING_ANSWERS: usize = 1024;
-/// `/odom` goes out every this many control ticks (50 Hz).
-const ODOM_EVERY_TICKS: u64 = 2;
 
 /// What the engine's outputs give the server.
 #[derive(Debug, Clone)]
 enum Feed {
     Status(Box<VehicleStatus>),
-    Odom(Timestamp, OdomPose),
+    /// A control tick's number, time and `odom` pose, when a topic publishes it.
+    Odometry(u64, Timestamp, OdomPose),
     Answer(crate::api::adapter::Answer),
     Event(String),
 }
@@ -68,7 +67,7 @@ enum Feed {
 /// counted (the next status or pose follows soon).
 pub struct WebsocketLink {
     feed: mpsc::Sender<Feed>,
-    ticks: u64,
+    ticks: ControlTicks,
     dropped: u64,
 }
 
@@ -77,15 +76,10 @@ impl WebsocketLink {
     pub fn see(&mut self, output: &EngineOutput) {
         let item = match output {
             EngineOutput::Status(s) => Feed::Status(s.clone()),
-            EngineOutput::Poses(t, report) => {
-                self.ticks += 1;
-                match report.odom {
-                    Some(odom) if self.ticks.is_multiple_of(ODOM_EVERY_TICKS) => {
-                        Feed::Odom(*t, odom)
-                    }
-                    _ => return,
-                }
-            }
+            EngineOutput::Poses(t, report) => match self.ticks.next(report) {
+                Some((tick, odom)) => Feed::Odometry(tick, *t, odom),
+                None => return,
+            },
             EngineOutput::CommandResult {
                 source,
                 topic,
@@ -182,9 +176,7 @@ pub fn start(
         command_rate_hz: config.command_rate_hz,
         pending: BTreeMap::new(),
         last_request: 0,
-        odometry: OdometryUncertainty::new(noise),
-        status_ticks: 0,
-        latches: published::Latches::default(),
+        publishing: Publishing::new(noise),
         latched: BTreeMap::new(),
         token: config.token.clone(),
         slots,
@@ -211,7 +203,7 @@ pub fn start(
     tokio::spawn(serve::serve(listener, router, limits));
     Ok(WebsocketLink {
         feed: feed_tx,
-        ticks: 0,
+        ticks: ControlTicks::default(),
         dropped: 0,
     })
 }
@@ -482,10 +474,8 @@ struct Server {
     pending: BTreeMap<u64, u64>,
     /// The id of the last command sent.
     last_request: u64,
-    odometry: OdometryUncertainty,
-    status_ticks: u64,
-    /// What the latched topics last carried.
-    latches: published::Latches,
+    /// What is published when (`api::rosbridge::publisher`).
+    publishing: Publishing,
     /// The last message of each latched topic, sent to a new subscriber at once.
     latched: BTreeMap<&'static str, String>,
     token: Option<String>,
@@ -530,51 +520,38 @@ impl Server {
         }
     }
 
-    /// Publishes `topic` to whoever is due for it, building the message only then.
-    fn publish(&mut self, topic: &'static str, build: impl FnOnce() -> Option<Value>) {
-        let now = Instant::now();
-        if !self.clients.values().any(|c| c.wants(topic, now)) {
-            return;
-        }
-        let Some(msg) = build() else { return };
+    /// Offers `msg` on `topic` to every client due for it; a latched topic's is kept for
+    /// the next subscribers.
+    fn publish(&mut self, published: Published, now: Instant) {
+        let Published {
+            topic,
+            msg,
+            latched,
+        } = published;
         let text = ops::publish(topic, &msg);
         for client in self.clients.values_mut() {
             client.offer(topic, &text, now);
         }
-    }
-
-    /// Publishes `msg` on the latched `topic` to every subscriber, and keeps it for the
-    /// next ones.
-    fn latch(&mut self, topic: &'static str, msg: &Value) {
-        let text = ops::publish(topic, msg);
-        let now = Instant::now();
-        for client in self.clients.values_mut() {
-            client.offer(topic, &text, now);
+        if latched {
+            self.latched.insert(topic, text);
         }
-        self.latched.insert(topic, text);
     }
 
     fn on_feed(&mut self, item: Feed) {
+        let now = Instant::now();
+        let clients = &self.clients;
+        // A message nobody is due for is not built.
+        let wanted = |topic: &str| clients.values().any(|c| c.wants(topic, now));
+        let mut out = Vec::new();
         match item {
-            Feed::Status(status) => {
-                self.status_ticks += 1;
-                for topic in published::due(self.status_ticks) {
-                    self.publish(topic.name, || (topic.build)(&status));
-                }
-                for (topic, msg) in self.latches.changed(&status) {
-                    self.latch(topic, &msg);
-                }
-            }
-            Feed::Odom(t, pose) => {
-                // The covariance integrates every sample, subscribed or not.
-                let covariance = self.odometry.update(t, &pose);
-                self.publish(topics::ODOM, || {
-                    Some(messages::odometry(t, &pose, &covariance))
-                });
+            Feed::Status(status) => self.publishing.on_status(&status, wanted, &mut out),
+            Feed::Odometry(tick, t, pose) => {
+                self.publishing
+                    .on_odometry(tick, t, &pose, wanted, &mut out);
             }
             Feed::Event(text) => {
                 let t = self.clock.now();
-                self.publish(topics::ROSOUT, || Some(messages::log(t, &text)));
+                self.publishing.on_event(t, &text, wanted, &mut out);
             }
             Feed::Answer(answer) => {
                 let Some(id) = answer.request.and_then(|r| self.pending.remove(&r)) else {
@@ -588,6 +565,9 @@ impl Server {
                     );
                 }
             }
+        }
+        for message in out {
+            self.publish(message, now);
         }
     }
 

@@ -1,5 +1,5 @@
 //! The messages the node publishes, as JSON of their ROS1 types (the field names of
-//! `interfaces/`), built from the core's poses, samples and codes, stamped and framed by
+//! `interfaces/`), built from the core's poses, samples, status and codes, stamped and framed by
 //! REP-103/105. The node serialises each through its generated type, which checks every
 //! field.
 
@@ -10,7 +10,8 @@ use super::{BASE_FRAME, MAP_FRAME, ODOM_FRAME, ros_time, yaw_quaternion};
 use crate::devices::imu::ImuSample;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
-use crate::vehicle::{Pose2D, PoseReport};
+use crate::vehicle::chassis::DriveMode;
+use crate::vehicle::{Pose2D, PoseReport, VehicleStatus};
 
 /// The IMU's noise, 1σ, for `/imu/data`'s covariances.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -150,4 +151,61 @@ pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> Value {
 /// A status code topic's std_msgs/Int16.
 pub fn code(data: i16) -> Value {
     json!({"data": data})
+}
+
+/// `/wheel_speeds` (std_msgs/Float64MultiArray): the left and the right wheel's measured
+/// surface speed, m/s (forward positive); nothing without a drive train. The rosbridge server
+/// publishes the same message (std_msgs keeps its fields in ROS 2).
+pub fn wheel_speeds(status: &VehicleStatus) -> Option<Value> {
+    let odometry = status.chassis.as_ref()?.odometry;
+    Some(json!({
+        "layout": {
+            "dim": [{"label": "left_right", "size": 2, "stride": 2}],
+            "data_offset": 0,
+        },
+        "data": [odometry.left_mps, odometry.right_mps],
+    }))
+}
+
+/// `/drive_mode` (std_msgs/String): who may drive, `manual` (velocity commands) or
+/// `navigation` (autonomous moves only); nothing without a drive train. Rosbridge publishes
+/// it too.
+pub fn drive_mode(status: &VehicleStatus) -> Option<Value> {
+    let mode = match status.mode? {
+        DriveMode::Manual => "manual",
+        DriveMode::Navigation => "navigation",
+    };
+    Some(json!({ "data": mode }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wheel_speeds_are_left_then_right() {
+        let mut status = VehicleStatus::default();
+        assert!(wheel_speeds(&status).is_none(), "no drive train, no speeds");
+        status.chassis = Some(crate::vehicle::chassis::ChassisStatus {
+            odometry: crate::vehicle::chassis::WheelOdometry {
+                left_mps: 0.25,
+                right_mps: 0.5,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let msg = wheel_speeds(&status).unwrap();
+        assert_eq!(msg["data"], json!([0.25, 0.5]));
+        assert_eq!(msg["layout"]["dim"][0]["size"], 2);
+    }
+
+    #[test]
+    fn the_drive_mode_is_named() {
+        let mut status = VehicleStatus::default();
+        assert!(drive_mode(&status).is_none(), "no drive train, no mode");
+        status.mode = Some(DriveMode::Navigation);
+        assert_eq!(drive_mode(&status), Some(json!({"data": "navigation"})));
+        status.mode = Some(DriveMode::Manual);
+        assert_eq!(drive_mode(&status), Some(json!({"data": "manual"})));
+    }
 }

@@ -26,10 +26,10 @@
 pub mod adapter;
 pub mod messages;
 pub mod odometry;
-pub mod published;
 pub mod publisher;
 pub mod queries;
 pub mod status;
+pub mod topics;
 
 use serde_json::json;
 

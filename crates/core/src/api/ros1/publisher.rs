@@ -1,7 +1,7 @@
-//! What the node publishes, sans-IO: the topics it advertises, and from each item the
-//! engine feeds it (poses every control tick, IMU samples, status ticks, motion ends,
-//! mission progress) the messages due, as JSON of their types with their topics. The node
-//! advertises [`advertised`] and serialises what [`Publishing`] returns; it decides nothing.
+//! What the node publishes, sans-IO: from each item the engine feeds it (poses every
+//! control tick, IMU samples, status ticks, motion ends, mission progress) the messages due,
+//! as JSON of their types with their topics, by the table of [`super::topics`]. The node
+//! advertises that table and serialises what [`Publishing`] returns; it decides nothing.
 
 use std::time::Duration;
 
@@ -9,16 +9,13 @@ use serde_json::Value;
 
 use super::messages::{self, ImuNoise};
 use super::odometry::{OdometryNoise, OdometryUncertainty};
-use super::published;
 use super::status::{StatusTopics, Topic};
+use super::topics::{self, PoseTick, Publish, TOPICS};
 use crate::control::MotionTag;
 use crate::control::mission::MissionEvent;
 use crate::devices::imu::ImuSample;
 use crate::time::Timestamp;
 use crate::vehicle::{Localization, Pose2D, PoseReport, VehicleStatus};
-
-/// `/tracked_pose`'s and `/tf`'s period (15 Hz).
-const TRACKED_POSE_PERIOD: Duration = Duration::from_nanos(1_000_000_000 / 15);
 
 /// What the engine's outputs give the node.
 #[derive(Debug, Clone)]
@@ -40,47 +37,6 @@ pub enum Feed {
     },
 }
 
-/// A topic the node advertises.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Advertised {
-    /// Its name.
-    pub name: &'static str,
-    /// Its ROS type, one of `interfaces/`.
-    pub msg_type: &'static str,
-    /// Messages kept for a slow subscriber.
-    pub queue: usize,
-    /// Latched: a new subscriber gets the last message at once.
-    pub latched: bool,
-}
-
-/// Every topic the node publishes.
-pub fn advertised() -> Vec<Advertised> {
-    let plain = |name, msg_type| Advertised {
-        name,
-        msg_type,
-        queue: 10,
-        latched: false,
-    };
-    let mut topics = vec![
-        plain("/raw_odom", "nav_msgs/Odometry"),
-        plain("/imu/data", "sensor_msgs/Imu"),
-        plain("/tracked_pose", "geometry_msgs/PoseStamped"),
-        plain("/tf", "tf2_msgs/TFMessage"),
-    ];
-    topics.extend(
-        published::STATUS_TOPICS
-            .iter()
-            .map(|t| plain(t.name, t.msg_type)),
-    );
-    topics.extend(Topic::ALL.iter().map(|t| Advertised {
-        name: t.name(),
-        msg_type: "std_msgs/Int16",
-        queue: 1,
-        latched: true,
-    }));
-    topics
-}
-
 /// Messages due, each with its topic.
 pub type Messages = Vec<(&'static str, Value)>;
 
@@ -90,7 +46,9 @@ pub struct Publishing {
     odometry: OdometryUncertainty,
     imu_noise: ImuNoise,
     status: StatusTopics,
-    next_tracked_pose: Option<Timestamp>,
+    /// When each topic of [`TOPICS`] published at most once a period is due next (`None`:
+    /// not yet published; unused for the others).
+    next_due: Vec<Option<Timestamp>>,
     seq: u32,
     imu_seq: u32,
     status_ticks: u64,
@@ -103,7 +61,7 @@ impl Publishing {
             odometry: OdometryUncertainty::new(odometry),
             imu_noise,
             status: StatusTopics::default(),
-            next_tracked_pose: None,
+            next_due: vec![None; TOPICS.len()],
             seq: 0,
             imu_seq: 0,
             status_ticks: 0,
@@ -117,15 +75,19 @@ impl Publishing {
             Feed::Poses(t, report) => self.on_poses(*t, report, out),
             Feed::Imu(sample) => {
                 self.imu_seq = self.imu_seq.wrapping_add(1);
-                out.push((
-                    "/imu/data",
-                    messages::imu(sample, self.imu_seq, &self.imu_noise),
-                ));
+                for topic in TOPICS {
+                    if let Publish::Imu(build) = topic.publish {
+                        out.push((topic.name, build(sample, self.imu_seq, &self.imu_noise)));
+                    }
+                }
             }
             Feed::Status(status) => {
                 self.status_ticks += 1;
-                for topic in published::due(self.status_ticks) {
-                    if let Some(msg) = (topic.build)(status, self.status_ticks as u32) {
+                for topic in TOPICS {
+                    if let Publish::Status { every, build } = topic.publish
+                        && self.status_ticks.is_multiple_of(every.max(1))
+                        && let Some(msg) = build(status, self.status_ticks as u32)
+                    {
                         out.push((topic.name, msg));
                     }
                 }
@@ -138,35 +100,30 @@ impl Publishing {
     }
 
     fn on_poses(&mut self, t: Timestamp, report: &PoseReport, out: &mut Messages) {
-        if let Some(odom) = report.odom {
-            let covariance = self.odometry.update(t, &odom);
+        // The odometry's covariance integrates every sample, and its sequence numbers
+        // count them, whoever subscribes.
+        let covariance = report.odom.map(|odom| {
             self.seq = self.seq.wrapping_add(1);
-            out.push((
-                "/raw_odom",
-                messages::odometry(t, self.seq, &odom, &covariance),
-            ));
-        }
-        // `/tracked_pose` and `/tf` at 15 Hz.
-        let due = self.next_tracked_pose.is_none_or(|next| t >= next);
-        if !due || (report.map.is_none() && report.odom.is_none()) {
-            return;
-        }
-        // One period on from the last message (the first one's included).
-        let next = self
-            .next_tracked_pose
-            .unwrap_or(t)
-            .saturating_add(TRACKED_POSE_PERIOD);
-        // Late by more than a period (a pause in the feed): start again from now.
-        self.next_tracked_pose = Some(if next < t {
-            t.saturating_add(TRACKED_POSE_PERIOD)
-        } else {
-            next
+            self.odometry.update(t, &odom)
         });
-        if let Some((pose, _)) = report.map {
-            out.push(("/tracked_pose", messages::pose_stamped(t, self.seq, &pose)));
-        }
-        if let Some(tf) = messages::tf(t, report) {
-            out.push(("/tf", tf));
+        let tick = PoseTick {
+            t,
+            report,
+            seq: self.seq,
+            covariance,
+        };
+        for (topic, next_due) in TOPICS.iter().zip(&mut self.next_due) {
+            let Publish::Poses { period, build } = topic.publish else {
+                continue;
+            };
+            if let Some(period) = period
+                && !due_at_most_every(next_due, period, t, report)
+            {
+                continue;
+            }
+            if let Some(msg) = build(&tick) {
+                out.push((topic.name, msg));
+            }
         }
     }
 
@@ -191,12 +148,33 @@ impl Publishing {
     }
 }
 
+/// Whether a topic published at most once a `period`, next due at `next_due`, is due at
+/// `t`; if so, when it is due next. A tick with no pose at all does not count.
+fn due_at_most_every(
+    next_due: &mut Option<Timestamp>,
+    period: Duration,
+    t: Timestamp,
+    report: &PoseReport,
+) -> bool {
+    let due = next_due.is_none_or(|next| t >= next);
+    if !due || (report.map.is_none() && report.odom.is_none()) {
+        return false;
+    }
+    // One period on from the last message (the first one's included).
+    let next = next_due.unwrap_or(t).saturating_add(period);
+    // Late by more than a period (a pause in the feed): start again from now.
+    *next_due = Some(if next < t {
+        t.saturating_add(period)
+    } else {
+        next
+    });
+    true
+}
+
 fn push_codes(codes: Vec<(Topic, i16)>, out: &mut Messages) {
-    out.extend(
-        codes
-            .into_iter()
-            .map(|(topic, code)| (topic.name(), messages::code(code))),
-    );
+    out.extend(codes.into_iter().filter_map(|(code, data)| {
+        topics::of_code(code).map(|topic| (topic.name, messages::code(data)))
+    }));
 }
 
 /// `/get_position`'s answer: the map pose when located, else none.
@@ -261,17 +239,24 @@ mod tests {
     }
 
     #[test]
-    fn every_topic_is_advertised_once() {
-        let topics = advertised();
-        let mut names: Vec<&str> = topics.iter().map(|t| t.name).collect();
-        names.sort_unstable();
-        names.dedup();
-        assert_eq!(names.len(), topics.len());
-        assert!(
-            topics
-                .iter()
-                .filter(|t| t.latched)
-                .all(|t| t.msg_type == "std_msgs/Int16")
+    fn status_topics_at_their_rates_and_codes_on_their_topics() {
+        let mut p = publishing();
+        let status = VehicleStatus {
+            chassis: Some(Default::default()),
+            mode: Some(crate::vehicle::chassis::DriveMode::Manual),
+            ..Default::default()
+        };
+        let mut out = Vec::new();
+        for _ in 0..10 {
+            p.on_feed(&Feed::Status(Box::new(status.clone())), &mut out);
+        }
+        let count = |name: &str| out.iter().filter(|(t, _)| *t == name).count();
+        assert_eq!(count("/wheel_speeds"), 10);
+        assert_eq!(count("/drive_mode"), 1);
+        assert_eq!(count("/androidmsg_locationstatus"), 1, "once, on change");
+        assert_eq!(
+            out.iter().find(|(t, _)| *t == "/androidmsg_initstatus"),
+            Some(&("/androidmsg_initstatus", serde_json::json!({"data": 12})))
         );
     }
 }

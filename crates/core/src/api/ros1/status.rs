@@ -64,7 +64,7 @@ pub const NAV_LOCATION_LOST: i16 = 84;
 /// A state of charge at or above this is full, %.
 const FULL_PCT: f64 = 99.5;
 
-/// One of the status topics.
+/// One of the status topics (its name and type are in [`super::topics::TOPICS`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Topic {
     /// `/androidmsg_initstatus`.
@@ -94,19 +94,6 @@ impl Topic {
         Topic::Navigation,
         Topic::VirtualMap,
     ];
-
-    /// Its ROS name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Topic::Init => "/androidmsg_initstatus",
-            Topic::Emergency => "/androidmsg_emergencystatus",
-            Topic::Charge => "/androidmsg_chargestatus",
-            Topic::Location => "/androidmsg_locationstatus",
-            Topic::Navigation => "/androidmsg_navigationstatus",
-            Topic::Power => "/power_report",
-            Topic::VirtualMap => "/androidmsg_virtualmapstatus",
-        }
-    }
 }
 
 /// The navigation code of a motion's end.

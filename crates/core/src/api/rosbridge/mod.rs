@@ -1,13 +1,15 @@
 //! device-mqtt-api.md's "WebSocket/ROS2 Topic" interfaces, served over the rosbridge v2
-//! protocol (what roslibjs, roslibpy and Foxglove speak): the operations, the topic table
-//! and the ROS messages as JSON. Moving them is `runtime::links::websocket`'s job.
+//! protocol (what roslibjs, roslibpy and Foxglove speak): the operations, a client's
+//! session, the topic table, what is published when, and the ROS messages as JSON. Moving
+//! the bytes is `runtime::links::websocket`'s job.
 
 pub mod adapter;
 pub mod envelope;
+pub mod latches;
 pub mod messages;
 pub mod ops;
 pub mod parts;
-pub mod published;
+pub mod publisher;
 pub mod session;
 pub mod topics;
 

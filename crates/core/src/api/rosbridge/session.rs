@@ -11,7 +11,7 @@ use serde_json::{Value, json};
 
 use super::adapter;
 use super::ops::{self, ClientOp, Level};
-use super::topics::{self, Flow, LATCHED};
+use super::topics::{self, Flow};
 
 /// Subscriptions one client may hold on one topic.
 pub const MAX_SUBSCRIPTIONS: usize = 16;
@@ -38,7 +38,7 @@ pub enum Action {
     Answer(String),
     /// The connection closes (after what is queued).
     Close,
-    /// The client subscribed to this one of [`LATCHED`]: its last message goes to it at
+    /// The client subscribed to this latched topic ([`topics::Topic::is_latched`]): its last message goes to it at
     /// once.
     SubscribedToLatched(&'static str),
     /// A message for the engine on `name` (a topic clients publish, its check passed), as
@@ -197,7 +197,7 @@ impl Session {
                                 Err(reason) => {
                                     refuse(op_id.as_deref(), &format!("subscribe: {reason}"))
                                 }
-                                Ok(()) if LATCHED.contains(&t.name) => {
+                                Ok(()) if t.is_latched() => {
                                     vec![Action::SubscribedToLatched(t.name)]
                                 }
                                 Ok(()) => Vec::new(),
@@ -223,10 +223,12 @@ impl Session {
                 topic,
                 msg_type,
             } => match topics::find(&topic) {
-                Some(t) if t.flow == Flow::Subscribed && topics::type_matches(t, &msg_type) => {
+                Some(t)
+                    if matches!(t.flow, Flow::Subscribed) && topics::type_matches(t, &msg_type) =>
+                {
                     Vec::new()
                 }
-                Some(t) if t.flow == Flow::Subscribed => refuse(
+                Some(t) if matches!(t.flow, Flow::Subscribed) => refuse(
                     op_id.as_deref(),
                     &format!("advertise: {topic} is {}, not {msg_type}", t.msg_type),
                 ),
@@ -252,7 +254,7 @@ impl Session {
             } => {
                 let refuse = |reason: &str| refuse(op_id.as_deref(), &format!("publish: {reason}"));
                 match topics::find(&topic) {
-                    Some(t) if t.flow == Flow::Subscribed => {
+                    Some(t) if matches!(t.flow, Flow::Subscribed) => {
                         match adapter::check(t.name, &topic, &msg) {
                             Ok(()) => vec![Action::Publish {
                                 name: t.name,
