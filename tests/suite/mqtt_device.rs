@@ -137,6 +137,62 @@ fn the_goal_example_drives_there_and_a_replaced_goal_is_cancelled() {
     assert!(heading.abs() <= 2.0, "the heading is {heading}° off 90°");
 }
 
+/// `cancel` ends the goal under way without latching: acked at once, the goal answered 3001,
+/// the vehicle at rest, and the next goal taken without a reset.
+#[test]
+fn cancel_ends_the_goal_under_way_and_the_next_goal_is_taken() {
+    let broker = Mosquitto::start();
+    let goal_acks = broker.subscribe(&[&format!("device/{SN}/goal/ack")]);
+    let cancel_acks = broker.subscribe(&[&format!("device/{SN}/cancel/ack")]);
+    let mut d = Proc::start(&["sim", "--mqtt", &broker.address()]);
+    d.wait_log(WAIT, "MQTT subscribed");
+    d.wait_out(Duration::from_secs(30), "LOCATE_TRUE", |l| {
+        serde_json::from_str::<Value>(l).is_ok_and(|s| s["nav"]["locate"] == "LOCATE_TRUE")
+    });
+    let goal = format!("device/{SN}/goal");
+    broker.publish(
+        &goal,
+        r#"{"msg_id": "far", "timestamp": 1757403776, "data": {"x": 40, "y": 0, "z": 0}}"#,
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    broker.publish(
+        &format!("device/{SN}/cancel"),
+        r#"{"msg_id": "cancel-1", "timestamp": 1757403778, "data": {}}"#,
+    );
+    let cancelled = json(
+        &goal_acks
+            .next_on(&format!("{goal}/ack"), WAIT)
+            .expect("the far goal's ack"),
+    );
+    assert_eq!(cancelled["msg_id"], "far");
+    assert_eq!(cancelled["code"], 3001, "{cancelled}");
+    let ack = json(
+        &cancel_acks
+            .next_on(&format!("device/{SN}/cancel/ack"), WAIT)
+            .expect("the cancel's ack"),
+    );
+    assert_eq!(ack["msg_id"], "cancel-1");
+    assert_eq!(ack["success"], true, "{ack}");
+    // At rest within a second, and not latched: the next goal drives without a reset.
+    std::thread::sleep(Duration::from_secs(1));
+    let (x0, y0, _) = last_pose(&mut d);
+    std::thread::sleep(Duration::from_secs(1));
+    let (x1, y1, _) = last_pose(&mut d);
+    assert!((x1 - x0).hypot(y1 - y0) < 0.01, "still moving after cancel");
+    let next = ask(
+        &broker,
+        &goal_acks,
+        "goal",
+        &format!(
+            r#"{{"msg_id": "near", "timestamp": 1757403790, "data": {{"x": {}, "y": {}, "z": 0}}}}"#,
+            x1 + 0.5,
+            y1
+        ),
+    );
+    assert_eq!(next["msg_id"], "near");
+    assert_eq!(next["success"], true, "{next}");
+}
+
 #[test]
 fn bad_requests_get_error_acks() {
     let broker = Mosquitto::start();

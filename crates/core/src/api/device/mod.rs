@@ -16,8 +16,10 @@
 //! this driver: unless `mapping_forward` names where that stack listens, mapping requests are
 //! refused with 3003; with it, they are passed on as they came and its acks relayed back.
 //!
-//! Two safety commands extend the spec in its own shape: `estop` (`data: {"engaged": bool}`)
-//! engages or releases the software emergency stop, and `reset` (`data: {}`) re-arms a latched
+//! Three commands extend the spec in its own shape: `estop` (`data: {"engaged": bool}`)
+//! engages or releases the software emergency stop, `reset` (`data: {}`) re-arms a latched
+//! stop once its cause has cleared, and `cancel` (`data: {}`) ends the goal under way without
+//! latching; a refusal answers 3002 with the reason.
 //!
 //! Each command is a file of `commands/`, found in `commands::COMMANDS` by its name; the
 //! request's body and `msg_id` are checked once here, and failures are [`DeviceError`]s whose
@@ -302,7 +304,7 @@ mod tests {
     fn estop_and_reset_are_command_topics() {
         let d = DeviceDialect::new("SN1", None, 1 << 20);
         let commands = d.command_topics();
-        for c in ["goal", "estop", "reset", "start_mapping"] {
+        for c in ["goal", "estop", "reset", "cancel", "start_mapping"] {
             assert!(
                 commands.contains(&format!("device/SN1/{c}")),
                 "{c}: {commands:?}"

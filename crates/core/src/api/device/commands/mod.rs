@@ -3,6 +3,7 @@
 //! its command and says when the request is answered; a failure is a [`DeviceError`], whose
 //! code the dialect answers with.
 
+mod cancel;
 mod estop;
 pub(super) mod goal;
 mod mapping;
@@ -63,13 +64,14 @@ const fn entry(name: &'static str, own: bool, handle: Handler) -> Entry {
 
 /// Every command: the spec's mapping requests, which belong to the navigation stack, then
 /// chassisd's own. A new one is its file and a line here.
-pub(super) const COMMANDS: [Entry; 6] = [
+pub(super) const COMMANDS: [Entry; 7] = [
     entry("start_mapping", false, mapping::handle),
     entry("stop_mapping", false, mapping::handle),
     entry("use_map", false, mapping::handle),
     entry("goal", true, goal::handle),
     entry("estop", true, estop::handle),
     entry("reset", true, reset::handle),
+    entry("cancel", true, cancel::handle),
 ];
 
 /// The command called `name`.
