@@ -1140,3 +1140,71 @@ fn hostile_tcpros_peers_cost_the_nodes_process_never_chassisd() {
         "the node's process printed a backtrace as it ended"
     );
 }
+
+/// Service calls have a rate per service, as topics' messages do: a client polling
+/// `/get_position` as fast as rospy can is refused beyond `ros1.command_rate_hz` (with a reason
+/// that says so, and one log line), and another service still answers.
+#[test]
+fn a_service_polled_beyond_its_rate_is_refused_and_the_others_still_answer() {
+    let master = Master::start();
+    let dir = common::tempdir("ros1-service-rate");
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"poll-1\"\n\n[ros1]\nmaster_uri = \"{}\"\ncommand_rate_hz = 5.0\ncommand_burst = 5\n",
+            master.uri()
+        ),
+    )
+    .expect("config");
+    let mut p = Proc::start(&["run", "--config", config.to_str().expect("UTF-8")]);
+    p.wait_log(Duration::from_secs(30), "ROS1 node registered");
+    let poll = r#"
+import time, rospy
+from map_msgs.srv import GetPosition, AboutRobot
+rospy.wait_for_service('/get_position', 10)
+position = rospy.ServiceProxy('/get_position', GetPosition)
+answered = over_rate = 0
+start = time.monotonic()
+for _ in range(100):
+    try:
+        position()
+        answered += 1
+    except rospy.ServiceException as e:
+        if 'command_rate_hz' in str(e):
+            over_rate += 1
+        else:
+            answered += 1
+print('answered', answered, 'over_rate', over_rate, 'seconds', time.monotonic() - start)
+print('navi_info status', rospy.ServiceProxy('/navi_info', AboutRobot)().status)
+"#;
+    let out = text(&ros(
+        &master,
+        &["python3", "-c", poll],
+        Duration::from_secs(60),
+    ));
+    let figure = |key: &str| -> f64 {
+        let words: Vec<&str> = out.split_whitespace().collect();
+        words
+            .iter()
+            .position(|w| *w == key)
+            .and_then(|i| words.get(i + 1))
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no {key} in:\n{out}"))
+    };
+    let (answered, over_rate, seconds) =
+        (figure("answered"), figure("over_rate"), figure("seconds"));
+    assert_eq!(answered + over_rate, 100.0, "{out}");
+    // The burst, then 5 a second (one more for a token refilled while the loop began).
+    assert!(
+        answered <= 5.0 + 5.0 * seconds + 1.0,
+        "{answered} answered in {seconds} s: {out}"
+    );
+    assert!(over_rate > 0.0, "{out}");
+    assert!(out.contains("navi_info status 0"), "{out}");
+    p.wait_log(
+        Duration::from_secs(10),
+        "ROS1 service calls over the rate limit are refused",
+    );
+    p.stop();
+}

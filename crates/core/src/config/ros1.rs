@@ -16,11 +16,13 @@ pub struct Ros1Config {
     /// The node's name in the graph.
     #[serde(default = "default_node_name")]
     pub node_name: String,
-    /// Messages taken per second on each subscribed topic; beyond it they are dropped,
-    /// counted and logged in a summary (as MQTT commands over `mqtt.command_rate_hz`).
+    /// Messages taken per second on each subscribed topic, and calls on each service; beyond
+    /// it messages are dropped and calls refused, counted and logged in a summary (as MQTT
+    /// commands over `mqtt.command_rate_hz`).
     #[serde(default = "default_command_rate_hz")]
     pub command_rate_hz: f64,
-    /// Messages taken at once on a topic before `command_rate_hz` applies.
+    /// Messages (or calls) taken at once on a topic (or service) before `command_rate_hz`
+    /// applies.
     #[serde(default = "default_command_burst")]
     pub command_burst: u32,
 }

@@ -150,7 +150,11 @@ async fn run(settings: NodeSettings) {
     tokio::spawn(write_to_chassisd(up_rx));
     tokio::spawn(end_when_descriptors_run_out());
     tokio::spawn(read_from_chassisd(to_node_tx));
-    let requests = Requests::new(up_tx.clone());
+    let rate = (
+        settings.config.command_rate_hz,
+        settings.config.command_burst,
+    );
+    let requests = Requests::new(up_tx.clone(), rate);
     let mut outage = OutageLog::default();
     let mut outage_start: Option<Instant> = None;
     let mut retry = Duration::from_millis(250);

@@ -33,19 +33,66 @@ struct Calls {
     by_call: HashMap<u64, (std::sync::mpsc::SyncSender<Verdict>, Instant)>,
 }
 
+/// A rate limit and its settings: `ros1.command_rate_hz` and `ros1.command_burst`.
+struct Limit {
+    rate: CommandRate,
+    rate_hz: f64,
+    burst: u32,
+}
+
+impl Limit {
+    fn new((rate_hz, burst): (f64, u32)) -> Self {
+        Self {
+            rate: CommandRate::new(rate_hz, burst),
+            rate_hz,
+            burst,
+        }
+    }
+
+    /// Whether a message or call on `name` is within its rate now. Those beyond it are
+    /// `left` ("dropped", "refused"): logged once when it starts on a name, then summed up
+    /// every 5 s while it lasts.
+    fn admit(&mut self, name: &str, what: &str, left: &str) -> bool {
+        let now = Instant::now();
+        let (admitted, report) = self.rate.admit(name, now);
+        match report.or_else(|| self.rate.due_summary(now)) {
+            Some(RateReport::Started(_)) => tracing::warn!(
+                name,
+                limit_hz = self.rate_hz,
+                burst = self.burst,
+                "ROS1 {what} over the rate limit are {left}; a summary follows every 5 s while it lasts"
+            ),
+            Some(RateReport::Summary(counts)) => {
+                let count: u64 = counts.iter().map(|(_, n)| n).sum();
+                tracing::warn!(
+                    count,
+                    "ROS1 {what} {left} over the rate limit in the last 5 s"
+                );
+            }
+            None => {}
+        }
+        admitted
+    }
+}
+
 /// Hands requests up to chassisd; answers come back by call number.
 #[derive(Clone)]
 pub struct Requests {
     up: mpsc::Sender<FromNode>,
     calls: Arc<Mutex<Calls>>,
+    /// Service calls within their rate per service, as topics' messages are: a client that
+    /// polls a query as fast as it can is refused beyond the rate, and never holds the
+    /// places every other caller waits in.
+    service_rate: Arc<Mutex<Limit>>,
 }
 
 impl Requests {
-    /// Requests that go up through `up`.
-    pub fn new(up: mpsc::Sender<FromNode>) -> Self {
+    /// Requests that go up through `up`; service calls within `rate` (per second, burst).
+    pub fn new(up: mpsc::Sender<FromNode>, rate: (f64, u32)) -> Self {
         Self {
             up,
             calls: Arc::new(Mutex::new(Calls::default())),
+            service_rate: Arc::new(Mutex::new(Limit::new(rate))),
         }
     }
 
@@ -93,6 +140,17 @@ impl Requests {
     /// Sends `request` and waits for the vehicle's answer (on a blocking thread: roslibrust
     /// runs service callbacks there).
     fn call(&self, request: Ros1Request) -> Verdict {
+        let service = request.name();
+        let admitted = self
+            .service_rate
+            .lock()
+            .map_err(|_| "the ROS1 node's rate limit is broken".to_owned())?
+            .admit(service, "service calls", "refused");
+        if !admitted {
+            return Err(format!(
+                "refused: {service} is called more often than ros1.command_rate_hz allows"
+            ));
+        }
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         self.submit(request, Some(tx))?;
         rx.recv_timeout(ANSWER_TIMEOUT)
@@ -477,7 +535,7 @@ async fn forward<T, F>(
     T: roslibrust::RosMessageType,
     F: Fn(T) -> Result<Ros1Request, String> + Send + 'static,
 {
-    let mut rate = CommandRate::new(rate_hz, burst);
+    let mut limit = Limit::new((rate_hz, burst));
     while let Some(message) = subscriber.next().await {
         let message = match message {
             Ok(m) => m,
@@ -486,26 +544,7 @@ async fn forward<T, F>(
                 continue;
             }
         };
-        let now = Instant::now();
-        let (admitted, report) = rate.admit(topic, now);
-        match report.or_else(|| rate.due_summary(now)) {
-            Some(RateReport::Started(_)) => tracing::warn!(
-                topic,
-                limit_hz = rate_hz,
-                burst,
-                "ROS1 messages over the rate limit are dropped; a summary follows every 5 s while it lasts"
-            ),
-            Some(RateReport::Summary(counts)) => {
-                let dropped: u64 = counts.iter().map(|(_, n)| n).sum();
-                tracing::warn!(
-                    topic,
-                    dropped,
-                    "ROS1 messages dropped over the rate limit in the last 5 s"
-                );
-            }
-            None => {}
-        }
-        if !admitted {
+        if !limit.admit(topic, "messages", "dropped") {
             continue;
         }
         let request = to_request(message).and_then(|r| requests.submit(r, None));
