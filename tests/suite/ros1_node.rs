@@ -1152,7 +1152,8 @@ fn a_service_polled_beyond_its_rate_is_refused_and_the_others_still_answer() {
     std::fs::write(
         &config,
         format!(
-            "[vehicle]\nname = \"poll-1\"\n\n[ros1]\nmaster_uri = \"{}\"\ncommand_rate_hz = 5.0\ncommand_burst = 5\n",
+            "[vehicle]\nname = \"poll-1\"\n\n[gnss]\nport = \"{}\"\n\n[ros1]\nmaster_uri = \"{}\"\ncommand_rate_hz = 5.0\ncommand_burst = 5\n",
+            dir.join("absent-tty").display(),
             master.uri()
         ),
     )
@@ -1180,7 +1181,7 @@ print('navi_info status', rospy.ServiceProxy('/navi_info', AboutRobot)().status)
 "#;
     let out = text(&ros(
         &master,
-        &["python3", "-c", poll],
+        &["/usr/bin/python3", "-c", poll],
         Duration::from_secs(60),
     ));
     let figure = |key: &str| -> f64 {
