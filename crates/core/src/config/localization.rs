@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::{ConfigError, VehicleConfig, check_range};
+use super::{ConfigError, VehicleConfig, check_range, check_ranges};
 use crate::fusion::localizer::LocalizerConfig;
 use crate::geodesy::Geodetic;
 
@@ -169,80 +169,75 @@ impl Default for LocalizationConfig {
 }
 
 impl LocalizationConfig {
-    /// Checks ranges.
+    /// Checks ranges: the datum, how GNSS fixes are weighed, then how dead reckoning's
+    /// error grows.
     pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
-        if let Some([lat, lon, h]) = self.datum {
-            check_range(file, "localization.datum[0]", lat, -90.0..=90.0, "degrees")?;
-            check_range(
-                file,
-                "localization.datum[1]",
-                lon,
-                -180.0..=180.0,
-                "degrees",
-            )?;
-            check_range(
-                file,
-                "localization.datum[2]",
-                h,
-                crate::geodesy::PLAUSIBLE_HEIGHT_M,
-                "m",
-            )?;
+        if let Some(datum) = self.datum {
+            check_datum(datum, file)?;
         }
+        self.check_gnss_weighting(file)?;
+        self.check_gnss_error_model(file)?;
+        self.check_gyro_model(file)?;
+        self.check_odometry_model(file)?;
         check_range(
             file,
-            "localization.locate_bound_m",
-            self.locate_bound_m,
-            0.01..=100.0,
+            "localization.max_position_radius_m",
+            self.max_position_radius_m,
+            1.0..=1_000_000.0,
             "m",
-        )?;
-        check_range(
+        )
+    }
+
+    /// The locate bound, the fixes' latency, the heading's noise and when to relocate.
+    fn check_gnss_weighting(&self, file: &Path) -> Result<(), ConfigError> {
+        check_ranges(
             file,
-            "localization.gnss_latency_s",
-            self.gnss_latency_s,
-            0.0..=1.0,
-            "s",
-        )?;
-        check_range(
+            "localization.",
+            [
+                ("locate_bound_m", self.locate_bound_m, 0.01..=100.0, "m"),
+                ("gnss_latency_s", self.gnss_latency_s, 0.0..=1.0, "s"),
+                (
+                    "heading_sigma_deg",
+                    self.heading_sigma_deg,
+                    0.01..=30.0,
+                    "degrees",
+                ),
+                ("relocate_after_s", self.relocate_after_s, 0.2..=60.0, "s"),
+            ],
+        )
+    }
+
+    /// The wandering part of a fix's error, and the receiver's velocity accuracy.
+    fn check_gnss_error_model(&self, file: &Path) -> Result<(), ConfigError> {
+        check_ranges(
             file,
-            "localization.heading_sigma_deg",
-            self.heading_sigma_deg,
-            0.01..=30.0,
-            "degrees",
-        )?;
-        check_range(
-            file,
-            "localization.relocate_after_s",
-            self.relocate_after_s,
-            0.2..=60.0,
-            "s",
-        )?;
-        check_range(
-            file,
-            "localization.gnss_correlated_fraction",
-            self.gnss_correlated_fraction,
-            0.0..=0.95,
-            "",
-        )?;
-        check_range(
-            file,
-            "localization.rtk_correlated_fraction",
-            self.rtk_correlated_fraction,
-            0.0..=0.95,
-            "",
-        )?;
-        check_range(
-            file,
-            "localization.gnss_correlation_time_s",
-            self.gnss_correlation_time_s,
-            1.0..=3600.0,
-            "s",
-        )?;
-        check_range(
-            file,
-            "localization.gnss_correlation_distance_m",
-            self.gnss_correlation_distance_m,
-            0.1..=100_000.0,
-            "m",
+            "localization.",
+            [
+                (
+                    "gnss_correlated_fraction",
+                    self.gnss_correlated_fraction,
+                    0.0..=0.95,
+                    "",
+                ),
+                (
+                    "rtk_correlated_fraction",
+                    self.rtk_correlated_fraction,
+                    0.0..=0.95,
+                    "",
+                ),
+                (
+                    "gnss_correlation_time_s",
+                    self.gnss_correlation_time_s,
+                    1.0..=3600.0,
+                    "s",
+                ),
+                (
+                    "gnss_correlation_distance_m",
+                    self.gnss_correlation_distance_m,
+                    0.1..=100_000.0,
+                    "m",
+                ),
+            ],
         )?;
         if let Some(v) = self.gnss_velocity_sigma_mps {
             check_range(
@@ -253,50 +248,41 @@ impl LocalizationConfig {
                 "m/s",
             )?;
         }
-        check_range(
+        Ok(())
+    }
+
+    /// The gyro's noise, the odom heading's walk and the gyro bias's walk.
+    fn check_gyro_model(&self, file: &Path) -> Result<(), ConfigError> {
+        check_ranges(
             file,
-            "localization.gyro_noise_rps",
-            self.gyro_noise_rps,
-            1e-5..=0.5,
-            "rad/s",
-        )?;
-        check_range(
-            file,
-            "localization.heading_walk",
-            self.heading_walk,
-            1e-5..=0.1,
-            "rad per √s",
-        )?;
-        check_range(
-            file,
-            "localization.gyro_bias_walk",
-            self.gyro_bias_walk,
-            0.0..=1e-2,
-            "rad/s per √s",
-        )?;
+            "localization.",
+            [
+                ("gyro_noise_rps", self.gyro_noise_rps, 1e-5..=0.5, "rad/s"),
+                ("heading_walk", self.heading_walk, 1e-5..=0.1, "rad per √s"),
+                (
+                    "gyro_bias_walk",
+                    self.gyro_bias_walk,
+                    0.0..=1e-2,
+                    "rad/s per √s",
+                ),
+            ],
+        )
+    }
+
+    /// The odometry's error variances (which share one range) and the wheels' scale walk.
+    fn check_odometry_model(&self, file: &Path) -> Result<(), ConfigError> {
         for (key, value, unit) in [
+            ("odom_along_m2_per_m", self.odom_along_m2_per_m, "m²/m"),
+            ("wheel_slip_m2_per_m", self.wheel_slip_m2_per_m, "m²/m"),
+            ("odom_across_m2_per_m", self.odom_across_m2_per_m, "m²/m"),
             (
-                "localization.odom_along_m2_per_m",
-                self.odom_along_m2_per_m,
-                "m²/m",
-            ),
-            (
-                "localization.wheel_slip_m2_per_m",
-                self.wheel_slip_m2_per_m,
-                "m²/m",
-            ),
-            (
-                "localization.odom_across_m2_per_m",
-                self.odom_across_m2_per_m,
-                "m²/m",
-            ),
-            (
-                "localization.odom_yaw_rad2_per_rad",
+                "odom_yaw_rad2_per_rad",
                 self.odom_yaw_rad2_per_rad,
                 "rad²/rad",
             ),
         ] {
-            check_range(file, key, value, 1e-7..=1.0, unit)?;
+            let key = format!("localization.{key}");
+            check_range(file, &key, value, 1e-7..=1.0, unit)?;
         }
         check_range(
             file,
@@ -304,15 +290,21 @@ impl LocalizationConfig {
             self.wheel_scale_walk,
             0.0..=0.1,
             "per √m",
-        )?;
-        check_range(
-            file,
-            "localization.max_position_radius_m",
-            self.max_position_radius_m,
-            1.0..=1_000_000.0,
-            "m",
         )
     }
+}
+
+/// `localization.datum`: latitude, longitude and a plausible height.
+fn check_datum([lat, lon, h]: [f64; 3], file: &Path) -> Result<(), ConfigError> {
+    check_ranges(
+        file,
+        "localization.",
+        [
+            ("datum[0]", lat, -90.0..=90.0, "degrees"),
+            ("datum[1]", lon, -180.0..=180.0, "degrees"),
+            ("datum[2]", h, crate::geodesy::PLAUSIBLE_HEIGHT_M, "m"),
+        ],
+    )
 }
 
 /// The localiser settings of a vehicle configuration.
@@ -350,4 +342,80 @@ pub fn localizer_config(config: &VehicleConfig) -> LocalizerConfig {
         c.cog_min_speed_mps = g.cog_min_speed_mps;
     }
     c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The error of the default settings changed by `edit`.
+    fn error_with(edit: impl FnOnce(&mut LocalizationConfig)) -> String {
+        let mut l = LocalizationConfig::default();
+        edit(&mut l);
+        l.validate(Path::new("v.toml")).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn each_range_names_its_key() {
+        assert!(
+            LocalizationConfig::default()
+                .validate(Path::new("v.toml"))
+                .is_ok()
+        );
+        for (e, expected) in [
+            (
+                error_with(|l| l.datum = Some([91.0, 8.0, 400.0])),
+                "`localization.datum[0]`: 91 is outside -90..=90 degrees",
+            ),
+            (
+                error_with(|l| l.datum = Some([47.0, 8.0, 20_000.0])),
+                "`localization.datum[2]`: 20000 is outside -500..=10000 m",
+            ),
+            (
+                error_with(|l| l.relocate_after_s = 0.1),
+                "`localization.relocate_after_s`: 0.1 is outside 0.2..=60 s",
+            ),
+            (
+                error_with(|l| l.gnss_velocity_sigma_mps = Some(2.0)),
+                "`localization.gnss_velocity_sigma_mps`: 2 is outside 0.001..=1 m/s",
+            ),
+            (
+                error_with(|l| l.gyro_bias_walk = 1.0),
+                "`localization.gyro_bias_walk`: 1 is outside 0..=0.01 rad/s per √s",
+            ),
+            (
+                error_with(|l| l.odom_yaw_rad2_per_rad = 0.0),
+                "`localization.odom_yaw_rad2_per_rad`: 0 is outside 0.0000001..=1 rad²/rad",
+            ),
+            (
+                error_with(|l| l.wheel_scale_walk = 1.0),
+                "`localization.wheel_scale_walk`: 1 is outside 0..=0.1 per √m",
+            ),
+            (
+                error_with(|l| l.max_position_radius_m = 0.0),
+                "`localization.max_position_radius_m`: 0 is outside 1..=1000000 m",
+            ),
+        ] {
+            assert!(e.contains(expected), "{expected}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_first_value_out_of_range_is_reported() {
+        let e = error_with(|l| {
+            l.datum = Some([47.0, 181.0, 400.0]);
+            l.locate_bound_m = 0.0;
+        });
+        assert!(e.contains("`localization.datum[1]`"), "{e}");
+        let e = error_with(|l| {
+            l.gnss_velocity_sigma_mps = Some(2.0);
+            l.gyro_noise_rps = 1.0;
+        });
+        assert!(e.contains("`localization.gnss_velocity_sigma_mps`"), "{e}");
+        let e = error_with(|l| {
+            l.wheel_scale_walk = 1.0;
+            l.max_position_radius_m = 0.0;
+        });
+        assert!(e.contains("`localization.wheel_scale_walk`"), "{e}");
+    }
 }

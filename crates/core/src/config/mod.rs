@@ -677,6 +677,19 @@ pub fn check_range(
     })
 }
 
+/// [`check_range`] on each `(key, value, range, unit)` in turn, its key written under
+/// `prefix` (e.g. `chassis.`): the first value out of its range is the error.
+pub fn check_ranges<'a>(
+    file: &Path,
+    prefix: &str,
+    checks: impl IntoIterator<Item = (&'a str, f64, std::ops::RangeInclusive<f64>, &'a str)>,
+) -> Result<(), ConfigError> {
+    for (key, value, range, unit) in checks {
+        check_range(file, &format!("{prefix}{key}"), value, range, unit)?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

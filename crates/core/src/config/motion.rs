@@ -2,12 +2,13 @@
 //! goals, trajectory tasks). Every limit defaults to the drive train's (`[chassis]`) and may
 //! only be lower: the chassis limits stay the last word on what reaches the wheels.
 
+use std::ops::RangeInclusive;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use super::chassis::ChassisConfig;
-use super::{ConfigError, check_range};
+use super::{ConfigError, check_range, check_ranges};
 use crate::control::profile::Limits;
 pub use crate::control::settings::{MinGnss, MotionSettings, Reach, TaskSettings, creep};
 
@@ -139,41 +140,43 @@ impl MotionConfig {
                 "add the [chassis] table of the drive train, or remove [motion]",
             ));
         };
-        // A move may be gentler than the drive train, never harsher.
+        self.check_chassis_caps(chassis, file)?;
+        self.check_move_ranges(file)?;
+        self.check_task_ranges(file)
+    }
+
+    /// The limits a move shares with the drive train: positive, and within the chassis'.
+    fn check_chassis_caps(&self, c: &ChassisConfig, file: &Path) -> Result<(), ConfigError> {
         for (key, value, cap, unit) in [
-            (
-                "max_speed_mps",
-                self.max_speed_mps,
-                chassis.max_speed_mps,
-                "m/s",
-            ),
+            ("max_speed_mps", self.max_speed_mps, c.max_speed_mps, "m/s"),
             (
                 "max_accel_mps2",
                 self.max_accel_mps2,
-                chassis.max_accel_mps2,
+                c.max_accel_mps2,
                 "m/s²",
             ),
             (
                 "max_decel_mps2",
                 self.max_decel_mps2,
-                chassis.max_decel_mps2,
+                c.max_decel_mps2,
                 "m/s²",
             ),
             (
                 "max_yaw_rate_rps",
                 self.max_yaw_rate_rps,
-                chassis.max_yaw_rate_rps,
+                c.max_yaw_rate_rps,
                 "rad/s",
             ),
             (
                 "max_yaw_accel_rps2",
                 self.max_yaw_accel_rps2,
-                chassis.max_yaw_accel_rps2,
+                c.max_yaw_accel_rps2,
                 "rad/s²",
             ),
         ] {
             let Some(v) = value else { continue };
             check_range(file, &format!("motion.{key}"), v, 0.001..=f64::MAX, unit)?;
+            // A move may be gentler than the drive train, never harsher.
             if v > cap {
                 return Err(ConfigError::invalid(
                     file,
@@ -186,88 +189,111 @@ impl MotionConfig {
                 ));
             }
         }
-        for (key, value, range, unit) in [
-            ("max_jerk_mps3", self.max_jerk_mps3, 0.01..=1000.0, "m/s³"),
-            (
-                "max_yaw_jerk_rps3",
-                self.max_yaw_jerk_rps3,
-                0.01..=1000.0,
-                "rad/s³",
-            ),
-            (
-                "position_tolerance_m",
-                self.position_tolerance_m,
-                0.0001..=0.5,
-                "m",
-            ),
-            (
-                "angle_tolerance_deg",
-                self.angle_tolerance_deg,
-                0.01..=20.0,
-                "degrees",
-            ),
-            (
-                "goal_position_tolerance_m",
-                self.goal_position_tolerance_m,
-                0.001..=5.0,
-                "m",
-            ),
-            (
-                "goal_angle_tolerance_deg",
-                self.goal_angle_tolerance_deg,
-                0.05..=180.0,
-                "degrees",
-            ),
-            (
-                "time_allowance_factor",
-                self.time_allowance_factor,
-                1.0..=100.0,
-                "times",
-            ),
-            ("time_allowance_s", self.time_allowance_s, 0.0..=3600.0, "s"),
-            (
-                "max_lateral_accel_mps2",
-                self.max_lateral_accel_mps2,
-                0.01..=10.0,
-                "m/s²",
-            ),
-            (
-                "task_gnss_wait_s",
-                self.task_gnss_wait_s,
-                0.0..=86_400.0,
-                "s",
-            ),
-            (
-                "task_max_approach_m",
-                self.task_max_approach_m,
-                0.0..=1000.0,
-                "m",
-            ),
-            (
-                "max_cross_track_m",
-                self.max_cross_track_m,
-                0.05..=10.0,
-                "m",
-            ),
-            (
-                "max_goal_distance_m",
-                self.max_goal_distance_m,
-                0.1..=10_000.0,
-                "m",
-            ),
-            (
-                "max_path_radius_m",
-                self.max_path_radius_m,
-                1.0..=100_000.0,
-                "m",
-            ),
-        ] {
-            if let Some(v) = value {
-                check_range(file, &format!("motion.{key}"), v, range, unit)?;
-            }
-        }
         Ok(())
     }
+
+    /// A move's own jerk limits, arrival tolerances and time allowance.
+    fn check_move_ranges(&self, file: &Path) -> Result<(), ConfigError> {
+        check_set_ranges(
+            file,
+            [
+                ("max_jerk_mps3", self.max_jerk_mps3, 0.01..=1000.0, "m/s³"),
+                (
+                    "max_yaw_jerk_rps3",
+                    self.max_yaw_jerk_rps3,
+                    0.01..=1000.0,
+                    "rad/s³",
+                ),
+                (
+                    "position_tolerance_m",
+                    self.position_tolerance_m,
+                    0.0001..=0.5,
+                    "m",
+                ),
+                (
+                    "angle_tolerance_deg",
+                    self.angle_tolerance_deg,
+                    0.01..=20.0,
+                    "degrees",
+                ),
+                (
+                    "goal_position_tolerance_m",
+                    self.goal_position_tolerance_m,
+                    0.001..=5.0,
+                    "m",
+                ),
+                (
+                    "goal_angle_tolerance_deg",
+                    self.goal_angle_tolerance_deg,
+                    0.05..=180.0,
+                    "degrees",
+                ),
+                (
+                    "time_allowance_factor",
+                    self.time_allowance_factor,
+                    1.0..=100.0,
+                    "times",
+                ),
+                ("time_allowance_s", self.time_allowance_s, 0.0..=3600.0, "s"),
+            ],
+        )
+    }
+
+    /// Trajectory tasks' curves, GNSS wait and approach, and how far goals and paths reach.
+    fn check_task_ranges(&self, file: &Path) -> Result<(), ConfigError> {
+        check_set_ranges(
+            file,
+            [
+                (
+                    "max_lateral_accel_mps2",
+                    self.max_lateral_accel_mps2,
+                    0.01..=10.0,
+                    "m/s²",
+                ),
+                (
+                    "task_gnss_wait_s",
+                    self.task_gnss_wait_s,
+                    0.0..=86_400.0,
+                    "s",
+                ),
+                (
+                    "task_max_approach_m",
+                    self.task_max_approach_m,
+                    0.0..=1000.0,
+                    "m",
+                ),
+                (
+                    "max_cross_track_m",
+                    self.max_cross_track_m,
+                    0.05..=10.0,
+                    "m",
+                ),
+                (
+                    "max_goal_distance_m",
+                    self.max_goal_distance_m,
+                    0.1..=10_000.0,
+                    "m",
+                ),
+                (
+                    "max_path_radius_m",
+                    self.max_path_radius_m,
+                    1.0..=100_000.0,
+                    "m",
+                ),
+            ],
+        )
+    }
+}
+
+/// [`check_ranges`] under `motion.` on the values that are set.
+fn check_set_ranges<'a>(
+    file: &Path,
+    checks: impl IntoIterator<Item = (&'a str, Option<f64>, RangeInclusive<f64>, &'a str)>,
+) -> Result<(), ConfigError> {
+    let set = checks
+        .into_iter()
+        .filter_map(|(key, value, range, unit)| Some((key, value?, range, unit)));
+    check_ranges(file, "motion.", set)
 }
 
 #[cfg(test)]
@@ -299,5 +325,54 @@ mod tests {
         assert!(e.contains("above chassis.max_speed_mps = 1 m/s"), "{e}");
         assert!(e.contains("raise chassis.max_speed_mps"), "{e}");
         assert!(m.validate(None, file).is_err());
+    }
+
+    #[test]
+    fn each_range_names_its_key() {
+        let file = Path::new("v.toml");
+        for (m, expected) in [
+            (
+                MotionConfig {
+                    max_yaw_accel_rps2: Some(0.0),
+                    ..MotionConfig::default()
+                },
+                "`motion.max_yaw_accel_rps2`: 0 is outside 0.001..=",
+            ),
+            (
+                MotionConfig {
+                    time_allowance_factor: Some(0.5),
+                    ..MotionConfig::default()
+                },
+                "`motion.time_allowance_factor`: 0.5 is outside 1..=100 times",
+            ),
+            (
+                MotionConfig {
+                    max_cross_track_m: Some(0.01),
+                    ..MotionConfig::default()
+                },
+                "`motion.max_cross_track_m`: 0.01 is outside 0.05..=10 m",
+            ),
+            // The chassis' caps come first, then a move's ranges, then a task's.
+            (
+                MotionConfig {
+                    max_path_radius_m: Some(0.0),
+                    max_jerk_mps3: Some(0.0),
+                    max_yaw_rate_rps: Some(2.0),
+                    ..MotionConfig::default()
+                },
+                "`motion.max_yaw_rate_rps`: 2 rad/s is above chassis.max_yaw_rate_rps",
+            ),
+            (
+                MotionConfig {
+                    max_path_radius_m: Some(0.0),
+                    max_jerk_mps3: Some(0.0),
+                    ..MotionConfig::default()
+                },
+                "`motion.max_jerk_mps3`",
+            ),
+        ] {
+            let e = m.validate(Some(&chassis()), file).unwrap_err().to_string();
+            assert!(e.contains(expected), "{expected}: {e}");
+        }
     }
 }

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::{ConfigError, check_range};
+use super::{ConfigError, check_range, check_ranges};
 
 /// `[mqtt]`
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
@@ -298,21 +298,48 @@ impl MqttConfig {
 
     /// Checks ranges and consistency.
     pub fn validate(&self, file: &Path) -> Result<(), ConfigError> {
-        let invalid = |key: &str, problem: &str, fix: &str| {
-            ConfigError::invalid(file, &format!("mqtt.{key}"), problem, fix)
-        };
+        self.check_broker_address(file)?;
+        self.check_client_identity(file)?;
+        self.check_status_topic(file)?;
+        self.check_link_limits(file)?;
+        if let Some(root) = &self.root {
+            root.validate(file)?;
+        }
+        if let Some(device) = &self.device {
+            device.validate(file)?;
+        }
+        if let Some(tls) = &self.tls {
+            tls.check_client_pair(file)?;
+        }
+        self.validate_embedded_broker(file)
+    }
+
+    /// The broker's host and port.
+    fn check_broker_address(&self, file: &Path) -> Result<(), ConfigError> {
         if self.host.trim().is_empty() {
             return Err(invalid(
+                file,
                 "host",
                 "is empty",
                 "set the broker's address, e.g. \"127.0.0.1\"",
             ));
         }
         if self.port == 0 {
-            return Err(invalid("port", "is 0", "set the broker's port, e.g. 1883"));
+            return Err(invalid(
+                file,
+                "port",
+                "is 0",
+                "set the broker's port, e.g. 1883",
+            ));
         }
+        Ok(())
+    }
+
+    /// The credentials, the client id and the ids reserved for other clients.
+    fn check_client_identity(&self, file: &Path) -> Result<(), ConfigError> {
         if self.password.is_some() && self.username.is_none() {
             return Err(invalid(
+                file,
                 "password",
                 "is set without a username",
                 "set mqtt.username too",
@@ -324,6 +351,7 @@ impl MqttConfig {
             .is_some_and(|c| c.is_empty() || c.len() > 128)
         {
             return Err(invalid(
+                file,
                 "client_id",
                 "must be 1 to 128 characters",
                 "choose a shorter, non-empty id",
@@ -335,38 +363,43 @@ impl MqttConfig {
             .find(|id| !crate::broker::admission::routable_client_id(id) || id.is_empty())
         {
             return Err(invalid(
+                file,
                 "reserved_client_ids",
                 &format!("{bad:?} is not a client id a broker can route"),
                 "list non-empty ids without + # / $ or control characters",
             ));
         }
+        Ok(())
+    }
+
+    /// The online/offline topic: one a client can subscribe to by name.
+    fn check_status_topic(&self, file: &Path) -> Result<(), ConfigError> {
         if self.status_topic.is_empty() || self.status_topic.contains(['+', '#']) {
             return Err(invalid(
+                file,
                 "status_topic",
                 "must be a non-empty topic without wildcards",
                 "use e.g. \"chassisd/{name}/status\"",
             ));
         }
-        check_range(
+        Ok(())
+    }
+
+    /// The link's timings, command rate, queues and largest message.
+    fn check_link_limits(&self, file: &Path) -> Result<(), ConfigError> {
+        check_ranges(
             file,
-            "mqtt.keep_alive_s",
-            self.keep_alive_s,
-            1.0..=600.0,
-            "s",
-        )?;
-        check_range(
-            file,
-            "mqtt.reconnect_max_s",
-            self.reconnect_max_s,
-            0.1..=300.0,
-            "s",
-        )?;
-        check_range(
-            file,
-            "mqtt.command_rate_hz",
-            self.command_rate_hz,
-            0.1..=100_000.0,
-            "per s",
+            "mqtt.",
+            [
+                ("keep_alive_s", self.keep_alive_s, 1.0..=600.0, "s"),
+                ("reconnect_max_s", self.reconnect_max_s, 0.1..=300.0, "s"),
+                (
+                    "command_rate_hz",
+                    self.command_rate_hz,
+                    0.1..=100_000.0,
+                    "per s",
+                ),
+            ],
         )?;
         for (key, n, max) in [
             ("command_burst", self.command_burst as usize, 100_000),
@@ -376,72 +409,19 @@ impl MqttConfig {
         ] {
             if n == 0 || n > max {
                 return Err(invalid(
+                    file,
                     key,
                     &format!("{n} is outside 1..={max}"),
                     "choose a value in range",
                 ));
             }
         }
-        if let Some(r) = &self.root {
-            if !is_topic_level(&r.vehicle_id) {
-                return Err(invalid(
-                    "root.vehicle_id",
-                    "must be one non-empty topic level (no '/', '+' or '#')",
-                    "use the vehicle's id, e.g. \"robot1\"",
-                ));
-            }
-            check_range(
-                file,
-                "mqtt.root.heartbeat_timeout_s",
-                r.heartbeat_timeout_s,
-                0.3..=600.0,
-                "s",
-            )?;
-            if r.heartbeat_client_id.as_deref().is_some_and(str::is_empty) {
-                return Err(invalid(
-                    "root.heartbeat_client_id",
-                    "is empty",
-                    "name the controlling client's id, or remove the key",
-                ));
-            }
-        }
-        if let Some(d) = &self.device {
-            if !is_topic_level(&d.serial_number) {
-                return Err(invalid(
-                    "device.serial_number",
-                    "must be one non-empty topic level (no '/', '+' or '#')",
-                    "use the serial number as printed, e.g. \"SN20260001\"",
-                ));
-            }
-            if d.mapping_forward
-                .as_ref()
-                .is_some_and(|f| f.is_empty() || f.contains(['+', '#']))
-            {
-                return Err(invalid(
-                    "device.mapping_forward",
-                    "must be a non-empty topic prefix without wildcards",
-                    "use e.g. \"nav/SN20260001\"",
-                ));
-            }
-        }
-        if let Some(tls) = &self.tls
-            && tls.client_cert_file.is_some() != tls.client_key_file.is_some()
-        {
-            return Err(invalid(
-                "tls.client_key_file",
-                "a client certificate needs its key and the other way round",
-                "set both client_cert_file and client_key_file, or neither",
-            ));
-        }
-        self.validate_embedded_broker(file)
+        Ok(())
     }
 
     /// The embedded broker's own rules: nobody on the network gets in without credentials,
     /// and TLS needs the broker's certificate.
     fn validate_embedded_broker(&self, file: &Path) -> Result<(), ConfigError> {
-        let invalid = |key: &str, problem: &str, fix: &str| {
-            ConfigError::invalid(file, &format!("mqtt.{key}"), problem, fix)
-        };
         let server_tls = self
             .tls
             .as_ref()
@@ -449,6 +429,7 @@ impl MqttConfig {
         if !self.embedded_broker {
             if matches!(server_tls, Some((true, _) | (_, true))) {
                 return Err(invalid(
+                    file,
                     "tls.cert_file",
                     "is the embedded broker's certificate, and mqtt.embedded_broker is off",
                     "remove tls.cert_file and tls.key_file, or set embedded_broker = true",
@@ -456,8 +437,35 @@ impl MqttConfig {
             }
             return Ok(());
         }
+        self.check_embedded_credentials(file)?;
+        if let Some(has) = server_tls
+            && has != (true, true)
+        {
+            return Err(invalid(
+                file,
+                "tls.cert_file",
+                "the embedded broker serves TLS with a certificate and its key, and one is missing",
+                "set tls.cert_file and tls.key_file (PEM, signed by tls.ca_file's CA), or \
+                 remove [mqtt.tls]",
+            ));
+        }
+        if self.embedded_max_clients == 0 || self.embedded_max_clients > 1024 {
+            return Err(invalid(
+                file,
+                "embedded_max_clients",
+                &format!("{} is outside 1..=1024", self.embedded_max_clients),
+                "a vehicle has a handful of clients; 64 is the default",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The embedded broker takes nobody from the network without a user name, and no user
+    /// name without a password.
+    fn check_embedded_credentials(&self, file: &Path) -> Result<(), ConfigError> {
         if self.username.is_none() && !is_loopback(&self.host) {
             return Err(invalid(
+                file,
                 "username",
                 &format!(
                     "is not set, and the embedded broker would listen on {} beyond this                      computer: anyone on the network could read everything and drive the                      vehicle",
@@ -468,26 +476,91 @@ impl MqttConfig {
         }
         if self.username.is_some() && self.password.as_deref().is_none_or(str::is_empty) {
             return Err(invalid(
+                file,
                 "password",
                 "is not set: the embedded broker requires a user name and a password",
                 "set mqtt.password (a long random one), or remove mqtt.username",
             ));
         }
-        if let Some(has) = server_tls
-            && has != (true, true)
-        {
+        Ok(())
+    }
+}
+
+/// An invalid value at `mqtt.<key>` in `file`.
+fn invalid(file: &Path, key: &str, problem: &str, fix: &str) -> ConfigError {
+    ConfigError::invalid(file, &format!("mqtt.{key}"), problem, fix)
+}
+
+impl RootDialectConfig {
+    /// `[mqtt.root]`: its topic level, heartbeat timeout and controlling client.
+    fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        if !is_topic_level(&self.vehicle_id) {
             return Err(invalid(
-                "tls.cert_file",
-                "the embedded broker serves TLS with a certificate and its key, and one is missing",
-                "set tls.cert_file and tls.key_file (PEM, signed by tls.ca_file's CA), or \
-                 remove [mqtt.tls]",
+                file,
+                "root.vehicle_id",
+                "must be one non-empty topic level (no '/', '+' or '#')",
+                "use the vehicle's id, e.g. \"robot1\"",
             ));
         }
-        if self.embedded_max_clients == 0 || self.embedded_max_clients > 1024 {
+        check_range(
+            file,
+            "mqtt.root.heartbeat_timeout_s",
+            self.heartbeat_timeout_s,
+            0.3..=600.0,
+            "s",
+        )?;
+        if self
+            .heartbeat_client_id
+            .as_deref()
+            .is_some_and(str::is_empty)
+        {
             return Err(invalid(
-                "embedded_max_clients",
-                &format!("{} is outside 1..=1024", self.embedded_max_clients),
-                "a vehicle has a handful of clients; 64 is the default",
+                file,
+                "root.heartbeat_client_id",
+                "is empty",
+                "name the controlling client's id, or remove the key",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl DeviceDialectConfig {
+    /// `[mqtt.device]`: its topic level and the mapping requests' prefix.
+    fn validate(&self, file: &Path) -> Result<(), ConfigError> {
+        if !is_topic_level(&self.serial_number) {
+            return Err(invalid(
+                file,
+                "device.serial_number",
+                "must be one non-empty topic level (no '/', '+' or '#')",
+                "use the serial number as printed, e.g. \"SN20260001\"",
+            ));
+        }
+        if self
+            .mapping_forward
+            .as_ref()
+            .is_some_and(|f| f.is_empty() || f.contains(['+', '#']))
+        {
+            return Err(invalid(
+                file,
+                "device.mapping_forward",
+                "must be a non-empty topic prefix without wildcards",
+                "use e.g. \"nav/SN20260001\"",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl TlsConfig {
+    /// A client certificate comes with its key.
+    fn check_client_pair(&self, file: &Path) -> Result<(), ConfigError> {
+        if self.client_cert_file.is_some() != self.client_key_file.is_some() {
+            return Err(invalid(
+                file,
+                "tls.client_key_file",
+                "a client certificate needs its key and the other way round",
+                "set both client_cert_file and client_key_file, or neither",
             ));
         }
         Ok(())
@@ -507,4 +580,156 @@ pub fn is_loopback(host: &str) -> bool {
 /// Whether `s` can stand as one level of a topic: non-empty, no separator or wildcard.
 pub fn is_topic_level(s: &str) -> bool {
     !s.is_empty() && !s.contains(['/', '+', '#']) && !s.chars().any(char::is_control)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The error of the default configuration changed by `edit`.
+    fn error_with(edit: impl FnOnce(&mut MqttConfig)) -> String {
+        let mut m = MqttConfig::default();
+        edit(&mut m);
+        m.validate(Path::new("v.toml")).unwrap_err().to_string()
+    }
+
+    fn tls() -> TlsConfig {
+        TlsConfig {
+            ca_file: "ca.pem".into(),
+            client_cert_file: None,
+            client_key_file: None,
+            cert_file: None,
+            key_file: None,
+        }
+    }
+
+    #[test]
+    fn each_check_names_its_key_and_the_problem() {
+        assert!(MqttConfig::default().validate(Path::new("v.toml")).is_ok());
+        for (e, expected) in [
+            (error_with(|m| m.host = " ".into()), "`mqtt.host`: is empty"),
+            (error_with(|m| m.port = 0), "`mqtt.port`: is 0"),
+            (
+                error_with(|m| m.password = Some("x".into())),
+                "`mqtt.password`: is set without a username",
+            ),
+            (
+                error_with(|m| m.client_id = Some("x".repeat(129))),
+                "`mqtt.client_id`: must be 1 to 128 characters",
+            ),
+            (
+                error_with(|m| m.reserved_client_ids = vec!["app".into(), "a/b".into()]),
+                "`mqtt.reserved_client_ids`: \"a/b\" is not a client id a broker can route",
+            ),
+            (
+                error_with(|m| m.status_topic = "robots/#".into()),
+                "`mqtt.status_topic`: must be a non-empty topic without wildcards",
+            ),
+            (
+                error_with(|m| m.keep_alive_s = 0.5),
+                "`mqtt.keep_alive_s`: 0.5 is outside 1..=600 s",
+            ),
+            (
+                error_with(|m| m.command_rate_hz = 0.0),
+                "`mqtt.command_rate_hz`: 0 is outside 0.1..=100000 per s",
+            ),
+            (
+                error_with(|m| m.reply_queue = 0),
+                "`mqtt.reply_queue`: 0 is outside 1..=100000",
+            ),
+            (
+                error_with(|m| {
+                    m.root = Some(RootDialectConfig {
+                        vehicle_id: "robot1".into(),
+                        heartbeat_timeout_s: 3.0,
+                        require_heartbeat: false,
+                        heartbeat_client_id: Some(String::new()),
+                    })
+                }),
+                "`mqtt.root.heartbeat_client_id`: is empty",
+            ),
+            (
+                error_with(|m| {
+                    m.root = Some(RootDialectConfig {
+                        vehicle_id: "robot/1".into(),
+                        heartbeat_timeout_s: 3.0,
+                        require_heartbeat: false,
+                        heartbeat_client_id: None,
+                    })
+                }),
+                "`mqtt.root.vehicle_id`: must be one non-empty topic level",
+            ),
+            (
+                error_with(|m| {
+                    m.device = Some(DeviceDialectConfig {
+                        serial_number: "SN1".into(),
+                        mapping_forward: Some("nav/+".into()),
+                    })
+                }),
+                "`mqtt.device.mapping_forward`: must be a non-empty topic prefix",
+            ),
+            (
+                error_with(|m| {
+                    m.tls = Some(TlsConfig {
+                        client_cert_file: Some("client.pem".into()),
+                        ..tls()
+                    })
+                }),
+                "`mqtt.tls.client_key_file`: a client certificate needs its key",
+            ),
+            (
+                error_with(|m| {
+                    m.tls = Some(TlsConfig {
+                        key_file: Some("broker.key".into()),
+                        ..tls()
+                    })
+                }),
+                "`mqtt.tls.cert_file`: is the embedded broker's certificate",
+            ),
+            (
+                error_with(|m| {
+                    m.embedded_broker = true;
+                    m.embedded_max_clients = 0;
+                }),
+                "`mqtt.embedded_max_clients`: 0 is outside 1..=1024",
+            ),
+        ] {
+            assert!(e.contains(expected), "{expected}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_first_part_in_error_is_reported() {
+        // The address, the identity, the status topic, the link's limits, the dialects,
+        // then TLS and the embedded broker.
+        let e = error_with(|m| {
+            m.port = 0;
+            m.client_id = Some(String::new());
+        });
+        assert!(e.contains("`mqtt.port`"), "{e}");
+        let e = error_with(|m| {
+            m.status_topic = String::new();
+            m.max_payload = 0;
+        });
+        assert!(e.contains("`mqtt.status_topic`"), "{e}");
+        let e = error_with(|m| {
+            m.max_payload = 0;
+            m.device = Some(DeviceDialectConfig {
+                serial_number: String::new(),
+                mapping_forward: None,
+            });
+        });
+        assert!(e.contains("`mqtt.max_payload`"), "{e}");
+        let e = error_with(|m| {
+            m.device = Some(DeviceDialectConfig {
+                serial_number: String::new(),
+                mapping_forward: None,
+            });
+            m.tls = Some(TlsConfig {
+                client_key_file: Some("client.key".into()),
+                ..tls()
+            });
+        });
+        assert!(e.contains("`mqtt.device.serial_number`"), "{e}");
+    }
 }

@@ -354,33 +354,51 @@ impl DriveProfile {
 
     /// Checks consistency; an error is (key, problem, fix).
     pub fn validate(&self) -> Result<(), (String, String, String)> {
-        let err =
-            |key: &str, problem: String, fix: &str| Err((key.to_owned(), problem, fix.to_owned()));
+        self.check_master_loss()?;
+        self.check_axes()?;
+        self.check_units()?;
+        self.check_rates()?;
+        check_pdo_list("tpdo", &self.tpdo)?;
+        check_pdo_list("rpdo", &self.rpdo)?;
+        if self.feedback.mode == Transport::Pdo {
+            self.check_feedback_mapped()?;
+        }
+        if self.command.mode == Transport::Pdo {
+            self.check_command_mapped()?;
+        }
+        self.check_setup()
+    }
+
+    /// A loss-of-master reaction is set, and a vendor timeout's object holds milliseconds.
+    fn check_master_loss(&self) -> Check {
         match self.master_loss {
-            None => {
-                return err(
-                    "master_loss",
-                    "not set: nothing would stop this drive if chassisd died, hung or lost its \
-                     cable"
-                        .into(),
-                    "add [master_loss] with watch = \"heartbeat\" (or \"sync\") and reaction = \
-                     \"quick_stop\", or watch = \"vendor_timeout\" with the drive's own \
-                     timeout object",
-                );
-            }
+            None => problem(
+                "master_loss",
+                "not set: nothing would stop this drive if chassisd died, hung or lost its \
+                 cable"
+                    .into(),
+                "add [master_loss] with watch = \"heartbeat\" (or \"sync\") and reaction = \
+                 \"quick_stop\", or watch = \"vendor_timeout\" with the drive's own \
+                 timeout object",
+            ),
             Some(MasterLoss::VendorTimeout { value_type, .. })
                 if !matches!(value_type, ValueType::U16 | ValueType::U32) =>
             {
-                return err(
+                problem(
                     "master_loss.type",
                     format!("{value_type} is not a timeout's type"),
                     "a timeout in ms is u16 or u32",
-                );
+                )
             }
-            Some(_) => {}
+            Some(_) => Ok(()),
         }
+    }
+
+    /// One or two axes, with an object per axis and a statusword (and combined target) that
+    /// fit their number.
+    fn check_axes(&self) -> Check {
         if !(1..=2).contains(&self.axes) {
-            return err(
+            return problem(
                 "axes",
                 format!("{} axes", self.axes),
                 "use 1, or 2 for a dual-channel drive",
@@ -393,7 +411,7 @@ impl DriveProfile {
             ("objects.actual_position", &self.objects.actual_position),
         ] {
             if list.len() != axes {
-                return err(
+                return problem(
                     key,
                     format!("{} entries for {axes} axes", list.len()),
                     "give one object per axis, in axis order",
@@ -403,102 +421,96 @@ impl DriveProfile {
         if !matches!(self.objects.statusword_bits, 16 | 32)
             || (self.objects.statusword_bits == 32 && axes != 2)
         {
-            return err(
+            return problem(
                 "objects.statusword_bits",
                 format!("{} bits with {axes} axes", self.objects.statusword_bits),
                 "use 16, or 32 for a dual-channel drive that packs both statuswords",
             );
         }
         if self.objects.combined_target_velocity.is_some() && axes != 2 {
-            return err(
+            return problem(
                 "objects.combined_target_velocity",
                 "set on a single-axis drive".into(),
                 "remove it, or set axes = 2",
             );
         }
+        Ok(())
+    }
+
+    /// The unit conversions are positive numbers.
+    fn check_units(&self) -> Check {
+        let u = &self.units;
         for (key, v) in [
-            (
-                "units.target_velocity_per_rpm",
-                self.units.target_velocity_per_rpm,
-            ),
-            (
-                "units.actual_velocity_per_rpm",
-                self.units.actual_velocity_per_rpm,
-            ),
-            ("units.counts_per_rev", self.units.counts_per_rev),
+            ("units.target_velocity_per_rpm", u.target_velocity_per_rpm),
+            ("units.actual_velocity_per_rpm", u.actual_velocity_per_rpm),
+            ("units.counts_per_rev", u.counts_per_rev),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return err(
+                return problem(
                     key,
                     format!("{v} is not a positive number"),
                     "set the drive's scale",
                 );
             }
         }
+        Ok(())
+    }
+
+    /// The feedback polling and command rates.
+    fn check_rates(&self) -> Check {
         for (key, hz) in [
             ("feedback.poll_hz", self.feedback.poll_hz),
             ("command.rate_hz", self.command.rate_hz),
         ] {
             if !(1.0..=1000.0).contains(&hz) {
-                return err(key, format!("{hz} Hz"), "use 1 to 1000 Hz");
+                return problem(key, format!("{hz} Hz"), "use 1 to 1000 Hz");
             }
         }
-        for (key, list) in [("tpdo", &self.tpdo), ("rpdo", &self.rpdo)] {
-            let mut seen = Vec::new();
-            for (i, spec) in list.iter().enumerate() {
-                if !(1..=4).contains(&spec.number) || seen.contains(&spec.number) {
-                    return err(
-                        &format!("{key}[{i}].number"),
-                        format!("PDO number {}", spec.number),
-                        "use distinct numbers 1 to 4",
-                    );
-                }
-                seen.push(spec.number);
-                if let Err(e) = PdoMapping::new(spec.objects.clone()) {
-                    return err(
-                        &format!("{key}[{i}].objects"),
-                        e.to_string(),
-                        "map at most 8 bytes",
-                    );
-                }
+        Ok(())
+    }
+
+    /// With PDO feedback, the TPDOs carry the statusword and each axis' velocity and
+    /// position.
+    fn check_feedback_mapped(&self) -> Check {
+        let needed = std::iter::once(self.objects.statusword)
+            .chain(self.objects.actual_velocity.iter().copied())
+            .chain(self.objects.actual_position.iter().copied());
+        for object in needed {
+            if !is_mapped(&self.tpdo, object) {
+                return problem(
+                    "tpdo",
+                    format!("feedback.mode is pdo but {object} is in no TPDO"),
+                    "map it in a [[tpdo]], or use feedback.mode = \"sdo\"",
+                );
             }
         }
-        let mapped = |list: &[PdoSpec], object: ObjectAddress| {
-            list.iter()
-                .any(|s| s.objects.iter().any(|e| e.object == object))
+        Ok(())
+    }
+
+    /// With PDO commands, the RPDOs carry the controlword and the targets (the combined
+    /// one, when there is one).
+    fn check_command_mapped(&self) -> Check {
+        let targets: Vec<ObjectAddress> = match self.objects.combined_target_velocity {
+            Some(c) => vec![c],
+            None => self.objects.target_velocity.clone(),
         };
-        if self.feedback.mode == Transport::Pdo {
-            let needed = std::iter::once(self.objects.statusword)
-                .chain(self.objects.actual_velocity.iter().copied())
-                .chain(self.objects.actual_position.iter().copied());
-            for object in needed {
-                if !mapped(&self.tpdo, object) {
-                    return err(
-                        "tpdo",
-                        format!("feedback.mode is pdo but {object} is in no TPDO"),
-                        "map it in a [[tpdo]], or use feedback.mode = \"sdo\"",
-                    );
-                }
+        for object in std::iter::once(self.objects.controlword).chain(targets) {
+            if !is_mapped(&self.rpdo, object) {
+                return problem(
+                    "rpdo",
+                    format!("command.mode is pdo but {object} is in no RPDO"),
+                    "map it in a [[rpdo]], or use command.mode = \"sdo\"",
+                );
             }
         }
-        if self.command.mode == Transport::Pdo {
-            let targets: Vec<ObjectAddress> = match self.objects.combined_target_velocity {
-                Some(c) => vec![c],
-                None => self.objects.target_velocity.clone(),
-            };
-            for object in std::iter::once(self.objects.controlword).chain(targets) {
-                if !mapped(&self.rpdo, object) {
-                    return err(
-                        "rpdo",
-                        format!("command.mode is pdo but {object} is in no RPDO"),
-                        "map it in a [[rpdo]], or use command.mode = \"sdo\"",
-                    );
-                }
-            }
-        }
+        Ok(())
+    }
+
+    /// Each set-up value fits its type.
+    fn check_setup(&self) -> Check {
         for (i, w) in self.setup.iter().enumerate() {
             if w.data().is_none() {
-                return err(
+                return problem(
                     &format!("setup[{i}].value"),
                     format!("{} does not fit {}", w.value, w.value_type),
                     "use a value within the type's range",
@@ -507,6 +519,44 @@ impl DriveProfile {
         }
         Ok(())
     }
+}
+
+/// The outcome of one of a profile's checks: an error is (key, problem, fix).
+type Check = Result<(), (String, String, String)>;
+
+/// The error of a check: `problem` at `key`, and how to fix it.
+fn problem(key: &str, problem: String, fix: &str) -> Check {
+    Err((key.to_owned(), problem, fix.to_owned()))
+}
+
+/// The PDOs of `list` (`tpdo` or `rpdo`, its `key`): distinct numbers 1 to 4, each mapping
+/// at most 8 bytes.
+fn check_pdo_list(key: &str, list: &[PdoSpec]) -> Check {
+    let mut seen = Vec::new();
+    for (i, spec) in list.iter().enumerate() {
+        if !(1..=4).contains(&spec.number) || seen.contains(&spec.number) {
+            return problem(
+                &format!("{key}[{i}].number"),
+                format!("PDO number {}", spec.number),
+                "use distinct numbers 1 to 4",
+            );
+        }
+        seen.push(spec.number);
+        if let Err(e) = PdoMapping::new(spec.objects.clone()) {
+            return problem(
+                &format!("{key}[{i}].objects"),
+                e.to_string(),
+                "map at most 8 bytes",
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Whether a PDO of `list` maps `object`.
+fn is_mapped(list: &[PdoSpec], object: ObjectAddress) -> bool {
+    list.iter()
+        .any(|s| s.objects.iter().any(|e| e.object == object))
 }
 
 #[cfg(test)]
@@ -580,5 +630,57 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("bits must be 8, 16 or 32"), "{e}");
+    }
+
+    #[test]
+    fn each_inconsistency_names_its_key_and_the_problem() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../devices/cia402-generic.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (from, to, expected) in [
+            (
+                "watch = \"heartbeat\"\nreaction = \"quick_stop\"",
+                "watch = \"vendor_timeout\"\nobject = \"0x2000:0\"\ntype = \"i16\"",
+                "`master_loss.type`: i16 (-32768 to 32767) is not a timeout's type",
+            ),
+            ("axes = 1", "axes = 3", "`axes`: 3 axes"),
+            (
+                "statusword = \"0x6041:0\"\n",
+                "statusword = \"0x6041:0\"\nstatusword_bits = 32\n",
+                "`objects.statusword_bits`: 32 bits with 1 axes",
+            ),
+            (
+                "heartbeat_producer = ",
+                "combined_target_velocity = \"0x60FF:3\"\nheartbeat_producer = ",
+                "`objects.combined_target_velocity`: set on a single-axis drive",
+            ),
+            (
+                "rate_hz = 50",
+                "rate_hz = 2000",
+                "`command.rate_hz`: 2000 Hz",
+            ),
+            ("number = 2", "number = 1", "`tpdo[1].number`: PDO number 1"),
+            (
+                "objects = [\"0x6040:0:16\", \"0x60FF:0:32\"]",
+                "objects = [\"0x6040:0:16\", \"0x60FF:0:32\", \"0x6064:0:32\"]",
+                "`rpdo[0].objects`",
+            ),
+            (
+                "objects = [\"0x6040:0:16\", \"0x60FF:0:32\"]",
+                "objects = [\"0x6040:0:16\"]",
+                "`rpdo`: command.mode is pdo but 0x60FF:0 is in no RPDO",
+            ),
+            (
+                "value = 3000",
+                "value = -1",
+                "`setup[0].value`: -1 does not fit u32 (0 to 4294967295)",
+            ),
+        ] {
+            let bad = text.replacen(from, to, 1);
+            assert_ne!(bad, text, "{from:?} not in the profile");
+            let e = DriveProfile::from_toml(&bad, Path::new("p.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(expected), "{expected}: {e}");
+        }
     }
 }
