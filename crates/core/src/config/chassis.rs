@@ -179,6 +179,16 @@ pub enum Wheel {
     Right,
 }
 
+impl Wheel {
+    /// Its name as the configuration writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Left => "left",
+            Self::Right => "right",
+        }
+    }
+}
+
 /// `[[can]]`: a CAN interface. Its bit rate is set outside the daemon (`ip link`).
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -825,7 +835,7 @@ fn check_wheels_driven_once(
             return Err(ConfigError::invalid(
                 file,
                 &drive_key(i, "wheels"),
-                format!("{w:?} is driven twice"),
+                format!("the {} wheel is driven twice", w.name()),
                 "each wheel belongs to one axis",
             ));
         }

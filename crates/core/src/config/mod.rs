@@ -661,19 +661,29 @@ pub fn check_range(
     if range.contains(&value) {
         return Ok(());
     }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    let (low, high) = (range.start(), range.end());
+    // A range open above says so, rather than print the largest float's 309 digits.
+    let (problem, fix) = if *high == f64::MAX {
+        (
+            format!("{value}{unit} is below {low}{unit}"),
+            format!("set a value of at least {low}{unit}"),
+        )
+    } else {
+        (
+            format!("{value} is outside {low}..={high}{unit}"),
+            format!("set a value between {low} and {high}{unit}"),
+        )
+    };
     Err(ConfigError::Invalid {
         file: file.to_owned(),
         key: key.to_owned(),
-        problem: format!(
-            "{value} is outside {}..={} {unit}",
-            range.start(),
-            range.end()
-        ),
-        fix: format!(
-            "set a value between {} and {} {unit}",
-            range.start(),
-            range.end()
-        ),
+        problem,
+        fix,
     })
 }
 
@@ -696,6 +706,27 @@ mod tests {
 
     fn load(text: &str) -> Result<VehicleConfig, ConfigError> {
         VehicleConfig::from_toml(text, Path::new("test.toml"))
+    }
+
+    #[test]
+    fn a_range_is_said_as_a_person_writes_it() {
+        let said = |value, range, unit| {
+            check_range(Path::new("v.toml"), "k", value, range, unit)
+                .unwrap_err()
+                .to_string()
+        };
+        let plain = said(11.0, 1.0..=10.0, "");
+        assert!(
+            plain.contains("11 is outside 1..=10; fix: set a value between 1 and 10"),
+            "{plain}"
+        );
+        assert!(!plain.ends_with(' '), "{plain:?}");
+        let open = said(0.0, 0.001..=f64::MAX, "m/s");
+        assert!(
+            open.contains("0 m/s is below 0.001 m/s; fix: set a value of at least 0.001 m/s"),
+            "{open}"
+        );
+        assert!(said(3.0, 0.01..=2.0, "m").contains("3 is outside 0.01..=2 m; fix"));
     }
 
     #[test]

@@ -336,7 +336,7 @@ mod tests {
                     max_yaw_accel_rps2: Some(0.0),
                     ..MotionConfig::default()
                 },
-                "`motion.max_yaw_accel_rps2`: 0 is outside 0.001..=",
+                "`motion.max_yaw_accel_rps2`: 0 rad/s² is below 0.001 rad/s²; fix: set a value of at least 0.001 rad/s²",
             ),
             (
                 MotionConfig {

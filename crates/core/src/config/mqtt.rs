@@ -468,10 +468,13 @@ impl MqttConfig {
                 file,
                 "username",
                 &format!(
-                    "is not set, and the embedded broker would listen on {} beyond this                      computer: anyone on the network could read everything and drive the                      vehicle",
+                    "is not set, and the embedded broker would listen on {} beyond this \
+                     computer: anyone on the network could read everything and drive the \
+                     vehicle",
                     self.host
                 ),
-                "set mqtt.username and mqtt.password (every client must then present them),                  or host = \"127.0.0.1\" to keep the broker to this computer",
+                "set mqtt.username and mqtt.password (every client must then present them), \
+                 or host = \"127.0.0.1\" to keep the broker to this computer",
             ));
         }
         if self.username.is_some() && self.password.as_deref().is_none_or(str::is_empty) {

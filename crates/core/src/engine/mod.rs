@@ -524,15 +524,7 @@ impl Engine {
             && route == Some(Route::Bus)
             && !self.drivetrain.is_listen_only(&record.source)
         {
-            self.count_record(&record.source);
-            if self.recorded_tx.len() >= MAX_UNPAIRED_TX {
-                // Recorded frames this engine never sent: differences, not a growing queue.
-                self.recorded_tx.pop_front();
-                self.stats.tx_mismatched += 1;
-            }
-            self.recorded_tx
-                .push_back((record.source.clone(), Received::from_socketcan(frame)));
-            self.compare_transmissions();
+            self.recorded_transmission(&record.source, frame);
             return record.t;
         }
         let t = self.effective_time(record);
@@ -556,37 +548,7 @@ impl Engine {
                     .handle(t, Input::Link(Device::Corrections, *state));
             }
             (Some(Route::Gnss | Route::Imu), Payload::Serial(bytes)) => {
-                let vehicle = &mut self.vehicle;
-                let measure = self.emit_measurements;
-                if let Some(receiver) = self.nmea.get_mut(&record.source) {
-                    receiver.push(t, bytes, |fix| {
-                        if measure {
-                            out.push(EngineOutput::Measured(Measured::Gnss(t, Box::new(*fix))));
-                        }
-                        for output in vehicle.handle(t, Input::Gnss(fix)) {
-                            if let Output::Event(event) = output {
-                                out.push(EngineOutput::Event(event));
-                            }
-                        }
-                    });
-                    if let Some(news) = receiver.take_news() {
-                        out.push(EngineOutput::Event(Event::Receiver(news)));
-                    }
-                } else if let Some((decoder, mounting)) = self.imu.get_mut(&record.source) {
-                    let emit = self.emit_poses;
-                    decoder.push(t, bytes, |sample| {
-                        if measure {
-                            out.push(EngineOutput::Measured(Measured::Imu(sample)));
-                        }
-                        let sample = mounting.apply(&sample);
-                        vehicle.handle(t, Input::Imu(&sample));
-                        if emit {
-                            out.push(EngineOutput::Imu(sample));
-                        }
-                    });
-                } else {
-                    self.stats.undecoded += 1;
-                }
+                self.sensor_bytes(t, &record.source, bytes, out);
             }
             (Some(Route::Gnss), Payload::Link(state)) => {
                 self.vehicle.handle(t, Input::Link(Device::Gnss, *state));
@@ -610,22 +572,7 @@ impl Engine {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
             (Some(Route::Adapter(id)), Payload::Command { topic, payload }) => {
-                let adapter = adapter_mut(&mut self.dialects, &mut self.adapters, id);
-                let mut core = CoreAt::new(&mut self.vehicle, t);
-                let mut replies = Vec::new();
-                let handled = adapter.on_request(t, topic, payload, &mut core, &mut replies);
-                if handled == Handled::Answered {
-                    self.stats.queries += 1;
-                } else {
-                    self.stats.commands += 1;
-                }
-                match handled {
-                    Handled::Taken | Handled::Answered => {}
-                    Handled::Refused => self.stats.commands_rejected += 1,
-                    Handled::NotOwned => self.stats.commands_without_dialect += 1,
-                }
-                out.append(&mut core.aside);
-                emit_replies(&record.source, replies, out);
+                self.request(t, id, &record.source, (topic, payload), out);
             }
             (Some(Route::Process), Payload::Command { topic, .. }) if topic == "shutdown" => {
                 self.vehicle
@@ -646,6 +593,89 @@ impl Engine {
         }
         self.transmit(tx, out);
         t
+    }
+
+    /// A CAN frame the live run sent, as recorded: paired with what this engine sends.
+    fn recorded_transmission(&mut self, source: &str, frame: &socketcan::CanAnyFrame) {
+        self.count_record(source);
+        if self.recorded_tx.len() >= MAX_UNPAIRED_TX {
+            // Recorded frames this engine never sent: differences, not a growing queue.
+            self.recorded_tx.pop_front();
+            self.stats.tx_mismatched += 1;
+        }
+        self.recorded_tx
+            .push_back((source.to_owned(), Received::from_socketcan(frame)));
+        self.compare_transmissions();
+    }
+
+    /// A receiver's or an IMU's bytes: decoded by the source's decoder, each fix or sample to
+    /// the core (and, when asked for, out as measured).
+    fn sensor_bytes(
+        &mut self,
+        t: Timestamp,
+        source: &str,
+        bytes: &[u8],
+        out: &mut Vec<EngineOutput>,
+    ) {
+        let vehicle = &mut self.vehicle;
+        let measure = self.emit_measurements;
+        if let Some(receiver) = self.nmea.get_mut(source) {
+            receiver.push(t, bytes, |fix| {
+                if measure {
+                    out.push(EngineOutput::Measured(Measured::Gnss(t, Box::new(*fix))));
+                }
+                for output in vehicle.handle(t, Input::Gnss(fix)) {
+                    if let Output::Event(event) = output {
+                        out.push(EngineOutput::Event(event));
+                    }
+                }
+            });
+            if let Some(news) = receiver.take_news() {
+                out.push(EngineOutput::Event(Event::Receiver(news)));
+            }
+        } else if let Some((decoder, mounting)) = self.imu.get_mut(source) {
+            let emit = self.emit_poses;
+            decoder.push(t, bytes, |sample| {
+                if measure {
+                    out.push(EngineOutput::Measured(Measured::Imu(sample)));
+                }
+                let sample = mounting.apply(&sample);
+                vehicle.handle(t, Input::Imu(&sample));
+                if emit {
+                    out.push(EngineOutput::Imu(sample));
+                }
+            });
+        } else {
+            self.stats.undecoded += 1;
+        }
+    }
+
+    /// A request of adapter `id`'s source: handed to its adapter with the core at `t`,
+    /// counted as a command or a query, its replies out.
+    fn request(
+        &mut self,
+        t: Timestamp,
+        id: AdapterId,
+        source: &str,
+        (topic, payload): (&str, &[u8]),
+        out: &mut Vec<EngineOutput>,
+    ) {
+        let adapter = adapter_mut(&mut self.dialects, &mut self.adapters, id);
+        let mut core = CoreAt::new(&mut self.vehicle, t);
+        let mut replies = Vec::new();
+        let handled = adapter.on_request(t, topic, payload, &mut core, &mut replies);
+        if handled == Handled::Answered {
+            self.stats.queries += 1;
+        } else {
+            self.stats.commands += 1;
+        }
+        match handled {
+            Handled::Taken | Handled::Answered => {}
+            Handled::Refused => self.stats.commands_rejected += 1,
+            Handled::NotOwned => self.stats.commands_without_dialect += 1,
+        }
+        out.append(&mut core.aside);
+        emit_replies(source, replies, out);
     }
 
     /// The valid frames among a caster's `bytes` go to the receiver's port as one write;
