@@ -8,7 +8,9 @@
 //! limit, an identifier it cannot route (both leave a stale last-will entry that panics
 //! the next connection under that identifier and poisons the broker for good), and a client
 //! that hangs up before its CONNACK (the same entry, through a failed write). The gate
-//! waits for the broker's CONNACK whatever the client does.
+//! waits for the broker's CONNACK whatever the client does, and however late: a client is
+//! let go after 5 s, but the broker's socket stays open for its answer (up to 60 s, 16 such
+//! at once), and the session it accepted is then ended cleanly.
 
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -21,7 +23,7 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Semaphore;
 use tokio_rustls::TlsAcceptor;
 
-use super::identifiers::Identifiers;
+use super::identifiers::{Identifiers, Turn};
 use super::relay::{Ended, Relay};
 use crate::broker::admission::{self, Place, Places, Policy};
 use crate::broker::held::{self, Held};
@@ -32,6 +34,11 @@ use crate::broker::wire::{self, Connect, Header, Refusal, WireError};
 const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(5);
 /// The broker must answer a forwarded CONNECT within this long.
 const UPSTREAM_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long a CONNACK the broker owes is still waited for once the client has been let go.
+const LATE_CONNACK_WAIT: Duration = Duration::from_secs(60);
+/// Forwarded CONNECTs waited for at once after their client was let go; beyond it the
+/// socket is closed at once (a broker that slow is restarted by its supervisor anyway).
+const MAX_LATE_CONNACKS: usize = 16;
 /// Connections still in their handshake at once. Beyond it a new connection is closed at
 /// once, so a flood of silent sockets costs a bounded amount of memory.
 pub const MAX_HANDSHAKES: usize = 64;
@@ -129,6 +136,8 @@ pub struct Gate {
     identifiers: Arc<Identifiers>,
     held: Mutex<Held>,
     handshakes: Arc<Semaphore>,
+    /// Forwarded CONNECTs whose CONNACK is still awaited after their client was let go.
+    late_connacks: Arc<Semaphore>,
     /// What the gate saw.
     pub counters: GateCounters,
     /// The last refused peer and why, for the summary.
@@ -151,6 +160,7 @@ impl Gate {
             identifiers: Arc::new(Identifiers::default()),
             held: Mutex::new(held),
             handshakes: Arc::new(Semaphore::new(MAX_HANDSHAKES)),
+            late_connacks: Arc::new(Semaphore::new(MAX_LATE_CONNACKS)),
             counters: GateCounters::default(),
             last_refused: Mutex::new(None),
             accept_failures: AtomicU64::new(0),
@@ -335,11 +345,17 @@ impl Gate {
             wire::Version::V5 => self.settings.upstream.v5,
             _ => self.settings.upstream.v4,
         };
-        let Some(upstream) = self
+        let upstream = match self
             .open_upstream(upstream, &connect_bytes, connect.version, &mut stream)
             .await
-        else {
-            return;
+        {
+            Upstream::Open(upstream) => upstream,
+            Upstream::Closed => return,
+            Upstream::Late(upstream, ack) => {
+                // The identifier stays taken until the broker has let this session go.
+                self.end_when_answered(upstream, ack, turn);
+                return;
+            }
         };
         let relay = Relay {
             version: connect.version,
@@ -418,49 +434,62 @@ impl Gate {
 
     /// Forwards the CONNECT to the broker and its CONNACK to the client. The CONNACK is
     /// awaited whatever the client does; a client gone by then is disconnected from the
-    /// broker cleanly. `None` when the session does not go on.
+    /// broker cleanly. A broker slower than [`UPSTREAM_TIMEOUT`] loses the client, but its
+    /// socket stays open ([`Upstream::Late`]): rumqttd 0.20 writes its CONNACK however late,
+    /// and a write to a closed socket leaves a stale last-will entry that panics the next
+    /// connection under the same identifier.
     async fn open_upstream<S: AsyncWrite + Unpin>(
         &self,
         upstream: SocketAddr,
         connect: &[u8],
         version: wire::Version,
         client: &mut S,
-    ) -> Option<TcpStream> {
-        let handshake = async {
+    ) -> Upstream {
+        let forward = async {
             let mut upstream = TcpStream::connect(upstream).await?;
             upstream.set_nodelay(true)?;
             upstream.write_all(connect).await?;
-            let mut ack = BytesMut::with_capacity(64);
-            let header = loop {
-                match wire::header(&ack, MAX_CONNECT) {
-                    Ok(Some(h)) if ack.len() >= h.total() => break h,
-                    Ok(_) => {}
-                    Err(e) => return Err(std::io::Error::other(e)),
-                }
-                if upstream.read_buf(&mut ack).await? == 0 {
-                    return Err(std::io::ErrorKind::UnexpectedEof.into());
-                }
-            };
-            Ok::<_, std::io::Error>((upstream, ack, header))
+            Ok::<_, std::io::Error>(upstream)
         };
-        let (mut upstream, ack, header) = match tokio::time::timeout(UPSTREAM_TIMEOUT, handshake)
-            .await
-        {
-            Ok(Ok(done)) => done,
+        let mut upstream = match tokio::time::timeout(UPSTREAM_TIMEOUT, forward).await {
+            Ok(Ok(upstream)) => upstream,
             Ok(Err(e)) => {
                 // Counted for the summary: one line per client would let a client flood the log.
                 tracing::debug!(error = %e, "embedded broker: the broker refused a forwarded connection");
                 self.counters
                     .upstream_failed
                     .fetch_add(1, Ordering::Relaxed);
-                return None;
+                return Upstream::Closed;
+            }
+            Err(_) => {
+                tracing::debug!("embedded broker: the broker did not take a connection in time");
+                self.counters
+                    .upstream_failed
+                    .fetch_add(1, Ordering::Relaxed);
+                return Upstream::Closed;
+            }
+        };
+        let mut ack = BytesMut::with_capacity(64);
+        let header = match tokio::time::timeout(
+            UPSTREAM_TIMEOUT,
+            read_connack(&mut upstream, &mut ack),
+        )
+        .await
+        {
+            Ok(Ok(header)) => header,
+            Ok(Err(e)) => {
+                tracing::debug!(error = %e, "embedded broker: the broker refused a forwarded connection");
+                self.counters
+                    .upstream_failed
+                    .fetch_add(1, Ordering::Relaxed);
+                return Upstream::Closed;
             }
             Err(_) => {
                 tracing::debug!("embedded broker: the broker did not answer a CONNECT in time");
                 self.counters
                     .upstream_failed
                     .fetch_add(1, Ordering::Relaxed);
-                return None;
+                return Upstream::Late(upstream, ack);
             }
         };
         let accepted = header.kind == wire::kind::CONNACK && wire::connack_accepts(&ack);
@@ -485,17 +514,73 @@ impl Gate {
         if !delivered {
             if accepted {
                 // The broker ends the session itself, with no will.
-                let _ = upstream.write_all(&wire::DISCONNECT).await;
-                let mut sink = [0u8; 1024];
-                let _ = tokio::time::timeout(UPSTREAM_TIMEOUT, async {
-                    while upstream.read(&mut sink).await.is_ok_and(|n| n > 0) {}
-                })
-                .await;
+                disconnect(&mut upstream).await;
             }
-            return None;
+            return Upstream::Closed;
         }
-        accepted.then_some(upstream)
+        if accepted {
+            Upstream::Open(upstream)
+        } else {
+            Upstream::Closed
+        }
     }
+
+    /// Waits (in the background, at most [`LATE_CONNACK_WAIT`]) for the CONNACK of a
+    /// session whose client was let go, then ends that session cleanly; `turn` keeps its
+    /// identifier until then. With [`MAX_LATE_CONNACKS`] already waiting, closes at once.
+    fn end_when_answered(&self, mut upstream: TcpStream, mut ack: BytesMut, turn: Option<Turn>) {
+        let Ok(permit) = self.late_connacks.clone().try_acquire_owned() else {
+            return;
+        };
+        tokio::spawn(async move {
+            let answered =
+                tokio::time::timeout(LATE_CONNACK_WAIT, read_connack(&mut upstream, &mut ack))
+                    .await;
+            if let Ok(Ok(header)) = answered
+                && header.kind == wire::kind::CONNACK
+                && wire::connack_accepts(&ack)
+            {
+                disconnect(&mut upstream).await;
+            }
+            drop((turn, permit));
+        });
+    }
+}
+
+/// What became of a forwarded CONNECT.
+enum Upstream {
+    /// The broker accepted it and the client has its CONNACK: the session goes on.
+    Open(TcpStream),
+    /// The session does not go on, and nothing is owed.
+    Closed,
+    /// The broker did not answer in time: the client is let go, and the broker's CONNACK,
+    /// when it comes, ends the session (what was read of it so far kept).
+    Late(TcpStream, BytesMut),
+}
+
+/// Reads the broker's answer to a CONNECT into `ack`: its header once whole.
+async fn read_connack(upstream: &mut TcpStream, ack: &mut BytesMut) -> std::io::Result<Header> {
+    loop {
+        match wire::header(ack, MAX_CONNECT) {
+            Ok(Some(h)) if ack.len() >= h.total() => return Ok(h),
+            Ok(_) => {}
+            Err(e) => return Err(std::io::Error::other(e)),
+        }
+        if upstream.read_buf(ack).await? == 0 {
+            return Err(std::io::ErrorKind::UnexpectedEof.into());
+        }
+    }
+}
+
+/// Ends an accepted session from the client's side: the broker ends it itself, with no
+/// will, and the socket is drained until it closes (at most [`UPSTREAM_TIMEOUT`]).
+async fn disconnect(upstream: &mut TcpStream) {
+    let _ = upstream.write_all(&wire::DISCONNECT).await;
+    let mut sink = [0u8; 1024];
+    let _ = tokio::time::timeout(UPSTREAM_TIMEOUT, async {
+        while upstream.read(&mut sink).await.is_ok_and(|n| n > 0) {}
+    })
+    .await;
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -554,4 +639,71 @@ enum ReadError {
     Wire(#[from] WireError),
     #[error("{0}")]
     Io(#[from] std::io::Error),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An MQTT 3.1.1 CONNECT of `client_id`, clean session, keep-alive 60 s.
+    fn connect(client_id: &str) -> Vec<u8> {
+        let mut body = vec![0, 4, b'M', b'Q', b'T', b'T', 4, 0x02, 0, 60];
+        body.extend_from_slice(&(client_id.len() as u16).to_be_bytes());
+        body.extend_from_slice(client_id.as_bytes());
+        let mut packet = vec![0x10, body.len() as u8];
+        packet.extend(body);
+        packet
+    }
+
+    /// A broker slower than the gate's patience still finds its socket open when it answers
+    /// (rumqttd 0.20's failed CONNACK write would leave a last-will entry that panics the
+    /// next connection under the identifier), and the session it accepted is then ended.
+    #[tokio::test]
+    async fn a_connack_later_than_the_timeout_is_still_read_and_the_session_ended() {
+        let slow_broker = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let upstream = slow_broker.local_addr().expect("address");
+        let broker = tokio::spawn(async move {
+            let (mut s, _) = slow_broker.accept().await.expect("the gate forwards");
+            let mut connect = [0u8; 256];
+            let _ = s.read(&mut connect).await;
+            tokio::time::sleep(UPSTREAM_TIMEOUT + Duration::from_millis(500)).await;
+            s.write_all(&[0x20, 0x02, 0x00, 0x00]).await.expect("write");
+            let mut rest = Vec::new();
+            let _ = s.read_to_end(&mut rest).await;
+            rest
+        });
+        let settings = GateSettings {
+            policy: Policy {
+                credentials: None,
+                max_clients: 4,
+                own_client_id: None,
+                reserved_client_ids: Vec::new(),
+            },
+            upstream: Upstreams {
+                v4: upstream,
+                v5: upstream,
+            },
+            max_packet: 1 << 16,
+            reserved_topics: Vec::new(),
+        };
+        let front = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let address = front.local_addr().expect("address");
+        tokio::spawn(Gate::new(settings, None).serve(front));
+        let mut client = TcpStream::connect(address).await.expect("connect");
+        client.write_all(&connect("late-1")).await.expect("write");
+        let mut answer = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(10), client.read_to_end(&mut answer))
+            .await
+            .expect("the client is let go");
+        assert!(answer.is_empty(), "{answer:?}");
+        let rest = tokio::time::timeout(Duration::from_secs(10), broker)
+            .await
+            .expect("the broker's session ends")
+            .expect("the broker task");
+        assert_eq!(
+            rest,
+            wire::DISCONNECT,
+            "the accepted session is ended cleanly"
+        );
+    }
 }
