@@ -454,44 +454,29 @@ impl Gate {
         let mut upstream = match tokio::time::timeout(UPSTREAM_TIMEOUT, forward).await {
             Ok(Ok(upstream)) => upstream,
             Ok(Err(e)) => {
-                // Counted for the summary: one line per client would let a client flood the log.
-                tracing::debug!(error = %e, "embedded broker: the broker refused a forwarded connection");
-                self.counters
-                    .upstream_failed
-                    .fetch_add(1, Ordering::Relaxed);
+                self.upstream_failed(&e.to_string());
                 return Upstream::Closed;
             }
             Err(_) => {
-                tracing::debug!("embedded broker: the broker did not take a connection in time");
-                self.counters
-                    .upstream_failed
-                    .fetch_add(1, Ordering::Relaxed);
+                self.upstream_failed("it did not take the connection in time");
                 return Upstream::Closed;
             }
         };
         let mut ack = BytesMut::with_capacity(64);
-        let header = match tokio::time::timeout(
-            UPSTREAM_TIMEOUT,
-            read_connack(&mut upstream, &mut ack),
-        )
-        .await
-        {
-            Ok(Ok(header)) => header,
-            Ok(Err(e)) => {
-                tracing::debug!(error = %e, "embedded broker: the broker refused a forwarded connection");
-                self.counters
-                    .upstream_failed
-                    .fetch_add(1, Ordering::Relaxed);
-                return Upstream::Closed;
-            }
-            Err(_) => {
-                tracing::debug!("embedded broker: the broker did not answer a CONNECT in time");
-                self.counters
-                    .upstream_failed
-                    .fetch_add(1, Ordering::Relaxed);
-                return Upstream::Late(upstream, ack);
-            }
-        };
+        let header =
+            match tokio::time::timeout(UPSTREAM_TIMEOUT, read_connack(&mut upstream, &mut ack))
+                .await
+            {
+                Ok(Ok(header)) => header,
+                Ok(Err(e)) => {
+                    self.upstream_failed(&e.to_string());
+                    return Upstream::Closed;
+                }
+                Err(_) => {
+                    self.upstream_failed("it did not answer the CONNECT in time");
+                    return Upstream::Late(upstream, ack);
+                }
+            };
         let accepted = header.kind == wire::kind::CONNACK && wire::connack_accepts(&ack);
         // A 5.0 client is told the gate's limits, which it would otherwise learn by being
         // disconnected.
@@ -523,6 +508,15 @@ impl Gate {
         } else {
             Upstream::Closed
         }
+    }
+
+    /// Counts a forwarded connection the broker did not take, for the summary: one line per
+    /// client would let a client flood the log.
+    fn upstream_failed(&self, why: &str) {
+        tracing::debug!(%why, "embedded broker: the broker did not take a forwarded connection");
+        self.counters
+            .upstream_failed
+            .fetch_add(1, Ordering::Relaxed);
     }
 
     /// Waits (in the background, at most [`LATE_CONNACK_WAIT`]) for the CONNACK of a
