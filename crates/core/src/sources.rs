@@ -20,6 +20,8 @@ pub const LOCAL_COMMANDS: &str = "stdin";
 pub const MQTT: &str = "mqtt";
 /// The ROS1 node's requests.
 pub const ROS1: &str = "ros1";
+/// The ROS 2 node's requests.
+pub const ROS2: &str = "ros2";
 /// What rosbridge WebSocket clients publish and call.
 pub const WEBSOCKET: &str = "websocket";
 
@@ -38,6 +40,7 @@ mod tests {
             LOCAL_COMMANDS,
             MQTT,
             ROS1,
+            ROS2,
             WEBSOCKET,
         ];
         let mut seen = std::collections::BTreeSet::new();

@@ -11,6 +11,7 @@ pub mod request_body;
 pub mod requests;
 pub mod root;
 pub mod ros1;
+pub mod ros2;
 pub mod rosbridge;
 pub mod rtk;
 #[cfg(test)]
@@ -32,6 +33,7 @@ pub const ADAPTERS: &[AdapterFactory] = &[
     |_| Box::new(local::ADAPTER),
     |_| Box::new(rosbridge::adapter::ADAPTER),
     |vehicle| Box::new(ros1::adapter::Ros1Adapter::new(vehicle)),
+    |_| Box::new(ros2::adapter::ADAPTER),
 ];
 
 /// Most points in one path.

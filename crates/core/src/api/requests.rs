@@ -137,6 +137,15 @@ pub fn goal(topic: &str, x: f64, y: f64, yaw: f64) -> Result<Command, String> {
     })
 }
 
+/// The yaw (rad) of an orientation quaternion `[x, y, z, w]`, as INIT_POSITION takes it: its
+/// values finite and its norm within 0.5–1.5 (a hand-typed quaternion is seldom exactly
+/// unit); `None` otherwise. A planar vehicle keeps only the rotation about z.
+pub fn quaternion_yaw([qx, qy, qz, qw]: [f64; 4]) -> Option<f64> {
+    let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+    ([qx, qy, qz, qw].iter().all(|v| v.is_finite()) && (0.5..=1.5).contains(&norm))
+        .then(|| (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz)))
+}
+
 /// The charging action: a mission of one CHARGING step (to the dock, then until the BMS
 /// reports charging), untagged.
 pub fn charge() -> Command {

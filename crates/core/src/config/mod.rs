@@ -17,6 +17,7 @@ pub mod motion;
 pub mod mqtt;
 pub mod ntrip;
 pub mod ros1;
+pub mod ros2;
 pub mod websocket;
 pub mod zones;
 
@@ -176,6 +177,9 @@ pub struct VehicleConfig {
     /// The native ROS1 node.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ros1: Option<ros1::Ros1Config>,
+    /// The native ROS 2 node.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ros2: Option<ros2::Ros2Config>,
     /// The rosbridge WebSocket server.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub websocket: Option<websocket::WebsocketConfig>,
@@ -575,6 +579,9 @@ impl VehicleConfig {
             m.validate(file)?;
         }
         if let Some(r) = &self.ros1 {
+            r.validate(file)?;
+        }
+        if let Some(r) = &self.ros2 {
             r.validate(file)?;
         }
         if let Some(w) = &self.websocket {

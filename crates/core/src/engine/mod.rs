@@ -157,6 +157,9 @@ pub enum EngineOutput {
     /// An IMU sample as the core got it, in the vehicle frame (only with
     /// [`Engine::emit_poses`]).
     Imu(crate::devices::imu::ImuSample),
+    /// The receiver's solution after a sentence, at the time the sentence came (only with
+    /// [`Engine::emit_poses`]: the ROS 2 node's `/fix`).
+    Fix(Timestamp, Box<crate::devices::gnss::GnssFix>),
     /// A raw measurement, as decoded (only with [`Engine::emit_measurements`]: what a
     /// calibration fits).
     Measured(Measured),
@@ -482,8 +485,9 @@ impl Engine {
         }
     }
 
-    /// Emits [`EngineOutput::Poses`] every control tick and [`EngineOutput::Imu`] for every
-    /// sample, for a consumer that publishes them at their own rate (the ROS1 node).
+    /// Emits [`EngineOutput::Poses`] every control tick, [`EngineOutput::Imu`] for every
+    /// sample and [`EngineOutput::Fix`] after every GNSS sentence, for a consumer that
+    /// publishes them at their own rate (the ROS nodes).
     pub fn emit_poses(&mut self) {
         self.emit_poses = true;
     }
@@ -619,10 +623,14 @@ impl Engine {
     ) {
         let vehicle = &mut self.vehicle;
         let measure = self.emit_measurements;
+        let emit = self.emit_poses;
         if let Some(receiver) = self.nmea.get_mut(source) {
             receiver.push(t, bytes, |fix| {
                 if measure {
                     out.push(EngineOutput::Measured(Measured::Gnss(t, Box::new(*fix))));
+                }
+                if emit {
+                    out.push(EngineOutput::Fix(t, Box::new(*fix)));
                 }
                 for output in vehicle.handle(t, Input::Gnss(fix)) {
                     if let Output::Event(event) = output {
@@ -634,7 +642,6 @@ impl Engine {
                 out.push(EngineOutput::Event(Event::Receiver(news)));
             }
         } else if let Some((decoder, mounting)) = self.imu.get_mut(source) {
-            let emit = self.emit_poses;
             decoder.push(t, bytes, |sample| {
                 if measure {
                     out.push(EngineOutput::Measured(Measured::Imu(sample)));

@@ -387,12 +387,7 @@ impl Localisation {
             return;
         };
         let enu = frame.to_enu(&here);
-        let by_quality = match fix.quality {
-            FixQuality::RtkFixed => 0.02,
-            FixQuality::RtkFloat => 0.3,
-            FixQuality::Dgps => 0.8,
-            _ => 2.5,
-        };
+        let by_quality = fix.quality.typical_sigma_m();
         // The receiver's own error estimate for this epoch, when it sends GST.
         let sigma = fix
             .accuracy

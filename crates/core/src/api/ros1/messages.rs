@@ -35,7 +35,8 @@ pub fn header(t: Timestamp, seq: u32, frame: &str) -> Value {
     })
 }
 
-fn quaternion([x, y, z, w]: [f64; 4]) -> Value {
+/// geometry_msgs/Quaternion.
+pub fn quaternion([x, y, z, w]: [f64; 4]) -> Value {
     json!({"x": x, "y": y, "z": z, "w": w})
 }
 
@@ -44,7 +45,7 @@ fn vector(v: &nalgebra::Vector3<f64>) -> Value {
 }
 
 /// A diagonal 3×3 covariance, row-major.
-fn diagonal(variance: f64) -> [f64; 9] {
+pub fn diagonal(variance: f64) -> [f64; 9] {
     let mut m = [0.0; 9];
     m[0] = variance;
     m[4] = variance;
@@ -123,9 +124,16 @@ pub fn tf(t: Timestamp, report: &PoseReport) -> Option<Value> {
 }
 
 /// `/imu/data` (sensor_msgs/Imu): a sample in the vehicle frame (the mounting applied),
-/// stamped when it was received. Without the sensor's own orientation,
-/// orientation_covariance[0] is -1, as sensor_msgs/Imu says.
+/// stamped when it was received.
 pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> Value {
+    let mut msg = imu_fields(sample, noise);
+    msg.insert("header".into(), header(sample.rx, seq, BASE_FRAME));
+    Value::Object(msg)
+}
+
+/// sensor_msgs/Imu's fields but its header (the same in ROS1 and ROS 2). Without the
+/// sensor's own orientation, orientation_covariance[0] is -1, as sensor_msgs/Imu says.
+pub fn imu_fields(sample: &ImuSample, noise: &ImuNoise) -> serde_json::Map<String, Value> {
     let (orientation, orientation_covariance) = match sample.orientation {
         Some(q) => (
             quaternion([q.i, q.j, q.k, q.w]),
@@ -137,15 +145,23 @@ pub fn imu(sample: &ImuSample, seq: u32, noise: &ImuNoise) -> Value {
             (quaternion([0.0, 0.0, 0.0, 1.0]), unknown)
         }
     };
-    json!({
-        "header": header(sample.rx, seq, BASE_FRAME),
-        "orientation": orientation,
-        "orientation_covariance": orientation_covariance,
-        "angular_velocity": vector(&sample.gyro),
-        "angular_velocity_covariance": diagonal(noise.gyro_rps.powi(2)),
-        "linear_acceleration": vector(&sample.accel),
-        "linear_acceleration_covariance": diagonal(noise.accel_mps2.powi(2)),
-    })
+    [
+        ("orientation", orientation),
+        ("orientation_covariance", json!(orientation_covariance)),
+        ("angular_velocity", vector(&sample.gyro)),
+        (
+            "angular_velocity_covariance",
+            json!(diagonal(noise.gyro_rps.powi(2))),
+        ),
+        ("linear_acceleration", vector(&sample.accel)),
+        (
+            "linear_acceleration_covariance",
+            json!(diagonal(noise.accel_mps2.powi(2))),
+        ),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_owned(), v))
+    .collect()
 }
 
 /// A status code topic's std_msgs/Int16.

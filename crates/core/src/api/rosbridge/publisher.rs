@@ -47,15 +47,30 @@ impl ControlTicks {
 /// What the publishers keep between messages.
 #[derive(Debug)]
 pub struct Publishing {
+    /// The topics published, each with what makes it due.
+    topics: Vec<(&'static str, Publish)>,
     odometry: OdometryUncertainty,
     status_ticks: u64,
     latches: Latches,
 }
 
 impl Publishing {
-    /// Publishing with the odometry's noise (`/odom`'s covariance).
+    /// Publishing the server's topics with the odometry's noise (`/odom`'s covariance).
     pub fn new(noise: OdometryNoise) -> Self {
+        let topics = TOPICS.iter().filter_map(|t| match t.flow {
+            Flow::Published(publish) => Some((t.name, publish)),
+            Flow::Subscribed => None,
+        });
+        Self::with_topics(noise, topics)
+    }
+
+    /// Publishing `topics` (the ROS 2 node's, which builds the same messages).
+    pub fn with_topics(
+        noise: OdometryNoise,
+        topics: impl IntoIterator<Item = (&'static str, Publish)>,
+    ) -> Self {
         Self {
+            topics: topics.into_iter().collect(),
             odometry: OdometryUncertainty::new(noise),
             status_ticks: 0,
             latches: Latches::default(),
@@ -71,13 +86,14 @@ impl Publishing {
         out: &mut Vec<Published>,
     ) {
         self.status_ticks += 1;
-        let mut due: Vec<_> = TOPICS
+        let mut due: Vec<_> = self
+            .topics
             .iter()
-            .filter_map(|t| match t.flow {
-                Flow::Published(Publish::Status { every, build })
+            .filter_map(|&(name, publish)| match publish {
+                Publish::Status { every, build }
                     if self.status_ticks.is_multiple_of(every.max(1)) =>
                 {
-                    Some((every, t.name, build))
+                    Some((every, name, build))
                 }
                 _ => None,
             })
@@ -95,12 +111,12 @@ impl Publishing {
                 });
             }
         }
-        for topic in TOPICS {
-            if let Flow::Published(Publish::Latched(changed)) = topic.flow
+        for &(topic, publish) in &self.topics {
+            if let Publish::Latched(changed) = publish
                 && let Some(msg) = changed(&mut self.latches, status)
             {
                 out.push(Published {
-                    topic: topic.name,
+                    topic,
                     msg,
                     latched: true,
                 });
@@ -119,13 +135,13 @@ impl Publishing {
     ) {
         // The covariance integrates every sample, subscribed or not.
         let covariance = self.odometry.update(t, pose);
-        for topic in TOPICS {
-            if let Flow::Published(Publish::Odometry { every, build }) = topic.flow
+        for &(topic, publish) in &self.topics {
+            if let Publish::Odometry { every, build } = publish
                 && tick.is_multiple_of(every.max(1))
-                && wanted(topic.name)
+                && wanted(topic)
             {
                 out.push(Published {
-                    topic: topic.name,
+                    topic,
                     msg: build(t, pose, &covariance),
                     latched: false,
                 });
@@ -141,12 +157,12 @@ impl Publishing {
         mut wanted: impl FnMut(&'static str) -> bool,
         out: &mut Vec<Published>,
     ) {
-        for topic in TOPICS {
-            if let Flow::Published(Publish::Event(build)) = topic.flow
-                && wanted(topic.name)
+        for &(topic, publish) in &self.topics {
+            if let Publish::Event(build) = publish
+                && wanted(topic)
             {
                 out.push(Published {
-                    topic: topic.name,
+                    topic,
                     msg: build(t, text),
                     latched: false,
                 });

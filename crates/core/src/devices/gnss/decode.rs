@@ -54,6 +54,17 @@ pub enum FixQuality {
 }
 
 impl FixQuality {
+    /// A horizontal 1σ typical of this quality, m, for a receiver that states none (no
+    /// GST): what the localiser weighs a fix by, and `/fix` approximates its covariance with.
+    pub fn typical_sigma_m(self) -> f64 {
+        match self {
+            Self::RtkFixed => 0.02,
+            Self::RtkFloat => 0.3,
+            Self::Dgps => 0.8,
+            _ => 2.5,
+        }
+    }
+
     /// Whether the receiver computed this position from satellites.
     pub fn is_valid(self) -> bool {
         matches!(

@@ -3,6 +3,7 @@
 use serde_json::Value;
 
 use super::{Context, Done};
+use crate::api::requests::quaternion_yaw;
 use crate::api::root::error::RootError;
 use crate::vehicle::Command;
 
@@ -29,14 +30,12 @@ impl InitPosition {
                 "data must be [x, y, z, qx, qy, qz, qw]: a position and an orientation quaternion",
             ));
         };
-        let norm = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
-        if ![x, y, qx, qy, qz, qw].iter().all(|v| v.is_finite()) || !(0.5..=1.5).contains(&norm) {
-            return Err(RootError::invalid(
+        match quaternion_yaw([qx, qy, qz, qw]) {
+            Some(yaw) if x.is_finite() && y.is_finite() => Ok(Self { x, y, yaw }),
+            _ => Err(RootError::invalid(
                 "values must be finite, the quaternion of unit length",
-            ));
+            )),
         }
-        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
-        Ok(Self { x, y, yaw })
     }
 }
 
