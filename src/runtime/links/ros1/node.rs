@@ -7,8 +7,7 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use tokio::io::{AsyncWriteExt, BufReader};
-use tokio::process::{Child, Command};
+use tokio::process::Child;
 use tokio::sync::mpsc;
 
 use super::pipe::{FromNode, MAX_LINE, NodeSettings, ToNode};
@@ -21,9 +20,9 @@ use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::ros1::publisher::{Messages, Publishing};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
+use crate::runtime::child_pipes::ChildPipes;
 use crate::runtime::child_process;
 use crate::runtime::clock::RecordClock;
-use crate::runtime::links::input_lines::{InputLine, InputLines};
 
 /// The hidden subcommand that runs [`super::child::main`].
 pub const CHILD_COMMAND: &str = "ros1-child";
@@ -334,54 +333,29 @@ async fn start(
     settings: &str,
     number: u64,
 ) -> Result<NodeProcess, std::io::Error> {
-    let mut child = Command::from(child_process::helper_command(exe, CHILD_COMMAND))
-        .kill_on_drop(true)
-        .spawn()?;
-    let (Some(mut stdin), Some(stdout)) = (child.stdin.take(), child.stdout.take()) else {
-        return Err(std::io::Error::other("its pipes were not set up"));
-    };
-    stdin.write_all(format!("{settings}\n").as_bytes()).await?;
-    let (down, mut down_rx) = mpsc::channel::<String>(DOWN_QUEUE);
-    tokio::spawn(async move {
-        while let Some(mut line) = down_rx.recv().await {
-            line.push('\n');
-            if stdin.write_all(line.as_bytes()).await.is_err() {
-                return;
-            }
-        }
-    });
-    let (up_tx, up) = mpsc::channel(DOWN_QUEUE);
-    tokio::spawn(read_requests(stdout, up_tx));
+    let ChildPipes {
+        child,
+        down,
+        up,
+        started,
+    } = ChildPipes::start(
+        exe,
+        CHILD_COMMAND,
+        settings,
+        DOWN_QUEUE,
+        MAX_LINE,
+        "ROS1 node",
+    )
+    .await?;
     Ok(NodeProcess {
         number,
         child,
         down,
         up,
-        started: Instant::now(),
+        started,
         registered: false,
         dropped: 0,
     })
-}
-
-/// Reads the node process's lines until its standard output closes.
-async fn read_requests(stdout: tokio::process::ChildStdout, up: mpsc::Sender<FromNode>) {
-    let mut lines = InputLines::new(BufReader::new(stdout), MAX_LINE);
-    while let Ok(Some(line)) = lines.next().await {
-        let message = match line {
-            InputLine::Text(text) => {
-                serde_json::from_str::<FromNode>(&text).map_err(|e| e.to_string())
-            }
-            other => Err(format!("{other:?}")),
-        };
-        match message {
-            Ok(message) => {
-                if up.send(message).await.is_err() {
-                    return;
-                }
-            }
-            Err(e) => tracing::error!(error = %e, "ROS1 node's process: a line not understood"),
-        }
-    }
 }
 
 /// Gives the engine's `answer` to the request it names.
