@@ -228,6 +228,21 @@ fn targets() -> Vec<Target> {
             structured: None,
             runner: ros1::runner,
         },
+        #[cfg(feature = "ros2")]
+        Target {
+            name: "ros2",
+            about: "what the ROS 2 node takes: each taken type's CDR (and a NavigateToPose goal) decoded as its process decodes it, the lines that process hands up, into the engine",
+            seeds: ros2::seeds,
+            tokens: &[
+                b"\x00\x00\x00\x00",
+                b"\x04\x00\x00\x00map\x00",
+                b"\x00\x00\x00\x00\x00\x00\xf0\x3f",
+                b"\xff\xff\xff\x7f",
+                b"{\"kind\":\"message\",\"topic\":\"/cmd_vel\",\"msg\":",
+            ],
+            structured: None,
+            runner: ros2::runner,
+        },
         Target {
             name: "zones",
             about: "zones files (GeoJSON): the checks, writing back, placing and the distance queries",
@@ -888,6 +903,112 @@ mod ros1 {
                 }
             };
             signature(&[u64::from(kind % KINDS), outcome])
+        })
+    }
+}
+
+#[cfg(feature = "ros2")]
+mod ros2 {
+    use super::*;
+    use chassisd::api::ros2::topics::TAKEN;
+    use chassisd::api::ros2::{self as api, NAVIGATE_TO_POSE, adapter};
+    use chassisd::runtime::links::ros2::messages::{cdr, decode};
+    use chassisd::runtime::links::ros2::pipe::FromNode;
+    use serde_json::json;
+
+    /// The goal's type, after the taken topics' in kind-byte order; then a line of the
+    /// node's process.
+    const GOAL: &str = "nav2_msgs/msg/NavigateToPoseGoal";
+
+    fn kinds() -> u8 {
+        TAKEN.len() as u8 + 2
+    }
+
+    pub fn seeds() -> Vec<Vec<u8>> {
+        let header = json!({"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "map"});
+        let twist = json!({"linear": {"x": 0.3, "y": 0.0, "z": 0.0},
+                           "angular": {"x": 0.0, "y": 0.0, "z": 0.2}});
+        let pose = json!({"position": {"x": 1.0, "y": 2.0, "z": 0.0},
+                          "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}});
+        let mut messages = vec![
+            twist.clone(),
+            json!({"header": header, "twist": twist}),
+            json!({"header": header, "pose": pose}),
+            json!({"header": header, "pose": {"pose": pose, "covariance": vec![0.0; 36]}}),
+            json!({"pose": {"header": header, "pose": pose}, "behavior_tree": ""}),
+        ];
+        let types = TAKEN.iter().map(|t| t.msg_type).chain([GOAL]);
+        let mut seeds: Vec<Vec<u8>> = types
+            .zip(messages.iter())
+            .enumerate()
+            .map(|(kind, (msg_type, msg))| {
+                [vec![kind as u8], cdr(msg_type, msg).unwrap_or_default()].concat()
+            })
+            .collect();
+        let line = FromNode::Message {
+            topic: "/cmd_vel".into(),
+            msg: messages.swap_remove(0),
+        };
+        seeds.push(
+            [
+                vec![kinds() - 1],
+                serde_json::to_vec(&line).unwrap_or_default(),
+            ]
+            .concat(),
+        );
+        seeds
+    }
+
+    /// The record (topic, message) an input makes, as the node's process and its parent
+    /// would hand it on; `None` where they would drop it.
+    fn taken(kind: u8, body: &[u8]) -> Option<(String, serde_json::Value)> {
+        let kind = usize::from(kind % kinds());
+        if let Some(t) = TAKEN.get(kind) {
+            return decode(t.msg_type, body)
+                .ok()
+                .map(|m| (t.name.to_owned(), m));
+        }
+        if kind == TAKEN.len() {
+            return decode(GOAL, body)
+                .ok()
+                .map(|m| (NAVIGATE_TO_POSE.to_owned(), m));
+        }
+        match serde_json::from_slice::<FromNode>(body).ok()? {
+            FromNode::Message { topic, msg } => Some((topic, msg)),
+            FromNode::Goal { msg, .. } => Some((NAVIGATE_TO_POSE.to_owned(), msg)),
+            FromNode::Ready | FromNode::Cancel { .. } => None,
+        }
+    }
+
+    pub fn runner() -> Runner {
+        let fresh = || simulated_vehicle(5, None);
+        let mut sim = fresh();
+        let mut n = 0u64;
+        Box::new(move |input| {
+            n += 1;
+            if n.is_multiple_of(2000) {
+                sim = fresh();
+            }
+            let Some((&kind, body)) = input.split_first() else {
+                return 0;
+            };
+            let outcome = match taken(kind, body) {
+                None => 0,
+                Some((topic, msg)) => {
+                    let mut sink = Collect::default();
+                    sim.input(
+                        api::SOURCE,
+                        Payload::Command {
+                            topic,
+                            payload: adapter::encode(Some(n), &msg),
+                        },
+                        &mut sink,
+                    );
+                    settle(&mut sim, n, &mut sink);
+                    1 + sink.outputs.min(8)
+                }
+            };
+            signature(&[u64::from(kind % kinds()), outcome])
         })
     }
 }

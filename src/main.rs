@@ -36,6 +36,11 @@ enum Command {
     #[cfg(feature = "ros1")]
     #[command(name = "ros1-child", hide = true)]
     Ros1Child,
+    /// The ROS 2 node's own process, started and watched by chassisd (settings on standard
+    /// input); not for use by hand.
+    #[cfg(feature = "ros2")]
+    #[command(name = "ros2-child", hide = true)]
+    Ros2Child,
 }
 
 /// Exit status of a configuration error (sysexits' EX_CONFIG).
@@ -93,6 +98,11 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
         #[cfg(feature = "ros1")]
         Command::Ros1Child => {
             chassisd::runtime::links::ros1::child::main()?;
+            Ok(true)
+        }
+        #[cfg(feature = "ros2")]
+        Command::Ros2Child => {
+            chassisd::runtime::links::ros2::child::main()?;
             Ok(true)
         }
     }

@@ -180,6 +180,7 @@ pub async fn run(options: MqttBenchOptions) -> crate::bench::error::Result<MqttR
             duration: Some(options.duration + Duration::from_secs(4)),
             mqtt: Some(options.mqtt.clone()),
             ros1: None,
+            ros2: None,
             websocket: None,
             handle: None,
             ntrip: None,

@@ -391,6 +391,7 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
                 master_uri: m.uri(),
                 ..Default::default()
             }),
+            ros2: None,
             websocket: Some(crate::config::websocket::WebsocketConfig {
                 bind: format!("127.0.0.1:{websocket_port}"),
                 ..Default::default()

@@ -34,6 +34,31 @@ pub fn ensure_ros1_built(wanted: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Checks a ROS 2 node's settings as it starts: a build with the `ros2` feature, an
+/// interface that exists, a readable `ROS_DOMAIN_ID` (a configuration error otherwise: exit
+/// 78, with the fix). `file` names where the settings came from.
+pub fn ensure_ros2(
+    ros2: Option<&chassisd::config::ros2::Ros2Config>,
+    file: &std::path::Path,
+) -> anyhow::Result<()> {
+    let Some(ros2) = ros2 else {
+        return Ok(());
+    };
+    #[cfg(feature = "ros2")]
+    {
+        chassisd::runtime::links::ros2::interface::resolve(ros2, file)?;
+        Ok(())
+    }
+    #[cfg(not(feature = "ros2"))]
+    {
+        let _ = (ros2, file);
+        anyhow::bail!(
+            "this chassisd was built without the ros2 feature; build it with the default \
+             features (cargo build --release) to join a ROS 2 domain"
+        )
+    }
+}
+
 /// `[ntrip]` with `--ntrip URL`'s caster (the rest of the section kept); a password in the
 /// URL replaces a password file.
 pub fn ntrip_override(configured: Option<NtripConfig>, url: &str) -> anyhow::Result<NtripConfig> {

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{block_on, ensure_ros1_built, ntrip_override};
+use super::{block_on, ensure_ros1_built, ensure_ros2, ntrip_override};
 use chassisd::config::{ConfigError, VehicleConfig};
 use chassisd::runtime::modes::live::{self, LiveOptions};
 
@@ -23,6 +23,10 @@ pub struct Args {
     /// over the configuration's `[ros1]` master_uri.
     #[arg(long, value_name = "URI")]
     ros_master: Option<String>,
+    /// Join ROS 2 (DDS) as a node: the configuration's `[ros2]`, or its defaults (domain
+    /// ROS_DOMAIN_ID or 0, this machine only).
+    #[arg(long)]
+    ros2: bool,
     /// Serve the rosbridge v2 WebSocket topics on ADDR (e.g. 127.0.0.1:9090), over the
     /// configuration's `[websocket]` bind.
     #[arg(long, value_name = "ADDR")]
@@ -40,6 +44,10 @@ pub struct Args {
 
 pub fn execute(a: Args) -> anyhow::Result<bool> {
     let mut vehicle = VehicleConfig::load(&a.config)?;
+    if a.ros2 && vehicle.ros2.is_none() {
+        vehicle.ros2 = Some(Default::default());
+    }
+    ensure_ros2(vehicle.ros2.as_ref(), &a.config)?;
     vehicle.require_devices(&a.config)?;
     if let Some(url) = a.ntrip {
         vehicle.ntrip = Some(ntrip_override(vehicle.ntrip.take(), &url)?);

@@ -52,6 +52,10 @@ pub struct Args {
     /// e.g. http://127.0.0.1:11311.
     #[arg(long, value_name = "URI")]
     ros_master: Option<String>,
+    /// Join ROS 2 (DDS) as a node with the default `[ros2]` (domain ROS_DOMAIN_ID or 0,
+    /// this machine only, commands taken).
+    #[arg(long, conflicts_with = "fast")]
+    ros2: bool,
     /// Serve the rosbridge v2 WebSocket topics (device-mqtt-api.md) on ADDR, e.g.
     /// 127.0.0.1:9090.
     #[arg(long, value_name = "ADDR", conflicts_with = "fast")]
@@ -106,6 +110,8 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         w.validate(Path::new("--websocket"))?;
     }
     ensure_ros1_built(ros1.is_some())?;
+    let ros2 = a.ros2.then(chassisd::config::ros2::Ros2Config::default);
+    super::ensure_ros2(ros2.as_ref(), Path::new("--ros2"))?;
     let mut mqtt = (!a.no_mqtt)
         .then(|| sim_mqtt(a.mqtt.as_deref()))
         .transpose()?;
@@ -115,8 +121,12 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
     if let Some(rtk) = mqtt.as_mut().and_then(|m| m.rtk.as_mut()) {
         rtk.trajectory_dir = a.trajectory_dir.map(|d| d.to_string_lossy().into_owned());
     }
-    // The ROS1 node's publishing gets a worker of its own beside the simulation.
-    let threads = if ros1.is_some() { 2 } else { 1 };
+    // A ROS node's publishing gets a worker of its own beside the simulation.
+    let threads = if ros1.is_some() || ros2.is_some() {
+        2
+    } else {
+        1
+    };
     let footprint = plant.geometry.footprint();
     let options = SimOptions {
         plant,
@@ -127,6 +137,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         duration: a.duration,
         mqtt,
         ros1,
+        ros2,
         websocket,
         handle: None,
         ntrip: a.ntrip.map(|url| ntrip_override(None, &url)).transpose()?,

@@ -1,6 +1,6 @@
-//! The log lines of the libraries that serve network peers themselves (roslibrust: one
-//! line per refused connection, per failed accept, per bad header), held to the per-message
-//! budget: a peer that makes such a library log at every connection costs the log a few
+//! The log lines of the libraries that serve network peers themselves (roslibrust, RustDDS
+//! and ros2-client: one line per refused connection, per failed accept, per bad header, per
+//! participant), held to the per-message budget: a peer that makes such a library log at every connection costs the log a few
 //! lines every 5 s and a count, never a line per connection. Warnings and errors are
 //! counted (what the log shows of them by default); more verbose levels asked for with
 //! `RUST_LOG` are shown as asked.
@@ -12,7 +12,7 @@ use crate::api::log_budget::LogBudget;
 use crate::time::Timestamp;
 
 /// Targets whose lines are budgeted.
-const BUDGETED: &[&str] = &["roslibrust"];
+const BUDGETED: &[&str] = &["roslibrust", "rustdds", "ros2_client"];
 
 static BUDGET: Mutex<LogBudget> = Mutex::new(LogBudget::new());
 static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();

@@ -18,9 +18,19 @@ pub fn init() -> WorkerGuard {
         .buffered_lines_limit(LOG_QUEUE)
         .thread_name("log-out")
         .finish(std::io::stderr());
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+    let mut filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
         tracing_subscriber::EnvFilter::new("info,rumqttd=off,roslibrust_ros1=warn")
     });
+    // RustDDS logs every participant it discovers at INFO: a peer announcing hundreds would
+    // write hundreds of lines. Its warnings still show (budgeted), unless RUST_LOG names it.
+    let named = std::env::var("RUST_LOG").is_ok_and(|v| v.contains("rustdds"));
+    if !named {
+        for directive in ["rustdds=warn", "ros2_client=warn"] {
+            if let Ok(d) = directive.parse() {
+                filter = filter.add_directive(d);
+            }
+        }
+    }
     let logs = tracing_subscriber::fmt()
         .with_writer(log_writer)
         .with_env_filter(filter);

@@ -8,7 +8,6 @@
 //! - the plumbing beside them: clocks, the recorder and status threads, logging to the
 //!   journal, systemd notification, panic containment, the allocator's tuning.
 
-pub mod child_pipes;
 pub mod child_process;
 pub mod clock;
 pub mod descriptors;

@@ -20,6 +20,7 @@ use crate::runtime::links::broker::{self, EmbeddedBroker};
 use crate::runtime::links::mqtt::{self, MqttSender, MqttSpec};
 use crate::runtime::links::ntrip::{self, CorrectionsClient};
 use crate::runtime::links::ros1::{self, Ros1Link};
+use crate::runtime::links::ros2::{self, Ros2Link};
 use crate::runtime::links::websocket::{self, WebsocketLink};
 use crate::runtime::recorder::Recorder;
 use crate::runtime::zones_writer::ZonesWriter;
@@ -44,6 +45,7 @@ pub struct Links {
     clock: RecordClock,
     mqtt: Option<MqttSender>,
     ros1: Option<Ros1Link>,
+    ros2: Option<Ros2Link>,
     websocket: Option<WebsocketLink>,
     corrections: Option<CorrectionsClient>,
     zones: Option<ZonesWriter>,
@@ -112,6 +114,13 @@ impl Links {
             }
             None => None,
         };
+        let ros2 = match config.ros2.clone() {
+            Some(r) => {
+                add(ros2::source_meta());
+                Some(ros2::start(engine, config, r, clock, tx.clone())?)
+            }
+            None => None,
+        };
         let websocket = match config.websocket.clone() {
             Some(w) => {
                 add(websocket::source_meta());
@@ -123,6 +132,7 @@ impl Links {
             clock,
             mqtt,
             ros1,
+            ros2,
             websocket,
             corrections,
             zones: zones_writer(config),
@@ -133,6 +143,7 @@ impl Links {
     pub fn any(&self) -> bool {
         self.mqtt.is_some()
             || self.ros1.is_some()
+            || self.ros2.is_some()
             || self.websocket.is_some()
             || self.corrections.is_some()
     }
@@ -151,6 +162,9 @@ impl Links {
         if let Some(link) = &mut self.websocket {
             link.see(&output);
         }
+        if let Some(link) = &mut self.ros2 {
+            link.see(&output);
+        }
         let output = match &mut self.ros1 {
             Some(link) => link.take(output)?,
             None => output,
@@ -162,6 +176,8 @@ impl Links {
                 }
             }
             EngineOutput::Event(event) => tracing::info!("{event}"),
+            // What only a ROS node publishes; none took it.
+            EngineOutput::Poses(..) | EngineOutput::Imu(_) | EngineOutput::Fix(..) => {}
             EngineOutput::ZonesChanged(text) => match &self.zones {
                 Some(writer) => writer.write(text),
                 None => {

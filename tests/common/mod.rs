@@ -6,6 +6,7 @@ pub mod caster;
 pub mod lockstep;
 pub mod mqtt;
 pub mod netcut;
+pub mod netns;
 pub mod process;
 pub mod pty;
 pub mod spec;

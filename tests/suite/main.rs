@@ -56,6 +56,7 @@ mod replay_golden;
 mod replay_hostile_files;
 mod replay_time;
 mod ros1_node;
+mod ros2_node;
 mod rtcm_ntrip_data;
 mod safety_properties;
 mod serial_pty;

@@ -2,6 +2,7 @@
 //! engine.
 
 pub mod broker;
+pub mod child_pipes;
 pub mod command_rate;
 pub mod input_lines;
 pub mod mqtt;
@@ -10,4 +11,5 @@ pub mod mqtt_observe;
 pub mod ntrip;
 pub mod per_address;
 pub mod ros1;
+pub mod ros2;
 pub mod websocket;

@@ -203,7 +203,43 @@ pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe
         };
         probes.push(Probe::new("mqtt", &what, result));
     }
+    #[cfg(feature = "ros2")]
+    if let Some(r) = &config.ros2 {
+        let what = format!("node {}/{}", r.namespace, r.node_name);
+        probes.push(Probe::new("ros2", &what, probe_ros2(r)));
+    }
     probes
+}
+
+/// Where the ROS 2 node would join: its domain and the addresses DDS would use.
+#[cfg(feature = "ros2")]
+fn probe_ros2(r: &crate::config::ros2::Ros2Config) -> Result<String, (String, String)> {
+    let file = std::path::Path::new("[ros2]");
+    match crate::runtime::links::ros2::interface::resolve(r, file) {
+        Ok(joining) => {
+            let domain = joining.domain;
+            let on = joining.networks.map_or("every interface".to_owned(), |n| {
+                n.iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            });
+            let commands = if r.accept_commands {
+                "takes commands"
+            } else {
+                "publishes only"
+            };
+            let middleware = match joining.middleware {
+                crate::config::ros2::Middleware::Fastdds => "Fast DDS",
+                crate::config::ros2::Middleware::Cyclonedds => "Cyclone DDS",
+            };
+            Ok(format!(
+                "domain {domain} on {on}; {commands}; the action framed as {middleware}'s"
+            ))
+        }
+        Err(crate::config::ConfigError::Invalid { problem, fix, .. }) => fail(problem, fix),
+        Err(other) => fail(other.to_string(), "check [ros2]"),
+    }
 }
 
 /// The zones' kinds (they were checked on load), and whether they lie near the datum: a

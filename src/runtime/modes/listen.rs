@@ -116,6 +116,9 @@ pub async fn run(options: ListenOptions) -> crate::runtime::error::Result<Listen
     if config.ros1.is_some() {
         tracing::warn!("ros1: the node is chassisd run's; ROS1 commands are not recorded");
     }
+    if config.ros2.is_some() {
+        tracing::warn!("ros2: the node is chassisd run's; ROS 2 commands are not recorded");
+    }
     drop(tx);
     // The stored configuration says how the bus was used: a replay then decodes it as the
     // monitor it was, transmitting nothing.

@@ -62,6 +62,8 @@ pub struct SimOptions {
     pub mqtt: Option<MqttConfig>,
     /// Join a ROS1 graph as a node.
     pub ros1: Option<crate::config::ros1::Ros1Config>,
+    /// Join a ROS 2 domain as a node.
+    pub ros2: Option<crate::config::ros2::Ros2Config>,
     /// Serve the rosbridge WebSocket topics.
     pub websocket: Option<crate::config::websocket::WebsocketConfig>,
     /// A benchmark's hold on the run: faults to inject, truth to read back.
@@ -194,6 +196,7 @@ async fn run_marked(
     // for.
     let mut config = sim.config().clone();
     config.ros1 = options.ros1.clone();
+    config.ros2 = options.ros2.clone();
     config.websocket = options.websocket.clone();
     let broker = session::start_broker(&config)?;
     let mut sources = lockstep::sources(&options.plant);
@@ -391,6 +394,12 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
         line += &format!(
             "; ROS1 node {} on {} (watch: rostopic echo /tracked_pose)",
             r.node_name, r.master_uri
+        );
+    }
+    if let Some(r) = &options.ros2 {
+        line += &format!(
+            "; ROS 2 node {} on this machine (watch: ros2 topic echo /odom)",
+            r.node_name
         );
     }
     if let Some(w) = &options.websocket {

@@ -32,9 +32,10 @@ pub struct Ros2Config {
     /// `false` publishes only.
     #[serde(default = "default_true")]
     pub accept_commands: bool,
-    /// How the vehicle's other nodes frame a service's requests (and so an action's).
-    #[serde(default)]
-    pub middleware: Middleware,
+    /// How the vehicle's other nodes frame a service's requests (and so an action's);
+    /// `None`: as `RMW_IMPLEMENTATION` says, else Fast DDS's (ROS 2's default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub middleware: Option<Middleware>,
     /// `/odom`'s rate, Hz (the control loop's 100 Hz at most).
     #[serde(default = "default_odom_rate_hz")]
     pub odom_rate_hz: f64,
@@ -156,7 +157,7 @@ impl Default for Ros2Config {
             discovery: Discovery::default(),
             interface: None,
             accept_commands: true,
-            middleware: Middleware::default(),
+            middleware: None,
             odom_rate_hz: default_odom_rate_hz(),
             frames: Ros2Frames::default(),
             command_rate_hz: default_command_rate_hz(),
@@ -195,6 +196,15 @@ impl Ros2Config {
                     format!("ROS_DOMAIN_ID={text:?} is not a domain id (0 to {MAX_DOMAIN_ID})")
                 }),
         }
+    }
+
+    /// The middleware for `RMW_IMPLEMENTATION`'s value `env` (the configured one first):
+    /// `rmw_cyclonedds_cpp` is Cyclone DDS's; unset or any other, Fast DDS's, ROS 2's default.
+    pub fn middleware(&self, env: Option<&str>) -> Middleware {
+        self.middleware.unwrap_or(match env.map(str::trim) {
+            Some("rmw_cyclonedds_cpp") => Middleware::Cyclonedds,
+            _ => Middleware::Fastdds,
+        })
     }
 
     /// Checks the values; `file` names the configuration in the error. (That `interface`
@@ -384,7 +394,18 @@ mod tests {
         )
         .unwrap();
         assert_eq!(c.discovery, Discovery::Subnet);
-        assert_eq!(c.middleware, Middleware::Cyclonedds);
+        assert_eq!(c.middleware(None), Middleware::Cyclonedds);
+        assert_eq!(
+            c.middleware(Some("rmw_fastrtps_cpp")),
+            Middleware::Cyclonedds,
+            "the configuration's first"
+        );
+        let unset = Ros2Config::default();
+        assert_eq!(unset.middleware(None), Middleware::Fastdds);
+        assert_eq!(
+            unset.middleware(Some("rmw_cyclonedds_cpp")),
+            Middleware::Cyclonedds
+        );
         assert!(!c.accept_commands);
         assert_eq!(c.frames.base, "base_footprint");
         assert_eq!(c.frames.map, "map");

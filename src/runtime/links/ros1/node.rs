@@ -20,9 +20,9 @@ use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::ros1::publisher::{Messages, Publishing};
 use crate::config::ros1::Ros1Config;
 use crate::record::{Payload, Record};
-use crate::runtime::child_pipes::ChildPipes;
 use crate::runtime::child_process;
 use crate::runtime::clock::RecordClock;
+use crate::runtime::links::child_pipes::ChildPipes;
 
 /// The hidden subcommand that runs [`super::child::main`].
 pub const CHILD_COMMAND: &str = "ros1-child";

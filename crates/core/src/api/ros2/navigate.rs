@@ -21,7 +21,8 @@ pub const STATUS_CANCELED: i8 = 5;
 /// Ended otherwise: a fault, a timeout, another command.
 pub const STATUS_ABORTED: i8 = 6;
 
-/// NavigateToPose's result codes (Jazzy): none, unknown, a timeout.
+/// NavigateToPose's result codes: none (Jazzy's only constant), unknown and a timeout
+/// (Kilted's constants; the same message on the wire).
 const ERROR_NONE: u16 = 0;
 const ERROR_UNKNOWN: u16 = 9000;
 const ERROR_TIMEOUT: u16 = 9003;

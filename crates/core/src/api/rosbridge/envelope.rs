@@ -38,10 +38,7 @@ fn colour(kind: ZoneKind) -> (f64, f64, f64) {
 /// id (the `shapeId` ROS1 `/set_shape` removes it by), `text` its name, `points` in pairs,
 /// each a segment of its outline.
 pub fn zones(t: Timestamp, outlines: &[ZoneOutline]) -> Value {
-    let clear = json!({
-        "header": header(t, MAP_FRAME), "ns": "", "id": 0, "type": LINE_LIST,
-        "action": DELETE_ALL,
-    });
+    let clear = marker(t, json!({"action": DELETE_ALL}));
     let markers = outlines.iter().map(|zone| {
         let points: Vec<Value> = zone
             .lines
@@ -51,26 +48,51 @@ pub fn zones(t: Timestamp, outlines: &[ZoneOutline]) -> Value {
             .map(|&(x, y)| json!({"x": mm(x), "y": mm(y), "z": 0.0}))
             .collect();
         let (r, g, b) = colour(zone.kind);
-        json!({
-            "header": header(t, MAP_FRAME),
-            "ns": zone.kind.name(),
-            "id": zone.id,
-            "type": LINE_LIST,
-            "action": ADD,
-            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
-                     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
-            "scale": {"x": LINE_WIDTH_M, "y": 0.0, "z": 0.0},
-            "color": {"r": r, "g": g, "b": b, "a": 1.0},
-            "lifetime": {"sec": 0, "nanosec": 0},
-            "frame_locked": false,
-            "points": points,
-            "colors": [],
-            "text": zone.name,
-            "mesh_resource": "",
-            "mesh_use_embedded_materials": false,
-        })
+        marker(
+            t,
+            json!({
+                "ns": zone.kind.name(),
+                "id": zone.id,
+                "scale": {"x": LINE_WIDTH_M, "y": 0.0, "z": 0.0},
+                "color": {"r": r, "g": g, "b": b, "a": 1.0},
+                "points": points,
+                "text": zone.name,
+            }),
+        )
     });
     json!({"markers": std::iter::once(clear).chain(markers).collect::<Vec<_>>()})
+}
+
+/// A visualization_msgs/Marker in `map` with every field of ROS 2 Jazzy's definition (a
+/// LINE_LIST added, the rest empty), `fields` put over them: the ROS 2 node serialises it
+/// through that type, and a rosbridge client ignores what it does not know.
+fn marker(t: Timestamp, fields: Value) -> Value {
+    let mut marker = json!({
+        "header": header(t, MAP_FRAME),
+        "ns": "",
+        "id": 0,
+        "type": LINE_LIST,
+        "action": ADD,
+        "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                 "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+        "scale": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "color": {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0},
+        "lifetime": {"sec": 0, "nanosec": 0},
+        "frame_locked": false,
+        "points": [],
+        "colors": [],
+        "texture_resource": "",
+        "texture": {"header": header(t, ""), "format": "", "data": []},
+        "uv_coordinates": [],
+        "text": "",
+        "mesh_resource": "",
+        "mesh_file": {"filename": "", "data": []},
+        "mesh_use_embedded_materials": false,
+    });
+    if let (Value::Object(all), Value::Object(given)) = (&mut marker, fields) {
+        all.extend(given);
+    }
+    marker
 }
 
 /// The envelope's diagnostic status (`/safety_envelope`, and in `/diagnostics`): OK while

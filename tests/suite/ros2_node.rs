@@ -1,0 +1,425 @@
+//! The native ROS 2 node against a DDS implementation that is not ours: the Eclipse Cyclone
+//! DDS Python binding (PyPI, pinned) as `tests/ros2/peer.py`, which builds its message
+//! classes from PyPI rosbags' definitions and checks every sample's CDR bytes against
+//! rosbags' serialiser. chassisd runs as `chassisd sim --no-mqtt --ros2`, as a newcomer
+//! would run it. Everything runs inside a network namespace of its own
+//! (`common::netns`): DDS discovery multicasts, and no packet may leave the test.
+
+use std::path::PathBuf;
+use std::process::Output;
+use std::time::Duration;
+
+use serde_json::Value;
+
+use crate::common::netns::NetNs;
+use crate::common::process::Proc;
+
+/// The Python of the test environment (tests/install-deps builds it).
+fn python() -> PathBuf {
+    crate::common::repo().join("target/test-venv/bin/python")
+}
+
+/// `peer.py ARGS` inside `ns`, on domain `domain`; its output (checked to be a success).
+fn peer(ns: &NetNs, domain: u16, args: &[&str]) -> Vec<Value> {
+    let out = peer_output(ns, domain, args);
+    assert!(
+        out.status.success(),
+        "peer.py {args:?}: {}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    events(&out)
+}
+
+fn peer_output(ns: &NetNs, domain: u16, args: &[&str]) -> Output {
+    ns.command(python().to_str().expect("UTF-8 path"))
+        .arg(crate::common::repo().join("tests/ros2/peer.py"))
+        .args(args)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .output()
+        .expect("peer.py runs")
+}
+
+/// Each line of `out` as JSON.
+fn events(out: &Output) -> Vec<Value> {
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect()
+}
+
+/// The samples among a listener's events, each checked byte for byte against rosbags.
+fn samples(events: &[Value]) -> Vec<&Value> {
+    let samples: Vec<&Value> = events.iter().filter(|e| e.get("msg").is_some()).collect();
+    for s in &samples {
+        assert_eq!(
+            s["bytes_match_rosbags"], true,
+            "{}: CDR differs from rosbags' serialisation: {s}",
+            s["topic"]
+        );
+    }
+    samples
+}
+
+/// `chassisd sim --no-mqtt --ros2 [MORE]` inside `ns` on `domain`, once its node is on the
+/// domain.
+fn sim(ns: &NetNs, domain: u16, more: &[&str]) -> Proc {
+    let mut args = vec!["sim", "--no-mqtt", "--ros2"];
+    args.extend_from_slice(more);
+    let wrapper = ns.wrapper();
+    let wrapper: Vec<&str> = wrapper.iter().map(String::as_str).collect();
+    // The peer frames the action's services as rmw_cyclonedds does; chassisd learns that
+    // from ROS 2's own variable, as it would on a vehicle.
+    let domain = format!("ROS_DOMAIN_ID={domain}");
+    let env = [
+        "env",
+        domain.as_str(),
+        "RMW_IMPLEMENTATION=rmw_cyclonedds_cpp",
+    ];
+    let full: Vec<&str> = wrapper.iter().copied().chain(env).collect();
+    let mut p = Proc::start_under(&full, &args);
+    p.wait_log(Duration::from_secs(30), "ROS 2 node on its domain");
+    p
+}
+
+/// The vehicle's forward speed in a base_status line.
+fn vx(line: &str) -> f64 {
+    let v: Value = serde_json::from_str(line).expect("base_status JSON");
+    v["robot"]["vx"].as_f64().expect("robot.vx")
+}
+
+/// A listener on `topic` of `msg_type`: at most `count` samples within `seconds`.
+fn listen(
+    ns: &NetNs,
+    domain: u16,
+    topic: &str,
+    msg_type: &str,
+    count: u32,
+    more: &[&str],
+) -> Vec<Value> {
+    let count = count.to_string();
+    let mut args = vec![
+        "listen",
+        "--topic",
+        topic,
+        "--type",
+        msg_type,
+        "--seconds",
+        "15",
+        "--count",
+        &count,
+    ];
+    args.extend_from_slice(more);
+    peer(ns, domain, &args)
+}
+
+#[test]
+fn odometry_frames_the_fix_and_the_latched_topics_arrive_in_ros2s_types() {
+    let ns = NetNs::new();
+    let _sim = sim(&ns, 11, &[]);
+    let odom_events = listen(&ns, 11, "/odom", "nav_msgs/msg/Odometry", 40, &[]);
+    let odom = samples(&odom_events);
+    assert_eq!(odom.len(), 40, "{odom_events:?}");
+    let first = &odom[0]["msg"];
+    assert_eq!(first["header"]["frame_id"], "odom");
+    assert_eq!(first["child_frame_id"], "base_link");
+    // 50 Hz: 39 periods of 20 ms (the receiver's own timing adds a little).
+    let span = odom[39]["t_rx"].as_f64().unwrap() - odom[0]["t_rx"].as_f64().unwrap();
+    let rate = 39.0 / span;
+    assert!((35.0..=65.0).contains(&rate), "/odom at {rate:.1} Hz");
+
+    let tf = listen(&ns, 11, "/tf", "tf2_msgs/msg/TFMessage", 3, &[]);
+    let tf = samples(&tf);
+    assert_eq!(tf.len(), 3);
+    let children: Vec<&str> = tf[2]["msg"]["transforms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["child_frame_id"].as_str().unwrap())
+        .collect();
+    assert!(children.contains(&"base_link"), "{children:?}");
+
+    // Published once, long before this reader joined: transient local keeps it.
+    let fixed = listen(
+        &ns,
+        11,
+        "/tf_static",
+        "tf2_msgs/msg/TFMessage",
+        1,
+        &["--transient-local", "--depth", "1"],
+    );
+    let fixed = samples(&fixed);
+    assert_eq!(fixed.len(), 1, "a late joiner gets /tf_static");
+    assert_eq!(
+        fixed[0]["msg"]["transforms"][0]["child_frame_id"],
+        "gnss_link"
+    );
+
+    let fix = listen(&ns, 11, "/fix", "sensor_msgs/msg/NavSatFix", 2, &[]);
+    let fix = samples(&fix);
+    assert_eq!(fix.len(), 2);
+    let f = &fix[1]["msg"];
+    assert_eq!(f["header"]["frame_id"], "gnss_link");
+    assert!(
+        f["latitude"].as_f64().is_some_and(|l| l.abs() <= 90.0),
+        "{f}"
+    );
+    assert!(f["position_covariance_type"].as_u64().unwrap() >= 1, "{f}");
+
+    let zones = listen(
+        &ns,
+        11,
+        "/zones",
+        "visualization_msgs/msg/MarkerArray",
+        1,
+        &["--transient-local", "--depth", "1"],
+    );
+    assert_eq!(samples(&zones).len(), 1, "a late joiner gets /zones");
+    let plan = listen(
+        &ns,
+        11,
+        "/plan",
+        "nav_msgs/msg/Path",
+        1,
+        &["--transient-local", "--depth", "1"],
+    );
+    assert_eq!(samples(&plan).len(), 1, "a late joiner gets /plan");
+    let imu = listen(
+        &ns,
+        11,
+        "/imu/data",
+        "sensor_msgs/msg/Imu",
+        5,
+        &["--best-effort"],
+    );
+    assert_eq!(samples(&imu).len(), 5);
+    let battery = listen(
+        &ns,
+        11,
+        "/battery_state",
+        "sensor_msgs/msg/BatteryState",
+        1,
+        &[],
+    );
+    assert_eq!(samples(&battery).len(), 1);
+    let diagnostics = listen(
+        &ns,
+        11,
+        "/diagnostics",
+        "diagnostic_msgs/msg/DiagnosticArray",
+        1,
+        &[],
+    );
+    assert_eq!(samples(&diagnostics).len(), 1);
+}
+
+#[test]
+fn cmd_vel_of_either_type_drives_and_stops_when_publishing_ends() {
+    let ns = NetNs::new();
+    let dir = crate::common::tempdir("ros2-cmd-vel");
+    let record = dir.join("rec");
+    let mut p = sim(&ns, 12, &["--record", record.to_str().expect("UTF-8 path")]);
+    peer(
+        &ns,
+        12,
+        &[
+            "publish",
+            "--topic",
+            "/cmd_vel",
+            "--type",
+            "geometry_msgs/msg/Twist",
+            "--json",
+            r#"{"linear": {"x": 0.4}, "angular": {"z": 0.0}}"#,
+            "--rate",
+            "10",
+            "--seconds",
+            "3",
+            "--wait-match",
+            "10",
+            "--best-effort",
+        ],
+    );
+    let lines: Vec<String> = p.drain_out().to_vec();
+    let fastest = lines.iter().map(|l| vx(l)).fold(0.0, f64::max);
+    assert!(fastest > 0.3, "never drove: fastest {fastest} m/s");
+    // The command watchdog (0.5 s) and the deceleration bring it to rest by itself.
+    p.wait_out(Duration::from_secs(3), "the vehicle at rest", |l| {
+        vx(l).abs() < 0.01
+    });
+
+    // Jazzy's diff_drive_controller and nav2 send TwistStamped on the same topic.
+    peer(
+        &ns,
+        12,
+        &[
+            "publish",
+            "--topic",
+            "/cmd_vel",
+            "--type",
+            "geometry_msgs/msg/TwistStamped",
+            "--json",
+            r#"{"header": {"frame_id": "base_link"}, "twist": {"linear": {"x": -0.3}}}"#,
+            "--rate",
+            "10",
+            "--seconds",
+            "3",
+            "--wait-match",
+            "10",
+            "--stamp-now",
+        ],
+    );
+    let lines: Vec<String> = p.drain_out().to_vec();
+    let backwards = lines.iter().map(|l| vx(l)).fold(0.0, f64::min);
+    assert!(backwards < -0.2, "never reversed: slowest {backwards} m/s");
+    p.wait_out(Duration::from_secs(3), "the vehicle at rest", |l| {
+        vx(l).abs() < 0.01
+    });
+    // Every message went through the arbiter, none refused (a TwistStamped is not taken
+    // for a Twist, nor the other way round).
+    assert_eq!(p.log_count("command refused"), 0, "{:?}", p.log);
+    // Recorded as they came: the recording replays to the live output, without DDS.
+    let lines = p.stop();
+    let live: Vec<u8> = lines
+        .iter()
+        .flat_map(|l| format!("{l}\n").into_bytes())
+        .collect();
+    let replay = crate::common::replay(&record);
+    assert!(replay.stdout == live, "replay differs from the live output");
+    let commands = std::fs::read_to_string(record.join("ros2.log")).expect("ros2.log");
+    assert!(commands.lines().count() >= 40, "{commands}");
+    // The payloads' hex: the stamped ones' `"twist"`, as they came.
+    assert!(commands.contains("22747769737422"), "{commands}");
+}
+
+#[test]
+fn a_navigate_to_pose_goal_gives_feedback_and_a_result_and_a_cancel_ends_one() {
+    let ns = NetNs::new();
+    let mut p = sim(&ns, 13, &[]);
+    p.wait_log_seen(Duration::from_secs(30), "localisation started");
+    let events = peer(
+        &ns,
+        13,
+        &[
+            "navigate",
+            "--x",
+            "1.0",
+            "--y",
+            "0.0",
+            "--seconds",
+            "40",
+            "--mapping",
+            "cyclone",
+        ],
+    );
+    assert!(events.iter().any(|e| e["goal"] == "accepted"), "{events:?}");
+    let feedback: Vec<&Value> = events.iter().filter_map(|e| e.get("feedback")).collect();
+    assert!(feedback.len() >= 2, "{events:?}");
+    let distance = |f: &Value| f["distance_remaining"].as_f64().unwrap();
+    assert!(
+        distance(feedback[feedback.len() - 1]) < distance(feedback[0]),
+        "{feedback:?}"
+    );
+    let result = events
+        .iter()
+        .find_map(|e| e.get("result"))
+        .expect("a result");
+    assert_eq!(result["status"], 4, "succeeded: {result}");
+    assert_eq!(result["error_code"], 0);
+
+    let events = peer(
+        &ns,
+        13,
+        &[
+            "navigate",
+            "--x",
+            "8.0",
+            "--y",
+            "0.0",
+            "--cancel-after",
+            "1.5",
+            "--seconds",
+            "30",
+            "--mapping",
+            "cyclone",
+        ],
+    );
+    assert!(
+        events.iter().any(|e| e.get("cancel").is_some()),
+        "{events:?}"
+    );
+    let result = events
+        .iter()
+        .find_map(|e| e.get("result"))
+        .expect("a result");
+    assert_eq!(result["status"], 5, "cancelled: {result}");
+    p.wait_log_seen(Duration::from_secs(5), "cancelled");
+
+    // A goal the vehicle cannot take is rejected; the reason goes to /rosout and the log.
+    let events = peer(
+        &ns,
+        13,
+        &[
+            "navigate",
+            "--x",
+            "1.0",
+            "--y",
+            "0.0",
+            "--frame",
+            "odom",
+            "--seconds",
+            "20",
+            "--mapping",
+            "cyclone",
+        ],
+    );
+    assert!(events.iter().any(|e| e["goal"] == "rejected"), "{events:?}");
+    p.wait_log_seen(Duration::from_secs(5), "goal rejected");
+}
+
+#[test]
+fn rviz2s_goal_pose_drives_the_vehicle_there() {
+    let ns = NetNs::new();
+    let mut p = sim(&ns, 14, &[]);
+    p.wait_log_seen(Duration::from_secs(30), "localisation started");
+    peer(
+        &ns,
+        14,
+        &[
+            "publish",
+            "--topic",
+            "/goal_pose",
+            "--type",
+            "geometry_msgs/msg/PoseStamped",
+            "--json",
+            r#"{"header": {"frame_id": "map"}, "pose": {"position": {"x": 1.5, "y": 0.0}, "orientation": {"w": 1.0}}}"#,
+            "--count",
+            "1",
+            "--rate",
+            "1",
+            "--seconds",
+            "5",
+            "--wait-match",
+            "10",
+        ],
+    );
+    p.wait_log_seen(Duration::from_secs(30), "succeeded");
+}
+
+#[test]
+fn a_configuration_that_names_a_missing_interface_is_refused_with_the_fix() {
+    let dir = crate::common::tempdir("ros2-interface");
+    let config = "[vehicle]\nname = \"t\"\n[ros2]\ninterface = \"nosuch0\"\n";
+    let file = dir.join("v.toml");
+    std::fs::write(&file, config).expect("write");
+    let out = std::process::Command::new(crate::common::chassisd())
+        .args(["run", "--config"])
+        .arg(&file)
+        .output()
+        .expect("chassisd runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(78), "{err}");
+    assert!(
+        err.contains("ros2.interface") && err.contains("nosuch0") && err.contains("lo"),
+        "{err}"
+    );
+}
