@@ -14,7 +14,7 @@ use std::sync::OnceLock;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
-use common::process::{Proc, lines_of};
+use common::process::{Proc, children_of, descriptors, lines_of, rss_mb};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
@@ -953,42 +953,6 @@ fn with_ros_ip_the_nodes_ports_answer_on_that_address_only() {
     ));
     assert!(info.contains("name"), "{info}");
     interrupt(p);
-}
-
-/// Resident memory of process `pid`, MB.
-fn rss_mb(pid: u32) -> f64 {
-    std::fs::read_to_string(format!("/proc/{pid}/status"))
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmRSS:"))?
-                .split_whitespace()
-                .nth(1)?
-                .parse::<f64>()
-                .ok()
-        })
-        .map_or(0.0, |kib| kib / 1024.0)
-}
-
-/// Open descriptors of process `pid`.
-fn descriptors(pid: u32) -> usize {
-    std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
-}
-
-/// The processes `pid` started (any of its threads).
-fn children_of(pid: u32) -> Vec<u32> {
-    std::fs::read_dir(format!("/proc/{pid}/task"))
-        .map(|tasks| {
-            tasks
-                .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("children")).ok())
-                .flat_map(|c| {
-                    c.split_whitespace()
-                        .filter_map(|p| p.parse().ok())
-                        .collect::<Vec<u32>>()
-                })
-                .collect()
-        })
-        .unwrap_or_default()
 }
 
 /// Waits until `/navi_info` answers (the node registered and serving).

@@ -423,3 +423,62 @@ fn a_configuration_that_names_a_missing_interface_is_refused_with_the_fix() {
         "{err}"
     );
 }
+
+/// `hostile.py ARGS` inside `ns`, on `domain`; its output.
+fn hostile(ns: &NetNs, domain: u16, args: &[&str]) -> std::process::Child {
+    ns.command(python().to_str().expect("UTF-8 path"))
+        .arg(crate::common::repo().join("tests/ros2/hostile.py"))
+        .args(args)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("hostile.py runs")
+}
+
+#[test]
+fn hundreds_of_participants_and_malformed_rtps_cost_the_nodes_process_alone() {
+    let ns = NetNs::new();
+    let mut p = sim(&ns, 15, &[]);
+    let pid = p.child.id();
+    let node = || {
+        crate::common::process::children_of(pid)
+            .into_iter()
+            .max_by_key(|&child| crate::common::process::rss_mb(child) as u64)
+            .expect("the node's process")
+    };
+    let (rss_before, fds_before) = (
+        crate::common::process::rss_mb(pid),
+        crate::common::process::descriptors(pid),
+    );
+    // 300 participants join the domain, each with a reader and a writer, and stay 8 s.
+    let mut crowd = hostile(&ns, 15, &["participants", "300", "--seconds", "8"]);
+    std::thread::sleep(Duration::from_secs(7));
+    let node_rss = crate::common::process::rss_mb(node());
+    assert!(
+        node_rss < 200.0,
+        "the node's process holds {node_rss:.0} MB"
+    );
+    assert!(crowd.wait().expect("hostile.py ends").success());
+    // 3000 malformed datagrams on every port of the domain (random bytes, random
+    // submessages, fragments announcing samples of up to 4 GiB).
+    let garbage = hostile(&ns, 15, &["garbage", "3000"])
+        .wait_with_output()
+        .expect("hostile.py ends");
+    assert!(garbage.status.success());
+    // The vehicle's process did not notice: its memory and descriptors, and its status
+    // lines at 10 Hz throughout.
+    let rss_after = crate::common::process::rss_mb(pid);
+    assert!(
+        rss_after < rss_before + 5.0,
+        "{rss_before:.1} -> {rss_after:.1} MB"
+    );
+    assert_eq!(crate::common::process::descriptors(pid), fds_before);
+    let lines = p.drain_out().len();
+    assert!(lines >= 100, "{lines} status lines over some 12 s");
+    // The node publishes still (its process restarted or not).
+    let odom = listen(&ns, 15, "/odom", "nav_msgs/msg/Odometry", 5, &[]);
+    assert_eq!(samples(&odom).len(), 5);
+    // What RustDDS says of it is held to the log's budget, never a line a datagram.
+    let warnings = p.log_count("rustdds");
+    assert!(warnings < 50, "{warnings} RustDDS lines");
+}

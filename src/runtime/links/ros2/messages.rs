@@ -458,7 +458,7 @@ mod tests {
         });
         let t = Timestamp::from_nanos(1_795_000_000_123_456_789);
         let mut out = Vec::new();
-        p.on_start(t, &mut out);
+        p.on_ready(t, &mut out);
         let report = PoseReport {
             odom: Some(Default::default()),
             map: None,

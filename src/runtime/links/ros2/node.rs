@@ -360,7 +360,7 @@ async fn serve(
                 Some(FromNode::Ready) => {
                     node.ready = true;
                     let mut once = Vec::new();
-                    publishing.on_start(requests.clock.now(), &mut once);
+                    publishing.on_ready(requests.clock.now(), &mut once);
                     node.publish(once);
                 }
                 Some(FromNode::Message { topic, msg }) => {

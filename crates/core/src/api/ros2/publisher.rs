@@ -4,10 +4,12 @@
 //! the frame ids `[ros2.frames]` names. The node's process serialises them; it decides
 //! nothing.
 
+use std::collections::BTreeMap;
+
 use serde_json::Value;
 
 use super::messages::{GNSS_FRAME, IMU_FRAME, Mounts};
-use super::topics::{Publish, TOPICS};
+use super::topics::{LATCHED, Publish, TOPICS};
 use crate::api::ros1::messages::ImuNoise;
 use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::rosbridge::messages::{BASE_FRAME, MAP_FRAME, ODOM_FRAME};
@@ -68,6 +70,8 @@ pub struct Publishing {
     last_fix: Option<FixKey>,
     /// The latest time the feed carried (events are stamped with it).
     now: Option<Timestamp>,
+    /// The last message of each latched topic, for a node that joins again.
+    latched: BTreeMap<&'static str, Value>,
 }
 
 /// What tells one of the receiver's solutions from the next: a sentence that only adds to a
@@ -112,17 +116,26 @@ impl Publishing {
             control_ticks: 0,
             last_fix: None,
             now: None,
+            latched: BTreeMap::new(),
         }
     }
 
-    /// The messages of the topics published once, when the node starts at `t`.
-    pub fn on_start(&mut self, t: Timestamp, out: &mut Messages) {
+    /// What a node that is (again) on its domain at `t` publishes first: the topics
+    /// published once, and every latched topic's last message (the node may have missed it,
+    /// or be a new process: its writers keep nothing of the last one's).
+    pub fn on_ready(&mut self, t: Timestamp, out: &mut Messages) {
+        let start = out.len();
         for topic in TOPICS {
             if let Publish::Static(build) = topic.publish {
                 out.push((topic.name, build(t, &self.settings.mounts)));
             }
         }
-        self.rename(out);
+        self.rename(&mut out[start..]);
+        out.extend(
+            self.latched
+                .iter()
+                .map(|(&topic, msg)| (topic, msg.clone())),
+        );
     }
 
     /// The messages `item` makes due.
@@ -171,15 +184,16 @@ impl Publishing {
                 .into_iter()
                 .map(|Published { topic, msg, .. }| (topic, msg)),
         );
-        if !self.renames.is_empty() {
-            let mut renamed = out.split_off(start);
-            self.rename(&mut renamed);
-            out.append(&mut renamed);
+        self.rename(&mut out[start..]);
+        for (topic, msg) in &out[start..] {
+            if super::topics::find(topic).is_some_and(|t| t.qos == LATCHED) {
+                self.latched.insert(topic, msg.clone());
+            }
         }
     }
 
     /// Gives the messages' frame ids the names `[ros2.frames]` chose.
-    fn rename(&self, messages: &mut Messages) {
+    fn rename(&self, messages: &mut [(&'static str, Value)]) {
         if self.renames.is_empty() {
             return;
         }
@@ -265,7 +279,7 @@ mod tests {
     fn odometry_at_its_rate_and_the_static_frames_once() {
         let mut p = Publishing::new(settings(Ros2Frames::default()));
         let mut out = Vec::new();
-        p.on_start(Timestamp::from_nanos(1), &mut out);
+        p.on_ready(Timestamp::from_nanos(1), &mut out);
         assert_eq!(topics(&out), ["/tf_static"]);
         out.clear();
         for n in 1..=100u64 {
@@ -316,7 +330,7 @@ mod tests {
         };
         let mut p = Publishing::new(settings(frames));
         let mut out = Vec::new();
-        p.on_start(Timestamp::from_nanos(1), &mut out);
+        p.on_ready(Timestamp::from_nanos(1), &mut out);
         let transform = &out[0].1["transforms"][0];
         assert_eq!(transform["header"]["frame_id"], "base_footprint");
         assert_eq!(transform["child_frame_id"], "gps");
@@ -325,6 +339,26 @@ mod tests {
         p.on_feed(&poses(Timestamp::from_nanos(30_000_000)), &mut out);
         assert_eq!(out[0].1["child_frame_id"], "base_footprint");
         assert_eq!(out[0].1["header"]["frame_id"], "odom", "not renamed");
+    }
+
+    #[test]
+    fn a_node_ready_again_gets_the_latched_topics_last_messages() {
+        let mut p = Publishing::new(settings(Ros2Frames::default()));
+        let mut out = Vec::new();
+        let status = VehicleStatus {
+            time: Timestamp::from_nanos(1_000_000_000),
+            ..Default::default()
+        };
+        p.on_feed(&Feed::Status(Box::new(status.clone())), &mut out);
+        assert!(topics(&out).contains(&"/zones"), "{:?}", topics(&out));
+        // Unchanged: not published again on the next status.
+        out.clear();
+        p.on_feed(&Feed::Status(Box::new(status)), &mut out);
+        assert!(!topics(&out).contains(&"/zones"));
+        // A node process that joins (again) gets them all the same.
+        out.clear();
+        p.on_ready(Timestamp::from_nanos(2_000_000_000), &mut out);
+        assert_eq!(topics(&out), ["/tf_static", "/plan", "/zones"]);
     }
 
     #[test]
