@@ -1,11 +1,14 @@
 //! A helper process talked to in JSON lines (the ROS nodes' processes): started with its
 //! settings as the first line of its standard input, then a line per message each way.
+//! Both ends are here: [`ChildPipes`] in chassisd, [`read_from_parent`] and
+//! [`write_to_parent`] in the helper.
 //! Sending never blocks the sender: a process that does not keep up loses lines, counted by
 //! its owner. What it says comes back parsed, a line it should not have said logged once
 //! each and skipped.
 
 use std::time::Instant;
 
+use serde::Serialize;
 use serde::de::DeserializeOwned;
 use tokio::io::{AsyncWriteExt, BufReader};
 use tokio::process::{Child, ChildStdout, Command};
@@ -84,6 +87,48 @@ async fn read_lines<Up: DeserializeOwned>(
                 }
             }
             Err(e) => tracing::error!(error = %e, "{what}'s process: a line not understood"),
+        }
+    }
+}
+
+/// In the helper process `what`: reads chassisd's lines (at most `max_line` bytes each) into
+/// `to`; a line not understood is logged and skipped, and the end of standard input
+/// (chassisd gone) ends the process.
+pub async fn read_from_parent<T: DeserializeOwned>(
+    to: mpsc::Sender<T>,
+    max_line: usize,
+    what: &'static str,
+) {
+    let mut lines = InputLines::new(BufReader::new(tokio::io::stdin()), max_line);
+    loop {
+        match lines.next().await {
+            Ok(Some(InputLine::Text(text))) => match serde_json::from_str::<T>(&text) {
+                Ok(message) => {
+                    if to.send(message).await.is_err() {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    tracing::error!(error = %e, "{what}: a line from chassisd not understood")
+                }
+            },
+            Ok(Some(other)) => tracing::error!(?other, "{what}: a line from chassisd not taken"),
+            Ok(None) | Err(_) => std::process::exit(0),
+        }
+    }
+}
+
+/// In a helper process: writes `up`'s messages to chassisd, a line each; a closed pipe
+/// (chassisd gone) ends the process.
+pub async fn write_to_parent<T: Serialize>(mut up: mpsc::Receiver<T>) {
+    let mut stdout = tokio::io::stdout();
+    while let Some(message) = up.recv().await {
+        let Ok(mut line) = serde_json::to_vec(&message) else {
+            continue;
+        };
+        line.push(b'\n');
+        if stdout.write_all(&line).await.is_err() || stdout.flush().await.is_err() {
+            std::process::exit(0);
         }
     }
 }

@@ -12,14 +12,13 @@
 use std::io::BufRead;
 use std::time::{Duration, Instant};
 
-use tokio::io::{AsyncWriteExt, BufReader};
 use tokio::sync::mpsc;
 
 use super::graph::{self, Registration, Requests};
 use super::pipe::{FromNode, MAX_LINE, NodeSettings, ToNode};
 use crate::runtime::child_process;
 use crate::runtime::error::{RuntimeError, invalid, io};
-use crate::runtime::links::input_lines::{InputLine, InputLines};
+use crate::runtime::links::child_pipes::{read_from_parent, write_to_parent};
 use crate::runtime::outage_log::{OutageLog, Say};
 
 /// The process's address space: roslibrust and its runtime need some 100 MB of it; a
@@ -109,47 +108,16 @@ async fn end_when_descriptors_run_out() {
     }
 }
 
-/// Reads chassisd's lines; the end of standard input ends the process.
-async fn read_from_chassisd(to_node: mpsc::Sender<ToNode>) {
-    let mut lines = InputLines::new(BufReader::new(tokio::io::stdin()), MAX_LINE);
-    loop {
-        match lines.next().await {
-            Ok(Some(InputLine::Text(text))) => match serde_json::from_str::<ToNode>(&text) {
-                Ok(message) => {
-                    if to_node.send(message).await.is_err() {
-                        return;
-                    }
-                }
-                Err(e) => {
-                    tracing::error!(error = %e, "ROS1 node: a line from chassisd not understood")
-                }
-            },
-            Ok(Some(other)) => tracing::error!(?other, "ROS1 node: a line from chassisd not taken"),
-            Ok(None) | Err(_) => std::process::exit(0),
-        }
-    }
-}
-
-/// Writes the node's lines to chassisd; a closed pipe ends the process.
-async fn write_to_chassisd(mut up: mpsc::Receiver<FromNode>) {
-    let mut stdout = tokio::io::stdout();
-    while let Some(message) = up.recv().await {
-        let Ok(mut line) = serde_json::to_vec(&message) else {
-            continue;
-        };
-        line.push(b'\n');
-        if stdout.write_all(&line).await.is_err() || stdout.flush().await.is_err() {
-            std::process::exit(0);
-        }
-    }
-}
-
 async fn run(settings: NodeSettings) {
     let (up_tx, up_rx) = mpsc::channel(UP_QUEUE);
     let (to_node_tx, mut to_node) = mpsc::channel(UP_QUEUE);
-    tokio::spawn(write_to_chassisd(up_rx));
+    tokio::spawn(write_to_parent(up_rx));
     tokio::spawn(end_when_descriptors_run_out());
-    tokio::spawn(read_from_chassisd(to_node_tx));
+    tokio::spawn(read_from_parent::<ToNode>(
+        to_node_tx,
+        MAX_LINE,
+        "ROS1 node",
+    ));
     let rate = (
         settings.config.command_rate_hz,
         settings.config.command_burst,

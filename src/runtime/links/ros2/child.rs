@@ -25,7 +25,6 @@ use ros2_client::{
     QosProfile, ServiceMapping,
 };
 use serde_json::Value;
-use tokio::io::{AsyncWriteExt, BufReader};
 use tokio::sync::mpsc;
 
 use super::messages::{cdr, decode, nav2_msgs};
@@ -36,7 +35,7 @@ use crate::api::ros2::topics::{self, Qos, TAKEN, TOPICS};
 use crate::config::ros2::Middleware;
 use crate::runtime::child_process;
 use crate::runtime::error::{RuntimeError, invalid, io};
-use crate::runtime::links::input_lines::{InputLine, InputLines};
+use crate::runtime::links::child_pipes::{read_from_parent, write_to_parent};
 
 /// The process's address space: RustDDS, its threads and socket buffers and the runtime
 /// need some 150 MB of it; a peer's announced sample size beyond what is left fails its
@@ -248,43 +247,6 @@ async fn read_topic(
     Ok(())
 }
 
-/// Reads chassisd's lines; the end of standard input ends the process.
-async fn read_from_chassisd(to_node: mpsc::Sender<ToNode>) {
-    let mut lines = InputLines::new(BufReader::new(tokio::io::stdin()), MAX_LINE);
-    loop {
-        match lines.next().await {
-            Ok(Some(InputLine::Text(text))) => match serde_json::from_str::<ToNode>(&text) {
-                Ok(message) => {
-                    if to_node.send(message).await.is_err() {
-                        return;
-                    }
-                }
-                Err(e) => {
-                    tracing::error!(error = %e, "ROS 2 node: a line from chassisd not understood")
-                }
-            },
-            Ok(Some(other)) => {
-                tracing::error!(?other, "ROS 2 node: a line from chassisd not taken")
-            }
-            Ok(None) | Err(_) => std::process::exit(0),
-        }
-    }
-}
-
-/// Writes the node's lines to chassisd; a closed pipe ends the process.
-async fn write_to_chassisd(mut up: mpsc::Receiver<FromNode>) {
-    let mut stdout = tokio::io::stdout();
-    while let Some(message) = up.recv().await {
-        let Ok(mut line) = serde_json::to_vec(&message) else {
-            continue;
-        };
-        line.push(b'\n');
-        if stdout.write_all(&line).await.is_err() || stdout.flush().await.is_err() {
-            std::process::exit(0);
-        }
-    }
-}
-
 /// The node on its domain, or why not.
 fn join(settings: &NodeSettings) -> Result<Node, String> {
     let mut builder = DomainParticipantBuilder::new(settings.joining.domain);
@@ -342,8 +304,12 @@ async fn run(settings: NodeSettings) -> Result<(), RuntimeError> {
     tokio::spawn(spinner.spin());
     let (up_tx, up_rx) = mpsc::channel(UP_QUEUE);
     let (to_node_tx, mut to_node) = mpsc::channel(UP_QUEUE);
-    tokio::spawn(write_to_chassisd(up_rx));
-    tokio::spawn(read_from_chassisd(to_node_tx));
+    tokio::spawn(write_to_parent(up_rx));
+    tokio::spawn(read_from_parent::<ToNode>(
+        to_node_tx,
+        MAX_LINE,
+        "ROS 2 node",
+    ));
     let namespace = settings.config.namespace.clone();
     let mut writers = Writers::create(&mut node, &namespace).map_err(RuntimeError::Failed)?;
     let mut goals = Goals::default();
@@ -463,6 +429,12 @@ impl Goals {
         };
         match started {
             Ok(executing) => {
+                // At most as many under way as may wait: an end never heard costs a place.
+                if self.executing.len() >= MAX_NEW_GOALS
+                    && let Some(&oldest) = self.executing.keys().min()
+                {
+                    self.executing.remove(&oldest);
+                }
                 self.executing.insert(goal, executing);
             }
             Err(e) => tracing::warn!(error = ?e, "ROS 2 node: a goal could not start"),

@@ -466,6 +466,9 @@ fn on_control(
                     .navigation
                     .accepted(id, pending.target, requests.clock.now());
                 requests.goals.insert(id, pending.goal);
+                // Those the navigation no longer keeps (a motion's end never heard) go too.
+                let navigation = &requests.navigation;
+                requests.goals.retain(|id, _| navigation.is_active(*id));
             }
             let Some(node) = node else {
                 return;
