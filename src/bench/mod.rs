@@ -14,6 +14,8 @@ pub mod real;
 pub mod replay;
 #[cfg(feature = "ros1")]
 pub mod ros1_attack;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod rosmaster;
 pub mod soak;
 

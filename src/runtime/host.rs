@@ -79,6 +79,32 @@ pub fn children_running(arg: &str) -> Vec<(u32, u64)> {
         .collect()
 }
 
+/// The CPU time process `pid` has used so far (user and system, every thread), seconds,
+/// where /proc tells it.
+pub fn process_cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    process_cpu_ticks(&stat).map(|ticks| ticks as f64 / clock_ticks_per_second())
+}
+
+/// utime + stime of a /proc/PID/stat line, in clock ticks. The command's name, in
+/// parentheses, may hold spaces and parentheses: the fields start after the last `)`.
+fn process_cpu_ticks(stat: &str) -> Option<u64> {
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    // After the name: state is field 3, utime 14 and stime 15.
+    let utime: u64 = fields.get(11)?.parse().ok()?;
+    let stime: u64 = fields.get(12)?.parse().ok()?;
+    Some(utime + stime)
+}
+
+/// The kernel's clock ticks per second (USER_HZ), which /proc's CPU times count.
+fn clock_ticks_per_second() -> f64 {
+    // SAFETY: sysconf has no preconditions.
+    match unsafe { libc::sysconf(libc::_SC_CLK_TCK) } {
+        n if n > 0 => n as f64,
+        _ => 100.0,
+    }
+}
+
 /// CPU busy between two samples, %.
 fn cpu_percent(before: (u64, u64), now: (u64, u64)) -> Option<f64> {
     let total = now.1.checked_sub(before.1)?;
@@ -130,6 +156,15 @@ async fn sample(clock: RecordClock, tx: mpsc::Sender<Record>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_process_cpu_time_is_read_past_its_name() {
+        let stat = "42 (a) b) (c) S 1 42 42 0 -1 4194560 100 0 0 0 250 75 0 0 20 0 3 0 1000";
+        assert_eq!(process_cpu_ticks(stat), Some(325));
+        assert_eq!(process_cpu_ticks("42 (cut"), None);
+        let me = process_cpu_seconds(std::process::id()).unwrap();
+        assert!(me >= 0.0);
+    }
 
     #[test]
     fn proc_figures_are_read() {

@@ -62,20 +62,22 @@ fn samples(events: &[Value]) -> Vec<&Value> {
 }
 
 /// `chassisd sim --no-mqtt --ros2 [MORE]` inside `ns` on `domain`, once its node is on the
-/// domain.
+/// domain, framing the action's services as rmw_cyclonedds does.
 fn sim(ns: &NetNs, domain: u16, more: &[&str]) -> Proc {
+    // The peer frames the action's services as rmw_cyclonedds does; chassisd learns that
+    // from ROS 2's own variable, as it would on a vehicle.
+    sim_on(ns, domain, "rmw_cyclonedds_cpp", more)
+}
+
+/// [`sim`] with `RMW_IMPLEMENTATION=rmw`.
+fn sim_on(ns: &NetNs, domain: u16, rmw: &str, more: &[&str]) -> Proc {
     let mut args = vec!["sim", "--no-mqtt", "--ros2"];
     args.extend_from_slice(more);
     let wrapper = ns.wrapper();
     let wrapper: Vec<&str> = wrapper.iter().map(String::as_str).collect();
-    // The peer frames the action's services as rmw_cyclonedds does; chassisd learns that
-    // from ROS 2's own variable, as it would on a vehicle.
     let domain = format!("ROS_DOMAIN_ID={domain}");
-    let env = [
-        "env",
-        domain.as_str(),
-        "RMW_IMPLEMENTATION=rmw_cyclonedds_cpp",
-    ];
+    let rmw = format!("RMW_IMPLEMENTATION={rmw}");
+    let env = ["env", domain.as_str(), rmw.as_str()];
     let full: Vec<&str> = wrapper.iter().copied().chain(env).collect();
     let mut p = Proc::start_under(&full, &args);
     p.wait_log(Duration::from_secs(30), "ROS 2 node on its domain");
@@ -376,6 +378,65 @@ fn a_navigate_to_pose_goal_gives_feedback_and_a_result_and_a_cancel_ends_one() {
     p.wait_log_seen(Duration::from_secs(5), "goal rejected");
 }
 
+/// examples/ros2_navigate (an action client of ours, on ros2-client) inside `ns` on
+/// `domain`: its events, and whether it got a result.
+fn navigate_ours(ns: &NetNs, domain: u16, mapping: &str, seconds: &str) -> (Vec<Value>, bool) {
+    // Beside chassisd: target/release/examples.
+    let example = crate::common::chassisd().with_file_name("examples/ros2_navigate");
+    assert!(
+        example.exists(),
+        "{} is missing: `cargo test` builds the examples (or `cargo build --release --examples`)",
+        example.display()
+    );
+    let out = ns
+        .command(example.to_str().expect("UTF-8 path"))
+        .args([
+            "--mapping",
+            mapping,
+            "--x",
+            "1.0",
+            "--y",
+            "0.0",
+            "--seconds",
+            seconds,
+        ])
+        .args(["--domain", &domain.to_string()])
+        .output()
+        .expect("ros2_navigate runs");
+    (events(&out), out.status.success())
+}
+
+#[test]
+fn fast_ddss_framing_of_the_action_is_served_when_configured() {
+    // Fast DDS, ROS 2's default middleware, carries a request's identity in the RTPS message
+    // rather than in a header of the request: with RMW_IMPLEMENTATION naming it (or unset),
+    // the node frames the action's services so.
+    let ns = NetNs::new();
+    let mut p = sim_on(&ns, 16, "rmw_fastrtps_cpp", &[]);
+    p.wait_log_seen(Duration::from_secs(30), "localisation started");
+    let (events, ended) = navigate_ours(&ns, 16, "enhanced", "40");
+    assert!(ended, "{events:?}");
+    assert!(
+        events
+            .iter()
+            .any(|e| e["event"] == "accepted" && e["accepted"] == true),
+        "{events:?}"
+    );
+    assert!(
+        events.iter().any(|e| e["event"] == "feedback"),
+        "{events:?}"
+    );
+    let result = events
+        .iter()
+        .find(|e| e["event"] == "result")
+        .expect("a result");
+    assert_eq!(result["status"], "Succeeded", "{result}");
+    assert_eq!(result["error_code"], 0, "{result}");
+    // The two framings do not mix: a client framing as Cyclone DDS does is not understood.
+    let (events, ended) = navigate_ours(&ns, 16, "cyclone", "6");
+    assert!(!ended, "a result across framings: {events:?}");
+}
+
 #[test]
 fn rviz2s_goal_pose_drives_the_vehicle_there() {
     let ns = NetNs::new();
@@ -481,4 +542,43 @@ fn hundreds_of_participants_and_malformed_rtps_cost_the_nodes_process_alone() {
     // What RustDDS says of it is held to the log's budget, never a line a datagram.
     let warnings = p.log_count("rustdds");
     assert!(warnings < 50, "{warnings} RustDDS lines");
+}
+
+#[test]
+fn the_benchmark_gives_odom_to_every_subscriber_of_both_routes() {
+    // A short run: the figures are the benchmark's; here, that every subscriber of both
+    // routes gets /odom at the rate asked and each message's latency is measured. The
+    // benchmark runs itself in a network namespace of its own.
+    let out = std::process::Command::new(crate::common::chassisd())
+        .args(["bench", "ros2", "--seconds", "1", "--subscribers", "2"])
+        .output()
+        .expect("chassisd bench ros2 runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let summary: Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: no JSON summary\n{stdout}\n{stderr}"));
+    let runs = summary["runs"].as_array().expect("runs");
+    let routes: Vec<&str> = runs.iter().filter_map(|r| r["route"].as_str()).collect();
+    assert_eq!(routes, ["baseline", "ros2", "rosbridge"], "{summary}");
+    assert!(runs[0]["cpu_percent"].as_f64().unwrap() > 0.0, "{summary}");
+    for run in &runs[1..] {
+        let expected = run["expected"].as_u64().unwrap();
+        assert_eq!(expected, 100, "{run}");
+        let received: Vec<u64> = run["received"]
+            .as_array()
+            .expect("received")
+            .iter()
+            .filter_map(Value::as_u64)
+            .collect();
+        assert_eq!(received.len(), 2, "{run}");
+        assert!(received.iter().all(|n| (90..=102).contains(n)), "{run}");
+        assert_eq!(
+            run["latency_ms"]["n"].as_u64(),
+            Some(received.iter().sum()),
+            "{run}"
+        );
+        let median = run["latency_ms"]["median"].as_f64().unwrap();
+        assert!(median > 0.0 && median < 100.0, "{run}");
+        assert!(run["added_cpu_percent"].is_f64(), "{run}");
+    }
 }

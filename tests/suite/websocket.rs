@@ -310,6 +310,44 @@ fn map_scan_and_a_goal_in_the_wrong_frame_are_refused_with_a_status() {
 }
 
 #[test]
+fn a_strict_client_is_let_in_and_a_page_request_is_answered_once() {
+    use std::io::Write;
+    use tokio_tungstenite::tungstenite::{self, Message};
+    let port = free_port();
+    let sim = sim(port);
+    // tungstenite (as websocat and Rust clients) refuses an upgrade whose Connection header
+    // is not `upgrade` alone: hyper's keep-alive off made it `upgrade, close`.
+    let stream = std::net::TcpStream::connect(("127.0.0.1", port)).expect("connect");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .expect("timeout");
+    let (mut socket, response) =
+        tungstenite::client(format!("ws://127.0.0.1:{port}/"), stream).expect("the handshake");
+    assert_eq!(response.headers()["connection"], "upgrade");
+    socket
+        .send(Message::Text(
+            r#"{"op": "subscribe", "topic": "/odom"}"#.into(),
+        ))
+        .expect("subscribe");
+    let first: Value = match socket.read().expect("a message") {
+        Message::Text(text) => serde_json::from_str(&text).expect("JSON"),
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(first["topic"], "/odom", "{first}");
+    // Anything else is one request per connection: two sent at once get one answer, which
+    // closes the connection.
+    let mut s = ws::connect_from([127, 0, 0, 1], port);
+    s.write_all(
+        b"GET /connection HTTP/1.1\r\nHost: a\r\n\r\nGET /connection HTTP/1.1\r\nHost: a\r\n\r\n",
+    )
+    .expect("send");
+    let all = answer(&mut s);
+    assert_eq!(all.matches("HTTP/1.1 ").count(), 1, "{all}");
+    assert!(all.to_lowercase().contains("connection: close"), "{all}");
+    sim.stop();
+}
+
+#[test]
 fn a_client_that_never_reads_delays_no_other_client() {
     let port = free_port();
     let mut sim = sim(port);

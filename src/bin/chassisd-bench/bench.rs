@@ -166,6 +166,27 @@ enum BenchCommand {
         #[arg(long, value_enum, default_value_t = BenchBroker::Both)]
         broker: BenchBroker,
     },
+    /// `/odom` to several subscribers, each a process of its own, through the native ROS 2
+    /// node (DDS) and through the rosbridge WebSocket, on the simulated vehicle: latency
+    /// from the pose's stamp (p50, p99, max), messages each got, and the CPU each route adds
+    /// to chassisd over the same vehicle publishing to nobody. Runs in a network namespace
+    /// of its own (unshare, iproute2). A table, then a JSON line with "pass"; exits with
+    /// status 1 when a target is missed.
+    #[cfg(feature = "ros2")]
+    Ros2 {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// How long each route is measured.
+        #[arg(long, default_value = "20", value_parser = seconds_arg)]
+        seconds: Duration,
+        /// Subscribers of each route.
+        #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=16))]
+        subscribers: u32,
+        /// `/odom`'s rate, Hz (1 to 100).
+        #[arg(long, default_value_t = 100.0, value_parser = odom_rate_arg)]
+        rate: f64,
+    },
 }
 
 /// Brokers `chassisd bench mqtt` can start.
@@ -286,7 +307,42 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             mqtt,
             broker,
         } => bench_mqtt(plant, seconds, mqtt.as_deref(), broker),
+        #[cfg(feature = "ros2")]
+        BenchCommand::Ros2 {
+            plant,
+            seconds,
+            subscribers,
+            rate,
+        } => bench_ros2(plant, seconds, subscribers, rate),
     }
+}
+
+#[cfg(feature = "ros2")]
+fn bench_ros2(
+    plant: Option<PathBuf>,
+    seconds: Duration,
+    subscribers: u32,
+    rate_hz: f64,
+) -> anyhow::Result<bool> {
+    use chassisd::bench::ros2;
+    // DDS discovery multicasts: the run happens in a network namespace of its own.
+    if let Some(status) = ros2::enter_private_network()? {
+        anyhow::ensure!(
+            status.code().is_some(),
+            "the benchmark in its network namespace ended by {status}"
+        );
+        return Ok(status.success());
+    }
+    let options = ros2::Ros2BenchOptions {
+        plant: load_plant(plant)?,
+        window: seconds,
+        subscribers,
+        rate_hz,
+    };
+    let report = ros2::run(&options)?;
+    print!("{}", report.table());
+    println!("{}", report.json());
+    Ok(report.pass)
 }
 
 fn bench_fusion(
@@ -421,6 +477,15 @@ pub fn minutes_arg(s: &str) -> Result<Duration, String> {
         _ => Err(format!(
             "{s:?}: give a positive number of minutes, at most a week"
         )),
+    }
+}
+
+/// Parses an `/odom` rate: 1 to 100 Hz.
+#[cfg(feature = "ros2")]
+fn odom_rate_arg(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (1.0..=100.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s:?}: give a rate from 1 to 100 Hz")),
     }
 }
 

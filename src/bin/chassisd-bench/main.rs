@@ -25,6 +25,17 @@ fn main() -> ExitCode {
     let _log_guard = chassisd::runtime::logging::init();
     // The benchmarks run the links, whose helper processes (the embedded broker, the ROS1
     // node) are this program started again with their hidden subcommand.
+    #[cfg(feature = "ros2")]
+    if std::env::args().nth(1).as_deref() == Some(chassisd::bench::ros2::LISTEN_COMMAND) {
+        let args: Vec<String> = std::env::args().skip(2).collect();
+        return match chassisd::bench::ros2::listen_main(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("chassisd-bench: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     if let Some(helper) = helper(std::env::args().nth(1).as_deref()) {
         return match helper {
             Ok(()) => ExitCode::SUCCESS,
@@ -53,6 +64,10 @@ fn helper(subcommand: Option<&str>) -> Option<Result<(), chassisd::runtime::erro
         #[cfg(feature = "ros1")]
         chassisd::runtime::links::ros1::CHILD_COMMAND => {
             Some(chassisd::runtime::links::ros1::child::main())
+        }
+        #[cfg(feature = "ros2")]
+        chassisd::runtime::links::ros2::CHILD_COMMAND => {
+            Some(chassisd::runtime::links::ros2::child::main())
         }
         _ => None,
     }

@@ -27,9 +27,13 @@ use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sections, Sink};
 use crate::sim::plant::{GnssCondition, PlantConfig, Truth};
 use crate::sim::scenario::Scenario;
 use crate::time::Timestamp;
+use crate::vehicle::chassis::CONTROL_PERIOD;
 
-/// How often the simulation catches up with the wall clock.
-const PACE: Duration = Duration::from_millis(10);
+/// How often the simulation catches up with the wall clock: every control tick.
+const PACE: Duration = CONTROL_PERIOD;
+/// How long after each control tick's time the simulation catches up: the plant's step
+/// that ends at the tick, and a little for the timer.
+const PACE_AFTER_TICK: Duration = Duration::from_micros(1500);
 /// Without a scenario, the receiver keeps an RTK-fixed solution.
 pub(crate) const RTK_FIXED: GnssCondition = GnssCondition {
     quality: Some(FixQuality::RtkFixed),
@@ -231,7 +235,14 @@ async fn run_marked(
     // signal that arrives between two turns.
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
         .map_err(io("cannot install the SIGINT handler"))?;
-    let mut pace = tokio::time::interval(PACE);
+    // Each catch-up just after a control tick's time, so what the tick publishes goes out
+    // within some 2 ms of its stamp, rather than up to a whole period later by the phase
+    // the timer happened to start in.
+    let first = clock
+        .now()
+        .ceil_to(CONTROL_PERIOD)
+        .saturating_add(PACE_AFTER_TICK);
+    let mut pace = tokio::time::interval_at(clock.instant_at(first), PACE);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut summary = Summary::new(sim.vehicle().truth());
     let mut faults = SimFaults::default();

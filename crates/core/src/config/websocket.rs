@@ -34,6 +34,9 @@ pub struct WebsocketConfig {
     /// client) are always let through to the token check.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub allowed_origins: Vec<String>,
+    /// `/odom`'s rate, Hz (1 to the control loop's 100).
+    #[serde(default = "default_odom_rate_hz")]
+    pub odom_rate_hz: f64,
 }
 
 fn default_bind() -> String {
@@ -52,6 +55,10 @@ fn default_command_rate_hz() -> f64 {
     50.0
 }
 
+fn default_odom_rate_hz() -> f64 {
+    50.0
+}
+
 impl Default for WebsocketConfig {
     fn default() -> Self {
         Self {
@@ -61,6 +68,7 @@ impl Default for WebsocketConfig {
             max_clients: default_max_clients(),
             command_rate_hz: default_command_rate_hz(),
             allowed_origins: Vec::new(),
+            odom_rate_hz: default_odom_rate_hz(),
         }
     }
 }
@@ -152,6 +160,13 @@ impl WebsocketConfig {
             self.command_rate_hz,
             1.0..=10_000.0,
             "messages/s",
+        )?;
+        check_range(
+            file,
+            "websocket.odom_rate_hz",
+            self.odom_rate_hz,
+            1.0..=100.0,
+            "Hz",
         )
     }
 }
@@ -235,5 +250,15 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("openssl rand"), "{e}");
+        for rate in [0.5, 101.0, f64::NAN] {
+            let e = WebsocketConfig {
+                odom_rate_hz: rate,
+                ..WebsocketConfig::default()
+            }
+            .validate(file)
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("websocket.odom_rate_hz"), "{rate}: {e}");
+        }
     }
 }

@@ -101,7 +101,7 @@ fn confine() -> Result<(), RuntimeError> {
 
 /// A ROS 2 QoS profile of a table's. A reliable writer that a reader does not acknowledge
 /// fails at once rather than wait: the process never stalls on one peer.
-fn profile(qos: Qos) -> QosProfile {
+pub(crate) fn profile(qos: Qos) -> QosProfile {
     let base = QosProfile::publisher_default();
     let base = match qos.reliability {
         topics::Reliability::Reliable => base.reliability_reliable(WhenFull::Fail),
@@ -118,7 +118,7 @@ fn profile(qos: Qos) -> QosProfile {
 
 /// A topic's ROS 2 name under `namespace`: `/imu/data` under `/robot_1` is
 /// `/robot_1/imu/data`.
-fn name(namespace: &str, topic: &str) -> Result<Name, String> {
+pub(crate) fn name(namespace: &str, topic: &str) -> Result<Name, String> {
     let full = format!("{namespace}{topic}");
     let (space, base) = full.rsplit_once('/').unwrap_or(("", &full));
     let space = if space.is_empty() { "/" } else { space };
@@ -126,7 +126,7 @@ fn name(namespace: &str, topic: &str) -> Result<Name, String> {
 }
 
 /// `package/msg/Type`'s parts.
-fn type_name(msg_type: &str) -> MessageTypeName {
+pub(crate) fn type_name(msg_type: &str) -> MessageTypeName {
     let mut parts = msg_type.split('/');
     let package = parts.next().unwrap_or_default();
     let name = parts.next_back().unwrap_or_default();

@@ -33,7 +33,7 @@ use self::serve::{Held, Limits};
 use self::slots::{AUTH_WINDOW, Slot, Slots};
 use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::rosbridge::ops::{self, Level};
-use crate::api::rosbridge::publisher::{ControlTicks, Published, Publishing};
+use crate::api::rosbridge::publisher::{ControlTicks, Published, Publishing, odometry_every};
 use crate::api::rosbridge::session::{Action, token_matches};
 use crate::api::rosbridge::{SOURCE, adapter};
 use crate::config::websocket::WebsocketConfig;
@@ -176,7 +176,7 @@ pub fn start(
         command_rate_hz: config.command_rate_hz,
         pending: BTreeMap::new(),
         last_request: 0,
-        publishing: Publishing::new(noise),
+        publishing: Publishing::new(noise, odometry_every(config.odom_rate_hz)),
         latched: BTreeMap::new(),
         token: config.token.clone(),
         slots,
@@ -203,7 +203,7 @@ pub fn start(
     tokio::spawn(serve::serve(listener, router, limits));
     Ok(WebsocketLink {
         feed: feed_tx,
-        ticks: ControlTicks::default(),
+        ticks: ControlTicks::new(odometry_every(config.odom_rate_hz)),
         dropped: 0,
     })
 }

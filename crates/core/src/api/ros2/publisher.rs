@@ -13,16 +13,13 @@ use super::topics::{LATCHED, Publish, TOPICS};
 use crate::api::ros1::messages::ImuNoise;
 use crate::api::ros1::odometry::OdometryNoise;
 use crate::api::rosbridge::messages::{BASE_FRAME, MAP_FRAME, ODOM_FRAME};
-use crate::api::rosbridge::publisher::{Published, Publishing as StatePublishing};
+use crate::api::rosbridge::publisher::{Published, Publishing as StatePublishing, odometry_every};
 use crate::api::rosbridge::topics::Publish as State;
 use crate::config::ros2::Ros2Frames;
 use crate::devices::gnss::GnssFix;
 use crate::devices::imu::ImuSample;
 use crate::time::Timestamp;
 use crate::vehicle::{PoseReport, VehicleStatus};
-
-/// The control loop's rate, Hz: `/odom` is published every so many of its ticks.
-const CONTROL_HZ: f64 = 100.0;
 
 /// What the engine's outputs give the node.
 #[derive(Debug, Clone)]
@@ -85,7 +82,7 @@ type FixKey = (
 impl Publishing {
     /// Publishing with `settings`.
     pub fn new(settings: Settings) -> Self {
-        let odom_every = (CONTROL_HZ / settings.odom_rate_hz).round().max(1.0) as u64;
+        let odom_every = odometry_every(settings.odom_rate_hz);
         let topics = TOPICS.iter().filter_map(|t| match t.publish {
             Publish::State(State::Odometry { build, .. }) => Some((
                 t.name,

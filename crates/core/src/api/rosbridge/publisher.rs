@@ -10,6 +10,7 @@ use super::topics::{Flow, Publish, TOPICS};
 use crate::api::ros1::odometry::{OdometryNoise, OdometryUncertainty};
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::chassis::CONTROL_PERIOD;
 use crate::vehicle::{PoseReport, VehicleStatus};
 
 /// A message due on a topic.
@@ -23,24 +24,38 @@ pub struct Published {
     pub latched: bool,
 }
 
-/// Counts the control ticks on the engine's side, so only the odometry a topic publishes
+/// Control ticks (100 Hz, [`CONTROL_PERIOD`]) per odometry message at `rate_hz`: 1 at
+/// 100 Hz, 2 at 50 Hz.
+pub fn odometry_every(rate_hz: f64) -> u64 {
+    let control_hz = 1.0 / CONTROL_PERIOD.as_secs_f64();
+    (control_hz / rate_hz).round().clamp(1.0, u64::MAX as f64) as u64
+}
+
+/// Counts the control ticks on the engine's side, so only the odometry the topics publish
 /// crosses to the server.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct ControlTicks {
     ticks: u64,
+    every: u64,
 }
 
 impl ControlTicks {
+    /// Ticks of which every `every`th carries odometry ([`odometry_every`]).
+    pub fn new(every: u64) -> Self {
+        Self {
+            ticks: 0,
+            every: every.max(1),
+        }
+    }
+
     /// The next control tick, whose poses are `report`: its number and its `odom` pose,
-    /// when a topic publishes that tick's odometry.
+    /// when the odometry of that tick is published.
     pub fn next(&mut self, report: &PoseReport) -> Option<(u64, OdomPose)> {
         self.ticks += 1;
         let odom = report.odom?;
-        let due = TOPICS.iter().any(|t| {
-            matches!(t.flow, Flow::Published(Publish::Odometry { every, .. })
-                if self.ticks.is_multiple_of(every.max(1)))
-        });
-        due.then_some((self.ticks, odom))
+        self.ticks
+            .is_multiple_of(self.every)
+            .then_some((self.ticks, odom))
     }
 }
 
@@ -55,9 +70,17 @@ pub struct Publishing {
 }
 
 impl Publishing {
-    /// Publishing the server's topics with the odometry's noise (`/odom`'s covariance).
-    pub fn new(noise: OdometryNoise) -> Self {
+    /// Publishing the server's topics with the odometry's noise (`/odom`'s covariance),
+    /// the odometry every `odometry_every`th control tick ([`odometry_every`]).
+    pub fn new(noise: OdometryNoise, odometry_every: u64) -> Self {
         let topics = TOPICS.iter().filter_map(|t| match t.flow {
+            Flow::Published(Publish::Odometry { build, .. }) => Some((
+                t.name,
+                Publish::Odometry {
+                    every: odometry_every.max(1),
+                    build,
+                },
+            )),
             Flow::Published(publish) => Some((t.name, publish)),
             Flow::Subscribed => None,
         });
@@ -189,7 +212,7 @@ mod tests {
 
     #[test]
     fn status_topics_at_their_rates_the_faster_first_then_the_latched() {
-        let mut p = Publishing::new(noise());
+        let mut p = Publishing::new(noise(), 2);
         let status = VehicleStatus {
             chassis: Some(ChassisStatus::default()),
             mode: Some(DriveMode::Manual),
@@ -223,8 +246,8 @@ mod tests {
 
     #[test]
     fn odometry_every_other_control_tick_with_its_covariance_whoever_subscribes() {
-        let mut ticks = ControlTicks::default();
-        let mut p = Publishing::new(noise());
+        let mut ticks = ControlTicks::new(2);
+        let mut p = Publishing::new(noise(), 2);
         let mut out = Vec::new();
         let mut report = PoseReport {
             odom: Some(OdomPose {
@@ -254,8 +277,54 @@ mod tests {
     }
 
     #[test]
+    fn odometry_rates_in_control_ticks() {
+        assert_eq!(odometry_every(100.0), 1);
+        assert_eq!(odometry_every(50.0), 2);
+        assert_eq!(odometry_every(30.0), 3);
+        assert_eq!(odometry_every(1.0), 100);
+        assert_eq!(odometry_every(1000.0), 1, "no faster than the control loop");
+    }
+
+    #[test]
+    fn the_tables_odometry_rate_is_the_configurations_default() {
+        let every = TOPICS
+            .iter()
+            .find_map(|t| match t.flow {
+                Flow::Published(Publish::Odometry { every, .. }) => Some(every),
+                _ => None,
+            })
+            .unwrap();
+        let default = crate::config::websocket::WebsocketConfig::default().odom_rate_hz;
+        assert_eq!(every, odometry_every(default));
+    }
+
+    #[test]
+    fn odometry_at_every_control_tick_at_100_hz() {
+        let mut ticks = ControlTicks::new(odometry_every(100.0));
+        let mut p = Publishing::new(noise(), odometry_every(100.0));
+        let mut out = Vec::new();
+        let report = PoseReport {
+            odom: Some(OdomPose::default()),
+            map: None,
+            frames: None,
+            localization: crate::vehicle::Localization::Uninitialized,
+        };
+        for n in 1..=10u64 {
+            let (tick, pose) = ticks.next(&report).expect("every tick");
+            p.on_odometry(
+                tick,
+                Timestamp::from_micros(n * 10_000),
+                &pose,
+                |_| true,
+                &mut out,
+            );
+        }
+        assert_eq!(topics(&out), vec!["/odom"; 10]);
+    }
+
+    #[test]
     fn events_go_to_rosout_when_wanted() {
-        let mut p = Publishing::new(noise());
+        let mut p = Publishing::new(noise(), 2);
         let mut out = Vec::new();
         p.on_event(Timestamp::from_nanos(1), "drive up", |_| false, &mut out);
         assert!(out.is_empty());

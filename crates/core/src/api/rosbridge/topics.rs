@@ -94,7 +94,8 @@ pub const TOPICS: &[Topic] = &[
             build: messages::pose,
         },
     ),
-    // The wheel odometry.
+    // The wheel odometry, by default at 50 Hz (`every: 2`); `websocket.odom_rate_hz` (ROS 2:
+    // `ros2.odom_rate_hz`) sets the rate the server publishes.
     published(
         "/odom",
         "nav_msgs/msg/Odometry",
