@@ -76,6 +76,8 @@ pub struct RouteRun {
     /// chassisd's CPU over the window (its process, and the node's when one runs), % of one
     /// core.
     pub cpu_percent: f64,
+    /// Of which the ROS 2 node's process, % of one core.
+    pub node_cpu_percent: f64,
     /// What the route adds to the baseline's, % of one core.
     pub added_cpu_percent: Option<f64>,
     /// From a message's stamp to a subscriber, every subscriber's messages together, ms.
@@ -108,12 +110,13 @@ impl Ros2Report {
     pub fn table(&self) -> String {
         let mut out = format!(
             "/odom at {} Hz to {} subscribers, {} s per route\n\
-             {:<10} {:>8} {:>8} {:>9} {:>9} {:>9}  received of expected\n",
+             {:<10} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9}  received of expected\n",
             self.rate_hz,
             self.subscribers,
             self.window_s,
             "route",
             "CPU %",
+            "node %",
             "added %",
             "p50 ms",
             "p99 ms",
@@ -123,12 +126,13 @@ impl Ros2Report {
         for run in &self.runs {
             let latency = run.latency_ms.as_ref();
             out += &format!(
-                "{:<10} {:>8.2} {:>8} {:>9} {:>9} {:>9}  {:?} of {}\n",
+                "{:<10} {:>8.2} {:>8.2} {:>8} {:>9} {:>9} {:>9}  {:?} of {}\n",
                 serde_json::to_value(run.route)
                     .ok()
                     .and_then(|v| v.as_str().map(str::to_owned))
                     .unwrap_or_default(),
                 run.cpu_percent,
+                run.node_cpu_percent,
                 number(run.added_cpu_percent),
                 number(latency.map(|l| l.median)),
                 number(latency.map(|l| l.p99)),
@@ -198,6 +202,7 @@ pub fn run(options: &Ros2BenchOptions) -> Result<Ros2Report> {
 /// What one route's run gave.
 struct Measured {
     cpu_percent: f64,
+    node_cpu_percent: f64,
     subscribers: Vec<Heard>,
 }
 
@@ -225,6 +230,7 @@ fn judge(
     RouteRun {
         route,
         cpu_percent: measured.cpu_percent,
+        node_cpu_percent: measured.node_cpu_percent,
         added_cpu_percent: baseline
             .filter(|_| route != Route::Baseline)
             .map(|b| measured.cpu_percent - b),
@@ -302,11 +308,13 @@ fn measure(options: &Ros2BenchOptions, route: Route) -> Result<Measured> {
         }
     }
     std::thread::sleep(SETTLE);
-    let before = chassisd_cpu_seconds();
+    let (me_before, node_before) = chassisd_cpu_seconds();
     let started = Instant::now();
     std::thread::sleep(options.window);
-    let cpu = chassisd_cpu_seconds() - before;
-    let cpu_percent = cpu / started.elapsed().as_secs_f64() * 100.0;
+    let (me, node) = chassisd_cpu_seconds();
+    let percent = |seconds: f64| seconds / started.elapsed().as_secs_f64() * 100.0;
+    let node_cpu_percent = percent(node - node_before);
+    let cpu_percent = percent(me - me_before) + node_cpu_percent;
     let subscribers = listeners
         .into_iter()
         .map(finish_listener)
@@ -316,19 +324,20 @@ fn measure(options: &Ros2BenchOptions, route: Route) -> Result<Measured> {
         .map_err(|_| BenchError::Failed("the simulated vehicle's thread panicked".into()))??;
     Ok(Measured {
         cpu_percent,
+        node_cpu_percent,
         subscribers,
     })
 }
 
-/// CPU time of chassisd so far: this process (the vehicle runs in it; the subscribers do
-/// not) and the ROS 2 node's process when one runs, s.
-fn chassisd_cpu_seconds() -> f64 {
+/// CPU time of chassisd so far, s: this process (the vehicle runs in it; the subscribers do
+/// not), and the ROS 2 node's process (0 when none runs).
+fn chassisd_cpu_seconds() -> (f64, f64) {
     let me = process_cpu_seconds(std::process::id()).unwrap_or(0.0);
     let node: f64 = children_running(NODE_COMMAND)
         .into_iter()
         .filter_map(|(pid, _)| process_cpu_seconds(pid))
         .sum();
-    me + node
+    (me, node)
 }
 
 /// The wall clock less the monotonic one, ns: a stamp less it is the monotonic time the

@@ -544,6 +544,120 @@ fn hundreds_of_participants_and_malformed_rtps_cost_the_nodes_process_alone() {
     assert!(warnings < 50, "{warnings} RustDDS lines");
 }
 
+/// `peer.py ARGS` inside `ns` on `domain`, started and left running.
+fn peer_running(ns: &NetNs, domain: u16, args: &[&str]) -> std::process::Child {
+    ns.command(python().to_str().expect("UTF-8 path"))
+        .arg(crate::common::repo().join("tests/ros2/peer.py"))
+        .args(args)
+        .env("ROS_DOMAIN_ID", domain.to_string())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("peer.py runs")
+}
+
+#[test]
+fn stalled_and_vanished_subscribers_delay_nobody_and_oversized_samples_are_dropped() {
+    let ns = NetNs::new();
+    let mut p = sim(&ns, 17, &[]);
+    p.wait_log_seen(Duration::from_secs(30), "localisation started");
+    let pid = p.child.id();
+    let node = crate::common::process::children_of(pid)[0];
+    let odom = [
+        "listen",
+        "--topic",
+        "/odom",
+        "--type",
+        "nav_msgs/msg/Odometry",
+    ];
+    // A reliable subscriber that stops (SIGSTOP: no more acknowledgements, its buffers
+    // full), and one that vanishes without a goodbye (SIGKILL), once both are matched.
+    let mut stalled = peer_running(&ns, 17, &[&odom[..], &["--seconds", "60"]].concat());
+    let mut vanished = peer_running(&ns, 17, &[&odom[..], &["--seconds", "60"]].concat());
+    std::thread::sleep(Duration::from_secs(3));
+    // SAFETY: kill on a child of ours, still running.
+    unsafe { libc::kill(stalled.id() as libc::pid_t, libc::SIGSTOP) };
+    vanished.kill().expect("SIGKILL");
+    let _ = vanished.wait();
+    p.drain_out();
+    // Another subscriber gets /odom at its rate without a gap, and the vehicle's status
+    // lines keep their 10 Hz.
+    let heard = listen(&ns, 17, "/odom", "nav_msgs/msg/Odometry", 250, &[]);
+    let heard = samples(&heard);
+    assert_eq!(heard.len(), 250);
+    let t: Vec<f64> = heard.iter().map(|s| s["t_rx"].as_f64().unwrap()).collect();
+    let rate = 249.0 / (t[249] - t[0]);
+    let gap = t.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    assert!((40.0..=60.0).contains(&rate), "/odom at {rate:.1} Hz");
+    assert!(gap < 0.1, "a gap of {gap:.3} s");
+    let lines = p.drain_out().len();
+    assert!(lines >= 45, "{lines} status lines over some 5 s");
+    let _ = stalled.kill();
+    let _ = stalled.wait();
+
+    // Goals of 4 MB: dropped by the node's process and counted, never handed over; its
+    // memory stays bounded and it is the same process.
+    let goal = r#"{"header": {"frame_id": "map"},
+                   "pose": {"position": {"x": 2.0}, "orientation": {"w": 1.0}}}"#;
+    let publish = [
+        "publish",
+        "--topic",
+        "/goal_pose",
+        "--type",
+        "geometry_msgs/msg/PoseStamped",
+        "--json",
+        goal,
+        "--rate",
+        "4",
+    ];
+    let big = [&publish[..], &["--pad-frame-id", "4000000", "--count", "4"]].concat();
+    peer(&ns, 17, &big);
+    p.wait_log(
+        Duration::from_secs(10),
+        "a sample larger than any request dropped",
+    );
+    let rss = crate::common::process::rss_mb(node);
+    assert!(rss < 200.0, "the node's process holds {rss:.0} MB");
+    assert_eq!(crate::common::process::children_of(pid), vec![node]);
+    assert_eq!(p.log_count("command accepted"), 0, "{:#?}", p.log);
+
+    // RViz2's "2D Pose Estimate": /initialpose places the vehicle, and /pose shows it there.
+    let estimate = r#"{"header": {"frame_id": "map"},
+                       "pose": {"pose": {"position": {"x": 10.0, "y": -5.0},
+                                         "orientation": {"z": 0.479425538604203,
+                                                         "w": 0.8775825618903728}}}}"#;
+    peer(
+        &ns,
+        17,
+        &[
+            "publish",
+            "--topic",
+            "/initialpose",
+            "--type",
+            "geometry_msgs/msg/PoseWithCovarianceStamped",
+            "--json",
+            estimate,
+            "--count",
+            "1",
+        ],
+    );
+    p.wait_log(Duration::from_secs(10), "command accepted");
+    std::thread::sleep(Duration::from_millis(500));
+    let pose = listen(
+        &ns,
+        17,
+        "/pose",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+        1,
+        &[],
+    );
+    let at = &samples(&pose)[0]["msg"]["pose"]["pose"]["position"];
+    let (x, y) = (at["x"].as_f64().unwrap(), at["y"].as_f64().unwrap());
+    assert!(
+        (x - 10.0).abs() < 0.2 && (y + 5.0).abs() < 0.2,
+        "/pose at ({x}, {y})"
+    );
+}
+
 #[test]
 fn the_benchmark_gives_odom_to_every_subscriber_of_both_routes() {
     // A short run: the figures are the benchmark's; here, that every subscriber of both

@@ -30,6 +30,7 @@ use tokio::sync::mpsc;
 use super::messages::{cdr, decode, nav2_msgs};
 use super::pipe::{FromNode, MAX_LINE, NodeSettings, ToNode};
 use super::wire::{RawCdr, RawSeed};
+use crate::api::adapter::MAX_REQUEST;
 use crate::api::ros2::NAVIGATE_TO_POSE;
 use crate::api::ros2::topics::{self, Qos, TAKEN, TOPICS};
 use crate::config::ros2::Middleware;
@@ -214,8 +215,24 @@ async fn read_topic(
         .collect();
     tokio::spawn(async move {
         let mut stream = Box::pin(reader.async_stream_seed(RawSeed));
-        let mut undecoded: u64 = 0;
+        let (mut undecoded, mut oversized): (u64, u64) = (0, 0);
         while let Some(sample) = stream.next().await {
+            // No request is this large (the engine refuses one over MAX_REQUEST): dropped
+            // here, counted, and never carried to chassisd as a line of JSON.
+            if let Ok((payload, _)) = &sample
+                && payload.len() > MAX_REQUEST
+            {
+                oversized += 1;
+                if oversized.is_power_of_two() {
+                    tracing::warn!(
+                        topic = taken.name,
+                        bytes = payload.len(),
+                        oversized,
+                        "ROS 2 node: a sample larger than any request dropped"
+                    );
+                }
+                continue;
+            }
             let decoded = match sample {
                 Ok((payload, _)) => match decode(taken.msg_type, &payload) {
                     Ok(msg) => Ok(msg),

@@ -287,6 +287,111 @@ mod tests {
         assert_eq!(out[0].1["child_frame_id"], "base_link");
     }
 
+    /// The fields of a ROS1 or ROS 2 message that both carry: a header's stamp becomes
+    /// nanoseconds, its seq (ROS1 only) goes.
+    fn shared_fields(msg: &Value) -> Value {
+        let mut msg = msg.clone();
+        if let Some(header) = msg.get_mut("header").and_then(Value::as_object_mut) {
+            let stamp = &header["stamp"];
+            let secs = stamp
+                .get("sec")
+                .or(stamp.get("secs"))
+                .and_then(Value::as_i64);
+            let nanos = stamp
+                .get("nanosec")
+                .or(stamp.get("nsecs"))
+                .and_then(Value::as_i64);
+            let ns = secs.zip(nanos).map(|(s, n)| s * 1_000_000_000 + n);
+            header.insert("stamp".into(), ns.into());
+            header.remove("seq");
+        }
+        if let Some(transforms) = msg.get_mut("transforms").and_then(Value::as_array_mut) {
+            for t in transforms {
+                *t = shared_fields(t);
+            }
+        }
+        msg
+    }
+
+    #[test]
+    fn odom_and_tf_carry_what_the_ros1_nodes_carry_for_the_same_poses() {
+        use crate::api::ros1::publisher::{Feed as Ros1Feed, Publishing as Ros1Publishing};
+        use crate::vehicle::{FrameTree, Pose2D};
+        let settings = Settings {
+            odom_rate_hz: 100.0,
+            ..settings(Ros2Frames::default())
+        };
+        let mut ros2 = Publishing::new(settings.clone());
+        let mut ros1 = Ros1Publishing::new(settings.odometry_noise, settings.imu_noise);
+        let (mut out2, mut out1) = (Vec::new(), Vec::new());
+        let mut tf_pairs = Vec::new();
+        // 3 s along a curve; the map frame set after the first second.
+        for n in 1..=300u64 {
+            let t = Timestamp::from_micros(n * 10_000);
+            let k = n as f64 * 0.01;
+            let odom = OdomPose {
+                x: 0.5 * k,
+                y: 0.05 * k * k,
+                yaw: 0.2 * k,
+                v: 0.5,
+                w: 0.2,
+            };
+            let frames = (n > 100).then_some(FrameTree {
+                map_to_odom: Pose2D {
+                    x: 3.0,
+                    y: -1.0,
+                    yaw: 0.3,
+                },
+                odom_to_base: Pose2D {
+                    x: odom.x,
+                    y: odom.y,
+                    yaw: odom.yaw,
+                },
+            });
+            let report = PoseReport {
+                odom: Some(odom),
+                map: None,
+                frames,
+                localization: Localization::Good,
+            };
+            ros2.on_feed(&Feed::Poses(t, report), &mut out2);
+            ros1.on_feed(&Ros1Feed::Poses(t, report), &mut out1);
+            if n % 10 == 0 {
+                let status = VehicleStatus {
+                    time: t,
+                    odom: Some(odom),
+                    frames,
+                    ..Default::default()
+                };
+                let start = out2.len();
+                ros2.on_feed(&Feed::Status(Box::new(status)), &mut out2);
+                let tf2 = out2[start..].iter().find(|(topic, _)| *topic == "/tf");
+                let tf1 = crate::api::ros1::messages::tf(t, &report);
+                tf_pairs.push((
+                    tf2.map(|(_, m)| shared_fields(m)),
+                    tf1.map(|m| shared_fields(&m)),
+                ));
+            }
+        }
+        let odom2: Vec<Value> = out2
+            .iter()
+            .filter(|(topic, _)| *topic == "/odom")
+            .map(|(_, m)| shared_fields(m))
+            .collect();
+        let odom1: Vec<Value> = out1
+            .iter()
+            .filter(|(topic, _)| *topic == "/raw_odom")
+            .map(|(_, m)| shared_fields(m))
+            .collect();
+        assert_eq!(odom2.len(), 300);
+        assert_eq!(odom2, odom1, "/odom against ROS1's /raw_odom");
+        assert_eq!(tf_pairs.len(), 30);
+        for (tf2, tf1) in tf_pairs {
+            assert!(tf2.is_some());
+            assert_eq!(tf2, tf1, "/tf against ROS1's");
+        }
+    }
+
     #[test]
     fn a_fix_goes_out_once_per_solution() {
         let mut p = Publishing::new(settings(Ros2Frames::default()));
