@@ -25,7 +25,14 @@ pub fn init() -> WorkerGuard {
     // write hundreds of lines. Its warnings still show (budgeted), unless RUST_LOG names it.
     let named = std::env::var("RUST_LOG").is_ok_and(|v| v.contains("rustdds"));
     if !named {
-        for directive in ["rustdds=warn", "ros2_client=warn"] {
+        // ros2-client warns at every start that ROS_DISTRO is not set: on a vehicle without
+        // ROS it never is. A distribution that does not match is still an error, shown.
+        let directives = [
+            "rustdds=warn",
+            "ros2_client=warn",
+            "ros2_client::distributions=error",
+        ];
+        for directive in directives {
             if let Ok(d) = directive.parse() {
                 filter = filter.add_directive(d);
             }

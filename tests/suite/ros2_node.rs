@@ -659,6 +659,67 @@ fn stalled_and_vanished_subscribers_delay_nobody_and_oversized_samples_are_dropp
 }
 
 #[test]
+fn the_configurations_namespace_and_frame_names_are_what_peers_see() {
+    // `chassisd run` of a vehicle with a receiver on a pseudo-terminal, its node under
+    // /robot_1 with frames of its own, as a fleet's second robot would be set up.
+    let ns = NetNs::new();
+    let dir = crate::common::tempdir("ros2-namespace");
+    let link = dir.join("gnss-port");
+    let _receiver = crate::common::pty::Talker::start(crate::common::pty::Port::open_at(&link));
+    let config = dir.join("vehicle.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[vehicle]\nname = \"robot-1\"\n\n[gnss]\nport = \"{}\"\n\n\
+             [ros2]\ndomain_id = 19\nnamespace = \"/robot_1\"\nnode_name = \"chassis\"\n\n\
+             [ros2.frames]\nbase = \"robot_1/base_link\"\ngnss = \"robot_1/gps\"\n",
+            link.display()
+        ),
+    )
+    .expect("config");
+    let wrapper = ns.wrapper();
+    let wrapper: Vec<&str> = wrapper.iter().map(String::as_str).collect();
+    let mut p = Proc::start_under(
+        &wrapper,
+        &["run".as_ref(), "--config".as_ref(), config.as_os_str()],
+    );
+    p.wait_log(Duration::from_secs(30), "ROS 2 node on its domain");
+    let fix = listen(&ns, 19, "/robot_1/fix", "sensor_msgs/msg/NavSatFix", 2, &[]);
+    let fix = samples(&fix);
+    assert_eq!(fix.len(), 2);
+    assert_eq!(fix[1]["msg"]["header"]["frame_id"], "robot_1/gps");
+    let mounts = listen(
+        &ns,
+        19,
+        "/robot_1/tf_static",
+        "tf2_msgs/msg/TFMessage",
+        1,
+        &["--transient-local", "--depth", "1"],
+    );
+    let mounts = samples(&mounts);
+    let antenna = &mounts[0]["msg"]["transforms"][0];
+    assert_eq!(antenna["header"]["frame_id"], "robot_1/base_link");
+    assert_eq!(antenna["child_frame_id"], "robot_1/gps");
+    // Nothing under the bare name.
+    let bare = peer_output(
+        &ns,
+        19,
+        &[
+            "listen",
+            "--topic",
+            "/fix",
+            "--type",
+            "sensor_msgs/msg/NavSatFix",
+            "--seconds",
+            "2",
+            "--count",
+            "1",
+        ],
+    );
+    assert_eq!(bare.status.code(), Some(3), "{:?}", events(&bare));
+}
+
+#[test]
 fn the_benchmark_gives_odom_to_every_subscriber_of_both_routes() {
     // A short run: the figures are the benchmark's; here, that every subscriber of both
     // routes gets /odom at the rate asked and each message's latency is measured. The

@@ -136,8 +136,16 @@ pub(crate) fn type_name(msg_type: &str) -> MessageTypeName {
 
 /// The writers of the published topics, by the table's names.
 struct Writers {
-    by_topic: HashMap<&'static str, (&'static str, Publisher<RawCdr>)>,
+    by_topic: HashMap<&'static str, Writer>,
     failed: u64,
+}
+
+/// A published topic's writer.
+struct Writer {
+    msg_type: &'static str,
+    publisher: Publisher<RawCdr>,
+    /// Transient local: the last samples are kept for readers that join later.
+    latched: bool,
 }
 
 impl Writers {
@@ -152,10 +160,15 @@ impl Writers {
                     &qos,
                 )
                 .map_err(|e| format!("{}: {e:?}", topic.name))?;
-            let writer = node
+            let publisher = node
                 .create_publisher::<RawCdr>(&dds_topic, None)
                 .map_err(|e| format!("{}: {e:?}", topic.name))?;
-            by_topic.insert(topic.name, (topic.msg_type, writer));
+            let writer = Writer {
+                msg_type: topic.msg_type,
+                publisher,
+                latched: topic.qos.durability == topics::Durability::TransientLocal,
+            };
+            by_topic.insert(topic.name, writer);
         }
         Ok(Self {
             by_topic,
@@ -164,16 +177,21 @@ impl Writers {
     }
 
     /// Serialises `msg` as its topic's type and writes it; a message its type refuses or
-    /// a write that fails is counted and logged now and then.
-    fn publish(&mut self, topic: &str, msg: &Value) {
-        let Some((msg_type, writer)) = self.by_topic.get(topic) else {
+    /// a write that fails is counted and logged now and then. A volatile topic's message
+    /// that no reader of `node`'s has matched is neither: it would go nowhere (the IMU's
+    /// 100 Hz and the rest cost nothing until someone subscribes).
+    fn publish(&mut self, node: &Node, topic: &str, msg: &Value) {
+        let Some(writer) = self.by_topic.get(topic) else {
             return self.failed(topic, "not a topic of the node");
         };
-        let bytes = match cdr(msg_type, msg) {
+        if !writer.latched && writer.publisher.get_subscription_count(node) == 0 {
+            return;
+        }
+        let bytes = match cdr(writer.msg_type, msg) {
             Ok(bytes) => bytes,
             Err(e) => return self.failed(topic, &e),
         };
-        if let Err(e) = writer.publish(RawCdr(bytes)) {
+        if let Err(e) = writer.publisher.publish(RawCdr(bytes)) {
             self.failed(topic, &format!("{e:?}"));
         }
     }
@@ -363,7 +381,7 @@ async fn run(settings: NodeSettings) -> Result<(), RuntimeError> {
             Some(message) = to_node.recv() => match message {
                 ToNode::Publish { messages } => {
                     for (topic, msg) in &messages {
-                        writers.publish(topic, msg);
+                        writers.publish(&node, topic, msg);
                     }
                 }
                 ToNode::Goal { goal, verdict } => {
