@@ -269,7 +269,8 @@ fn measure(options: &Ros2BenchOptions, route: Route) -> Result<Measured> {
             }),
         ),
     };
-    let total = VEHICLE_START + SETTLE + options.window + Duration::from_secs(2);
+    // The vehicle outlives the window by a little, for the subscribers' last messages.
+    let total = VEHICLE_START + SETTLE + options.window + Duration::from_millis(500);
     let sim = SimOptions {
         plant: options.plant.clone(),
         seed: 1,
