@@ -488,9 +488,20 @@ impl Listening {
         Ok(())
     }
 
-    /// Time left until the window ends.
-    fn left(&self) -> Duration {
-        self.window_end.saturating_duration_since(Instant::now())
+    /// The next item of `stream` before the window ends; `None` once it has ended, or
+    /// the stream has.
+    async fn next_within<S: futures_util::Stream + Unpin>(
+        &self,
+        stream: &mut S,
+    ) -> Option<S::Item> {
+        let left = self.window_end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return None;
+        }
+        tokio::time::timeout(left, stream.next())
+            .await
+            .ok()
+            .flatten()
     }
 }
 
@@ -535,18 +546,12 @@ async fn listen_dds(domain: u16, listening: &mut Listening) -> Result<()> {
         .create_subscription::<Vec<u8>>(&topic, Some(qos))
         .map_err(|e| BenchError::Failed(format!("/odom: {e:?}")))?;
     let mut stream = Box::pin(reader.async_stream_seed(RawSeed));
-    loop {
-        let left = listening.left();
-        if left.is_zero() {
-            return Ok(());
-        }
-        let Ok(Some(sample)) = tokio::time::timeout(left, stream.next()).await else {
-            return Ok(());
-        };
+    while let Some(sample) = listening.next_within(&mut stream).await {
         let (payload, _) = sample.map_err(|e| BenchError::Failed(format!("/odom: {e:?}")))?;
         let msg = decode(odom.msg_type, &payload).map_err(failed("/odom's CDR"))?;
         listening.arrived(&msg)?;
     }
+    Ok(())
 }
 
 /// A rosbridge client subscribed to `/odom` at `address`.
@@ -567,14 +572,7 @@ async fn listen_rosbridge(address: &str, listening: &mut Listening) -> Result<()
         .send(Message::Text(subscribe.to_string()))
         .await
         .map_err(invalid("subscribing"))?;
-    loop {
-        let left = listening.left();
-        if left.is_zero() {
-            return Ok(());
-        }
-        let Ok(Some(frame)) = tokio::time::timeout(left, socket.next()).await else {
-            return Ok(());
-        };
+    while let Some(frame) = listening.next_within(&mut socket).await {
         let Message::Text(text) = frame.map_err(invalid("the WebSocket"))? else {
             continue;
         };
@@ -583,4 +581,5 @@ async fn listen_rosbridge(address: &str, listening: &mut Listening) -> Result<()
             listening.arrived(&envelope["msg"])?;
         }
     }
+    Ok(())
 }

@@ -487,13 +487,25 @@ fn a_configuration_that_names_a_missing_interface_is_refused_with_the_fix() {
 
 /// `hostile.py ARGS` inside `ns`, on `domain`; its output.
 fn hostile(ns: &NetNs, domain: u16, args: &[&str]) -> std::process::Child {
+    script_running(ns, domain, "hostile.py", args, std::process::Stdio::piped())
+}
+
+/// `tests/ros2/SCRIPT ARGS` inside `ns` on `domain`, started and left running with its
+/// standard output to `stdout`.
+fn script_running(
+    ns: &NetNs,
+    domain: u16,
+    script: &str,
+    args: &[&str],
+    stdout: std::process::Stdio,
+) -> std::process::Child {
     ns.command(python().to_str().expect("UTF-8 path"))
-        .arg(crate::common::repo().join("tests/ros2/hostile.py"))
+        .arg(crate::common::repo().join("tests/ros2").join(script))
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
-        .stdout(std::process::Stdio::piped())
+        .stdout(stdout)
         .spawn()
-        .expect("hostile.py runs")
+        .unwrap_or_else(|e| panic!("{script} runs: {e}"))
 }
 
 #[test]
@@ -546,13 +558,8 @@ fn hundreds_of_participants_and_malformed_rtps_cost_the_nodes_process_alone() {
 
 /// `peer.py ARGS` inside `ns` on `domain`, started and left running.
 fn peer_running(ns: &NetNs, domain: u16, args: &[&str]) -> std::process::Child {
-    ns.command(python().to_str().expect("UTF-8 path"))
-        .arg(crate::common::repo().join("tests/ros2/peer.py"))
-        .args(args)
-        .env("ROS_DOMAIN_ID", domain.to_string())
-        .stdout(std::process::Stdio::null())
-        .spawn()
-        .expect("peer.py runs")
+    // Its output unread: nothing to fill a pipe and stop it before the test does.
+    script_running(ns, domain, "peer.py", args, std::process::Stdio::null())
 }
 
 #[test]
