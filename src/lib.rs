@@ -12,6 +12,7 @@ pub use chassisd_core::{
 
 pub mod bench;
 pub mod calib;
+pub mod interchange;
 pub mod replay;
 pub mod runtime;
 pub mod sim;

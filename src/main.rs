@@ -19,6 +19,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Replay(cli::replay::Args),
+    Export(cli::export::Args),
     Run(cli::run::Args),
     Record(cli::record::Args),
     Sim(cli::sim::Args),
@@ -83,6 +84,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> anyhow::Result<bool> {
     match cli.command {
         Command::Replay(args) => cli::replay::execute(args),
+        Command::Export(args) => cli::export::execute(args),
         Command::Run(args) => cli::run::execute(args),
         Command::Record(args) => cli::record::execute(args),
         Command::Sim(args) => cli::sim::execute(args),

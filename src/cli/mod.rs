@@ -9,6 +9,7 @@ pub mod calibrate;
 pub mod can_sim;
 pub mod check;
 pub mod common;
+pub mod export;
 pub mod ntrip;
 pub mod record;
 pub mod replay;

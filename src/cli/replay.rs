@@ -52,6 +52,12 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
     let summary = replay::replay(&a.path, &options, &mut out)
         .with_context(|| format!("replay of {}", a.path.display()))?;
     out.flush()?;
+    Ok(report(&summary, a.lenient))
+}
+
+/// Prints what the replay went through on stderr; whether it passes (records out of order
+/// and transmissions that differ fail it unless `lenient`).
+pub fn report(summary: &replay::ReplaySummary, lenient: bool) -> bool {
     for skip in &summary.skipped_lines.0 {
         eprintln!("skipped {}:{}: {}", skip.file, skip.line, skip.reason);
     }
@@ -74,19 +80,19 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
     }
     eprintln!("{}", summary.one_line());
     let late = summary.out_of_order.1;
-    if late > 0 && !a.lenient {
+    if late > 0 && !lenient {
         eprintln!(
             "{late} records go back in time within their file: the recording was \
              edited or its clock stepped; exit status 1 (--lenient accepts them)"
         );
     }
     let differ = summary.engine.tx_mismatched;
-    if differ > 0 && !a.lenient {
+    if differ > 0 && !lenient {
         eprintln!(
             "{differ} transmissions differ from the recording's: this chassisd does \
              not drive the vehicle as the recorded one did; exit status 1 (--lenient \
              accepts them)"
         );
     }
-    Ok((late == 0 && differ == 0) || a.lenient)
+    (late == 0 && differ == 0) || lenient
 }

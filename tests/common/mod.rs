@@ -129,6 +129,18 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// The Python of the test environment, with the PyPI packages tests/install-deps pins there
+/// (roslibpy, cyclonedds, rosbags, mcap, ...).
+pub fn venv_python() -> PathBuf {
+    let python = repo().join("target/test-venv/bin/python");
+    assert!(
+        python.exists(),
+        "{} is missing: tests/install-deps builds the test environment there",
+        python.display()
+    );
+    python
+}
+
 /// A new empty folder under the system temp dir, unique to this process and call.
 pub fn tempdir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!(

@@ -22,6 +22,7 @@ const LAYERS: &[&[&str]] = &[
     &["record", "api"],
     &["engine"],
     &["sim"],
+    &["interchange"],
     &["runtime"],
     &["replay"],
     &["calib"],
@@ -39,7 +40,10 @@ const CRATES: &[(&str, &[&str])] = &[
             "control", "zones", "config", "vehicle", "record", "api", "engine",
         ],
     ),
-    ("src", &["sim", "runtime", "replay", "calib", "bench"]),
+    (
+        "src",
+        &["sim", "interchange", "runtime", "replay", "calib", "bench"],
+    ),
 ];
 
 type ModulePath = Vec<String>;

@@ -34,6 +34,7 @@ mod heap_release;
 mod hostile_commands;
 mod hostile_recordings;
 mod layers;
+mod mcap_export;
 mod motion_cutter;
 mod motion_mission;
 mod motion_moves;

@@ -5,7 +5,6 @@
 //! would run it. Everything runs inside a network namespace of its own
 //! (`common::netns`): DDS discovery multicasts, and no packet may leave the test.
 
-use std::path::PathBuf;
 use std::process::Output;
 use std::time::Duration;
 
@@ -13,11 +12,6 @@ use serde_json::Value;
 
 use crate::common::netns::NetNs;
 use crate::common::process::Proc;
-
-/// The Python of the test environment (tests/install-deps builds it).
-fn python() -> PathBuf {
-    crate::common::repo().join("target/test-venv/bin/python")
-}
 
 /// `peer.py ARGS` inside `ns`, on domain `domain`; its output (checked to be a success).
 fn peer(ns: &NetNs, domain: u16, args: &[&str]) -> Vec<Value> {
@@ -32,7 +26,7 @@ fn peer(ns: &NetNs, domain: u16, args: &[&str]) -> Vec<Value> {
 }
 
 fn peer_output(ns: &NetNs, domain: u16, args: &[&str]) -> Output {
-    ns.command(python().to_str().expect("UTF-8 path"))
+    ns.command(crate::common::venv_python().to_str().expect("UTF-8 path"))
         .arg(crate::common::repo().join("tests/ros2/peer.py"))
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())
@@ -499,7 +493,7 @@ fn script_running(
     args: &[&str],
     stdout: std::process::Stdio,
 ) -> std::process::Child {
-    ns.command(python().to_str().expect("UTF-8 path"))
+    ns.command(crate::common::venv_python().to_str().expect("UTF-8 path"))
         .arg(crate::common::repo().join("tests/ros2").join(script))
         .args(args)
         .env("ROS_DOMAIN_ID", domain.to_string())

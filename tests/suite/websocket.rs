@@ -7,7 +7,6 @@
 
 use crate::common;
 
-use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
@@ -15,16 +14,6 @@ use common::mqtt::free_port;
 use common::process::Proc;
 use common::ws;
 use serde_json::Value;
-
-fn python() -> PathBuf {
-    let venv = common::repo().join("target/test-venv/bin/python");
-    assert!(
-        venv.exists(),
-        "{} is missing: tests/install-deps installs roslibpy there",
-        venv.display()
-    );
-    venv
-}
 
 /// `chassisd sim --no-mqtt --websocket 127.0.0.1:PORT`, listening.
 fn sim(port: u16) -> Proc {
@@ -85,7 +74,7 @@ fn run_with_token(
 
 /// Runs one check of the client script against the server on `port`.
 fn client(port: u16, check: &[&str]) -> Value {
-    let out = Command::new(python())
+    let out = Command::new(common::venv_python())
         .arg(common::repo().join("tests/websocket/client.py"))
         .arg(port.to_string())
         .args(check)
@@ -404,7 +393,7 @@ fn live_page(port: u16, dir: &std::path::Path, mode: &[&str]) -> Value {
         chromium.exists(),
         "tests/install-deps installs Debian's chromium"
     );
-    let out = Command::new(python())
+    let out = Command::new(common::venv_python())
         .arg(common::repo().join("tests/websocket/page.py"))
         .arg(chromium)
         .arg(port.to_string())

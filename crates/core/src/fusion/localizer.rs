@@ -866,6 +866,17 @@ impl MapPlacement {
         (g.lat_deg, g.lon_deg)
     }
 
+    /// The map frame's x axis's angle from east, rad (0 until INIT_POSITION turns it): what
+    /// turns a covariance in map coordinates into east and north.
+    pub fn rotation(&self) -> f64 {
+        self.map.rotation
+    }
+
+    /// The datum's height above the ellipsoid, m: the height of the map's plane.
+    pub fn height_m(&self) -> f64 {
+        self.frame.datum().h_m
+    }
+
     /// A WGS84 position's map coordinates (x, y), m.
     pub fn place(&self, lat_deg: f64, lon_deg: f64) -> (f64, f64) {
         let enu = self.frame.to_enu(&Geodetic {

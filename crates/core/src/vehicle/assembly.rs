@@ -57,6 +57,7 @@ pub(super) fn status(t: Timestamp, parts: Parts<'_>) -> VehicleStatus {
         gnss: place.gnss_status(t),
         pose,
         pose_covariance: map.map(|(_, covariance)| covariance),
+        placement: place.localizer().map_placement(),
         odom,
         frames,
         localization,

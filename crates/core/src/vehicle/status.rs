@@ -25,6 +25,9 @@ pub struct VehicleStatus {
     pub pose: Pose2D,
     /// The map pose's covariance; `None` while the pose is the odom frame's.
     pub pose_covariance: Option<PoseCovariance>,
+    /// Where the map frame lies on the globe, once there is a datum: what turns the map pose
+    /// into latitude and longitude.
+    pub placement: Option<crate::fusion::localizer::MapPlacement>,
     /// The `odom` frame's pose (wheels and gyro only, continuous), once the drives report.
     pub odom: Option<crate::fusion::odometry::OdomPose>,
     /// The frame tree at `time`, once both the map and the odom frame exist.

@@ -47,10 +47,10 @@ pub fn nav_sat_status(quality: FixQuality) -> i8 {
     }
 }
 
-/// The covariance (ENU, m², row-major) of `fix`'s position and its type: the receiver's own
-/// GST figures for this epoch when it sent them, else the quality's typical σ (vertical
-/// twice the horizontal).
-fn covariance(fix: &GnssFix, rx: Timestamp) -> ([f64; 9], u8) {
+/// The covariance (ENU, m², row-major) of `fix`'s position and its type (NavSatFix's, which
+/// Foxglove's LocationFix shares): the receiver's own GST figures for this epoch when it sent
+/// them, else the quality's typical σ (vertical twice the horizontal).
+pub fn position_covariance(fix: &GnssFix, rx: Timestamp) -> ([f64; 9], u8) {
     if !fix.quality.is_valid() {
         return ([0.0; 9], COVARIANCE_UNKNOWN);
     }
@@ -86,7 +86,8 @@ pub fn fix(t: Timestamp, fix: &GnssFix) -> Value {
         ),
         None => (Value::Null, Value::Null, Value::Null),
     };
-    let (position_covariance, covariance_type) = covariance(fix, position.map_or(t, |p| p.rx));
+    let (position_covariance, covariance_type) =
+        position_covariance(fix, position.map_or(t, |p| p.rx));
     json!({
         "header": header(position.map_or(t, |p| p.rx), GNSS_FRAME),
         "status": {"status": nav_sat_status(fix.quality), "service": SERVICE_GPS},

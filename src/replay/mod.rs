@@ -1,5 +1,8 @@
 //! `chassisd replay`: a recording (or a plain NMEA log) through the same engine as live
-//! mode, as fast as the machine allows, one base_status JSON line per tick.
+//! mode, as fast as the machine allows, one base_status JSON line per tick; or, through
+//! [`mcap`], into an MCAP file.
+
+pub mod mcap;
 
 use std::fmt::Write as _;
 use std::io::Write;
@@ -84,6 +87,15 @@ pub struct ReplayOptions {
 
 /// What takes a replay's engine outputs as they come.
 pub trait Consumer {
+    /// The configuration the engine runs and the serial sources that speak NMEA, before the
+    /// first record.
+    fn begin(&mut self, _vehicle: &VehicleConfig, _nmea_sources: &[String]) {}
+
+    /// A record, as it goes into the engine (before the outputs it makes).
+    fn record(&mut self, _record: &Record) -> std::io::Result<()> {
+        Ok(())
+    }
+
     /// Takes (drains) `outputs`; their times are the recorded times less `offset_ns`.
     fn take(&mut self, outputs: &mut Vec<EngineOutput>, offset_ns: i128) -> std::io::Result<()>;
 }
@@ -173,6 +185,12 @@ pub fn replay_into(
             vec![(IMPORT_SOURCE.to_owned(), Decoder::Nmea)],
         )
     };
+    let nmea: Vec<String> = sources
+        .iter()
+        .filter(|(_, d)| matches!(d, Decoder::Nmea))
+        .map(|(name, _)| name.clone())
+        .collect();
+    consumer.begin(&vehicle, &nmea);
     let store = Box::new(MemoryStore::with(trajectories));
     let mut engine = Engine::with_trajectories(&vehicle, &sources, store);
     setup(&mut engine);
@@ -401,6 +419,7 @@ fn run(
         // The ticks of a long gap leave in batches, so memory does not grow with it.
         let before = Timestamp::from_nanos(record.t.as_nanos().saturating_sub(1));
         advance(&mut engine, before, &mut outputs, out, offset)?;
+        out.record(&record)?;
         let t = engine.handle(&record, &mut outputs);
         span = Some(span.map_or((t, t), |(first, _)| (first, t)));
         out.take(&mut outputs, offset)?;
