@@ -20,6 +20,7 @@ struct Cli {
 enum Command {
     Replay(cli::replay::Args),
     Export(cli::export::Args),
+    Import(cli::import::Args),
     Run(cli::run::Args),
     Record(cli::record::Args),
     Sim(cli::sim::Args),
@@ -85,6 +86,7 @@ fn run(cli: Cli) -> anyhow::Result<bool> {
     match cli.command {
         Command::Replay(args) => cli::replay::execute(args),
         Command::Export(args) => cli::export::execute(args),
+        Command::Import(args) => cli::import::execute(args),
         Command::Run(args) => cli::run::execute(args),
         Command::Record(args) => cli::record::execute(args),
         Command::Sim(args) => cli::sim::execute(args),

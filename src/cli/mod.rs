@@ -10,6 +10,7 @@ pub mod can_sim;
 pub mod check;
 pub mod common;
 pub mod export;
+pub mod import;
 pub mod ntrip;
 pub mod record;
 pub mod replay;

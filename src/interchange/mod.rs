@@ -4,12 +4,16 @@
 //! - [`mcap_out`]: one MCAP file being written (chunked, zstd, indexed; JSON channels);
 //! - [`schemas`]: the channels' JSON schemas, Foxglove's well-known ones among them;
 //! - [`raw`]: the recorded inputs as messages, one channel per source;
-//! - [`derived`]: the engine's outputs as messages.
+//! - [`derived`]: the engine's outputs as messages;
+//! - [`vehicle_recording`]: a vehicle's motion and fixes as a chassisd recording.
 
+pub mod bag;
 pub mod derived;
+pub mod import;
 pub mod mcap_out;
 pub mod raw;
 pub mod schemas;
+pub mod vehicle_recording;
 
 use std::path::{Path, PathBuf};
 

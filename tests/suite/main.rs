@@ -7,6 +7,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod bag_import;
 mod calibrate;
 mod check;
 mod check_receivers;

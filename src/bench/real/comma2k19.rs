@@ -310,6 +310,14 @@ impl Data {
     }
 }
 
+/// Writes the data at `dir` as a recording folder at `out`; the receiver's records it holds.
+pub fn write_recording(dir: &Path, out: &Path) -> Result<Vec<Record>> {
+    let data = Data::load(dir)?;
+    let clean = data.records(None, None);
+    recording::write(out, &data.forced()?, &clean)?;
+    Ok(clean)
+}
+
 /// The figures of `dir`.
 pub fn figures(dir: &Path, options: &Options) -> Result<Vec<Figure>> {
     let workers = options.workers;

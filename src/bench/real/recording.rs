@@ -1,135 +1,33 @@
-//! A real vehicle's wheels, gyro and GNSS as a chassisd recording, and its replay.
+//! A real vehicle's wheels, gyro and GNSS as a chassisd recording (written by
+//! `interchange::vehicle_recording`, as `chassisd import` writes a bag's), and its replay.
 //!
-//! The simulator's CiA 402 drives are back-driven at the wheel speeds the data gives and its
-//! IMU reads the data's gyro, so wheels and gyro reach the core through the real decoders;
-//! the receiver's sentences are written as the receiver sent them, at the times they
-//! arrived. A replay runs the recording through the library's engine with any set of GNSS
+//! A replay runs the recording through the library's engine with any set of GNSS
 //! records in place of the recorded ones (a cut, a wild fix), and keeps every control tick's
 //! poses.
 
 use std::path::Path;
 use std::time::Duration;
 
-use bytes::Bytes;
-
 use crate::bench::error::{Result, invalid};
 use crate::config::VehicleConfig;
-use crate::devices::gnss::FixQuality;
-use crate::devices::gnss::encode::{angle, quality_digit, sentence};
 use crate::engine::{Decoder, Engine, EngineOutput};
-use crate::record::{Payload, Record, RecordingReader, RecordingWriter};
-use crate::sim::lockstep::{self, Lockstep, PLANT_STEP, Sink};
-use crate::sim::plant::{ForcedMotion, GnssCondition, PlantConfig};
+use crate::record::{Payload, Record, RecordingReader};
+use crate::sim::lockstep;
 use crate::time::Timestamp;
 
 /// Recordings start here (2026-01-01T00:00:00Z).
 pub const START: Timestamp = Timestamp::from_micros(1_767_225_600_000_000);
-/// The drives boot, standing, before the data starts, s.
-pub const BOOT_S: f64 = 3.0;
+pub use crate::interchange::vehicle_recording::{BOOT_S, Epoch, Forced};
+
+/// Writes the recording of `forced` with `gnss` at `dir`, starting at [`START`].
+pub fn write(dir: &Path, forced: &Forced, gnss: &[Record]) -> Result<()> {
+    crate::interchange::vehicle_recording::write(dir, forced, gnss, START)
+        .map_err(|e| crate::bench::error::BenchError::Failed(e.to_string()))
+}
 
 /// The recording's time of a time `s` seconds into the data.
 pub fn at(s: f64) -> Timestamp {
     START.saturating_add(Duration::from_secs_f64((BOOT_S + s).max(0.0)))
-}
-
-/// A real vehicle's motion, as the simulated drive train and IMU are to replay it.
-pub struct Forced {
-    /// The simulated vehicle: the real one's wheels, track, antenna and IMU rate.
-    pub plant: PlantConfig,
-    /// `[localization]` keys set beside chassisd's defaults (the receiver's latency).
-    pub localization: toml::Table,
-    /// The motion through the data, sorted by time: (s into the data, motion).
-    pub motion: Vec<(f64, ForcedMotion)>,
-}
-
-impl Forced {
-    /// The motion in force at `s` (the last sample at or before it).
-    fn motion_at(&self, s: f64) -> ForcedMotion {
-        let i = self.motion.partition_point(|(t, _)| *t <= s);
-        self.motion
-            .get(i.saturating_sub(1))
-            .map(|(_, m)| *m)
-            .unwrap_or_default()
-    }
-
-    /// The data's length, s.
-    fn span_s(&self) -> f64 {
-        self.motion.last().map_or(0.0, |(t, _)| *t)
-    }
-}
-
-/// Writes the records a lockstep run makes into a recording folder.
-struct Writer {
-    writer: RecordingWriter,
-    failed: Option<String>,
-}
-
-impl Sink for Writer {
-    fn record(&mut self, record: &Record) {
-        if self.failed.is_none()
-            && let Err(e) = self.writer.write(record)
-        {
-            self.failed = Some(e.to_string());
-        }
-    }
-
-    fn output(&mut self, _: EngineOutput) {}
-}
-
-/// Writes the recording of `forced` with `gnss` (time-ordered serial records of the
-/// receiver) at `dir`.
-pub fn write(dir: &Path, forced: &Forced, gnss: &[Record]) -> Result<()> {
-    let plant = forced.plant.clone();
-    let mut sim = Lockstep::new(plant.clone(), 1, START)?;
-    // The simulator's drive train, IMU and receiver ports with chassisd's own localisation
-    // defaults but for what the vehicle's integrator would set; the first fix is the datum.
-    let mut config: toml::Table = toml::from_str(&sim.config().to_effective_toml())
-        .map_err(invalid("the simulated vehicle's configuration"))?;
-    config.insert(
-        "localization".into(),
-        toml::Value::Table(forced.localization.clone()),
-    );
-    let config_text = toml::to_string(&config).map_err(invalid("the configuration"))?;
-    let writer = RecordingWriter::create(
-        dir,
-        &plant.name,
-        START,
-        Some(&config_text),
-        lockstep::sources(&plant),
-    )
-    .map_err(invalid(format!("recording {}", dir.display())))?;
-    let mut sink = Writer {
-        writer,
-        failed: None,
-    };
-    let mut fixes = gnss.iter().peekable();
-    let step = PLANT_STEP.as_secs_f64();
-    let steps = ((BOOT_S + forced.span_s()) / step).round() as u64;
-    let no_fix = GnssCondition {
-        quality: None,
-        offset: (0.0, 0.0),
-    };
-    for k in 0..steps {
-        let s = k as f64 * step - BOOT_S;
-        if s >= 0.0 {
-            sim.vehicle_mut().force_motion(Some(forced.motion_at(s)));
-        }
-        while let Some(fix) = fixes.next_if(|f| f.t <= sim.time()) {
-            sink.record(fix);
-        }
-        sim.step(no_fix, &mut sink);
-    }
-    if let Some(e) = sink.failed {
-        return Err(crate::bench::error::BenchError::Failed(format!(
-            "recording {}: {e}",
-            dir.display()
-        )));
-    }
-    // The recording ends where the lockstep stopped: a replay runs the control loop to its
-    // end, and ticks past the last recorded one would transmit frames never recorded.
-    sink.writer
-        .finish(sim.time())
-        .map_err(invalid(format!("recording {}", dir.display())))
 }
 
 /// One control tick of a replay.
@@ -261,70 +159,4 @@ pub fn distance(a: (f64, f64), b: (f64, f64)) -> f64 {
 pub fn compose(c: (f64, f64, f64), o: (f64, f64, f64)) -> (f64, f64) {
     let (s, co) = c.2.sin_cos();
     (c.0 + co * o.0 - s * o.1, c.1 + s * o.0 + co * o.1)
-}
-
-/// One receiver epoch, as NMEA.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Epoch {
-    /// Its UTC time, µs since 1970.
-    pub utc_us: i64,
-    /// Fix quality.
-    pub quality: FixQuality,
-    /// Latitude, longitude (degrees), height above the ellipsoid (m).
-    pub position: (f64, f64, f64),
-    /// HDOP.
-    pub hdop: f64,
-    /// Speed (m/s) and course over ground (degrees true), when the receiver sends RMC.
-    pub velocity: Option<(f64, f64)>,
-}
-
-impl Epoch {
-    /// GGA, then RMC when the epoch has a velocity: one serial chunk.
-    pub fn sentences(&self) -> Bytes {
-        let utc = chrono::DateTime::from_timestamp_micros(self.utc_us).unwrap_or_default();
-        let time = utc.format("%H%M%S%.3f").to_string();
-        // hhmmss.ss, as most receivers send.
-        let time = &time[..time.len() - 1];
-        let (lat, lon, h) = self.position;
-        let mut out = String::with_capacity(200);
-        sentence(
-            &mut out,
-            &format!(
-                "GPGGA,{time},{},{},{},12,{:.2},{h:.3},M,0.000,M,,",
-                angle(lat, true),
-                angle(lon, false),
-                quality_digit(self.quality),
-                self.hdop
-            ),
-        );
-        if let Some((speed, course)) = self.velocity {
-            let mode = match self.quality {
-                FixQuality::RtkFixed => 'R',
-                FixQuality::RtkFloat => 'F',
-                FixQuality::Dgps => 'D',
-                _ => 'A',
-            };
-            sentence(
-                &mut out,
-                &format!(
-                    "GPRMC,{time},A,{},{},{:.3},{:.2},{},,,{mode}",
-                    angle(lat, true),
-                    angle(lon, false),
-                    speed / (1852.0 / 3600.0),
-                    course.rem_euclid(360.0),
-                    utc.format("%d%m%y")
-                ),
-            );
-        }
-        Bytes::from(out)
-    }
-
-    /// The epoch as the receiver's serial record at `t`.
-    pub fn record(&self, t: Timestamp) -> Record {
-        Record {
-            t,
-            source: lockstep::GNSS_SOURCE.to_owned(),
-            payload: Payload::Serial(self.sentences()),
-        }
-    }
 }
