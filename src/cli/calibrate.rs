@@ -304,6 +304,7 @@ fn collect_live(vehicle: &VehicleConfig, live: LiveCalibration) -> anyhow::Resul
         },
         duration: Some(span),
         progress: std::io::stderr().is_terminal(),
+        mcap: false,
     };
     let summary = block_on(1, listen::run(options))??;
     eprintln!("{}", summary.line());

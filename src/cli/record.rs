@@ -33,6 +33,11 @@ pub struct Args {
     /// Stop after this many seconds.
     #[arg(long, value_parser = seconds_arg)]
     duration: Option<Duration>,
+    /// Also write each segment as an MCAP file (recording.mcap in the segment's folder: the
+    /// raw chunks, NMEA sentences, CAN frames and commands on a channel per source, as
+    /// `chassisd export` writes them), its chunks on disk at least every second.
+    #[arg(long)]
+    mcap: bool,
 }
 
 pub fn execute(a: Args) -> anyhow::Result<bool> {
@@ -46,6 +51,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         },
         duration: a.duration,
         progress: std::io::stderr().is_terminal(),
+        mcap: a.mcap,
     };
     let summary = block_on(1, listen::run(options))??;
     eprintln!("{}", summary.line());

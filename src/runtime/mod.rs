@@ -21,6 +21,7 @@ pub mod links;
 pub mod listeners;
 pub mod logging;
 pub mod lossy;
+pub mod mcap_sink;
 pub mod modes;
 pub mod notify;
 pub mod outage_log;

@@ -90,7 +90,15 @@ fn record_rotates_keeps_the_newest_and_each_segment_replays_and_nothing_is_sent(
     let mut proc = record(
         &config,
         &out,
-        &["--segment-s", "2", "--keep", "3", "--duration", "7"],
+        &[
+            "--segment-s",
+            "2",
+            "--keep",
+            "3",
+            "--duration",
+            "7",
+            "--mcap",
+        ],
     );
     proc.wait_log(Duration::from_secs(10), "recording the vehicle's commands");
     // Into the second segment: the first is removed by the end.
@@ -148,6 +156,86 @@ fn record_rotates_keeps_the_newest_and_each_segment_replays_and_nothing_is_sent(
         seen.push(topic);
     }
     assert_eq!(seen, [goal], "only the test's command on the broker");
+
+    // Each segment's MCAP file holds what its folder holds, as an independent reader reads
+    // it (raw chunks and the command byte for byte, indexes and statistics).
+    let empty = dir.join("no-statuses");
+    std::fs::write(&empty, "").unwrap();
+    for name in &names {
+        let segment = out.join(name);
+        let check = std::process::Command::new(common::venv_python())
+            .arg(common::repo().join("tests/mcap/check_export.py"))
+            .arg(segment.join("recording.mcap"))
+            .arg(&segment)
+            .arg(&empty)
+            .output()
+            .expect("check_export.py");
+        assert!(
+            check.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&check.stderr)
+        );
+    }
+}
+
+#[test]
+fn a_killed_record_mcap_leaves_a_file_read_whole_up_to_its_last_second() {
+    let _turn = SERIAL.lock().unwrap_or_else(|p| p.into_inner());
+    let dir = common::tempdir("record-mcap-kill");
+    let link = dir.join("gnss-port");
+    let _talker = Talker::start(Port::open_at(&link));
+    let broker = Mosquitto::start();
+    let config = config(&dir, &link, &broker);
+    let out = dir.join("rec");
+    let mut proc = record(&config, &out, &["--mcap"]);
+    proc.wait_log(Duration::from_secs(10), "link up");
+    std::thread::sleep(Duration::from_millis(3500));
+    let killed_at = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    proc.child.kill().expect("SIGKILL");
+    let _ = proc.child.wait();
+    let segment = out.join("0001");
+    let read = std::process::Command::new(common::venv_python())
+        .arg(common::repo().join("tests/mcap/stream_read.py"))
+        .arg(segment.join("recording.mcap"))
+        .output()
+        .expect("stream_read.py");
+    assert!(
+        read.status.success(),
+        "{}",
+        String::from_utf8_lossy(&read.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+    // No summary: the writer never finished; every message before the cut reads whole.
+    assert_ne!(report["ended"], "footer", "{report}");
+    let chunks = report["messages"]["/raw/gnss"].as_u64().unwrap_or(0);
+    assert!(chunks >= 20, "{report}");
+    assert!(
+        report["messages"]["/raw/gnss/nmea"].as_u64() >= Some(chunks),
+        "{report}"
+    );
+    // Flushed at least every second: what was read reaches to within 1.5 s of the kill.
+    let last = report["last_log_time"].as_u64().unwrap();
+    assert!(
+        killed_at.saturating_sub(last) < 1_500_000_000,
+        "the file ends {} ms before the kill",
+        killed_at.saturating_sub(last) / 1_000_000
+    );
+    // And what it holds is the receiver's bytes as the recording's files hold them.
+    let gnss = std::fs::read_to_string(segment.join("gnss.log")).unwrap();
+    let recorded: String = gnss
+        .lines()
+        .filter(|l| !l.contains('!'))
+        .filter_map(|l| l.rsplit(' ').next())
+        .collect::<String>()
+        .to_lowercase();
+    let in_mcap = report["serial_bytes"]["/raw/gnss"].as_str().unwrap();
+    assert!(
+        !in_mcap.is_empty() && recorded.starts_with(in_mcap),
+        "the MCAP's bytes are not the recording's"
+    );
 }
 
 #[test]

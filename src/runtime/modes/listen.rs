@@ -13,12 +13,13 @@ use tokio::sync::mpsc;
 
 use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::VehicleConfig;
-use crate::engine::Engine;
+use crate::engine::{Decoder, Engine};
 use crate::record::segments::{Progress, Rotation, SegmentedWriter};
 use crate::record::{Payload, SourceMeta};
 use crate::runtime::clock::RecordClock;
 use crate::runtime::drivers;
 use crate::runtime::links::mqtt_observe;
+use crate::runtime::mcap_sink::WithMcap;
 use crate::runtime::recorder::Recorder;
 use crate::vehicle::LinkState;
 
@@ -42,6 +43,8 @@ pub struct ListenOptions {
     pub duration: Option<Duration>,
     /// Draw a progress line (standard error is a terminal).
     pub progress: bool,
+    /// Write each segment's records as an MCAP file too (`recording.mcap` in its folder).
+    pub mcap: bool,
 }
 
 /// What a recording session wrote.
@@ -126,6 +129,11 @@ pub async fn run(options: ListenOptions) -> crate::runtime::error::Result<Listen
     for bus in &mut as_recorded.can {
         bus.listen_only = true;
     }
+    let nmea_sources: Vec<String> = sources
+        .iter()
+        .filter(|s| s.protocol.as_deref() == Some(Decoder::Nmea.protocol()))
+        .map(|s| s.name.clone())
+        .collect();
     let writer = SegmentedWriter::create(
         &options.out,
         &config.vehicle.name,
@@ -139,7 +147,16 @@ pub async fn run(options: ListenOptions) -> crate::runtime::error::Result<Listen
         options.out.display()
     )))?;
     let progress = writer.progress();
-    let mut recorder = Recorder::start(writer);
+    let mut recorder = if options.mcap {
+        let with_mcap =
+            WithMcap::new(writer, options.out.clone(), nmea_sources).map_err(invalid(format!(
+                "cannot start the MCAP file in {}",
+                options.out.display()
+            )))?;
+        Recorder::start(with_mcap)
+    } else {
+        Recorder::start(writer)
+    };
     tracing::info!(folder = %options.out.display(), max_bytes = options.rotation.max_bytes,
         max_span_s = options.rotation.max_span.as_secs_f64(), keep = ?options.rotation.keep,
         "recording, listen-only: nothing is sent to any device");
