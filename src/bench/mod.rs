@@ -5,6 +5,7 @@ pub mod attacks;
 pub mod control;
 pub mod envelope;
 pub mod error;
+pub mod export;
 pub mod fusion;
 pub mod gnss_fit;
 pub mod husky;

@@ -253,7 +253,7 @@ fn time_replay(
 }
 
 /// The peak memory a replay summary reports ("peak memory 7.8 MB"), bytes.
-fn peak_from_summary(stderr: &str) -> Option<u64> {
+pub fn peak_from_summary(stderr: &str) -> Option<u64> {
     let rest = stderr.rsplit_once("peak memory ")?.1;
     let mb: f64 = rest.split_whitespace().next()?.parse().ok()?;
     Some((mb * 1e6) as u64)

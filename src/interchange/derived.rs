@@ -74,10 +74,10 @@ impl DerivedChannels {
                 data,
             } => out.push((
                 t,
-                Message {
-                    topic: "/commands/results".into(),
-                    schema: schemas::COMMAND_RESULT,
-                    json: without_nulls(json!({
+                Message::new(
+                    "/commands/results",
+                    schemas::COMMAND_RESULT,
+                    &without_nulls(json!({
                         "timestamp": time_json(t),
                         "source": source,
                         "topic": topic,
@@ -86,21 +86,21 @@ impl DerivedChannels {
                         "error": result.as_ref().err(),
                         "data": data.as_ref().map(Value::to_string),
                     })),
-                },
+                ),
             )),
             EngineOutput::Publish(p) => out.push((
                 t,
-                Message {
-                    topic: "/mqtt/published".into(),
-                    schema: schemas::MQTT_PUBLISH,
-                    json: json!({
+                Message::new(
+                    "/mqtt/published",
+                    schemas::MQTT_PUBLISH,
+                    &json!({
                         "timestamp": time_json(t),
                         "topic": p.topic,
                         "qos": p.qos as u8,
                         "retain": p.retain,
                         "payload": String::from_utf8_lossy(&p.payload),
                     }),
-                },
+                ),
             )),
             // Regenerated transmissions are the recorded ones (the raw channels carry
             // those); the rest repeat what the events and the statuses say.
@@ -118,11 +118,11 @@ impl DerivedChannels {
         let base = BaseStatus::from_status(status);
         out.push((
             t,
-            Message {
-                topic: "/status/base_status".into(),
-                schema: schemas::BASE_STATUS,
-                json: serde_json::to_value(&base).unwrap_or(Value::Null),
-            },
+            Message::new(
+                "/status/base_status",
+                schemas::BASE_STATUS,
+                &serde_json::to_value(&base).unwrap_or(Value::Null),
+            ),
         ));
         if let Some(m) = fused_fix(status) {
             out.push((t, m));
@@ -131,20 +131,20 @@ impl DerivedChannels {
             if let Some(battery) = battery_state(status) {
                 out.push((
                     t,
-                    Message {
-                        topic: "/status/battery".into(),
-                        schema: schemas::BATTERY_STATE,
-                        json: without_nulls(battery),
-                    },
+                    Message::new(
+                        "/status/battery",
+                        schemas::BATTERY_STATE,
+                        &without_nulls(battery),
+                    ),
                 ));
             }
             out.push((
                 t,
-                Message {
-                    topic: "/status/diagnostics".into(),
-                    schema: schemas::DIAGNOSTIC_ARRAY,
-                    json: diagnostics(status),
-                },
+                Message::new(
+                    "/status/diagnostics",
+                    schemas::DIAGNOSTIC_ARRAY,
+                    &diagnostics(status),
+                ),
             ));
         }
         self.statuses += 1;
@@ -194,10 +194,10 @@ fn location_fix(
     covariance: [f64; 9],
     kind: u8,
 ) -> Message {
-    Message {
-        topic: topic.into(),
-        schema: schemas::LOCATION_FIX,
-        json: json!({
+    Message::new(
+        topic,
+        schemas::LOCATION_FIX,
+        &json!({
             "timestamp": time_json(t),
             "frame_id": frame,
             "latitude": lat,
@@ -206,7 +206,7 @@ fn location_fix(
             "position_covariance": covariance,
             "position_covariance_type": kind,
         }),
-    }
+    )
 }
 
 /// `/fused/fix`: the map pose on the globe with its covariance turned into east and north
@@ -245,11 +245,11 @@ fn poses(t: Timestamp, report: &PoseReport, out: &mut Vec<(Timestamp, Message)>)
     if let Some((p, _)) = &report.map {
         out.push((
             t,
-            Message {
-                topic: "/fused/pose".into(),
-                schema: schemas::POSE_IN_FRAME,
-                json: json!({"timestamp": time_json(t), "frame_id": MAP_FRAME, "pose": pose(p)}),
-            },
+            Message::new(
+                "/fused/pose",
+                schemas::POSE_IN_FRAME,
+                &json!({"timestamp": time_json(t), "frame_id": MAP_FRAME, "pose": pose(p)}),
+            ),
         ));
     }
     let transforms = match (&report.frames, &report.map) {
@@ -263,11 +263,11 @@ fn poses(t: Timestamp, report: &PoseReport, out: &mut Vec<(Timestamp, Message)>)
     };
     out.push((
         t,
-        Message {
-            topic: "/tf".into(),
-            schema: schemas::FRAME_TRANSFORMS,
-            json: json!({ "transforms": transforms }),
-        },
+        Message::new(
+            "/tf",
+            schemas::FRAME_TRANSFORMS,
+            &json!({ "transforms": transforms }),
+        ),
     ));
 }
 
@@ -301,11 +301,11 @@ fn plan_message(t: Timestamp, points: &[(f64, f64)]) -> Message {
             })
         })
         .collect();
-    Message {
-        topic: "/plan".into(),
-        schema: schemas::POSES_IN_FRAME,
-        json: json!({"timestamp": time_json(t), "frame_id": MAP_FRAME, "poses": poses}),
-    }
+    Message::new(
+        "/plan",
+        schemas::POSES_IN_FRAME,
+        &json!({"timestamp": time_json(t), "frame_id": MAP_FRAME, "poses": poses}),
+    )
 }
 
 /// `/events`: an event as a log line; stops, faults and a closing gate are warnings.
@@ -325,10 +325,10 @@ fn log(t: Timestamp, event: &Event) -> Message {
         Event::Cutter { .. } => ("cutter", LOG_INFO),
         Event::Receiver(_) => ("receiver", LOG_INFO),
     };
-    Message {
-        topic: "/events".into(),
-        schema: schemas::LOG,
-        json: json!({
+    Message::new(
+        "/events",
+        schemas::LOG,
+        &json!({
             "timestamp": time_json(t),
             "level": level,
             "message": event.to_string(),
@@ -336,7 +336,7 @@ fn log(t: Timestamp, event: &Event) -> Message {
             "file": "",
             "line": 0,
         }),
-    }
+    )
 }
 
 /// `value` with its top-level `null`s left out: Foxglove's schemas have no null, and
@@ -352,9 +352,5 @@ fn without_nulls(value: Value) -> Value {
 
 /// `/zones`: the zones (GeoJSON, WGS84), at the start and after each edit.
 pub fn zones(geojson: &str) -> Message {
-    Message {
-        topic: "/zones".into(),
-        schema: schemas::GEOJSON,
-        json: json!({"geojson": geojson}),
-    }
+    Message::new("/zones", schemas::GEOJSON, &json!({"geojson": geojson}))
 }

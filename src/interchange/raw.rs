@@ -8,6 +8,9 @@
 use std::collections::HashMap;
 
 use base64::Engine as _;
+use std::fmt::Write as _;
+
+use serde::Serialize;
 use serde_json::{Value, json};
 use socketcan::{CanAnyFrame, EmbeddedFrame, Frame as _};
 
@@ -23,8 +26,59 @@ pub struct Message {
     pub topic: String,
     /// Its schema.
     pub schema: Schema,
-    /// The JSON.
-    pub json: Value,
+    /// The JSON, serialised.
+    pub body: Vec<u8>,
+}
+
+impl Message {
+    /// A message of `body` serialised (a `serde_json::Value`, or a struct of the schema's
+    /// fields where a channel is busy enough for the difference to count).
+    pub fn new(topic: impl Into<String>, schema: Schema, body: &impl Serialize) -> Self {
+        Self {
+            topic: topic.into(),
+            schema,
+            // Serialising plain data into a vector cannot fail.
+            body: serde_json::to_vec(body).unwrap_or_default(),
+        }
+    }
+
+    /// The JSON, parsed back (for tests and checks).
+    pub fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or(Value::Null)
+    }
+}
+
+/// A time as Foxglove's schemas write one.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Time {
+    sec: u64,
+    nsec: u64,
+}
+
+impl From<Timestamp> for Time {
+    fn from(t: Timestamp) -> Self {
+        let nanos = t.as_nanos();
+        Self {
+            sec: nanos / 1_000_000_000,
+            nsec: nanos % 1_000_000_000,
+        }
+    }
+}
+
+/// chassisd.CanFrame, written field by field: a bus's frames are most of a recording.
+#[derive(Serialize)]
+struct CanFrameJson<'a> {
+    timestamp: Time,
+    interface: &'a str,
+    id: u32,
+    extended: bool,
+    remote: bool,
+    error: bool,
+    fd: bool,
+    dlc: usize,
+    data: &'a [u8],
+    direction: &'static str,
+    candump: String,
 }
 
 /// The longest NMEA sentence kept while it is assembled, bytes: NMEA allows 82, the
@@ -34,8 +88,7 @@ const MAX_SENTENCE: usize = 512;
 
 /// `{"sec", "nsec"}` of `t`, as Foxglove's JSON schemas write a time.
 pub fn time_json(t: Timestamp) -> Value {
-    let nanos = t.as_nanos();
-    json!({"sec": nanos.div_euclid(1_000_000_000), "nsec": nanos.rem_euclid(1_000_000_000)})
+    json!(Time::from(t))
 }
 
 /// Turns records into messages; keeps each NMEA source's unfinished sentence.
@@ -63,33 +116,33 @@ impl RawChannels {
         let timestamp = time_json(record.t);
         match &record.payload {
             Payload::Serial(bytes) => {
-                out.push(Message {
-                    topic: format!("/raw/{source}"),
-                    schema: schemas::SERIAL_CHUNK,
-                    json: json!({
+                out.push(Message::new(
+                    format!("/raw/{source}"),
+                    schemas::SERIAL_CHUNK,
+                    &json!({
                         "timestamp": timestamp,
                         "source": source,
                         "data": base64::engine::general_purpose::STANDARD.encode(bytes),
                     }),
-                });
+                ));
                 if let Some(line) = self.nmea.get_mut(source) {
                     sentences(line, bytes, |sentence| {
-                        out.push(Message {
-                            topic: format!("/raw/{source}/nmea"),
-                            schema: schemas::NMEA_SENTENCE,
-                            json: json!({
+                        out.push(Message::new(
+                            format!("/raw/{source}/nmea"),
+                            schemas::NMEA_SENTENCE,
+                            &json!({
                                 "timestamp": timestamp,
                                 "source": source,
                                 "sentence": sentence,
                             }),
-                        });
+                        ));
                     });
                 }
             }
-            Payload::Link(state) => out.push(Message {
-                topic: format!("/raw/{source}/link"),
-                schema: schemas::LINK_EVENT,
-                json: json!({
+            Payload::Link(state) => out.push(Message::new(
+                format!("/raw/{source}/link"),
+                schemas::LINK_EVENT,
+                &json!({
                     "timestamp": timestamp,
                     "source": source,
                     "state": match state {
@@ -97,21 +150,19 @@ impl RawChannels {
                         LinkState::Down => "down",
                     },
                 }),
-            }),
-            Payload::Can(frame) | Payload::CanTx(frame) => out.push(Message {
-                topic: format!("/raw/{source}"),
-                schema: schemas::CAN_FRAME,
-                json: can_frame(
-                    timestamp,
+            )),
+            Payload::Can(frame) | Payload::CanTx(frame) => out.push(Message::new(
+                format!("/raw/{source}"),
+                schemas::CAN_FRAME,
+                &can_frame(
+                    record.t,
                     source,
                     frame,
                     matches!(record.payload, Payload::CanTx(_)),
                 ),
-            }),
-            Payload::Command { topic, payload } => out.push(Message {
-                topic: format!("/raw/{source}"),
-                schema: schemas::COMMAND,
-                json: {
+            )),
+            Payload::Command { topic, payload } => {
+                out.push(Message::new(format!("/raw/{source}"), schemas::COMMAND, &{
                     let mut m = json!({
                         "timestamp": timestamp,
                         "source": source,
@@ -123,37 +174,45 @@ impl RawChannels {
                         m["text"] = json!(text);
                     }
                     m
-                },
-            }),
+                }))
+            }
         }
     }
 }
 
 /// A CAN frame as a CAN user reads it: the identifier as a number, its flags, the data bytes,
 /// and the frame in candump's `ID#DATA` form.
-fn can_frame(timestamp: Value, interface: &str, frame: &CanAnyFrame, sent: bool) -> Value {
+fn can_frame<'a>(
+    t: Timestamp,
+    interface: &'a str,
+    frame: &'a CanAnyFrame,
+    sent: bool,
+) -> CanFrameJson<'a> {
     let extended = frame.is_extended();
     let id = frame.raw_id();
     let data = frame.data();
-    let hex: String = data.iter().map(|b| format!("{b:02X}")).collect();
+    let mut hex = String::with_capacity(2 * data.len());
+    for b in data {
+        let _ = write!(hex, "{b:02X}");
+    }
     let candump = match frame {
         CanAnyFrame::Remote(_) => format!("{}#R", id_text(id, extended)),
         CanAnyFrame::Fd(_) => format!("{}##0{hex}", id_text(id, extended)),
         _ => format!("{}#{hex}", id_text(id, extended)),
     };
-    json!({
-        "timestamp": timestamp,
-        "interface": interface,
-        "id": id,
-        "extended": extended,
-        "remote": matches!(frame, CanAnyFrame::Remote(_)),
-        "error": matches!(frame, CanAnyFrame::Error(_)),
-        "fd": matches!(frame, CanAnyFrame::Fd(_)),
-        "dlc": frame.dlc(),
-        "data": data,
-        "direction": if sent { "tx" } else { "rx" },
-        "candump": candump,
-    })
+    CanFrameJson {
+        timestamp: t.into(),
+        interface,
+        id,
+        extended,
+        remote: matches!(frame, CanAnyFrame::Remote(_)),
+        error: matches!(frame, CanAnyFrame::Error(_)),
+        fd: matches!(frame, CanAnyFrame::Fd(_)),
+        dlc: frame.dlc(),
+        data,
+        direction: if sent { "tx" } else { "rx" },
+        candump,
+    }
 }
 
 /// The identifier as candump writes it: three hex digits, or eight for an extended one.
@@ -210,19 +269,19 @@ mod tests {
         raw.messages(&serial(b"\xb5\x62\x01\x07$GPGGA,1"), &mut out);
         raw.messages(&serial(b"23519.00,4807*1F\r\n\xb5$GPG"), &mut out);
         raw.messages(&serial(b"ST,1*2\r\n"), &mut out);
-        let sentences: Vec<&str> = out
+        let sentences: Vec<String> = out
             .iter()
             .filter(|m| m.topic == "/raw/gnss/nmea")
-            .map(|m| m.json["sentence"].as_str().unwrap())
+            .map(|m| m.json()["sentence"].as_str().unwrap().to_owned())
             .collect();
         assert_eq!(sentences, ["$GPGGA,123519.00,4807*1F", "$GPGST,1*2"]);
         let chunks = out.iter().filter(|m| m.topic == "/raw/gnss").count();
         assert_eq!(chunks, 3);
         assert_eq!(
-            out[0].json["timestamp"],
+            out[0].json()["timestamp"],
             json!({"sec": 1_700_000_000, "nsec": 123_456_000})
         );
-        assert_eq!(out[0].json["data"], "tWIBByRHUEdHQSwx");
+        assert_eq!(out[0].json()["data"], "tWIBByRHUEdHQSwx");
     }
 
     #[test]
@@ -239,7 +298,7 @@ mod tests {
         };
         let mut out = Vec::new();
         RawChannels::default().messages(&record, &mut out);
-        let m = &out[0].json;
+        let m = &out[0].json();
         assert_eq!(out[0].topic, "/raw/can0");
         assert_eq!(m["id"], 0x181);
         assert_eq!(m["data"], json!([0x37, 2, 0, 0]));

@@ -40,7 +40,6 @@ pub fn export(
         clock: Timestamp::from_nanos(0),
         messages: Vec::new(),
         timed: Vec::new(),
-        json: Vec::with_capacity(4096),
     };
     let summary = replay_into(recording, options, Engine::emit_poses, &mut exporter)?;
     let (messages, message_bytes) = exporter.file.written();
@@ -72,15 +71,12 @@ struct Exporter {
     /// Scratch: one record's messages, and the outputs' timed ones.
     messages: Vec<Message>,
     timed: Vec<(Timestamp, Message)>,
-    json: Vec<u8>,
 }
 
 impl Exporter {
     fn write(&mut self, t: Timestamp, message: &Message) -> std::io::Result<()> {
-        self.json.clear();
-        serde_json::to_writer(&mut self.json, &message.json)?;
         self.file
-            .write(&message.topic, &message.schema, t, &self.json)
+            .write(&message.topic, &message.schema, t, &message.body)
             .map_err(std::io::Error::other)
     }
 }

@@ -37,7 +37,6 @@ pub struct WithMcap {
     links: std::collections::BTreeMap<String, LinkState>,
     flushed: Instant,
     scratch: Vec<Message>,
-    json: Vec<u8>,
 }
 
 impl WithMcap {
@@ -61,7 +60,6 @@ impl WithMcap {
             links: Default::default(),
             flushed: Instant::now(),
             scratch: Vec::new(),
-            json: Vec::with_capacity(4096),
         };
         sink.open()?;
         Ok(sink)
@@ -82,10 +80,7 @@ impl WithMcap {
         };
         self.raw.messages(record, &mut self.scratch);
         for m in self.scratch.drain(..) {
-            self.json.clear();
-            serde_json::to_writer(&mut self.json, &m.json)
-                .map_err(|e| io_error(InterchangeError::Refused(e.to_string())))?;
-            file.write(&m.topic, &m.schema, record.t, &self.json)
+            file.write(&m.topic, &m.schema, record.t, &m.body)
                 .map_err(io_error)?;
         }
         Ok(())

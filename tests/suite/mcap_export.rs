@@ -149,3 +149,27 @@ fn the_zones_in_force_are_on_the_map_as_geojson() {
     assert_eq!(report["zones_compared"], true, "{report}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_export_benchmark_runs_and_reports_on_a_short_synthetic_recording() {
+    // The benchmark's own run is an hour of the simulated vehicle; a minute here. Its speed
+    // target is the benchmark's to judge (a loaded test machine is no measure of speed):
+    // here it runs, reports each figure, and the memory target holds.
+    let out = Command::new(common::chassisd())
+        .args(["bench", "export", "--seconds", "60", "--fixtures"])
+        .arg(common::repo().join("fixtures"))
+        .output()
+        .expect("chassisd bench export");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let summary: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().unwrap_or_default()).expect("JSON last");
+    let recordings = summary["recordings"].as_array().unwrap();
+    assert_eq!(recordings.len(), 2, "{summary}");
+    let synthetic = &recordings[1];
+    assert_eq!(synthetic["span_s"], 60.0, "{summary}");
+    assert!(synthetic["messages"].as_u64() > Some(50_000), "{summary}");
+    for r in recordings {
+        assert!(r["times_real_time"].as_f64() > Some(0.0), "{summary}");
+        assert!(r["peak_bytes"].as_u64() < Some(64_000_000), "{summary}");
+    }
+}

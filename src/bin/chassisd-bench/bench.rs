@@ -116,6 +116,17 @@ enum BenchCommand {
         #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=10_000))]
         plans: u32,
     },
+    /// Time `chassisd export --mcap` on the longest fixture and on a synthetic recording of
+    /// the simulated vehicle (× real time, MB/s, peak memory); the last line is JSON with
+    /// "pass". Exits with status 1 when a target is missed.
+    Export {
+        /// The folder of recordings whose longest is exported.
+        #[arg(long, default_value = "fixtures")]
+        fixtures: PathBuf,
+        /// The synthetic recording's length, seconds.
+        #[arg(long, default_value_t = 3600, value_parser = clap::value_parser!(u64).range(10..=86_400))]
+        seconds: u64,
+    },
     /// Time plain-log replay against gpsd's gpsdecode on real receiver logs repeated to a
     /// size (all concatenated, then each receiver alone), with peak memory; the last line
     /// is JSON with "pass". Exits with status 1 when a target is missed.
@@ -283,6 +294,17 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             broker,
             without_ros1,
         } => bench_soak(plant, minutes, broker, !without_ros1),
+        BenchCommand::Export { fixtures, seconds } => {
+            let exe = daemon_binary()?;
+            let report = chassisd::bench::export::run(
+                &exe,
+                &fixtures,
+                std::time::Duration::from_secs(seconds),
+            )?;
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
         BenchCommand::Replay {
             data,
             megabytes,
