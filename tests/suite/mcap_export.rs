@@ -119,16 +119,27 @@ fn every_fixture_and_a_receiver_log_export_to_a_file_an_independent_reader_check
 }
 
 #[test]
-fn the_zones_in_force_are_on_the_map_as_geojson() {
+fn the_zones_in_force_are_on_the_map_and_the_documented_layout_finds_its_topics() {
     let dir = common::tempdir("mcap-zones");
-    let fixture = common::repo().join("fixtures/sim-drive");
-    // A boundary round the recording's datum, and a keep-out circle in it.
+    // The simulated mower with all its parts (receiver, IMU, drives, battery), 20 s.
+    let fixture = dir.join("mower");
+    let sim = Command::new(common::chassisd())
+        .args(["sim", "--fast", "--duration", "20", "--record"])
+        .arg(&fixture)
+        .output()
+        .expect("chassisd sim");
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    // A boundary round the mower's datum (47.397742, 8.545594), and a keep-out circle in it.
     let zones = r#"{"type": "FeatureCollection", "features": [
         {"type": "Feature", "properties": {"kind": "boundary", "name": "yard"},
-         "geometry": {"type": "Polygon", "coordinates": [[[121.4727, 31.2299], [121.4747, 31.2299],
-            [121.4747, 31.2309], [121.4727, 31.2309], [121.4727, 31.2299]]]}},
+         "geometry": {"type": "Polygon", "coordinates": [[[8.5446, 47.3972], [8.5466, 47.3972],
+            [8.5466, 47.3982], [8.5446, 47.3982], [8.5446, 47.3972]]]}},
         {"type": "Feature", "properties": {"kind": "keep_out", "name": "tree", "radius_m": 1.5},
-         "geometry": {"type": "Point", "coordinates": [121.4740, 31.2306]}}]}"#;
+         "geometry": {"type": "Point", "coordinates": [8.5460, 47.3979]}}]}"#;
     std::fs::write(dir.join("zones.geojson"), zones).unwrap();
     let mut config = std::fs::read_to_string(fixture.join("vehicle.toml")).unwrap();
     config.push_str(
@@ -147,6 +158,20 @@ fn the_zones_in_force_are_on_the_map_as_geojson() {
     );
     assert_eq!(report["channels"]["/zones"], 1, "{report}");
     assert_eq!(report["zones_compared"], true, "{report}");
+    // The layout docs/ offers opens topics this file has: every topic a panel names.
+    let layout: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(common::repo().join("docs/foxglove-layout.json")).unwrap(),
+    )
+    .unwrap();
+    let mut named = Vec::new();
+    layout_topics(&layout["configById"], &mut named);
+    assert!(named.len() >= 8, "{named:?}");
+    for topic in &named {
+        assert!(
+            report["channels"].get(topic).is_some(),
+            "the layout names {topic}: {report}"
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -171,5 +196,31 @@ fn the_export_benchmark_runs_and_reports_on_a_short_synthetic_recording() {
     for r in recordings {
         assert!(r["times_real_time"].as_f64() > Some(0.0), "{summary}");
         assert!(r["peak_bytes"].as_u64() < Some(64_000_000), "{summary}");
+    }
+}
+
+/// The topics a Foxglove layout's panels name (keys and values starting with `/`, a message
+/// path cut at its first `.`).
+fn layout_topics(value: &serde_json::Value, out: &mut Vec<String>) {
+    match value {
+        serde_json::Value::String(text) => take_topic(text, out),
+        serde_json::Value::Array(items) => items.iter().for_each(|v| layout_topics(v, out)),
+        serde_json::Value::Object(map) => {
+            for (key, v) in map {
+                take_topic(key, out);
+                layout_topics(v, out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// The topic of `text` when it is a topic or a message path.
+fn take_topic(text: &str, out: &mut Vec<String>) {
+    if let Some(path) = text.strip_prefix('/') {
+        let topic = format!("/{}", path.split('.').next().unwrap_or_default());
+        if !out.contains(&topic) {
+            out.push(topic);
+        }
     }
 }
