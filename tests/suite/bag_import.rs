@@ -200,3 +200,74 @@ fn a_bag_without_the_needed_topics_is_refused_by_name() {
     assert!(stderr.contains("neither a ROS1 bag"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `chassisd import BAG`: its exit code and stderr (it must not succeed).
+fn refused(bag: &Path, dir: &Path) -> (Option<i32>, String) {
+    let out = Command::new(common::chassisd())
+        .arg("import")
+        .arg(bag)
+        .arg("--out")
+        .arg(dir.join("never"))
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_bag_claiming_huge_chunks_is_refused_before_anything_is_allocated() {
+    let dir = common::tempdir("import-hostile");
+    // A ROS1 bag whose first chunk claims 4 GB once decompressed.
+    let bag = dir.join("husky.bag");
+    write_bag(
+        "husky",
+        &common::shared_data("ekf/husky-test1"),
+        "ros1",
+        &bag,
+    );
+    let mut bytes = std::fs::read(&bag).unwrap();
+    let chunk = bytes
+        .windows(4)
+        .position(|w| w == b"op=\x05")
+        .expect("a chunk");
+    let size = chunk
+        + bytes[chunk..]
+            .windows(5)
+            .position(|w| w == b"size=")
+            .unwrap()
+        + 5;
+    bytes[size..size + 4].copy_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    std::fs::write(&bag, &bytes).unwrap();
+    let (code, stderr) = refused(&bag, &dir);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("claims 4294967280 bytes"), "{stderr}");
+    // A ROS 2 bag (MCAP) whose first chunk claims to be a terabyte long.
+    let car = dir.join("car");
+    write_bag(
+        "comma",
+        &common::shared_data("ekf/comma2k19-rav4"),
+        "ros2",
+        &car,
+    );
+    let file = std::fs::read_dir(&car)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .unwrap();
+    let mut bytes = std::fs::read(&file).unwrap();
+    // Magic (8), then records of an opcode and a length (9): the first chunk (opcode 6).
+    let mut at = 8;
+    while bytes[at] != 0x06 {
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        at += 9 + len;
+    }
+    bytes[at + 1..at + 9].copy_from_slice(&(1u64 << 40).to_le_bytes());
+    std::fs::write(&file, &bytes).unwrap();
+    let (code, stderr) = refused(&car, &dir);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("exceeds limit"), "{stderr}");
+    assert!(!dir.join("never").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -41,6 +41,13 @@ const ROS1_MAGIC: &[u8] = b"#ROSBAG V2.0\n";
 /// The largest read handed to the MCAP reader at once, bytes (its request is a hint taken
 /// from the file, so a claim, not a size).
 const MCAP_READ: usize = 1 << 20;
+/// The largest record or chunk (decompressed) a bag may claim, bytes: rosbag writes chunks of
+/// 768 KiB and rosbag2's MCAP writer of 4 MiB by default; a claim beyond this is refused
+/// before anything is allocated for it.
+const MAX_RECORD: usize = 256 << 20;
+/// The largest compressed chunk of a ROS1 bag, bytes: its decompression is bounded by the
+/// ratio lz4 and bz2 reach on it.
+const MAX_COMPRESSED_CHUNK: u64 = 16 << 20;
 
 /// The bag file at `path` (a ROS 2 bag's folder: the `.mcap` file in it) and its kind.
 pub fn open(path: &Path) -> Result<(PathBuf, BagKind), InterchangeError> {
@@ -110,6 +117,7 @@ fn read_ros1(
     let refused = |e: rosbag::Error| {
         InterchangeError::Refused(format!("{}: not a readable ROS1 bag: {e}", file.display()))
     };
+    check_ros1_chunks(file)?;
     let bag = rosbag::RosBag::new(file).map_err(|e| InterchangeError::io(file, e))?;
     let mut topics: std::collections::HashMap<u32, Topic> = std::collections::HashMap::new();
     for record in bag.index_records() {
@@ -151,9 +159,11 @@ fn read_mcap(
     each: &mut dyn FnMut(&Topic, u64, &[u8]),
 ) -> Result<(), InterchangeError> {
     use mcap::records::Record;
-    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
+    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
     let mut f = std::fs::File::open(file).map_err(|e| InterchangeError::io(file, e))?;
-    let mut reader = LinearReader::new();
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(MAX_RECORD),
+    );
     let mut schemas: std::collections::HashMap<u16, String> = std::collections::HashMap::new();
     let mut topics: std::collections::HashMap<u16, Topic> = std::collections::HashMap::new();
     while let Some(event) = reader.next_event() {
@@ -195,4 +205,92 @@ fn read_mcap(
         }
     }
     Ok(())
+}
+
+/// Walks a ROS1 bag's records (each a header of `name=value` fields and data, both
+/// length-prefixed) and refuses a chunk whose claimed size, or whose compressed data, is
+/// beyond what is read: the rosbag crate allocates what a chunk claims before it looks.
+fn check_ros1_chunks(file: &Path) -> Result<(), InterchangeError> {
+    use std::io::{BufReader, Seek, SeekFrom};
+    let refused = |why: String| {
+        InterchangeError::Refused(format!(
+            "{}: not a readable ROS1 bag: {why}",
+            file.display()
+        ))
+    };
+    let f = std::fs::File::open(file).map_err(|e| InterchangeError::io(file, e))?;
+    let total = f
+        .metadata()
+        .map_err(|e| InterchangeError::io(file, e))?
+        .len();
+    let mut r = BufReader::new(f);
+    r.seek(SeekFrom::Start(ROS1_MAGIC.len() as u64))
+        .map_err(|e| InterchangeError::io(file, e))?;
+    let mut at = ROS1_MAGIC.len() as u64;
+    let u32_at = |r: &mut BufReader<std::fs::File>| -> Result<u32, InterchangeError> {
+        let mut b = [0u8; 4];
+        r.read_exact(&mut b)
+            .map_err(|e| InterchangeError::io(file, e))?;
+        Ok(u32::from_le_bytes(b))
+    };
+    while at < total {
+        let header_len = u64::from(u32_at(&mut r)?);
+        if header_len > 1 << 20 || at + 4 + header_len + 4 > total {
+            return Err(refused(format!(
+                "a record header of {header_len} bytes at byte {at}"
+            )));
+        }
+        let mut header = vec![0u8; header_len as usize];
+        r.read_exact(&mut header)
+            .map_err(|e| InterchangeError::io(file, e))?;
+        let data_len = u64::from(u32_at(&mut r)?);
+        let end = at + 4 + header_len + 4 + data_len;
+        if end > total {
+            return Err(refused(format!(
+                "a record at byte {at} runs past the file's end"
+            )));
+        }
+        let (op, size, compression) = header_fields(&header);
+        if op == Some(0x05) {
+            let size =
+                size.ok_or_else(|| refused(format!("a chunk at byte {at} states no size")))?;
+            let compressed = compression.is_some_and(|c| c != b"none");
+            if size as usize > MAX_RECORD
+                || (compressed && data_len > MAX_COMPRESSED_CHUNK)
+                || (!compressed && u64::from(size) != data_len)
+            {
+                return Err(refused(format!(
+                    "a chunk at byte {at} claims {size} bytes from {data_len} (at most {MAX_RECORD} \
+                     are read, from at most {MAX_COMPRESSED_CHUNK} compressed)"
+                )));
+            }
+        }
+        r.seek(SeekFrom::Start(end))
+            .map_err(|e| InterchangeError::io(file, e))?;
+        at = end;
+    }
+    Ok(())
+}
+
+/// A ROS1 record header's `op`, `size` and `compression` fields.
+fn header_fields(mut header: &[u8]) -> (Option<u8>, Option<u32>, Option<&[u8]>) {
+    let (mut op, mut size, mut compression) = (None, None, None);
+    while let Some((len, rest)) = header.split_first_chunk::<4>() {
+        let len = u32::from_le_bytes(*len) as usize;
+        let Some((field, rest)) = rest.split_at_checked(len) else {
+            break;
+        };
+        header = rest;
+        let Some(eq) = field.iter().position(|b| *b == b'=') else {
+            continue;
+        };
+        let (name, value) = (&field[..eq], &field[eq + 1..]);
+        match name {
+            b"op" => op = value.first().copied(),
+            b"size" => size = value.first_chunk::<4>().map(|v| u32::from_le_bytes(*v)),
+            b"compression" => compression = Some(value),
+            _ => {}
+        }
+    }
+    (op, size, compression)
 }
