@@ -1,7 +1,9 @@
 """Writes a vehicle of the shared data (../shared/data/ekf) as a ROS bag with PyPI rosbags,
 as a robot's drivers would have logged it, for `chassisd import`.
 
-usage: write_bag.py husky|comma DATA_DIR ros1|ros2 OUT START_NS
+usage: write_bag.py husky|comma DATA_DIR ros1|ros2 OUT START_NS [TOPIC,...]
+
+With TOPICs, only those topics are written (a bag that lacks the others).
 
 husky: /gps/fix (sensor_msgs/NavSatFix, the receiver's status and covariance), /imu/data
 (sensor_msgs/Imu, as mounted), /husky_velocity_controller/odom (nav_msgs/Odometry).
@@ -141,6 +143,9 @@ def comma(data):
 def main():
     vehicle, data, fmt, out, start = sys.argv[1], Path(sys.argv[2]), sys.argv[3], Path(sys.argv[4]), int(sys.argv[5])
     messages = husky(data) if vehicle == "husky" else comma(data)
+    if len(sys.argv) > 6:
+        keep = sys.argv[6].split(",")
+        messages = [m for m in messages if m[0] in keep]
     messages.sort(key=lambda m: m[2])
     if ROS1:
         from rosbags.rosbag1 import Writer

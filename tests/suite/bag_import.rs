@@ -14,8 +14,14 @@ use crate::common;
 
 /// `write_bag.py VEHICLE DATA FORMAT OUT`, stamped on the converter's time line.
 fn write_bag(vehicle: &str, data: &Path, format: &str, out: &Path) {
+    write_bag_of(vehicle, data, format, out, &[]);
+}
+
+/// [`write_bag`] with only `topics` (all with none named).
+fn write_bag_of(vehicle: &str, data: &Path, format: &str, out: &Path, topics: &[&str]) {
     let start = START.as_nanos() + (BOOT_S * 1e9) as u64;
-    let status = Command::new(common::venv_python())
+    let mut script = Command::new(common::venv_python());
+    script
         .arg(common::repo().join("tests/mcap/write_bag.py"))
         .args([
             vehicle,
@@ -23,10 +29,11 @@ fn write_bag(vehicle: &str, data: &Path, format: &str, out: &Path) {
             format,
             out.to_str().unwrap(),
         ])
-        .arg(start.to_string())
-        .status()
-        .expect("write_bag.py");
-    assert!(status.success());
+        .arg(start.to_string());
+    if !topics.is_empty() {
+        script.arg(topics.join(","));
+    }
+    assert!(script.status().expect("write_bag.py").success());
 }
 
 /// `chassisd import BAG --out OUT ARGS`: its stderr.
@@ -185,6 +192,24 @@ fn a_bag_without_the_needed_topics_is_refused_by_name() {
         "{stderr}"
     );
     assert!(!dir.join("x").exists());
+    // A bag of the receiver alone: what is missing, and what it has.
+    let fixes = dir.join("fixes.bag");
+    write_bag_of(
+        "husky",
+        &common::shared_data("ekf/husky-test1"),
+        "ros1",
+        &fixes,
+        &["/gps/fix"],
+    );
+    let (code, stderr) = refused(&fixes, &dir);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(
+        stderr.contains(
+            "the bag lacks sensor_msgs/Imu (the gyro), nav_msgs/Odometry (the wheels); it has: \
+             /gps/fix (sensor_msgs/NavSatFix, 989 messages)"
+        ),
+        "{stderr}"
+    );
     // Not a bag at all.
     let junk: PathBuf = dir.join("junk.bag");
     std::fs::write(&junk, b"#ROSBAG V1.2\nnot this").unwrap();
