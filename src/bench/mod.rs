@@ -6,6 +6,7 @@ pub mod control;
 pub mod envelope;
 pub mod error;
 pub mod export;
+pub mod fleet;
 pub mod fusion;
 pub mod gnss_fit;
 pub mod husky;
@@ -48,6 +49,7 @@ impl Broker {
     /// Points `mqtt` at this broker on 127.0.0.1, starting mosquitto if it is the one; the
     /// embedded broker starts with the simulation.
     pub fn start(self, mqtt: &mut MqttConfig) -> crate::bench::error::Result<Option<Mosquitto>> {
+        let mqtt = mqtt.first_mut();
         mqtt.host = "127.0.0.1".into();
         mqtt.embedded_broker = self == Self::Embedded;
         match self {

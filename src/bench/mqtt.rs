@@ -169,7 +169,7 @@ pub async fn run(options: MqttBenchOptions) -> crate::bench::error::Result<MqttR
             .unwrap_or_default()
             .as_micros()
     ));
-    let (host, port) = (options.mqtt.host.clone(), options.mqtt.port);
+    let (host, port) = (options.mqtt.first().host.clone(), options.mqtt.first().port);
     let sim = tokio::spawn(sim::run(
         SimOptions {
             plant: options.plant.clone(),

@@ -404,8 +404,8 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
     ));
     let topics = Topics::new(&vehicle_id);
     let client = tokio::spawn(drive(
-        mqtt.host.clone(),
-        mqtt.port,
+        mqtt.first().host.clone(),
+        mqtt.first().port,
         topics.clone(),
         log.clone(),
         start + options.run_for,
@@ -430,7 +430,9 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
         schedule.push(FaultKind::TcprosLengthLie);
     }
     let master_uri = rosmaster.as_ref().map(|m| m.uri()).unwrap_or_default();
-    let own_id = mqtt.base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
+    let own_id = mqtt
+        .first()
+        .base_client_id(&lockstep::vehicle_config(&options.plant)?.vehicle.name);
     let cycle_length: Duration = schedule.iter().map(|k| k.hold() + CALM).sum();
     let rss_start = resident_memory_bytes().unwrap_or(0);
     let floors = Arc::new(Floors::new(
@@ -452,19 +454,25 @@ async fn run_one(options: &SoakOptions, broker: Broker) -> crate::bench::error::
             let began = Instant::now();
             let flood = match kind {
                 FaultKind::CommandFlood => {
-                    let run = flood(mqtt.host.clone(), mqtt.port, topics.clone(), kind.hold());
+                    let run = flood(
+                        mqtt.first().host.clone(),
+                        mqtt.first().port,
+                        topics.clone(),
+                        kind.hold(),
+                    );
                     Some(tokio::spawn(async move { run.await.map(|()| None) }))
                 }
                 FaultKind::ConnectionFlood => {
-                    let run = connection_flood(mqtt.host.clone(), mqtt.port, kind.hold());
+                    let run =
+                        connection_flood(mqtt.first().host.clone(), mqtt.first().port, kind.hold());
                     Some(tokio::spawn(async move { run.await.map(|()| None) }))
                 }
                 FaultKind::ClientIdTakeover
                 | FaultKind::UnreleasedQos2
                 | FaultKind::RetainedFlood => Some(tokio::spawn(attack(
                     kind,
-                    mqtt.host.clone(),
-                    mqtt.port,
+                    mqtt.first().host.clone(),
+                    mqtt.first().port,
                     own_id.clone(),
                 ))),
                 FaultKind::Slowloris => {

@@ -10,7 +10,7 @@ use anyhow::Context;
 
 use chassisd::config::calibration::CalibrationFile;
 use chassisd::config::mqtt::{
-    DeviceDialectConfig, MqttConfig, RootDialectConfig, RtkDialectConfig,
+    DeviceDialectConfig, MqttConfig, MqttLinkConfig, RootDialectConfig, RtkDialectConfig,
 };
 use chassisd::sim::plant::PlantConfig;
 use chassisd::sim::scenario::Scenario;
@@ -52,7 +52,6 @@ const SIM_SERIAL_NUMBER: &str = "SIM0001";
 /// dialect, on the broker at `external`, or on an embedded one at 127.0.0.1:1883.
 pub fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
     let mut config = MqttConfig {
-        embedded_broker: external.is_none(),
         rtk: Some(RtkDialectConfig::default()),
         root: Some(RootDialectConfig {
             vehicle_id: SIM_VEHICLE_ID.into(),
@@ -64,15 +63,18 @@ pub fn sim_mqtt(external: Option<&str>) -> anyhow::Result<MqttConfig> {
             serial_number: SIM_SERIAL_NUMBER.into(),
             mapping_forward: None,
         }),
-        ..MqttConfig::default()
+        ..MqttConfig::one(MqttLinkConfig {
+            embedded_broker: external.is_none(),
+            ..MqttLinkConfig::default()
+        })
     };
     if let Some(address) = external {
         let (host, port) = address
             .rsplit_once(':')
             .and_then(|(h, p)| Some((h, p.parse::<u16>().ok()?)))
             .with_context(|| format!("--mqtt {address:?}: expected HOST:PORT"))?;
-        config.host = host.to_owned();
-        config.port = port;
+        config.first_mut().host = host.to_owned();
+        config.first_mut().port = port;
     }
     Ok(config)
 }

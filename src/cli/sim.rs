@@ -116,7 +116,7 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
         .then(|| sim_mqtt(a.mqtt.as_deref()))
         .transpose()?;
     if let (Some(m), Some(port)) = (mqtt.as_mut(), a.broker_port) {
-        m.port = port;
+        m.first_mut().port = port;
     }
     if let Some(rtk) = mqtt.as_mut().and_then(|m| m.rtk.as_mut()) {
         rtk.trajectory_dir = a.trajectory_dir.map(|d| d.to_string_lossy().into_owned());

@@ -8,8 +8,9 @@ use std::path::Path;
 use tokio::sync::mpsc;
 
 use crate::api::log_budget::{self, LogBudget, SharedBudget};
-use crate::api::mqtt::MQTT_SOURCE;
+use crate::api::mqtt::Publish;
 use crate::config::VehicleConfig;
+use crate::config::mqtt::DialectName;
 use crate::devices::gnss::GnssFix;
 use crate::engine::{CORRECTIONS_SOURCE, Engine, EngineOutput, HOST_SOURCE, RTCM_PROTOCOL};
 use crate::record::{Record, RecordingWriter, SourceMeta};
@@ -28,6 +29,8 @@ use crate::time::Timestamp;
 
 /// The log lines of refused commands, shared by every link.
 static REFUSED: SharedBudget = SharedBudget::new(LogBudget::new());
+/// The log lines of messages no MQTT link carries.
+static UNROUTED: SharedBudget = SharedBudget::new(LogBudget::new());
 
 /// The embedded broker, when the configuration asks for one. Started first, before the
 /// drivers: its process takes a moment to start on a slow PC, and nothing that keeps time
@@ -43,7 +46,8 @@ pub fn start_broker(config: &VehicleConfig) -> Result<Option<EmbeddedBroker>> {
 /// frames), and where commands and corrections come from.
 pub struct Links {
     clock: RecordClock,
-    mqtt: Option<MqttSender>,
+    /// Each MQTT link, with the dialects it carries.
+    mqtt: Vec<MqttRoute>,
     ros1: Option<Ros1Link>,
     ros2: Option<Ros2Link>,
     websocket: Option<WebsocketLink>,
@@ -76,37 +80,42 @@ impl Links {
             }
             None => None,
         };
-        let mqtt = match &config.mqtt {
-            Some(m) => {
+        let mut mqtt = Vec::new();
+        if let Some(m) = &config.mqtt {
+            if m.root.is_some() {
                 add(SourceMeta::commands(
-                    MQTT_SOURCE,
-                    &format!("{MQTT_SOURCE}.log"),
+                    HOST_SOURCE,
+                    &format!("{HOST_SOURCE}.log"),
                 ));
+                host::spawn(clock, tx.clone());
+            }
+            for link in &m.links {
+                let source = link.source();
+                add(SourceMeta::commands(&source, &format!("{source}.log")));
+                let dialects = m.dialects_of(link);
                 let spec = MqttSpec {
-                    config: m.clone(),
+                    config: link.clone(),
                     vehicle: config.vehicle.name.clone(),
-                    subscriptions: engine.subscriptions(),
-                    command_topics: engine.command_topics(),
+                    subscriptions: engine.subscriptions(Some(&dialects)),
+                    command_topics: engine.command_topics(Some(&dialects)),
                 };
-                if m.root.is_some() {
-                    add(SourceMeta::commands(
-                        HOST_SOURCE,
-                        &format!("{HOST_SOURCE}.log"),
-                    ));
-                    host::spawn(clock, tx.clone());
-                }
                 let sender = mqtt::spawn(spec, clock, tx.clone())?;
-                if let Some(b) = broker {
+                if link.embedded_broker
+                    && let Some(b) = broker.clone()
+                {
                     broker::spawn_health_reports(
                         b,
                         sender.clone(),
-                        m.broker_health_topic(&config.vehicle.name),
+                        link.broker_health_topic(&config.vehicle.name),
                     );
                 }
-                Some(sender)
+                mqtt.push(MqttRoute {
+                    name: link.name.clone(),
+                    dialects,
+                    sender,
+                });
             }
-            None => None,
-        };
+        }
         let ros1 = match config.ros1.clone() {
             Some(r) => {
                 add(ros1::source_meta());
@@ -141,7 +150,7 @@ impl Links {
 
     /// Whether any link may send records (commands, corrections).
     pub fn any(&self) -> bool {
-        self.mqtt.is_some()
+        !self.mqtt.is_empty()
             || self.ros1.is_some()
             || self.ros2.is_some()
             || self.websocket.is_some()
@@ -170,11 +179,7 @@ impl Links {
             None => output,
         };
         match output {
-            EngineOutput::Publish(message) => {
-                if let Some(link) = &self.mqtt {
-                    link.send(message);
-                }
-            }
+            EngineOutput::Publish(message) => self.publish(message),
             EngineOutput::Event(event) => tracing::info!("{event}"),
             // What only a ROS node publishes; none took it.
             EngineOutput::Poses(..) | EngineOutput::Imu(_) | EngineOutput::Fix(..) => {}
@@ -210,6 +215,39 @@ impl Links {
             other => return Some(other),
         }
         None
+    }
+}
+
+/// One MQTT link as the router sees it.
+struct MqttRoute {
+    name: String,
+    dialects: Vec<DialectName>,
+    sender: MqttSender,
+}
+
+impl Links {
+    /// Sends `message` on the link that carries its dialect: answers go back to the broker
+    /// their requests came from.
+    fn publish(&self, message: Publish) {
+        let dialect = message.dialect.and_then(DialectName::from_name);
+        let route = self
+            .mqtt
+            .iter()
+            .find(|r| dialect.is_some_and(|d| r.dialects.contains(&d)));
+        match route {
+            Some(r) => r.sender.send(message),
+            None => {
+                if let Some(left_out) = log_budget::allow(&UNROUTED, self.clock.now()) {
+                    tracing::error!(
+                        topic = %message.topic,
+                        dialect = ?message.dialect,
+                        links = ?self.mqtt.iter().map(|r| r.name.as_str()).collect::<Vec<_>>(),
+                        left_out,
+                        "MQTT message of a dialect no link carries: not sent"
+                    );
+                }
+            }
+        }
     }
 }
 

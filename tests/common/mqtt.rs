@@ -177,6 +177,33 @@ impl Mosquitto {
         Self::start_with(Some((settings, dir.to_owned())), client_args)
     }
 
+    /// Starts mosquitto on plain TCP with a password file of `users` (name, password) and the
+    /// access control list `acl`; its clients connect as the first user. Files go in `dir`.
+    pub fn start_with_acl(dir: &Path, users: &[(&str, &str)], acl: &str) -> Mosquitto {
+        let passwd = dir.join("passwd");
+        for (i, (user, password)) in users.iter().enumerate() {
+            let create: &[&str] = if i == 0 { &["-c", "-b"] } else { &["-b"] };
+            let status = Command::new("mosquitto_passwd")
+                .args(create)
+                .arg(&passwd)
+                .args([user, password])
+                .stderr(Stdio::null())
+                .status()
+                .expect("mosquitto_passwd runs");
+            assert!(status.success(), "mosquitto_passwd failed");
+        }
+        let acl_file = dir.join("acl");
+        std::fs::write(&acl_file, acl).expect("acl written");
+        let settings = format!(
+            "allow_anonymous false\npassword_file {}\nacl_file {}\n",
+            passwd.display(),
+            acl_file.display()
+        );
+        let (user, password) = users[0];
+        let client_args = ["-u", user, "-P", password].map(str::to_owned).to_vec();
+        Self::start_with(Some((settings, dir.to_owned())), client_args)
+    }
+
     /// Starts mosquitto on plain TCP with a password file holding `user` / `password`;
     /// anonymous clients are refused. Files go in `dir`.
     pub fn start_with_password(dir: &Path, user: &str, password: &str) -> Mosquitto {

@@ -161,6 +161,34 @@ enum BenchCommand {
         #[arg(long)]
         without_ros1: bool,
     },
+    /// Many simulated vehicles in this process (each its own engine, plant and platform
+    /// link) on broker nodes, with an operator on each node: report periods, command round
+    /// trips, and, after node 0 is killed, the connects per second that followed, the time
+    /// until every vehicle was back and any command lost or answered twice. A table, then a
+    /// JSON line with "pass"; exits with status 1 when a target is missed.
+    Fleet {
+        /// Plant file (default: the built-in devices/plant.mower.toml).
+        #[arg(long)]
+        plant: Option<PathBuf>,
+        /// Vehicles.
+        #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+        vehicles: u32,
+        /// Broker nodes (independent mosquitto brokers on loopback).
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
+        nodes: u32,
+        /// Steady running before the kill and after every vehicle is back.
+        #[arg(long, default_value = "20", value_parser = seconds_arg)]
+        steady: Duration,
+        /// Do not kill a node.
+        #[arg(long)]
+        no_kill: bool,
+        /// The platform links' first back-off bound, s.
+        #[arg(long, default_value_t = 2.0)]
+        reconnect_min: f64,
+        /// The platform links' largest back-off bound, s.
+        #[arg(long, default_value_t = 30.0)]
+        reconnect_max: f64,
+    },
     /// Time the MQTT surface on the simulated vehicle: base_status period (median, p99,
     /// max jitter) and the DRIVE command's way to the CAN bus. The last line is JSON.
     Mqtt {
@@ -294,6 +322,33 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             broker,
             without_ros1,
         } => bench_soak(plant, minutes, broker, !without_ros1),
+        BenchCommand::Fleet {
+            plant,
+            vehicles,
+            nodes,
+            steady,
+            no_kill,
+            reconnect_min,
+            reconnect_max,
+        } => {
+            if let Some(why) = Mosquitto::missing() {
+                anyhow::bail!(why);
+            }
+            let dir = tempfile_dir("chassisd-bench-fleet")?;
+            let nodes = chassisd::bench::fleet::MosquittoNodes::start(nodes as usize, &dir)?;
+            let options = chassisd::bench::fleet::FleetOptions {
+                plant: load_plant(plant)?,
+                vehicles: vehicles as usize,
+                steady,
+                kill: !no_kill,
+                reconnect: (reconnect_min, reconnect_max),
+            };
+            let report = block_on(2, chassisd::bench::fleet::run(options, Box::new(nodes)))??;
+            std::fs::remove_dir_all(&dir).ok();
+            print!("{}", report.table());
+            println!("{}", report.json());
+            Ok(report.pass)
+        }
         BenchCommand::Export { fixtures, seconds } => {
             let exe = daemon_binary()?;
             let report = chassisd::bench::export::run(
@@ -490,6 +545,13 @@ fn bench_soak(
     }
     println!("{}", report.json());
     Ok(report.pass)
+}
+
+/// A new folder of this run's own under the system's temporary folder.
+fn tempfile_dir(name: &str) -> anyhow::Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    Ok(dir)
 }
 
 /// Parses a positive number of minutes (up to a week).

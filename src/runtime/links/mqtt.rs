@@ -1,6 +1,9 @@
-//! The MQTT link (rumqttc): connects to the broker, reconnects with back-off and subscribes
-//! again, keeps a retained `online` message with an `offline` last will, forwards incoming
-//! commands to the engine as records, and publishes the engine's messages.
+//! One MQTT link (rumqttc): connects to its broker (or the next of its failover brokers),
+//! reconnects with jittered back-off ([`super::backoff`]) and subscribes again, keeps a
+//! retained `online` message with an `offline` last will, forwards incoming commands to the
+//! engine as records of its own source, and publishes the messages of the dialects it
+//! carries. Each link is a task of its own with its own queues and limits: one link down
+//! never holds up another.
 //!
 //! Outgoing messages wait in two bounded queues while the broker is away: telemetry (QoS 0;
 //! the oldest is dropped first) and replies and events (QoS 1; kept up to their own bound).
@@ -22,11 +25,13 @@ use rumqttc::{
 use tokio::sync::mpsc;
 
 use crate::api::log_budget::{self, LogBudget, SharedBudget};
-use crate::api::mqtt::{MQTT_SOURCE, Publish, Qos};
-use crate::config::mqtt::MqttConfig;
+use crate::api::mqtt::{Publish, Qos};
+use crate::config::mqtt::{BrokerAddress, MqttLinkConfig};
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
+use crate::runtime::links::backoff::{Backoff, BrokerWalk};
 use crate::runtime::links::command_rate::{CommandRate, RateReport};
+use crate::runtime::links::mqtt_echo::Echo;
 use crate::runtime::links::mqtt_losses::{Losses, Tell};
 use crate::vehicle::LinkState;
 
@@ -37,8 +42,6 @@ static RETAINED_IGNORED: SharedBudget = SharedBudget::new(LogBudget::new());
 const HANDOFF: usize = 4096;
 /// Requests rumqttc queues between the client handle and its event loop.
 const CLIENT_QUEUE: usize = 256;
-/// First reconnect delay.
-const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 
 /// Hands messages to the link task.
 #[derive(Clone)]
@@ -218,8 +221,8 @@ impl Outbox {
 
 /// What the link needs to start.
 pub struct MqttSpec {
-    /// Broker and queues.
-    pub config: MqttConfig,
+    /// Brokers, identity and queues.
+    pub config: MqttLinkConfig,
     /// Vehicle name (client id and status topic).
     pub vehicle: String,
     /// Topic filters to subscribe to.
@@ -234,21 +237,31 @@ pub fn spawn(
     clock: RecordClock,
     records: mpsc::Sender<Record>,
 ) -> Result<MqttSender, RuntimeError> {
-    let options = options(&spec)?;
+    let brokers = broker_options(&spec)?;
     let (tx, mut rx) = mpsc::channel(HANDOFF);
     tokio::spawn(async move {
         // An auxiliary task: after a panic (logged once by the hook) the link starts afresh
         // with a new connection; the queue of outgoing messages survives it.
         loop {
-            let (client, mut eventloop) = AsyncClient::new(options.clone(), CLIENT_QUEUE);
+            let (client, mut eventloop) = AsyncClient::new(brokers[0].1.clone(), CLIENT_QUEUE);
             eventloop.set_network_options(low_latency());
-            let link = run(&spec, client, eventloop, &mut rx, clock, records.clone());
+            let link = run(
+                &spec,
+                &brokers,
+                client,
+                eventloop,
+                &mut rx,
+                clock,
+                records.clone(),
+            );
             match crate::runtime::panics::contain(link).await {
                 Ok(LinkEnd::EngineGone) => return,
                 Ok(LinkEnd::PollerLost) => {
-                    tracing::error!("MQTT link restarted: its event loop ended (a panic in it?)");
+                    tracing::error!(link = %spec.config.name, "MQTT link restarted: its event loop ended (a panic in it?)");
                 }
-                Err(()) => tracing::error!("MQTT link restarted after a panic"),
+                Err(()) => {
+                    tracing::error!(link = %spec.config.name, "MQTT link restarted after a panic")
+                }
             }
             tokio::time::sleep(Duration::from_secs(1)).await;
         }
@@ -259,6 +272,26 @@ pub fn spawn(
     })
 }
 
+/// The client options for each of the link's brokers, in the order they are tried: id,
+/// keep-alive, last will, credentials, TLS (its server name the broker's own).
+fn broker_options(spec: &MqttSpec) -> Result<Vec<(BrokerAddress, MqttOptions)>, RuntimeError> {
+    let c = &spec.config;
+    let client_id = c.client_id(&spec.vehicle);
+    c.brokers()
+        .into_iter()
+        .map(|broker| {
+            let mut o = client_options_at(c, &broker, client_id.clone())?;
+            o.set_last_will(LastWill::new(
+                c.status_topic(&spec.vehicle),
+                "offline",
+                QoS::AtLeastOnce,
+                true,
+            ));
+            Ok((broker, o))
+        })
+        .collect()
+}
+
 /// Commands and their acks are small packets that must not wait for Nagle's algorithm to
 /// fill a segment (it held each DRIVE ack back about 40 ms).
 pub fn low_latency() -> NetworkOptions {
@@ -267,26 +300,15 @@ pub fn low_latency() -> NetworkOptions {
     n
 }
 
-/// The client options of `spec`: id, keep-alive, last will, credentials, TLS.
-pub(crate) fn options(spec: &MqttSpec) -> Result<MqttOptions, RuntimeError> {
-    let c = &spec.config;
-    let mut o = client_options(c, c.client_id(&spec.vehicle))?;
-    o.set_last_will(LastWill::new(
-        c.status_topic(&spec.vehicle),
-        "offline",
-        QoS::AtLeastOnce,
-        true,
-    ));
-    Ok(o)
-}
-
-/// The options of any client of chassisd's on the broker of `c`, as `client_id`:
-/// keep-alive, a clean session, packet sizes, credentials, TLS. No last will.
-pub(crate) fn client_options(
-    c: &MqttConfig,
+/// The options of any client of chassisd's on `broker`, one of link `c`'s, as `client_id`:
+/// keep-alive, a clean session, packet sizes, credentials, TLS (its server name the
+/// broker's own). No last will.
+pub(crate) fn client_options_at(
+    c: &MqttLinkConfig,
+    broker: &BrokerAddress,
     client_id: String,
 ) -> Result<MqttOptions, RuntimeError> {
-    let mut o = MqttOptions::new(client_id, c.host.clone(), c.port);
+    let mut o = MqttOptions::new(client_id, broker.host.clone(), broker.port);
     o.set_keep_alive(c.keep_alive());
     o.set_clean_session(true);
     // Oversized commands get an error reply from their dialect; only far larger packets
@@ -300,7 +322,9 @@ pub(crate) fn client_options(
         // rustls needs a process-wide crypto provider; ring is the one compiled in. A second
         // install (another link) is refused harmlessly.
         let _ = rustls::crypto::ring::default_provider().install_default();
-        let read = |p: &str| std::fs::read(p).map_err(io(format!("mqtt.tls: cannot read {p}")));
+        let read = |p: &str| {
+            std::fs::read(p).map_err(io(format!("mqtt link {}: tls: cannot read {p}", c.name)))
+        };
         let client_auth = match (&tls.client_cert_file, &tls.client_key_file) {
             (Some(cert), Some(key)) => Some((read(cert)?, read(key)?)),
             _ => None,
@@ -324,6 +348,7 @@ enum LinkEnd {
 
 async fn run(
     spec: &MqttSpec,
+    brokers: &[(BrokerAddress, MqttOptions)],
     client: AsyncClient,
     eventloop: EventLoop,
     rx: &mut mpsc::Receiver<Publish>,
@@ -331,7 +356,8 @@ async fn run(
     records: mpsc::Sender<Record>,
 ) -> LinkEnd {
     let c = &spec.config;
-    let broker = format!("{}:{}", c.host, c.port);
+    let name = c.name.as_str();
+    let mut broker = brokers[0].0.to_string();
     let status_topic = c.status_topic(&spec.vehicle);
     let mut outbox = Outbox::new(c.telemetry_queue, c.reply_queue, c.packet_limit());
     let mut rate = CommandRate::new(c.command_rate_hz, c.command_burst)
@@ -342,38 +368,58 @@ async fn run(
     // Whether this session's connect and subscribe are worth an info line (not while
     // sessions keep being lost: those are summarised).
     let mut announce = true;
-    let mut events = Poller::spawn(eventloop, c.reconnect_max());
+    let backoff = Backoff::new(
+        c.reconnect_min(),
+        c.reconnect_max(),
+        crate::secret::unguessable(),
+    );
+    let mut events = Poller::spawn(eventloop, brokers.to_vec(), backoff);
+    let mut echo = Echo::default();
+    let source = c.source();
     let link = |state| Record {
         t: clock.now(),
-        source: MQTT_SOURCE.into(),
+        source: source.clone(),
         payload: Payload::Link(state),
     };
     loop {
         if let Some(report) = rate.due_summary(Instant::now()) {
             log_rate(&report, c);
         }
+        if echo.overdue(Instant::now()) {
+            tracing::error!(
+                link = name,
+                %broker,
+                topic = %status_topic,
+                "MQTT: the broker did not deliver the link's own `online` back within 5 s: its \
+                 ACL probably denies the vehicle's topics, and the link's commands will not \
+                 arrive (docs/fleet.md gives the ACLs)"
+            );
+        }
         if let Some(lost) = losses.due_summary(Instant::now()) {
-            tracing::warn!(%broker, lost, "MQTT sessions lost in the last 5 s; reconnecting each time");
+            tracing::warn!(link = name, %broker, lost, "MQTT sessions lost in the last 5 s; reconnecting each time");
         }
         tokio::select! {
             event = events.next() => {
-                let Some(event) = event else { return LinkEnd::PollerLost };
+                let Some((at, event)) = event else { return LinkEnd::PollerLost };
+                if let Some((address, _)) = brokers.get(at) {
+                    broker = address.to_string();
+                }
                 match event {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     connected = true;
                     last_failure = None;
                     losses.connected(Instant::now());
                     if announce {
-                        tracing::info!(%broker, client_id = %c.client_id(&spec.vehicle), "MQTT connected");
+                        tracing::info!(link = name, %broker, client_id = %c.client_id(&spec.vehicle), "MQTT connected");
                     }
+                    // The commands' topics, and the link's own status for its echo.
                     let filters = spec
                         .subscriptions
                         .iter()
+                        .chain(std::iter::once(&status_topic))
                         .map(|f| rumqttc::SubscribeFilter::new(f.clone(), QoS::AtLeastOnce));
-                    if !spec.subscriptions.is_empty()
-                        && let Err(e) = client.try_subscribe_many(filters)
-                    {
-                        tracing::error!(error = %e, "MQTT subscribe failed");
+                    if let Err(e) = client.try_subscribe_many(filters) {
+                        tracing::error!(link = name, error = %e, "MQTT subscribe failed");
                     }
                     // `online` goes first, tracked like a reply.
                     let online = Publish {
@@ -384,6 +430,7 @@ async fn run(
                         outbox.replies.push_front(online);
                     }
                     outbox.flush(&client);
+                    echo.sent(Instant::now());
                     if records.send(link(LinkState::Up)).await.is_err() {
                         return LinkEnd::EngineGone;
                     }
@@ -391,6 +438,14 @@ async fn run(
                 Ok(Event::Incoming(Packet::Publish(p))) => {
                     if crate::runtime::panics::inject("mqtt") {
                         panic!("injected panic ({}=mqtt)", crate::runtime::panics::INJECT_PANIC);
+                    }
+                    if p.topic == status_topic {
+                        // Its own status: the echo (live, not the retained copy an earlier
+                        // session left), never a command.
+                        if !p.retain && p.payload.as_ref() == b"online" && echo.heard() {
+                            tracing::info!(link = name, %broker, "MQTT: the broker now delivers the link's own status back");
+                        }
+                        continue;
                     }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
@@ -408,7 +463,7 @@ async fn run(
                     }
                     let record = Record {
                         t: clock.now(),
-                        source: MQTT_SOURCE.into(),
+                        source: source.clone(),
                         payload: Payload::Command { topic: p.topic, payload: p.payload },
                     };
                     if records.send(record).await.is_err() {
@@ -418,9 +473,9 @@ async fn run(
                 Ok(Event::Incoming(Packet::SubAck(ack))) => {
                     let refused = refused_subscriptions(&ack);
                     if refused > 0 {
-                        tracing::error!(refused, "MQTT broker refused subscriptions");
+                        tracing::error!(link = name, %broker, refused, "MQTT broker refused subscriptions (its ACL?); the link's commands on them will not arrive");
                     } else if announce {
-                        tracing::info!(topics = ?spec.subscriptions, "MQTT subscribed");
+                        tracing::info!(link = name, topics = ?spec.subscriptions, "MQTT subscribed");
                     }
                 }
                 Ok(Event::Outgoing(outgoing)) => {
@@ -433,11 +488,12 @@ async fn run(
                 Ok(_) => {}
                 Err(e) => {
                     outbox.requeue_unacknowledged();
+                    echo.lost();
                     if connected {
                         connected = false;
                         let tell = losses.lost(Instant::now());
                         announce = tell == Tell::Lost;
-                        log_loss(&tell, &broker, &e, &c.client_id(&spec.vehicle));
+                        log_loss(&tell, name, &broker, &e, &c.client_id(&spec.vehicle));
                         if records.send(link(LinkState::Down)).await.is_err() {
                             return LinkEnd::EngineGone;
                         }
@@ -446,10 +502,10 @@ async fn run(
                         // on every retry.
                         let cause = e.to_string();
                         if last_failure.as_deref() != Some(cause.as_str()) {
-                            tracing::warn!(%broker, error = %cause, "MQTT connect failed; retrying");
+                            tracing::warn!(link = name, %broker, error = %cause, "MQTT connect failed; retrying (on the next broker when the link lists more)");
                             last_failure = Some(cause);
                         } else {
-                            tracing::debug!(%broker, error = %cause, "MQTT connect failed");
+                            tracing::debug!(link = name, %broker, error = %cause, "MQTT connect failed");
                         }
                     }
                 }
@@ -469,9 +525,10 @@ async fn run(
 /// connection attempt starts the attempt over, so a loop that also waits for outgoing
 /// messages would cut every slow connection short (seen on a slow PC: five attempts in
 /// 60 ms, each one taking the last one's place on the broker). The poller also waits out
-/// the reconnect back-off.
+/// the reconnect back-off and chooses the broker of the next attempt.
 struct Poller {
-    events: mpsc::Receiver<Result<Event, rumqttc::ConnectionError>>,
+    /// Each event with the index of the broker it came from.
+    events: mpsc::Receiver<(usize, Result<Event, rumqttc::ConnectionError>)>,
     task: tokio::task::JoinHandle<()>,
 }
 
@@ -479,27 +536,43 @@ impl Poller {
     /// Events waiting for the link before the poller waits.
     const QUEUE: usize = 64;
 
-    fn spawn(mut eventloop: EventLoop, reconnect_max: Duration) -> Self {
+    fn spawn(
+        mut eventloop: EventLoop,
+        brokers: Vec<(BrokerAddress, MqttOptions)>,
+        mut backoff: Backoff,
+    ) -> Self {
         let (tx, events) = mpsc::channel(Self::QUEUE);
         let task = tokio::spawn(async move {
-            let mut backoff = FIRST_BACKOFF;
+            let mut walk = BrokerWalk::new(brokers.len());
+            let mut connected = false;
             loop {
+                let at = walk.current();
                 let event = eventloop.poll().await;
                 let failed = event.is_err();
                 if matches!(event, Ok(Event::Incoming(Packet::ConnAck(_)))) {
-                    backoff = FIRST_BACKOFF;
+                    connected = true;
+                    backoff.reset();
                 }
-                if tx.send(event).await.is_err() {
+                if tx.send((at, event)).await.is_err() {
                     return;
                 }
                 if failed {
+                    // A lost session is tried again where it was; a failed attempt moves
+                    // on to the next broker.
+                    if !std::mem::take(&mut connected) {
+                        walk.attempt_failed();
+                    }
+                    if let Some((_, options)) = brokers.get(walk.current())
+                        && walk.current() != at
+                    {
+                        eventloop.mqtt_options = options.clone();
+                    }
                     // rumqttc keeps a publish whose packet id collided across a lost
                     // connection, and then refuses every request of every later session
                     // until a "collision timeout" ends it: the link stayed wedged for good
                     // after a takeover. The link queues unacknowledged replies itself.
                     eventloop.state.collision = None;
-                    tokio::time::sleep(backoff).await;
-                    backoff = (backoff * 2).min(reconnect_max);
+                    tokio::time::sleep(backoff.next_wait()).await;
                 }
             }
         });
@@ -507,7 +580,7 @@ impl Poller {
     }
 
     /// The next event; `None` when the poller ended (it never does by itself).
-    async fn next(&mut self) -> Option<Result<Event, rumqttc::ConnectionError>> {
+    async fn next(&mut self) -> Option<(usize, Result<Event, rumqttc::ConnectionError>)> {
         self.events.recv().await
     }
 }
@@ -528,29 +601,39 @@ pub(crate) fn refused_subscriptions(ack: &rumqttc::SubAck) -> usize {
 }
 
 /// A lost session, as [`Losses`] says to tell it.
-fn log_loss(tell: &Tell, broker: &str, error: &rumqttc::ConnectionError, client_id: &str) {
+fn log_loss(
+    tell: &Tell,
+    link: &str,
+    broker: &str,
+    error: &rumqttc::ConnectionError,
+    client_id: &str,
+) {
     match tell {
         Tell::Lost => {
-            tracing::warn!(%broker, %error, "MQTT connection lost; reconnecting");
+            tracing::warn!(link, %broker, %error, "MQTT connection lost; reconnecting");
         }
         Tell::LikelyTakeover { cut_short } => tracing::error!(
+            link,
             %broker,
             %error,
             cut_short,
             client_id,
             "MQTT: the broker keeps closing chassisd's session soon after it connects: another \
              client is probably connecting with chassisd's client id (MQTT gives an id to its \
-             newest connection). Keep mqtt.client_id_suffix on, and have the broker's ACL \
-             reserve the id (docs/security.md); further losses are summarised every 5 s"
+             newest connection), or the broker's ACL refuses what the link publishes or \
+             subscribes to (RabbitMQ and EMQX can close such a session; docs/fleet.md). Keep \
+             the link's client_id_suffix on, and have the broker's ACL reserve the id \
+             (docs/security.md); further losses are summarised every 5 s"
         ),
-        Tell::Quiet => tracing::debug!(%broker, %error, "MQTT connection lost again"),
+        Tell::Quiet => tracing::debug!(link, %broker, %error, "MQTT connection lost again"),
     }
 }
 
 /// One line when a flood starts on a topic, then one per period while it lasts.
-fn log_rate(report: &RateReport, c: &MqttConfig) {
+fn log_rate(report: &RateReport, c: &MqttLinkConfig) {
     match report {
         RateReport::Started(topic) => tracing::warn!(
+            link = %c.name,
             %topic,
             limit_hz = c.command_rate_hz,
             burst = c.command_burst,
@@ -563,7 +646,7 @@ fn log_rate(report: &RateReport, c: &MqttConfig) {
                 .map(|(t, n)| format!("{t}: {n}"))
                 .collect::<Vec<_>>()
                 .join(", ");
-            tracing::warn!(refused, %topics, "MQTT commands refused over the rate limit in the last 5 s");
+            tracing::warn!(link = %c.name, refused, %topics, "MQTT commands refused over the rate limit in the last 5 s");
         }
     }
 }

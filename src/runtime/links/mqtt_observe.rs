@@ -2,51 +2,62 @@
 //! and records what arrives, and publishes nothing (no `online`, no last will, no replies),
 //! so a recorder never answers for the vehicle.
 
-use std::time::Duration;
-
 use rumqttc::{AsyncClient, Event, Packet, QoS};
 use tokio::sync::mpsc;
 
-use crate::api::mqtt::MQTT_SOURCE;
-use crate::config::mqtt::MqttConfig;
+use crate::config::mqtt::MqttLinkConfig;
 use crate::record::{Payload, Record};
 use crate::runtime::clock::RecordClock;
-use crate::runtime::links::mqtt::{client_options, low_latency};
+use crate::runtime::links::backoff::{Backoff, BrokerWalk};
+use crate::runtime::links::mqtt::{client_options_at, low_latency};
 use crate::vehicle::LinkState;
 
 /// Requests rumqttc queues between the client handle and its event loop.
 const CLIENT_QUEUE: usize = 16;
-/// First reconnect delay.
-const FIRST_BACKOFF: Duration = Duration::from_millis(100);
-
-/// Starts the observer; commands and link events go to `records` as source `mqtt`.
+/// Starts the observer of one link; commands and link events go to `records` as the
+/// link's source (`mqtt` for the one-link form's).
 pub fn spawn(
-    config: &MqttConfig,
+    config: &MqttLinkConfig,
     vehicle: &str,
     topics: Vec<String>,
     clock: RecordClock,
     records: mpsc::Sender<Record>,
 ) -> Result<(), crate::runtime::error::RuntimeError> {
     let client_id = format!("{}-recorder", config.base_client_id(vehicle));
-    let (client, mut events) = AsyncClient::new(client_options(config, client_id)?, CLIENT_QUEUE);
+    let brokers = config
+        .brokers()
+        .into_iter()
+        .map(|b| {
+            Ok((
+                b.to_string(),
+                client_options_at(config, &b, client_id.clone())?,
+            ))
+        })
+        .collect::<Result<Vec<_>, crate::runtime::error::RuntimeError>>()?;
+    let (client, mut events) = AsyncClient::new(brokers[0].1.clone(), CLIENT_QUEUE);
     events.set_network_options(low_latency());
-    let broker = format!("{}:{}", config.host, config.port);
-    let reconnect_max = config.reconnect_max();
+    let mut backoff = Backoff::new(
+        config.reconnect_min(),
+        config.reconnect_max(),
+        crate::secret::unguessable(),
+    );
+    let source = config.source();
     tokio::spawn(async move {
         let link = |state| Record {
             t: clock.now(),
-            source: MQTT_SOURCE.into(),
+            source: source.clone(),
             payload: Payload::Link(state),
         };
         let mut connected = false;
         let mut said = false;
-        let mut backoff = FIRST_BACKOFF;
+        let mut walk = BrokerWalk::new(brokers.len());
         loop {
+            let broker = &brokers[walk.current()].0;
             let record = match events.poll().await {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     connected = true;
                     said = false;
-                    backoff = FIRST_BACKOFF;
+                    backoff.reset();
                     let filters = topics
                         .iter()
                         .map(|t| rumqttc::SubscribeFilter::new(t.clone(), QoS::AtLeastOnce));
@@ -71,7 +82,7 @@ pub fn spawn(
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) if !p.retain => Record {
                     t: clock.now(),
-                    source: MQTT_SOURCE.into(),
+                    source: source.clone(),
                     payload: Payload::Command {
                         topic: p.topic,
                         payload: p.payload,
@@ -88,8 +99,11 @@ pub fn spawn(
                     if was_connected && records.send(link(LinkState::Down)).await.is_err() {
                         return;
                     }
-                    tokio::time::sleep(backoff).await;
-                    backoff = (backoff * 2).min(reconnect_max.max(FIRST_BACKOFF));
+                    if !was_connected {
+                        walk.attempt_failed();
+                        events.mqtt_options = brokers[walk.current()].1.clone();
+                    }
+                    tokio::time::sleep(backoff.next_wait()).await;
                     continue;
                 }
             };

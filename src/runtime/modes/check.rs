@@ -22,6 +22,7 @@ use tokio_serial::SerialPortBuilderExt;
 
 use std::net::ToSocketAddrs;
 
+use crate::config::mqtt::{BrokerAddress, MqttLinkConfig};
 use crate::config::zones::ZonesConfig;
 use crate::config::{GnssConfig, ReceiverKind, VehicleConfig};
 use crate::devices::can::Received;
@@ -194,14 +195,17 @@ pub async fn run(config: &VehicleConfig, configure: Option<Layers>) -> Vec<Probe
             .map_or("inline".into(), |f| f.display().to_string());
         probes.push(Probe::new("zones", &what, probe_zones(config, z)));
     }
-    if let Some(m) = &config.mqtt {
-        let what = format!("broker {}:{}", m.host, m.port);
-        let result = if m.embedded_broker {
-            probe_embedded_broker(config).await
-        } else {
-            probe_broker(config, None).await
-        };
-        probes.push(Probe::new("mqtt", &what, result));
+    // Each link, and on each link each broker it may fail over to.
+    for link in config.mqtt.iter().flat_map(|m| &m.links) {
+        for broker in link.brokers() {
+            let what = format!("broker {broker}");
+            let result = if link.embedded_broker {
+                probe_embedded_broker(config, link).await
+            } else {
+                probe_broker(config, link, &broker, None).await
+            };
+            probes.push(Probe::new(&link.source(), &what, result));
+        }
     }
     #[cfg(feature = "ros2")]
     if let Some(r) = &config.ros2 {
@@ -590,11 +594,11 @@ async fn probe_bms(
 
 /// The embedded broker: not running (chassisd run starts it), or running, with the health
 /// the daemon publishes (clients, restarts, refusals).
-async fn probe_embedded_broker(config: &VehicleConfig) -> Result<String, (String, String)> {
-    let Some(m) = &config.mqtt else {
-        return Ok("no broker configured".into());
-    };
-    let free = (m.host.as_str(), m.port)
+async fn probe_embedded_broker(
+    config: &VehicleConfig,
+    link: &MqttLinkConfig,
+) -> Result<String, (String, String)> {
+    let free = (link.host.as_str(), link.port)
         .to_socket_addrs()
         .ok()
         .and_then(|mut a| a.next())
@@ -602,7 +606,9 @@ async fn probe_embedded_broker(config: &VehicleConfig) -> Result<String, (String
     if free {
         return Ok("embedded: not running now; `chassisd run` starts it".into());
     }
-    probe_broker(config, Some(m.broker_health_topic(&config.vehicle.name))).await
+    let at = link.brokers().swap_remove(0);
+    let health = link.broker_health_topic(&config.vehicle.name);
+    probe_broker(config, link, &at, Some(health)).await
 }
 
 /// The embedded broker's health in words.
@@ -636,16 +642,15 @@ fn describe_health(h: &BrokerHealth) -> String {
 /// retained health on that topic and describes it.
 async fn probe_broker(
     config: &VehicleConfig,
+    link: &MqttLinkConfig,
+    broker: &BrokerAddress,
     health: Option<String>,
 ) -> Result<String, (String, String)> {
-    let Some(m) = &config.mqtt else {
-        return Ok("no broker configured".into());
-    };
     // A client id of its own (the daemon's stays connected) and no last will.
-    let client_id = format!("{}-check", m.base_client_id(&config.vehicle.name));
-    let options = match crate::runtime::links::mqtt::client_options(m, client_id) {
+    let client_id = format!("{}-check", link.base_client_id(&config.vehicle.name));
+    let options = match crate::runtime::links::mqtt::client_options_at(link, broker, client_id) {
         Ok(o) => o,
-        Err(e) => return fail(format!("{e:#}"), "check the mqtt.tls files"),
+        Err(e) => return fail(format!("{e:#}"), "check the link's tls files"),
     };
     let (client, mut events) = rumqttc::AsyncClient::new(options, 10);
     // Set once the embedded broker let the probe in, so a missing health report is told
@@ -683,9 +688,8 @@ async fn probe_broker(
                     return fail(
                         format!("cannot connect: {e}"),
                         format!(
-                            "is the broker running at {}:{} (e.g. `systemctl status mosquitto`)? \
-                             With TLS, check the certificates",
-                            m.host, m.port
+                            "is the broker running at {broker} (e.g. `systemctl status mosquitto`)? \
+                             With TLS, check the certificates"
                         ),
                     );
                 }
@@ -699,7 +703,7 @@ async fn probe_broker(
         }
         fail(
             format!("no answer in {:.0} s", BROKER_WAIT.as_secs_f64()),
-            "check mqtt.host, mqtt.port and the network",
+            "check the link's host, port (or failover) and the network",
         )
     });
     let _ = client.try_disconnect();

@@ -11,7 +11,6 @@ use std::time::Duration;
 use crate::runtime::error::{RuntimeError, invalid, io};
 use tokio::sync::mpsc;
 
-use crate::api::mqtt::MQTT_SOURCE;
 use crate::config::VehicleConfig;
 use crate::engine::{Decoder, Engine};
 use crate::record::segments::{Progress, Rotation, SegmentedWriter};
@@ -101,19 +100,21 @@ pub async fn run(options: ListenOptions) -> crate::runtime::error::Result<Listen
     let _can_tx = devices.can_tx;
     let mut sources: Vec<SourceMeta> = devices.sources;
     if let Some(m) = &config.mqtt {
-        if m.embedded_broker {
-            tracing::warn!(
-                "mqtt.embedded_broker: the broker is chassisd run's own, and none runs while \
-                 recording; MQTT commands are not recorded"
-            );
-        } else {
-            // The topics `chassisd run` would take commands on.
-            let topics = Engine::new(config, &devices.decoders).subscriptions();
-            sources.push(SourceMeta::commands(
-                MQTT_SOURCE,
-                &format!("{MQTT_SOURCE}.log"),
-            ));
-            mqtt_observe::spawn(m, &config.vehicle.name, topics, clock, tx.clone())?;
+        let engine = Engine::new(config, &devices.decoders);
+        for link in &m.links {
+            if link.embedded_broker {
+                tracing::warn!(
+                    link = %link.name,
+                    "the link's broker is chassisd run's embedded one, and none runs while \
+                     recording; its MQTT commands are not recorded"
+                );
+                continue;
+            }
+            // The topics `chassisd run` would take commands on, on this link.
+            let topics = engine.subscriptions(Some(&m.dialects_of(link)));
+            let source = link.source();
+            sources.push(SourceMeta::commands(&source, &format!("{source}.log")));
+            mqtt_observe::spawn(link, &config.vehicle.name, topics, clock, tx.clone())?;
         }
     }
     if config.ros1.is_some() {

@@ -12,7 +12,6 @@ use bytes::Bytes;
 use tokio::sync::mpsc;
 
 use crate::api::local;
-use crate::api::mqtt::MQTT_SOURCE;
 use crate::api::rtk::BaseStatus;
 use crate::api::trajectory::Unconfigured;
 use crate::config::VehicleConfig;
@@ -163,8 +162,8 @@ async fn run_marked(
 
     // What must come up before systemd hears READY: each device, and the broker.
     let mut expected = devices.names;
-    if config.mqtt.is_some() {
-        expected.push(MQTT_SOURCE.into());
+    if let Some(m) = &config.mqtt {
+        expected.extend(m.links.iter().map(|l| l.source()));
     }
     let mut service = ServiceManager::new(expected, READY_GRACE, std::time::Instant::now());
     let mut stall = InjectedStall::from_env(std::time::Instant::now());

@@ -12,7 +12,7 @@ use tokio::sync::{mpsc, watch};
 
 use crate::api::rtk::BaseStatus;
 use crate::api::trajectory::MemoryStore;
-use crate::config::mqtt::MqttConfig;
+use crate::config::mqtt::{DialectName, MqttConfig};
 use crate::devices::gnss::FixQuality;
 use crate::engine::{EngineOutput, EngineStats};
 use crate::record::{Payload, Record};
@@ -381,11 +381,13 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
     }
     line += "; base_status JSON lines on stdout";
     if let Some(m) = &options.mqtt {
+        let rtk = m.link_of(DialectName::Rtk).unwrap_or(m.first());
         line += &format!(
             " and over MQTT (watch: mosquitto_sub -h {} -p {} -t base_status)",
-            m.host, m.port
+            rtk.host, rtk.port
         );
         if let Some(device) = &m.device {
+            let link = m.link_of(DialectName::Device).unwrap_or(m.first());
             // A goal is one message: pasted once, it drives the vehicle to (2, 1) m facing
             // north; the answer comes on the goal's ack topic when it ends.
             let mut about = format!("answered on device/{}/goal/ack", device.serial_number);
@@ -397,7 +399,7 @@ fn start_line(options: &SimOptions, vehicle: &str) -> String {
             }
             line += &format!(
                 "; drive it to x 2 m, y 1 m facing north ({about}): mosquitto_pub -h {} -p {} -t device/{}/goal -m '{{\"msg_id\": \"1\", \"timestamp\": 1757403776, \"data\": {{\"x\": 2.0, \"y\": 1.0, \"z\": 0.7071}}}}'",
-                m.host, m.port, device.serial_number
+                link.host, link.port, device.serial_number
             );
         }
     }

@@ -7,7 +7,7 @@ pub use crate::api::adapter::Handled;
 use crate::api::adapter::{Adapter, Reply};
 pub use crate::api::publish::{Publish, Qos};
 use crate::api::trajectory::TrajectoryStore;
-use crate::config::mqtt::MqttConfig;
+use crate::config::mqtt::{DialectName, MqttConfig};
 use crate::control::mission::MissionEvent;
 use crate::control::{MotionResult, MotionTag};
 use crate::time::Timestamp;
@@ -93,7 +93,10 @@ impl Adapter for Dialects {
             return Handled::NotOwned;
         };
         let mut handled = Handled::Taken;
-        publishing(out, |p| handled = d.on_message(t, topic, payload, core, p));
+        let name = d.name();
+        publishing(out, name, |p| {
+            handled = d.on_message(t, topic, payload, core, p)
+        });
         handled
     }
 
@@ -104,13 +107,15 @@ impl Adapter for Dialects {
         out: &mut Vec<Reply>,
     ) {
         for d in &mut self.dialects {
-            publishing(out, |p| d.on_status(status, core, p));
+            let name = d.name();
+            publishing(out, name, |p| d.on_status(status, core, p));
         }
     }
 
     fn on_motion_ended(&mut self, t: Timestamp, result: &MotionResult, out: &mut Vec<Reply>) {
         if let Some(d) = result.tag.and_then(|tag| self.owner(tag)) {
-            publishing(out, |p| d.on_motion_ended(t, result, p));
+            let name = d.name();
+            publishing(out, name, |p| d.on_motion_ended(t, result, p));
         }
     }
 
@@ -124,16 +129,23 @@ impl Adapter for Dialects {
         if let Some(tag) = tag
             && let Some(d) = self.owner(tag)
         {
-            publishing(out, |p| d.on_mission_event(t, tag.id, event, p));
+            let name = d.name();
+            publishing(out, name, |p| d.on_mission_event(t, tag.id, event, p));
         }
     }
 }
 
-/// What `dialect` publishes, as replies.
-fn publishing(out: &mut Vec<Reply>, dialect: impl FnOnce(&mut Vec<Publish>)) {
+/// What the dialect called `name` publishes, as replies marked with its name, so the
+/// runtime sends them on the link that carries it.
+fn publishing(out: &mut Vec<Reply>, name: &'static str, dialect: impl FnOnce(&mut Vec<Publish>)) {
     let mut publishes = Vec::new();
     dialect(&mut publishes);
-    out.extend(publishes.into_iter().map(Reply::Publish));
+    out.extend(publishes.into_iter().map(|p| {
+        Reply::Publish(Publish {
+            dialect: Some(name),
+            ..p
+        })
+    }));
 }
 
 /// The dialects in force, in the order they were configured.
@@ -162,25 +174,33 @@ impl Dialects {
         Self::new(factories.iter().filter_map(|f| f(&mut setup)).collect())
     }
 
-    /// Every dialect's topic filters.
-    pub fn subscriptions(&self) -> Vec<String> {
-        self.dialects
-            .iter()
+    /// The topic filters of the dialects `carried` names (every dialect's with `None`).
+    pub fn subscriptions(&self, carried: Option<&[DialectName]>) -> Vec<String> {
+        self.carried(carried)
             .flat_map(|d| d.subscriptions())
             .collect()
     }
 
-    /// Every exact topic the dialects take or publish.
-    pub fn topics(&self) -> Vec<String> {
-        self.dialects.iter().flat_map(|d| d.topics()).collect()
+    /// Every exact topic the dialects `carried` names take or publish.
+    pub fn topics(&self, carried: Option<&[DialectName]>) -> Vec<String> {
+        self.carried(carried).flat_map(|d| d.topics()).collect()
     }
 
-    /// The exact topics the dialects act on.
-    pub fn command_topics(&self) -> Vec<String> {
-        self.dialects
-            .iter()
+    /// The exact topics the dialects `carried` names act on.
+    pub fn command_topics(&self, carried: Option<&[DialectName]>) -> Vec<String> {
+        self.carried(carried)
             .flat_map(|d| d.command_topics())
             .collect()
+    }
+
+    /// The dialects `carried` names (all with `None`): one link's.
+    fn carried<'a>(
+        &'a self,
+        carried: Option<&'a [DialectName]>,
+    ) -> impl Iterator<Item = &'a Box<dyn Dialect>> {
+        self.dialects.iter().filter(move |d| {
+            carried.is_none_or(|names| names.iter().any(|n| n.as_str() == d.name()))
+        })
     }
 
     /// The dialect that tagged a motion or mission.

@@ -22,6 +22,9 @@ pub struct Publish {
     pub qos: Qos,
     /// Retained by the broker.
     pub retain: bool,
+    /// The dialect that publishes it (`rtk`, `root`, `device`): the runtime sends it on the
+    /// link that carries that dialect. `None`: a link's own message.
+    pub dialect: Option<&'static str>,
 }
 
 impl Publish {
@@ -38,6 +41,7 @@ impl Publish {
             payload: payload.into(),
             qos: Qos::AtMostOnce,
             retain: false,
+            dialect: None,
         }
     }
 

@@ -420,14 +420,13 @@ impl VehicleConfig {
         if let Some(mqtt) = &mut config.mqtt {
             mqtt.resolve(base);
             // Found now, not after the devices are opened and the broker is dialled.
-            if let Some(tls) = &mqtt.tls {
-                for (key, path) in [
-                    ("mqtt.tls.ca_file", Some(&tls.ca_file)),
-                    ("mqtt.tls.client_cert_file", tls.client_cert_file.as_ref()),
-                    ("mqtt.tls.client_key_file", tls.client_key_file.as_ref()),
-                ] {
+            for (i, link) in mqtt.links.iter().enumerate() {
+                let Some(tls) = &link.tls else { continue };
+                for (key, path) in tls.files().into_iter().take(3) {
                     if let Some(path) = path {
-                        read_text(Path::new(path)).map_err(|e| e.named_by(file, key))?;
+                        read_text(Path::new(path)).map_err(|e| {
+                            e.named_by(file, &format!("{}{key}", mqtt.key_prefix(i)))
+                        })?;
                     }
                 }
             }
@@ -461,16 +460,13 @@ impl VehicleConfig {
                     .into_owned()
             }),
         ));
-        if let Some(tls) = self.mqtt.as_ref().and_then(|m| m.tls.as_ref()) {
-            for (key, path) in [
-                ("mqtt.tls.ca_file", Some(&tls.ca_file)),
-                ("mqtt.tls.client_cert_file", tls.client_cert_file.as_ref()),
-                ("mqtt.tls.client_key_file", tls.client_key_file.as_ref()),
-                ("mqtt.tls.cert_file", tls.cert_file.as_ref()),
-                ("mqtt.tls.key_file", tls.key_file.as_ref()),
-            ] {
-                if let Some(path) = path {
-                    named.push((key.into(), path.clone()));
+        if let Some(m) = &self.mqtt {
+            for (i, link) in m.links.iter().enumerate() {
+                let Some(tls) = &link.tls else { continue };
+                for (key, path) in tls.files() {
+                    if let Some(path) = path {
+                        named.push((format!("{}{key}", m.key_prefix(i)), path.clone()));
+                    }
                 }
             }
         }
@@ -528,10 +524,12 @@ impl VehicleConfig {
     /// replay connects to nothing that needs them).
     pub fn to_effective_toml(&self) -> String {
         let mut recorded = self.clone();
-        if let Some(m) = &mut recorded.mqtt
-            && m.password.is_some()
-        {
-            m.password = Some(REDACTED.into());
+        if let Some(m) = &mut recorded.mqtt {
+            for link in &mut m.links {
+                if link.password.is_some() {
+                    link.password = Some(REDACTED.into());
+                }
+            }
         }
         if let Some(w) = &mut recorded.websocket
             && w.token.is_some()

@@ -21,6 +21,7 @@ use crate::api::mqtt::{CoreAccess, Dialects, MQTT_SOURCE, Publish};
 use crate::api::trajectory::{MemoryStore, TrajectoryStore};
 use crate::config::VehicleConfig;
 use crate::config::imu::{ImuConfig, ImuProtocol};
+use crate::config::mqtt::DialectName;
 use crate::devices::can::{Frame, Received};
 use crate::devices::gnss::rtcm::{RtcmFramer, RtcmStats};
 use crate::devices::gnss::{GnssReceiver, GnssStats};
@@ -34,7 +35,8 @@ use crate::vehicle::envelope::Envelope;
 use crate::vehicle::gate::GateConfig;
 use crate::vehicle::zones::ZoneGuard;
 use crate::vehicle::{
-    CoreConfig, Device, Event, HostUsage, Input, LinkState, Output, Vehicle, VehicleStatus,
+    CoreConfig, Device, Event, HostUsage, Input, LinkState, MqttLinkStatus, Output, Vehicle,
+    VehicleStatus,
 };
 use drivetrain::{BusStats, Drivetrain};
 
@@ -245,6 +247,9 @@ enum Route {
     Host,
     /// A command channel: its protocol's adapter.
     Adapter(AdapterId),
+    /// One MQTT link, by its place in the configuration: its commands go to the dialects,
+    /// its states to the status.
+    MqttLink(usize),
 }
 
 /// One of the engine's adapters.
@@ -270,6 +275,7 @@ fn adapter_mut<'a>(
 
 /// The routes of a configuration's sources: later entries win a name taken twice.
 fn routes(
+    mqtt_links: &[(String, MqttLinkStatus)],
     nmea: &BTreeMap<String, GnssReceiver>,
     imu: &BTreeMap<String, (ImuDecoder, Mounting)>,
     drivetrain: &Drivetrain,
@@ -290,6 +296,12 @@ fn routes(
             .map(|name| (name.to_owned(), Route::Bus)),
     );
     routes.insert(MQTT_SOURCE.to_owned(), Route::Adapter(AdapterId::Mqtt));
+    routes.extend(
+        mqtt_links
+            .iter()
+            .enumerate()
+            .map(|(i, (source, _))| (source.clone(), Route::MqttLink(i))),
+    );
     routes.extend(imu.keys().map(|name| (name.clone(), Route::Imu)));
     routes.extend(nmea.keys().map(|name| (name.clone(), Route::Gnss)));
     routes.insert(CORRECTIONS_SOURCE.to_owned(), Route::Corrections);
@@ -319,6 +331,8 @@ pub struct Engine {
     stop_reason: Option<String>,
     /// The MQTT protocol dialects, the MQTT link's adapter.
     dialects: Dialects,
+    /// Each MQTT link's recording source and state, for the status.
+    mqtt_links: Vec<(String, MqttLinkStatus)>,
     /// The other command channels' adapters ([`crate::api::ADAPTERS`]).
     adapters: Vec<Box<dyn Adapter>>,
     /// Emit the poses every control tick and every IMU sample.
@@ -408,6 +422,21 @@ fn from_every_adapter(
     out
 }
 
+/// Each MQTT link's recording source and its state before any is recorded.
+fn mqtt_links(config: &VehicleConfig) -> Vec<(String, MqttLinkStatus)> {
+    let links = config.mqtt.iter().flat_map(|m| &m.links);
+    links
+        .map(|l| {
+            let status = MqttLinkStatus {
+                name: l.name.clone(),
+                up: false,
+                since: None,
+            };
+            (l.source(), status)
+        })
+        .collect()
+}
+
 /// The dialects a configuration turns on, trajectories kept in `trajectories`.
 fn dialects(config: &VehicleConfig, trajectories: Box<dyn TrajectoryStore>) -> Dialects {
     match &config.mqtt {
@@ -451,6 +480,7 @@ impl Engine {
             .iter()
             .map(|a| a(&config.vehicle.name))
             .collect();
+        let mqtt_links = mqtt_links(config);
         let mut vehicle = Vehicle::new(CoreConfig::from_vehicle(config));
         if let Some(z) = &config.zones {
             let guard = ZoneGuard::new(z.set.clone(), z.footprint.radius_m(), z.margin_m);
@@ -459,7 +489,8 @@ impl Engine {
         }
         Self {
             vehicle,
-            routes: routes(&nmea, &imu, &drivetrain, &adapters),
+            routes: routes(&mqtt_links, &nmea, &imu, &drivetrain, &adapters),
+            mqtt_links,
             adapters,
             nmea,
             imu,
@@ -560,7 +591,15 @@ impl Engine {
             (Some(Route::Imu), Payload::Link(state)) => {
                 self.vehicle.handle(t, Input::Link(Device::Imu, *state));
             }
-            // The control link's state is recorded; the dialects do not act on it yet.
+            // The control links' states are recorded and shown in the status; the dialects
+            // do not act on them (the heartbeat watchdog does, on silence).
+            (Some(Route::MqttLink(i)), Payload::Link(state)) => {
+                if let Some((_, link)) = self.mqtt_links.get_mut(i) {
+                    link.up = *state == LinkState::Up;
+                    link.since = Some(t);
+                }
+            }
+            // An MQTT source no link of this configuration has (an older recording's).
             (Some(Route::Adapter(AdapterId::Mqtt)), Payload::Link(_)) => {}
             (Some(Route::Bus), Payload::Link(state)) => {
                 self.drivetrain
@@ -576,6 +615,10 @@ impl Engine {
                 self.can_frame(t, &record.source, frame, &mut tx);
             }
             (Some(Route::Adapter(id)), Payload::Command { topic, payload }) => {
+                self.request(t, id, &record.source, (topic, payload), out);
+            }
+            (Some(Route::MqttLink(_)), Payload::Command { topic, payload }) => {
+                let id = AdapterId::Mqtt;
                 self.request(t, id, &record.source, (topic, payload), out);
             }
             (Some(Route::Process), Payload::Command { topic, .. }) if topic == "shutdown" => {
@@ -814,7 +857,8 @@ impl Engine {
                     if let Output::Event(event) = &output {
                         out.push(EngineOutput::Event(event.clone()));
                     }
-                    if let Output::Status(s) = output {
+                    if let Output::Status(mut s) = output {
+                        s.mqtt_links = self.mqtt_links.iter().map(|(_, l)| l.clone()).collect();
                         self.announce_stop_reason(&s, out);
                         let mut core = CoreAt::new(&mut self.vehicle, tick);
                         let reports =
@@ -941,14 +985,14 @@ impl Engine {
         t
     }
 
-    /// The topic filters the configured dialects subscribe to.
-    pub fn subscriptions(&self) -> Vec<String> {
-        self.dialects.subscriptions()
+    /// The topic filters the dialects `carried` names subscribe to (all with `None`).
+    pub fn subscriptions(&self, carried: Option<&[DialectName]>) -> Vec<String> {
+        self.dialects.subscriptions(carried)
     }
 
-    /// The exact topics the configured dialects act on.
-    pub fn command_topics(&self) -> Vec<String> {
-        self.dialects.command_topics()
+    /// The exact topics the dialects `carried` names act on (all with `None`).
+    pub fn command_topics(&self, carried: Option<&[DialectName]>) -> Vec<String> {
+        self.dialects.command_topics(carried)
     }
 
     /// Engine counters.
@@ -1031,6 +1075,72 @@ mod tests {
                 _ => None,
             })
             .collect()
+    }
+
+    /// With two links, each link's records come as its own source: its commands reach the
+    /// dialects, its answers are marked with their dialect (so the runtime sends them on the
+    /// link carrying it), and its up and down reach the status.
+    #[test]
+    fn each_links_source_reaches_the_dialects_and_its_state_the_status() {
+        let config = VehicleConfig::from_toml(
+            "[[mqtt.link]]\nname = \"site\"\ndialects = [\"rtk\"]\n\
+             [[mqtt.link]]\nname = \"platform\"\nplatform = true\ndialects = [\"root\"]\n\
+             [mqtt.rtk]\n[mqtt.root]\nvehicle_id = \"v1\"\n",
+            std::path::Path::new("vehicle.toml"),
+        )
+        .expect("configuration");
+        let mut e = Engine::new(&config, &[]);
+        let mut out = Vec::new();
+        e.handle(
+            &Record {
+                t: Timestamp::from_micros(1_000),
+                source: "mqtt-platform".into(),
+                payload: Payload::Link(LinkState::Up),
+            },
+            &mut out,
+        );
+        e.handle(
+            &Record {
+                t: Timestamp::from_micros(2_000),
+                source: "mqtt-platform".into(),
+                payload: Payload::Command {
+                    topic: "/root/v1/heartbeat/set".into(),
+                    payload: bytes::Bytes::from_static(br#"{"clientId": "op"}"#),
+                },
+            },
+            &mut out,
+        );
+        let notify = out
+            .iter()
+            .find_map(|o| match o {
+                EngineOutput::Publish(p) if p.topic == "/root/v1/heartbeat/notify" => Some(p),
+                _ => None,
+            })
+            .expect("the heartbeat answered");
+        assert_eq!(notify.dialect, Some("root"));
+        e.advance_to(Timestamp::from_micros(200_000), &mut out);
+        let status = out
+            .iter()
+            .rev()
+            .find_map(|o| match o {
+                EngineOutput::Status(s) => Some(s),
+                _ => None,
+            })
+            .expect("a status");
+        let links: Vec<(&str, bool, Option<u64>)> = status
+            .mqtt_links
+            .iter()
+            .map(|l| (l.name.as_str(), l.up, l.since.map(Timestamp::as_micros)))
+            .collect();
+        assert_eq!(
+            links,
+            [("site", false, None), ("platform", true, Some(1_000))]
+        );
+        let base_status = out.iter().find_map(|o| match o {
+            EngineOutput::Publish(p) if p.topic == "base_status" => Some(p),
+            _ => None,
+        });
+        assert_eq!(base_status.map(|p| p.dialect), Some(Some("rtk")));
     }
 
     /// A refusal answered in the protocol's own reply (the core's, or the dialect's for a

@@ -67,6 +67,7 @@ pub(super) fn status(t: Timestamp, parts: Parts<'_>) -> VehicleStatus {
         host,
         mode: chassis.map(Chassis::mode),
         corrections: None,
+        mqtt_links: Vec::new(),
         envelope: envelope.map(|e| e.status(place.localizer(), chassis, t)),
     }
 }

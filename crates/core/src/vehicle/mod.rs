@@ -39,8 +39,8 @@ use localisation::Localisation;
 pub use messages::{Command, Device, Input, LinkState, Output, PathPoints, PathRequest};
 use safety::SafetyConfig;
 pub use status::{
-    BatteryStatus, FrameTree, GnssStatus, HostUsage, Localization, Navigation, Pose2D,
-    PoseCovariance, PoseReport, VehicleStatus,
+    BatteryStatus, FrameTree, GnssStatus, HostUsage, Localization, MqttLinkStatus, Navigation,
+    Pose2D, PoseCovariance, PoseReport, VehicleStatus,
 };
 
 /// The vehicle core.

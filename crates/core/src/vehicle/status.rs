@@ -48,6 +48,19 @@ pub struct VehicleStatus {
     pub corrections: Option<super::corrections::CorrectionsStatus>,
     /// The zones and the GNSS gate; `None` without zones.
     pub envelope: Option<super::envelope::EnvelopeStatus>,
+    /// Each MQTT link, in the configuration's order; empty without `[mqtt]`.
+    pub mqtt_links: Vec<MqttLinkStatus>,
+}
+
+/// One MQTT link as its recorded states say.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MqttLinkStatus {
+    /// The link's name (`mqtt` in the one-link form).
+    pub name: String,
+    /// Whether its session with the broker is up.
+    pub up: bool,
+    /// When it last went up or down; `None` before its first state.
+    pub since: Option<Timestamp>,
 }
 
 /// The frame tree of REP-105 at one time: the map pose is `map_to_odom` composed with

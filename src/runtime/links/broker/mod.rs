@@ -27,7 +27,7 @@ use crate::runtime::child_process;
 use crate::runtime::error::{RuntimeError, invalid, io};
 
 use crate::api::mqtt::Publish;
-use crate::config::mqtt::MqttConfig;
+use crate::config::mqtt::{MqttConfig, MqttLinkConfig};
 use crate::runtime::links::mqtt::MqttSender;
 use child::{ChildReport, ChildSettings};
 use tls::ServerTls;
@@ -103,8 +103,12 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// The broker's settings from `[mqtt]`, for the vehicle called `vehicle`.
-pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, RuntimeError> {
+/// The broker's settings from `[mqtt]`'s link `config`, for the vehicle called `vehicle`.
+pub fn settings(
+    mqtt: &MqttConfig,
+    config: &MqttLinkConfig,
+    vehicle: &str,
+) -> Result<ChildSettings, RuntimeError> {
     let listen: SocketAddr = (config.host.as_str(), config.port)
         .to_socket_addrs()
         .map_err(io(format!(
@@ -128,11 +132,11 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, Run
     // chassisd's own topics (commands, answers, reports) stay served whatever names other
     // clients invent.
     let mut reserved_topics = crate::api::mqtt::Dialects::from_config(
-        config,
+        mqtt,
         Box::new(crate::api::trajectory::Unconfigured),
         crate::api::DIALECTS,
     )
-    .topics();
+    .topics(Some(&mqtt.dialects_of(config)));
     reserved_topics.extend([
         config.status_topic(vehicle),
         config.broker_health_topic(vehicle),
@@ -152,20 +156,20 @@ pub fn settings(config: &MqttConfig, vehicle: &str) -> Result<ChildSettings, Run
     })
 }
 
-/// Starts the embedded broker when `[mqtt]` asks for one, for the vehicle `vehicle` (whose
-/// own link always finds a place in it).
+/// Starts the embedded broker when a link of `[mqtt]` asks for one, for the vehicle
+/// `vehicle` (whose own link always finds a place in it).
 pub fn start_if_embedded(
-    config: &MqttConfig,
+    mqtt: &MqttConfig,
     vehicle: &str,
 ) -> Result<Option<EmbeddedBroker>, RuntimeError> {
-    if !config.embedded_broker {
+    let Some(link) = mqtt.embedded() else {
         return Ok(None);
-    }
-    start(settings(config, vehicle)?).map(Some)
+    };
+    start(settings(mqtt, link, vehicle)?).map(Some)
 }
 
 /// Publishes the broker's health (restarts, clients, refusals) retained on
-/// [`MqttConfig::broker_health_topic`] every [`child::STATS_EVERY`], for `chassisd check`
+/// [`MqttLinkConfig::broker_health_topic`] every [`child::STATS_EVERY`], for `chassisd check`
 /// and any monitoring client.
 pub fn spawn_health_reports(broker: EmbeddedBroker, mqtt: MqttSender, topic: String) {
     tokio::spawn(async move {

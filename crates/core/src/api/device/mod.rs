@@ -152,7 +152,9 @@ pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn D
     Some(Box::new(DeviceDialect::new(
         &d.serial_number,
         d.mapping_forward.clone(),
-        setup.mqtt.max_payload,
+        setup
+            .mqtt
+            .max_payload(crate::config::mqtt::DialectName::Device),
     )))
 }
 

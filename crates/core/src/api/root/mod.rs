@@ -194,7 +194,9 @@ pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn D
     Some(Box::new(RootDialect::new(
         &r.vehicle_id,
         r.heartbeat_client_id.clone(),
-        setup.mqtt.max_payload,
+        setup
+            .mqtt
+            .max_payload(crate::config::mqtt::DialectName::Root),
     )))
 }
 

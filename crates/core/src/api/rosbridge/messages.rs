@@ -13,6 +13,7 @@ use crate::api::rtk::status::{locate_name, navigation_name};
 use crate::devices::gnss::FixQuality;
 use crate::fusion::odometry::OdomPose;
 use crate::time::Timestamp;
+use crate::vehicle::MqttLinkStatus;
 use crate::vehicle::chassis::status_bits;
 use crate::vehicle::corrections::CorrectionsStatus;
 use crate::vehicle::{Localization, Navigation, VehicleStatus};
@@ -173,9 +174,27 @@ fn corrections_diagnostic(c: &CorrectionsStatus) -> Value {
     )
 }
 
+/// One MQTT link: up, or down (a warning: the vehicle's own watchdogs act on silence).
+fn mqtt_link_diagnostic(link: &MqttLinkStatus) -> Value {
+    let since = link.since.map_or_else(
+        || "never".into(),
+        |t| format!("{:.3}", t.as_nanos() as f64 * 1e-9),
+    );
+    diagnostic(
+        if link.up { OK } else { WARN },
+        &format!("mqtt link {}", link.name),
+        if link.up {
+            "connected"
+        } else {
+            "not connected to its broker"
+        },
+        &[("up", link.up.to_string()), ("since_s", since)],
+    )
+}
+
 /// `/diagnostics` (diagnostic_msgs/DiagnosticArray): one status each for the receiver, the
-/// IMU, the drive train, the RTK corrections (with `[ntrip]`), the battery and the
-/// localisation.
+/// IMU, the drive train, the RTK corrections (with `[ntrip]`), each MQTT link, the battery
+/// and the localisation.
 pub fn diagnostics(status: &VehicleStatus) -> Value {
     let g = &status.gnss;
     let mut all = vec![diagnostic(
@@ -225,6 +244,7 @@ pub fn diagnostics(status: &VehicleStatus) -> Value {
     if let Some(c) = &status.corrections {
         all.push(corrections_diagnostic(c));
     }
+    all.extend(status.mqtt_links.iter().map(mqtt_link_diagnostic));
     if let Some(e) = &status.envelope {
         all.push(super::envelope::status(e));
     }
@@ -465,6 +485,38 @@ mod tests {
             braking_m: 0.0,
         });
         assert_eq!(part(&status, "safety envelope").unwrap()["level"], WARN);
+    }
+
+    #[test]
+    fn each_mqtt_link_is_a_diagnostic_of_its_own() {
+        let mut status = VehicleStatus::default();
+        let link = |name: &str, up, since_us: Option<u64>| MqttLinkStatus {
+            name: name.into(),
+            up,
+            since: since_us.map(crate::time::Timestamp::from_micros),
+        };
+        status.mqtt_links = vec![
+            link("site", true, Some(1_500_000)),
+            link("platform", false, None),
+        ];
+        let all = diagnostics(&status)["status"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
+        let of = |name: &str| {
+            all.iter()
+                .find(|d| d["name"] == format!("chassisd: mqtt link {name}"))
+                .cloned()
+                .unwrap_or_else(|| panic!("{name}: {all:?}"))
+        };
+        let (site, platform) = (of("site"), of("platform"));
+        assert_eq!(
+            (site["level"].clone(), site["message"].clone()),
+            (json!(OK), json!("connected"))
+        );
+        assert_eq!(platform["level"], WARN);
+        assert_eq!(site["values"][1]["value"], "1.500");
+        assert_eq!(platform["values"][1]["value"], "never");
     }
 
     #[test]

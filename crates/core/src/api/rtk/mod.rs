@@ -163,7 +163,12 @@ pub fn from_setup(setup: &mut super::mqtt::DialectSetup<'_>) -> Option<Box<dyn D
         .trajectories
         .take()
         .unwrap_or_else(|| Box::new(trajectory::MemoryStore::default()));
-    Some(Box::new(RtkDialect::new(store, setup.mqtt.max_payload)))
+    Some(Box::new(RtkDialect::new(
+        store,
+        setup
+            .mqtt
+            .max_payload(crate::config::mqtt::DialectName::Rtk),
+    )))
 }
 
 impl Dialect for RtkDialect {
