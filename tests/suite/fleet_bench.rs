@@ -31,9 +31,15 @@ fn a_fleet_fails_over_when_a_node_dies_and_no_command_is_lost_or_doubled() {
         .iter()
         .filter_map(serde_json::Value::as_u64)
         .collect();
-    assert!(per_second.iter().filter(|n| **n > 0).count() >= 2, "{per_second:?}");
+    assert!(
+        per_second.iter().filter(|n| **n > 0).count() >= 2,
+        "{per_second:?}"
+    );
     assert_eq!(per_second.iter().sum::<u64>(), 30);
     let commands = &summary["commands"];
-    assert_eq!((&commands["lost"], &commands["twice"]), (&0.into(), &0.into()));
+    assert_eq!(
+        (&commands["lost"], &commands["twice"]),
+        (&0.into(), &0.into())
+    );
     assert!(commands["once"].as_u64().unwrap_or(0) > 50, "{summary}");
 }

@@ -436,9 +436,6 @@ async fn run(
                     }
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
-                    if crate::runtime::panics::inject("mqtt") {
-                        panic!("injected panic ({}=mqtt)", crate::runtime::panics::INJECT_PANIC);
-                    }
                     if p.topic == status_topic {
                         // Its own status: the echo (live, not the retained copy an earlier
                         // session left), never a command.
@@ -446,6 +443,9 @@ async fn run(
                             tracing::info!(link = name, %broker, "MQTT: the broker now delivers the link's own status back");
                         }
                         continue;
+                    }
+                    if crate::runtime::panics::inject("mqtt") {
+                        panic!("injected panic ({}=mqtt)", crate::runtime::panics::INJECT_PANIC);
                     }
                     if p.retain {
                         outbox.dropped.retained_commands += 1;
