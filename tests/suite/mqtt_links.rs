@@ -79,7 +79,16 @@ fn each_command_is_answered_on_the_broker_it_came_from() {
     let platform = Mosquitto::start();
     let on_site = site.subscribe(&["#"]);
     let on_platform = platform.subscribe(&["#"]);
-    let mut daemon = run(&two_links(&dir, site.port, platform.port, ""));
+    let config = two_links(&dir, site.port, platform.port, "");
+    let recording = dir.join("recording");
+    let mut daemon = Proc::start(&[
+        "run".as_ref(),
+        "--config".as_ref(),
+        config.as_os_str(),
+        "--record".as_ref(),
+        recording.as_os_str(),
+    ]);
+    wait_count(&mut daemon, "MQTT subscribed", 2);
 
     // rtk's request on the site's broker: answered there, never on the platform's.
     site.publish(
@@ -136,9 +145,16 @@ fn each_command_is_answered_on_the_broker_it_came_from() {
     // Each link's commands are recorded under its own source; the log names the link.
     assert!(daemon.log_count("link=\"platform\"") + daemon.log_count("link=platform") > 0);
     daemon.stop();
+    // The recording holds each link's commands as its own source, and replays them.
+    let replayed = common::replay(&recording);
+    let summary = String::from_utf8_lossy(&replayed.stderr);
+    assert!(
+        summary.contains("mqtt-platform 3") && summary.contains("mqtt-site 2"),
+        "{summary}"
+    );
+    assert!(summary.contains("3 commands (2 refused)"), "{summary}");
 
     // `check` shows each link with its broker.
-    let config = dir.join("vehicle.toml");
     let out = std::process::Command::new(common::chassisd())
         .args(["check", "--config"])
         .arg(&config)
