@@ -208,6 +208,13 @@ pub async fn run(options: FleetOptions, mut nodes: Box<dyn Nodes>) -> Result<Fle
             "a fleet needs vehicles and a node".into(),
         ));
     }
+    let (first, largest) = options.reconnect;
+    if !(0.01..=60.0).contains(&first) || !(first..=600.0).contains(&largest) {
+        return Err(BenchError::Failed(format!(
+            "back-off bounds {first} s and {largest} s: the first must lie in 0.01..=60 s, \
+             the largest between it and 600 s"
+        )));
+    }
     let clock = RecordClock::start();
     let (stop_tx, stop) = watch::channel(false);
     let links: Arc<Mutex<Vec<LinkEvent>>> = Arc::default();

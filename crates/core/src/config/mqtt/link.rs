@@ -188,6 +188,12 @@ pub fn packet_limit(max_payload: usize) -> usize {
     max_payload.saturating_mul(4).max(1 << 20)
 }
 
+/// `value` seconds as a duration; `fallback` for a value no duration holds (negative, NaN or
+/// too large: validation refuses those, this keeps an unchecked configuration from panicking).
+fn seconds(value: f64, fallback: f64) -> Duration {
+    Duration::try_from_secs_f64(value).unwrap_or(Duration::from_secs_f64(fallback))
+}
+
 /// One broker of a link.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BrokerAddress {
@@ -235,28 +241,35 @@ impl MqttLinkConfig {
 
     /// The keep-alive interval.
     pub fn keep_alive(&self) -> Duration {
-        Duration::from_secs_f64(
-            self.keep_alive_s
-                .unwrap_or(if self.platform { 30.0 } else { 5.0 }),
-        )
+        seconds(self.keep_alive_s(), 5.0)
     }
 
     /// The first reconnect back-off's bound.
     pub fn reconnect_min(&self) -> Duration {
-        Duration::from_secs_f64(self.reconnect_min_s.unwrap_or(if self.platform {
-            2.0
-        } else {
-            0.1
-        }))
+        seconds(self.reconnect_min_s(), 0.1)
     }
 
     /// The largest reconnect back-off bound.
     pub fn reconnect_max(&self) -> Duration {
-        Duration::from_secs_f64(self.reconnect_max_s.unwrap_or(if self.platform {
-            30.0
-        } else {
-            2.0
-        }))
+        seconds(self.reconnect_max_s(), 2.0)
+    }
+
+    /// `keep_alive_s`, or its default (5 s; 30 s on a platform link), unchecked.
+    fn keep_alive_s(&self) -> f64 {
+        self.keep_alive_s
+            .unwrap_or(if self.platform { 30.0 } else { 5.0 })
+    }
+
+    /// `reconnect_min_s`, or its default (0.1 s; 2 s on a platform link), unchecked.
+    fn reconnect_min_s(&self) -> f64 {
+        self.reconnect_min_s
+            .unwrap_or(if self.platform { 2.0 } else { 0.1 })
+    }
+
+    /// `reconnect_max_s`, or its default (2 s; 30 s on a platform link), unchecked.
+    fn reconnect_max_s(&self) -> f64 {
+        self.reconnect_max_s
+            .unwrap_or(if self.platform { 30.0 } else { 2.0 })
     }
 
     /// The brokers in the order they are tried: `host:port`, then `failover`. Entries that
@@ -459,24 +472,11 @@ impl MqttLinkConfig {
             at.file,
             &at.prefix,
             [
-                (
-                    "keep_alive_s",
-                    self.keep_alive().as_secs_f64(),
-                    1.0..=600.0,
-                    "s",
-                ),
-                (
-                    "reconnect_min_s",
-                    self.reconnect_min().as_secs_f64(),
-                    0.01..=60.0,
-                    "s",
-                ),
-                (
-                    "reconnect_max_s",
-                    self.reconnect_max().as_secs_f64(),
-                    0.1..=600.0,
-                    "s",
-                ),
+                // The values as given: a negative or NaN one is refused here, before any
+                // becomes a Duration.
+                ("keep_alive_s", self.keep_alive_s(), 1.0..=600.0, "s"),
+                ("reconnect_min_s", self.reconnect_min_s(), 0.01..=60.0, "s"),
+                ("reconnect_max_s", self.reconnect_max_s(), 0.1..=600.0, "s"),
                 (
                     "command_rate_hz",
                     self.command_rate_hz,
@@ -485,7 +485,7 @@ impl MqttLinkConfig {
                 ),
             ],
         )?;
-        if self.reconnect_min() > self.reconnect_max() {
+        if self.reconnect_min_s() > self.reconnect_max_s() {
             return Err(at.invalid(
                 "reconnect_min_s",
                 "is above reconnect_max_s",

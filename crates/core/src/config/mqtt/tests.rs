@@ -49,6 +49,14 @@ fn each_check_names_its_key_and_the_problem() {
             "`mqtt.keep_alive_s`: 0.5 is outside 1..=600 s",
         ),
         (
+            error_with(|m| m.first_mut().reconnect_max_s = Some(-1.0)),
+            "`mqtt.reconnect_max_s`: -1 is outside 0.1..=600 s",
+        ),
+        (
+            error_with(|m| m.first_mut().keep_alive_s = Some(f64::NAN)),
+            "`mqtt.keep_alive_s`: NaN is outside 1..=600 s",
+        ),
+        (
             error_with(|m| m.first_mut().command_rate_hz = 0.0),
             "`mqtt.command_rate_hz`: 0 is outside 0.1..=100000 per s",
         ),
