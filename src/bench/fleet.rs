@@ -234,7 +234,7 @@ pub async fn run(options: FleetOptions, mut nodes: Box<dyn Nodes>) -> Result<Fle
     // Every vehicle reports.
     let all_up = log
         .wait(&mut seen, ALL_UP_WITHIN, |l| {
-            l.reporting(options.vehicles) == options.vehicles
+            l.reporting() == options.vehicles
         })
         .await
         .then(|| started.elapsed().as_secs_f64());
@@ -528,7 +528,7 @@ impl Timeline {
     }
 
     /// Vehicles that reported at least once.
-    fn reporting(&self, _of: usize) -> usize {
+    fn reporting(&self) -> usize {
         self.reports.len()
     }
 

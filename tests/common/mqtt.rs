@@ -108,19 +108,27 @@ impl TestPki {
 /// mosquitto settings that refuse anonymous clients and accept `user` / `password` (a
 /// password file written in `dir`).
 fn password_settings(dir: &Path, user: &str, password: &str) -> String {
-    let passwd = dir.join("passwd");
-    let status = Command::new("mosquitto_passwd")
-        .args(["-c", "-b"])
-        .arg(&passwd)
-        .args([user, password])
-        .stderr(Stdio::null())
-        .status()
-        .expect("mosquitto_passwd runs");
-    assert!(status.success(), "mosquitto_passwd failed");
     format!(
         "allow_anonymous false\npassword_file {}\n",
-        passwd.display()
+        password_file(dir, &[(user, password)]).display()
     )
+}
+
+/// A mosquitto password file in `dir` holding `users` (name, password).
+fn password_file(dir: &Path, users: &[(&str, &str)]) -> PathBuf {
+    let passwd = dir.join("passwd");
+    for (i, (user, password)) in users.iter().enumerate() {
+        let create: &[&str] = if i == 0 { &["-c", "-b"] } else { &["-b"] };
+        let status = Command::new("mosquitto_passwd")
+            .args(create)
+            .arg(&passwd)
+            .args([user, password])
+            .stderr(Stdio::null())
+            .status()
+            .expect("mosquitto_passwd runs");
+        assert!(status.success(), "mosquitto_passwd failed");
+    }
+    passwd
 }
 
 /// A port nobody listens on right now.
@@ -180,18 +188,7 @@ impl Mosquitto {
     /// Starts mosquitto on plain TCP with a password file of `users` (name, password) and the
     /// access control list `acl`; its clients connect as the first user. Files go in `dir`.
     pub fn start_with_acl(dir: &Path, users: &[(&str, &str)], acl: &str) -> Mosquitto {
-        let passwd = dir.join("passwd");
-        for (i, (user, password)) in users.iter().enumerate() {
-            let create: &[&str] = if i == 0 { &["-c", "-b"] } else { &["-b"] };
-            let status = Command::new("mosquitto_passwd")
-                .args(create)
-                .arg(&passwd)
-                .args([user, password])
-                .stderr(Stdio::null())
-                .status()
-                .expect("mosquitto_passwd runs");
-            assert!(status.success(), "mosquitto_passwd failed");
-        }
+        let passwd = password_file(dir, users);
         let acl_file = dir.join("acl");
         std::fs::write(&acl_file, acl).expect("acl written");
         let settings = format!(
