@@ -297,6 +297,23 @@ pub fn passing_bench<S: AsRef<std::ffi::OsStr>>(args: &[S], what: &str) -> serde
     summary
 }
 
+/// How far the simulated vehicle went forward by random wheel slip alone (m), from `chassisd
+/// sim`'s closing log line: motion no odometry sees, so no controller answers for it.
+pub fn unseen_slip(log: &[String]) -> f64 {
+    let summary = log
+        .iter()
+        .find(|l| l.contains("from the start"))
+        .unwrap_or_else(|| panic!("no summary in {log:?}"));
+    summary
+        .split("heading ")
+        .nth(1)
+        .and_then(|s| s.split(", ").nth(1))
+        .and_then(|s| s.split(" m of it random wheel slip").next())
+        .unwrap_or_else(|| panic!("no unseen slip in {summary}"))
+        .parse()
+        .expect("a number")
+}
+
 /// Where the simulated vehicle truly ended (x, y, m), from `chassisd sim`'s closing log line.
 pub fn truth_end(log: &[String]) -> (f64, f64) {
     let summary = log

@@ -465,12 +465,13 @@ impl Summary {
             (Ended::Stopped, _) => "stopped".to_owned(),
         };
         let mut line = format!(
-            "chassisd sim: {why} after {:.1} s simulated; drove {:.1} m, ending ({:.3}, {:.3}) m from the start, heading {:.0}°; {} commands ({} refused), {} status lines",
+            "chassisd sim: {why} after {:.1} s simulated; drove {:.1} m, ending ({:.3}, {:.3}) m from the start, heading {:.0}°, {:.3} m of it random wheel slip no odometry sees; {} commands ({} refused), {} status lines",
             elapsed.as_secs_f64(),
             self.distance_m,
             self.last.x - self.start.x,
             self.last.y - self.start.y,
             self.last.yaw.to_degrees().rem_euclid(360.0),
+            self.last.unseen_slip_m - self.start.unseen_slip_m,
             stats.commands,
             stats.commands_rejected,
             stats.ticks,
