@@ -12,6 +12,7 @@ pub mod gnss_fit;
 pub mod husky;
 pub mod mosquitto;
 pub mod mqtt;
+pub mod rabbitmq;
 pub mod real;
 pub mod replay;
 #[cfg(feature = "ros1")]

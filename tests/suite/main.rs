@@ -22,6 +22,7 @@ mod docs_topic_tables;
 mod documented_examples;
 mod drive_latency;
 mod fleet_bench;
+mod fleet_rabbitmq;
 mod fusion_bench;
 mod fusion_dead_reckoning;
 mod fusion_husky;

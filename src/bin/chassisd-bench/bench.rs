@@ -173,9 +173,32 @@ enum BenchCommand {
         /// Vehicles.
         #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=10_000))]
         vehicles: u32,
-        /// Broker nodes (independent mosquitto brokers on loopback).
-        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=16))]
-        nodes: u32,
+        /// Broker nodes started on loopback: independent mosquitto brokers (default 2), or
+        /// with --rabbitmq one RabbitMQ cluster (default and least 3).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16), conflicts_with = "broker")]
+        nodes: Option<u32>,
+        /// The nodes are one RabbitMQ cluster with its MQTT plugin (Debian's
+        /// rabbitmq-server), started by the bench on loopback, node 0 killed.
+        #[arg(long, conflicts_with = "broker")]
+        rabbitmq: bool,
+        /// Run on these brokers instead (host:port, comma-separated), started by you.
+        #[arg(long, value_delimiter = ',')]
+        broker: Vec<String>,
+        /// The brokers of --broker are one cluster (each command is sent once, through the
+        /// last of them, which must not be the one stopped).
+        #[arg(long, requires = "broker")]
+        clustered: bool,
+        /// With --broker, the shell command that kills node 0 (its host:port in
+        /// $CHASSISD_NODE); without it no node is killed.
+        #[arg(long, requires_all = ["broker", "start_cmd"])]
+        stop_cmd: Option<String>,
+        /// The QoS the vehicles subscribe to commands with (their links' command_qos):
+        /// default 1, and 0 with --rabbitmq, as docs/fleet.md advises for such a cluster.
+        #[arg(long, value_parser = clap::value_parser!(u8).range(0..=1))]
+        command_qos: Option<u8>,
+        /// With --stop-cmd, the shell command that starts node 0 again at the end.
+        #[arg(long, requires = "stop_cmd")]
+        start_cmd: Option<String>,
         /// Steady running before the kill and after every vehicle is back.
         #[arg(long, default_value = "20", value_parser = seconds_arg)]
         steady: Duration,
@@ -326,24 +349,51 @@ pub fn execute(a: Args) -> anyhow::Result<bool> {
             plant,
             vehicles,
             nodes,
+            rabbitmq,
+            broker,
+            clustered,
+            stop_cmd,
+            start_cmd,
+            command_qos,
             steady,
             no_kill,
             reconnect_min,
             reconnect_max,
         } => {
-            if let Some(why) = Mosquitto::missing() {
-                anyhow::bail!(why);
-            }
+            use chassisd::bench::fleet::{MosquittoNodes, NamedNodes, Nodes, RabbitNodes};
             let dir = tempfile_dir("chassisd-bench-fleet")?;
-            let nodes = chassisd::bench::fleet::MosquittoNodes::start(nodes as usize, &dir)?;
+            let kill = !no_kill && (broker.is_empty() || stop_cmd.is_some());
+            let nodes: Box<dyn Nodes> = if !broker.is_empty() {
+                let stop_start = stop_cmd.zip(start_cmd);
+                Box::new(NamedNodes::new(&broker, clustered, stop_start)?)
+            } else if rabbitmq {
+                let count = nodes.unwrap_or(3);
+                if count < 3 {
+                    anyhow::bail!(
+                        "--rabbitmq needs at least 3 nodes: before 3.12 RabbitMQ's MQTT plugin \
+                         takes connections only while a majority of the nodes runs, so with 2 \
+                         a killed node would leave no node taking vehicles"
+                    );
+                }
+                if let Some(why) = chassisd::bench::rabbitmq::RabbitCluster::missing() {
+                    anyhow::bail!(why);
+                }
+                Box::new(RabbitNodes::start(count as usize, &dir)?)
+            } else {
+                if let Some(why) = Mosquitto::missing() {
+                    anyhow::bail!(why);
+                }
+                Box::new(MosquittoNodes::start(nodes.unwrap_or(2) as usize, &dir)?)
+            };
             let options = chassisd::bench::fleet::FleetOptions {
                 plant: load_plant(plant)?,
                 vehicles: vehicles as usize,
                 steady,
-                kill: !no_kill,
+                kill,
                 reconnect: (reconnect_min, reconnect_max),
+                command_qos: command_qos.unwrap_or(if rabbitmq { 0 } else { 1 }),
             };
-            let report = block_on(2, chassisd::bench::fleet::run(options, Box::new(nodes)))??;
+            let report = block_on(2, chassisd::bench::fleet::run(options, nodes))??;
             std::fs::remove_dir_all(&dir).ok();
             print!("{}", report.table());
             println!("{}", report.json());

@@ -413,11 +413,12 @@ async fn run(
                         tracing::info!(link = name, %broker, client_id = %c.client_id(&spec.vehicle), "MQTT connected");
                     }
                     // The commands' topics, and the link's own status for its echo.
+                    let qos = if c.command_qos == 0 { QoS::AtMostOnce } else { QoS::AtLeastOnce };
                     let filters = spec
                         .subscriptions
                         .iter()
                         .chain(std::iter::once(&status_topic))
-                        .map(|f| rumqttc::SubscribeFilter::new(f.clone(), QoS::AtLeastOnce));
+                        .map(|f| rumqttc::SubscribeFilter::new(f.clone(), qos));
                     if let Err(e) = client.try_subscribe_many(filters) {
                         tracing::error!(link = name, error = %e, "MQTT subscribe failed");
                     }
@@ -621,9 +622,10 @@ fn log_loss(
             "MQTT: the broker keeps closing chassisd's session soon after it connects: another \
              client is probably connecting with chassisd's client id (MQTT gives an id to its \
              newest connection), or the broker's ACL refuses what the link publishes or \
-             subscribes to (RabbitMQ and EMQX can close such a session; docs/fleet.md). Keep \
-             the link's client_id_suffix on, and have the broker's ACL reserve the id \
-             (docs/security.md); further losses are summarised every 5 s"
+             subscribes to (RabbitMQ and EMQX can close such a session; docs/fleet.md), or a \
+             RabbitMQ cluster before 3.12 holds the link's subscription on a node that is down \
+             (set command_qos = 0). Keep the link's client_id_suffix on, and have the broker's \
+             ACL reserve the id (docs/security.md); further losses are summarised every 5 s"
         ),
         Tell::Quiet => tracing::debug!(link, %broker, %error, "MQTT connection lost again"),
     }

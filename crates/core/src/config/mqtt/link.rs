@@ -70,6 +70,12 @@ pub struct MqttLinkConfig {
     /// Command replies kept while the broker is away.
     #[serde(default = "default_reply_queue")]
     pub reply_queue: usize,
+    /// The QoS chassisd subscribes to its command topics with: 1, or 0 for a broker that
+    /// keeps a clean session's QoS 1 subscription on one node (RabbitMQ before 3.12: the
+    /// vehicle cannot subscribe on another node while that one is down). With a clean
+    /// session the two lose the same: what was in flight when the connection broke.
+    #[serde(default = "default_command_qos")]
+    pub command_qos: u8,
     /// Commands accepted per second on each topic; beyond it they are refused unanswered.
     #[serde(default = "default_command_rate_hz")]
     pub command_rate_hz: f64,
@@ -130,6 +136,9 @@ fn default_host() -> String {
 fn default_port() -> u16 {
     1883
 }
+fn default_command_qos() -> u8 {
+    1
+}
 fn default_telemetry_queue() -> usize {
     64
 }
@@ -171,6 +180,7 @@ impl Default for MqttLinkConfig {
             reconnect_max_s: None,
             telemetry_queue: default_telemetry_queue(),
             reply_queue: default_reply_queue(),
+            command_qos: default_command_qos(),
             command_rate_hz: default_command_rate_hz(),
             command_burst: default_command_burst(),
             max_payload: default_max_payload(),
@@ -485,6 +495,13 @@ impl MqttLinkConfig {
                 ),
             ],
         )?;
+        if self.command_qos > 1 {
+            return Err(at.invalid(
+                "command_qos",
+                &format!("{} is not 0 or 1", self.command_qos),
+                "commands are subscribed at QoS 1 (the default) or 0",
+            ));
+        }
         if self.reconnect_min_s() > self.reconnect_max_s() {
             return Err(at.invalid(
                 "reconnect_min_s",

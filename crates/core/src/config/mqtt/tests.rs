@@ -57,6 +57,10 @@ fn each_check_names_its_key_and_the_problem() {
             "`mqtt.keep_alive_s`: NaN is outside 1..=600 s",
         ),
         (
+            error_with(|m| m.first_mut().command_qos = 2),
+            "`mqtt.command_qos`: 2 is not 0 or 1",
+        ),
+        (
             error_with(|m| m.first_mut().command_rate_hz = 0.0),
             "`mqtt.command_rate_hz`: 0 is outside 0.1..=100000 per s",
         ),
@@ -187,6 +191,7 @@ platform = true
 host = "mqtt.fleet.example.com"
 port = 8883
 failover = ["node2.fleet.example.com:8883", "[2001:db8::2]:8883"]
+command_qos = 0
 username = "robot1"
 password = "secret"
 dialects = ["root", "device"]
@@ -237,6 +242,7 @@ fn the_fleet_form_spreads_the_dialects_over_its_links() {
     );
     assert_eq!(site.status_topic("mower"), "chassisd/mower/status");
     assert_eq!(m.prefixes(platform), ["/root/robot1", "device/SN1"]);
+    assert_eq!((site.command_qos, platform.command_qos), (1, 0));
 }
 
 #[test]

@@ -9,6 +9,8 @@
 //! operator sends each command to every node) or a cluster (the operator sends each command
 //! once, through the node that is never killed).
 
+mod nodes;
+
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -31,6 +33,7 @@ use crate::sim::lockstep::{Lockstep, PLANT_STEP, Sections, Sink};
 use crate::sim::plant::PlantConfig;
 use crate::vehicle::LinkState;
 use crate::vehicle::chassis::CONTROL_PERIOD;
+pub use nodes::{MosquittoNodes, NamedNodes, Nodes, RabbitNodes};
 
 /// The report each vehicle's platform link carries at 5 Hz: its period is the fleet's.
 const REPORT: &str = "report/chassis/general";
@@ -49,60 +52,6 @@ pub const MAX_SHARE_PER_SECOND: f64 = 0.35;
 /// The share is held only from this many returning vehicles: fewer are too few to spread.
 const SPREAD_FROM: usize = 50;
 
-/// The broker nodes a fleet runs on.
-pub trait Nodes: Send {
-    /// How many.
-    fn count(&self) -> usize;
-    /// Node `i`'s address for MQTT clients.
-    fn address(&self, i: usize) -> (String, u16);
-    /// Whether the nodes form one cluster (a message published on one reaches subscribers
-    /// on all) rather than independent brokers.
-    fn clustered(&self) -> bool;
-    /// Kills node `i` (its clients see their connections drop).
-    fn stop(&mut self, i: usize) -> Result<()>;
-    /// Starts node `i` again.
-    fn start(&mut self, i: usize) -> Result<()>;
-    /// The CPU time node `i`'s processes have used, s, where it can be read.
-    fn cpu_seconds(&self, i: usize) -> Option<f64>;
-}
-
-/// Independent mosquitto brokers on loopback.
-pub struct MosquittoNodes {
-    nodes: Vec<super::mosquitto::Mosquitto>,
-}
-
-impl MosquittoNodes {
-    /// Starts `count` brokers, their files in `dir`.
-    pub fn start(count: usize, dir: &std::path::Path) -> Result<Self> {
-        let nodes = (0..count)
-            .map(|_| super::mosquitto::Mosquitto::start(dir))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Self { nodes })
-    }
-}
-
-impl Nodes for MosquittoNodes {
-    fn count(&self) -> usize {
-        self.nodes.len()
-    }
-    fn address(&self, i: usize) -> (String, u16) {
-        ("127.0.0.1".into(), self.nodes[i].port())
-    }
-    fn clustered(&self) -> bool {
-        false
-    }
-    fn stop(&mut self, i: usize) -> Result<()> {
-        self.nodes[i].stop();
-        Ok(())
-    }
-    fn start(&mut self, i: usize) -> Result<()> {
-        self.nodes[i].restart()
-    }
-    fn cpu_seconds(&self, i: usize) -> Option<f64> {
-        crate::runtime::host::process_cpu_seconds(self.nodes[i].pid()?)
-    }
-}
-
 /// What to run.
 pub struct FleetOptions {
     /// The simulated vehicle.
@@ -115,6 +64,8 @@ pub struct FleetOptions {
     pub kill: bool,
     /// The platform links' back-off bounds, s (`reconnect_min_s`, `reconnect_max_s`).
     pub reconnect: (f64, f64),
+    /// The platform links' `command_qos`.
+    pub command_qos: u8,
 }
 
 /// One vehicle's link going up or down, as its engine received it.
@@ -149,6 +100,8 @@ pub struct FleetReport {
     pub nodes: usize,
     /// Whether the nodes are a cluster.
     pub clustered: bool,
+    /// The QoS the vehicles subscribed to their commands with.
+    pub command_qos: u8,
     /// Each node's CPU while every vehicle ran steadily, % of one core.
     pub node_cpu_percent: Vec<Option<f64>>,
     /// Seconds until every vehicle reported, from the start.
@@ -172,16 +125,30 @@ pub struct FleetReport {
 pub struct CommandCounts {
     /// Sent.
     pub sent: usize,
-    /// Answered exactly once.
+    /// Executed and answered exactly once.
     pub once: usize,
-    /// Never answered, though sent while the vehicle was connected.
+    /// Never executed, though sent while the vehicle was connected.
     pub lost: usize,
-    /// Answered more than once.
+    /// Executed, but no answer reached the operator.
+    pub unanswered: usize,
+    /// Arrived at the vehicle while connected, but never executed.
+    pub dropped: usize,
+    /// Sent to a vehicle that stayed connected while the fleet failed over, and lost by the
+    /// brokers: it never reached the vehicle, or its answer never reached the operator. A
+    /// RabbitMQ cluster drops a few such messages in the moment a node dies.
+    pub lost_in_failover: usize,
+    /// Answered more than once, though the vehicle stayed connected.
     pub twice: usize,
     /// Sent while the vehicle's link was down (clean sessions: never executed late).
     pub during_outage: usize,
     /// Of those, answered anyway (sent just before the vehicle's link saw the loss).
     pub during_outage_answered: usize,
+    /// Of those, answered more than once: the vehicle sends a reply again when the broker
+    /// went away before acknowledging it (at least once, as QoS 1 promises).
+    pub during_outage_answer_copies: usize,
+    /// Executed more than once by their vehicle (its engine answered them more than once),
+    /// at any time.
+    pub executed_twice: usize,
 }
 
 /// How the fleet came back after a node was killed.
@@ -199,6 +166,8 @@ pub struct Failover {
     pub max_share_per_second: f64,
     /// The longest gap in any vehicle's reports across the kill, ms.
     pub longest_report_gap_ms: Option<f64>,
+    /// Vehicles whose link went down again after they came back.
+    pub relapsed: usize,
 }
 
 /// Runs the fleet on `nodes`.
@@ -218,19 +187,25 @@ pub async fn run(options: FleetOptions, mut nodes: Box<dyn Nodes>) -> Result<Fle
     let clock = RecordClock::start();
     let (stop_tx, stop) = watch::channel(false);
     let links: Arc<Mutex<Vec<LinkEvent>>> = Arc::default();
+    let tally: Tally = Arc::default();
     let (seen_tx, mut seen) = mpsc::unbounded_channel();
     let operators = (0..nodes.count())
-        .map(|i| operator(i, nodes.address(i), seen_tx.clone()))
+        .map(|i| operator(i, nodes.address(i), options.command_qos, seen_tx.clone()))
         .collect::<Vec<_>>();
     let started = Instant::now();
     let mut vehicles = Vec::new();
     for v in 0..options.vehicles {
-        let mqtt = vehicle_mqtt(v, &*nodes, options.reconnect);
+        let mqtt = vehicle_mqtt(v, &*nodes, &options);
         let plant = options.plant.clone();
-        let (links, stop) = (links.clone(), stop.clone());
-        vehicles.push(tokio::spawn(vehicle(v, plant, mqtt, clock, links, stop)));
+        let (links, tally, stop) = (links.clone(), tally.clone(), stop.clone());
+        vehicles.push(tokio::spawn(vehicle(
+            v, plant, mqtt, clock, links, tally, stop,
+        )));
     }
-    let mut log = Timeline::default();
+    let mut log = Timeline {
+        reports_from: nodes.clustered().then(|| nodes.count() - 1),
+        ..Timeline::default()
+    };
     // Every vehicle reports.
     let all_up = log
         .wait(&mut seen, ALL_UP_WITHIN, |l| {
@@ -306,6 +281,10 @@ pub async fn run(options: FleetOptions, mut nodes: Box<dyn Nodes>) -> Result<Fle
     }
     let events = links.lock().map(|l| l.clone()).unwrap_or_default();
     let failover = failover.map(|(at, give_up)| (at, failover_figures(&events, &log, at, give_up)));
+    if let Ok(tally) = tally.lock() {
+        log.arrived = tally.arrived.clone();
+        log.executed = tally.executed.clone();
+    }
     let mut report = FleetReport::new(
         &options, &*nodes, all_up, &log, &commands, &events, failover,
     );
@@ -327,7 +306,7 @@ fn all_back(links: &Mutex<Vec<LinkEvent>>, since: Instant) -> bool {
 
 /// The platform link of vehicle `v`: its id `v0007`, its first node `v % nodes`, the
 /// others as failover.
-fn vehicle_mqtt(v: usize, nodes: &dyn Nodes, reconnect: (f64, f64)) -> MqttConfig {
+fn vehicle_mqtt(v: usize, nodes: &dyn Nodes, options: &FleetOptions) -> MqttConfig {
     let n = nodes.count();
     let order: Vec<usize> = (0..n).map(|k| (v + k) % n).collect();
     let (host, port) = nodes.address(order[0]);
@@ -346,8 +325,9 @@ fn vehicle_mqtt(v: usize, nodes: &dyn Nodes, reconnect: (f64, f64)) -> MqttConfi
         port,
         failover,
         client_id: Some(format!("fleet-{}", vehicle_id(v))),
-        reconnect_min_s: Some(reconnect.0),
-        reconnect_max_s: Some(reconnect.1),
+        reconnect_min_s: Some(options.reconnect.0),
+        reconnect_max_s: Some(options.reconnect.1),
+        command_qos: options.command_qos,
         status_topic: Some(format!("/root/{}/chassisd/status", vehicle_id(v))),
         ..MqttLinkConfig::default()
     };
@@ -375,12 +355,37 @@ fn vehicle_of(id: &str) -> Option<usize> {
 
 /// Routes a vehicle's outputs to its links.
 struct FleetSink {
+    vehicle: usize,
     links: Links,
+    tally: Tally,
+}
+
+/// What reached the vehicles, by (vehicle, messageId): each command's arrivals at its
+/// vehicle's link, and its executions (the engine's answers, told apart from copies of an
+/// answer the link sent again).
+#[derive(Default, Clone)]
+struct Tallies {
+    arrived: HashMap<(usize, u64), u32>,
+    executed: HashMap<(usize, u64), u32>,
+}
+
+type Tally = Arc<Mutex<Tallies>>;
+
+/// The `messageId` of a DRIVE command or its answer.
+fn message_id(payload: &[u8]) -> Option<u64> {
+    serde_json::from_slice::<Value>(payload).ok()?["messageId"].as_u64()
 }
 
 impl Sink for FleetSink {
     fn record(&mut self, _record: &Record) {}
     fn output(&mut self, output: EngineOutput) {
+        if let EngineOutput::Publish(p) = &output
+            && p.topic.ends_with("/cmd/chassis/ack")
+            && let Some(id) = message_id(&p.payload)
+            && let Ok(mut tally) = self.tally.lock()
+        {
+            *tally.executed.entry((self.vehicle, id)).or_default() += 1;
+        }
         let _ = self.links.route(output);
     }
 }
@@ -393,6 +398,7 @@ async fn vehicle(
     mqtt: MqttConfig,
     clock: RecordClock,
     events: Arc<Mutex<Vec<LinkEvent>>>,
+    tally: Tally,
     mut stop: watch::Receiver<bool>,
 ) -> Result<()> {
     let sections = Sections {
@@ -414,7 +420,11 @@ async fn vehicle(
     let links = Links::start(sim.engine_mut(), &config, None, clock, &tx, &mut sources)
         .map_err(invalid("the fleet vehicle's links"))?;
     drop(tx);
-    let mut sink = FleetSink { links };
+    let mut sink = FleetSink {
+        vehicle: v,
+        links,
+        tally: tally.clone(),
+    };
     let mut pace = tokio::time::interval(CONTROL_PERIOD);
     pace.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     loop {
@@ -432,6 +442,13 @@ async fn vehicle(
                 {
                     e.push(LinkEvent { vehicle: v, at: Instant::now(), up: state == LinkState::Up });
                 }
+                if let Payload::Command { topic, payload } = &record.payload
+                    && topic.ends_with("/cmd/chassis/set")
+                    && let Some(id) = message_id(payload)
+                    && let Ok(mut tally) = tally.lock()
+                {
+                    *tally.arrived.entry((v, id)).or_default() += 1;
+                }
                 sim.input(&record.source, record.payload, &mut sink);
             }
             _ = stop.changed() => return Ok(()),
@@ -444,8 +461,15 @@ async fn vehicle(
 fn operator(
     node: usize,
     (host, port): (String, u16),
+    qos: u8,
     seen: mpsc::UnboundedSender<Observation>,
 ) -> AsyncClient {
+    // The vehicles' command QoS: advice for any subscriber of such a cluster.
+    let qos = if qos == 0 {
+        QoS::AtMostOnce
+    } else {
+        QoS::AtLeastOnce
+    };
     let mut o = MqttOptions::new(format!("fleet-operator-{node}"), host, port);
     o.set_keep_alive(Duration::from_secs(5));
     o.set_clean_session(true);
@@ -460,7 +484,7 @@ fn operator(
                         format!("/root/+/{REPORT}"),
                         "/root/+/cmd/chassis/ack".into(),
                     ] {
-                        let _ = subscriber.try_subscribe(filter, QoS::AtLeastOnce);
+                        let _ = subscriber.try_subscribe(filter, qos);
                     }
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
@@ -496,20 +520,27 @@ fn operator(
     client
 }
 
-/// Everything the operators saw, in order.
+/// Everything the operators saw, in order, and what the vehicles executed.
 #[derive(Default)]
 struct Timeline {
     /// Each vehicle's report arrivals (copies from several operators within 20 ms merged).
     reports: BTreeMap<usize, Vec<Instant>>,
     /// Each command's answers, by (vehicle, id): when, and from which node's operator.
     answers: HashMap<(usize, u64), Vec<(Instant, usize)>>,
+    /// Reports are taken from this node's operator alone (a cluster's, whose operators all
+    /// see every report), or from every node's.
+    reports_from: Option<usize>,
+    /// Each command's arrivals at its vehicle, once the run is over.
+    arrived: HashMap<(usize, u64), u32>,
+    /// Each command's executions at its vehicle, once the run is over.
+    executed: HashMap<(usize, u64), u32>,
 }
 
 impl Timeline {
     /// Takes what has arrived.
     fn take(&mut self, o: Observation) {
         match o.seen {
-            Seen::Report { vehicle } => {
+            Seen::Report { vehicle } if self.reports_from.is_none_or(|n| n == o.node) => {
                 let arrivals = self.reports.entry(vehicle).or_default();
                 let copy = arrivals
                     .last()
@@ -518,6 +549,7 @@ impl Timeline {
                     arrivals.push(o.at);
                 }
             }
+            Seen::Report { .. } => {}
             Seen::Answer { vehicle, id } => {
                 self.answers
                     .entry((vehicle, id))
@@ -612,6 +644,13 @@ fn failover_figures(
     for e in after.iter().filter(|e| e.up) {
         back.entry(e.vehicle).or_insert(e.at);
     }
+    // A vehicle that lost its link again after it came back (a broker closing the new
+    // session, as a cluster does that holds its subscription on the dead node).
+    let mut downs: HashMap<usize, usize> = HashMap::new();
+    for e in after.iter().filter(|e| !e.up) {
+        *downs.entry(e.vehicle).or_default() += 1;
+    }
+    let relapsed = downs.values().filter(|n| **n > 1).count();
     let seconds = give_up.as_secs() as usize + 1;
     let mut per_second = vec![0usize; seconds];
     for at in back.values() {
@@ -646,6 +685,7 @@ fn failover_figures(
             largest as f64 / back.len() as f64
         },
         longest_report_gap_ms: longest_gap,
+        relapsed,
     }
 }
 
@@ -697,6 +737,13 @@ impl FleetReport {
         failover: Option<(Instant, Failover)>,
     ) -> Self {
         let outages = outages(events, log, failover.as_ref().map(|(at, _)| *at));
+        // From the kill until the fleet was back (or the bench gave up on it).
+        let failing_over = failover.as_ref().map(|(at, f)| {
+            let back = f
+                .all_back_s
+                .map_or(Duration::from_secs(3600), Duration::from_secs_f64);
+            (*at, *at + back)
+        });
         let failover = failover.map(|(_, f)| f);
         let in_outage = |v: usize, a: Instant, b: Instant| {
             outages
@@ -729,16 +776,28 @@ impl FleetReport {
                         .collect()
                 })
                 .unwrap_or_default();
-            let down = in_outage(v, at, at);
-            match (answers.len(), down) {
-                (_, true) => {
-                    counts.during_outage += 1;
-                    counts.during_outage_answered += usize::from(!answers.is_empty());
-                    counts.twice += usize::from(answers.len() > 1);
+            let executions = log.executed.get(&(v, id)).copied().unwrap_or(0);
+            let arrived = log.arrived.contains_key(&(v, id));
+            counts.executed_twice += usize::from(executions > 1);
+            let failing_over = failing_over.is_some_and(|(from, to)| at >= from && at <= to);
+            if in_outage(v, at, at) {
+                counts.during_outage += 1;
+                counts.during_outage_answered += usize::from(!answers.is_empty());
+                counts.during_outage_answer_copies += usize::from(answers.len() > 1);
+            } else if arrived && executions == 0 {
+                counts.dropped += 1;
+            } else if executions == 0 || answers.is_empty() {
+                if failing_over {
+                    counts.lost_in_failover += 1;
+                } else if executions == 0 {
+                    counts.lost += 1;
+                } else {
+                    counts.unanswered += 1;
                 }
-                (0, false) => counts.lost += 1,
-                (1, false) => counts.once += 1,
-                (_, false) => counts.twice += 1,
+            } else if answers.len() == 1 {
+                counts.once += 1;
+            } else {
+                counts.twice += 1;
             }
             if let Some(first) = answers.first() {
                 round_trips.push(first.duration_since(at).as_secs_f64() * 1000.0);
@@ -754,8 +813,15 @@ impl FleetReport {
         }
         if counts.lost > 0 || counts.twice > 0 {
             missed.push(format!(
-                "{} commands lost and {} answered twice while their vehicles were connected",
+                "{} commands lost (never executed) and {} answered twice while their vehicles \
+                 were connected",
                 counts.lost, counts.twice
+            ));
+        }
+        if counts.executed_twice > 0 || counts.dropped > 0 || counts.unanswered > 0 {
+            missed.push(format!(
+                "{} commands executed twice, {} dropped by their vehicle and {} unanswered",
+                counts.executed_twice, counts.dropped, counts.unanswered
             ));
         }
         match &report_period_ms {
@@ -772,6 +838,21 @@ impl FleetReport {
                     f.vehicles_back, f.vehicles_down
                 ));
             }
+            if f.relapsed > 0 {
+                missed.push(format!(
+                    "{} vehicles lost their link again after they came back",
+                    f.relapsed
+                ));
+            }
+            // Reports flow again within a second of the last vehicle's return.
+            if let (Some(gap), Some(back)) = (f.longest_report_gap_ms, f.all_back_s)
+                && gap > (back + 1.0) * 1000.0
+            {
+                missed.push(format!(
+                    "a vehicle's reports stopped for {gap:.0} ms, though all were back after \
+                     {back:.1} s"
+                ));
+            }
             if f.vehicles_back >= SPREAD_FROM && f.max_share_per_second > MAX_SHARE_PER_SECOND {
                 missed.push(format!(
                     "{:.0} % of the returning vehicles came back in one second (at most {:.0} %)",
@@ -784,6 +865,7 @@ impl FleetReport {
             vehicles: options.vehicles,
             nodes: nodes.count(),
             clustered: nodes.clustered(),
+            command_qos: options.command_qos,
             node_cpu_percent: Vec::new(),
             all_up_s,
             report_period_ms,
@@ -806,12 +888,14 @@ impl FleetReport {
             })
         };
         let mut t = format!(
-            "vehicles: {} on {} {} node(s)\n\
+            "vehicles: {} on {} {} node(s), commands subscribed at QoS {}\n\
              all reporting after: {}\n\
              report period, ms: {}\n\
              command round trip, ms: {}\n\
-             commands: {} sent, {} answered once, {} lost, {} answered twice; {} sent during \
-             their vehicle's outage ({} answered)\n",
+             commands: {} sent, {} executed and answered once, {} lost, {} executed twice, {} \
+             answered twice, {} unanswered, {} dropped by the vehicle, {} lost by the brokers \
+             while the fleet failed over; {} sent during their vehicle's outage ({} answered, \
+             {} of them twice)\n",
             self.vehicles,
             self.nodes,
             if self.clustered {
@@ -819,15 +903,21 @@ impl FleetReport {
             } else {
                 "independent"
             },
+            self.command_qos,
             self.all_up_s.map_or("-".into(), |s| format!("{s:.1} s")),
             spread(&self.report_period_ms),
             spread(&self.command_round_trip_ms),
             self.commands.sent,
             self.commands.once,
             self.commands.lost,
+            self.commands.executed_twice,
             self.commands.twice,
+            self.commands.unanswered,
+            self.commands.dropped,
+            self.commands.lost_in_failover,
             self.commands.during_outage,
             self.commands.during_outage_answered,
+            self.commands.during_outage_answer_copies,
         );
         let cpu: Vec<String> = self
             .node_cpu_percent
@@ -837,10 +927,12 @@ impl FleetReport {
         t += &format!("each node's CPU while steady: {}\n", cpu.join(", "));
         if let Some(f) = &self.failover {
             t += &format!(
-                "node 0 killed: {} vehicles lost it, {} back, all back after {}; connects per \
-                 second after the kill {:?} (largest share {:.0} %); longest report gap {}\n",
+                "node 0 killed: {} vehicles lost it, {} back ({} lost it again), all back after \
+                 {}; connects per second after the kill {:?} (largest share {:.0} %); longest \
+                 report gap {}\n",
                 f.vehicles_down,
                 f.vehicles_back,
+                f.relapsed,
                 f.all_back_s.map_or("-".into(), |s| format!("{s:.2} s")),
                 f.connects_per_second,
                 f.max_share_per_second * 100.0,
