@@ -27,81 +27,112 @@ pub struct TestPki {
     pub cert: PathBuf,
     /// The broker's key (PEM).
     pub key: PathBuf,
+    /// The CA's key, which signs the certificates.
+    ca_key: PathBuf,
+    dir: PathBuf,
+    name: String,
+}
+
+/// Runs openssl with `args` in `dir`.
+fn openssl(dir: &Path, args: &[&str]) {
+    let out = Command::new("openssl")
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("openssl runs");
+    assert!(
+        out.status.success(),
+        "openssl {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 impl TestPki {
     /// Makes a CA called `name` and a broker certificate it signs, in `dir`.
     pub fn create(dir: &Path, name: &str) -> TestPki {
-        let openssl = |args: &[&str]| {
-            let out = Command::new("openssl")
-                .args(args)
-                .current_dir(dir)
-                .output()
-                .expect("openssl runs");
-            assert!(
-                out.status.success(),
-                "openssl {args:?}: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
-        let file = |what: &str| format!("{name}-{what}");
-        let (ca, ca_key) = (file("ca.pem"), file("ca.key"));
-        let (cert, key, csr) = (file("broker.pem"), file("broker.key"), file("broker.csr"));
-        let ext = file("broker.ext");
-        openssl(&[
-            "req",
-            "-x509",
-            "-newkey",
-            "rsa:2048",
-            "-nodes",
-            "-days",
-            "2",
-            "-subj",
-            &format!("/CN={name} test CA"),
-            "-keyout",
-            &ca_key,
-            "-out",
-            &ca,
-        ]);
-        openssl(&[
-            "req",
-            "-newkey",
-            "rsa:2048",
-            "-nodes",
-            "-subj",
-            "/CN=localhost",
-            "-keyout",
-            &key,
-            "-out",
-            &csr,
-        ]);
-        std::fs::write(
-            dir.join(&ext),
-            "subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n",
-        )
-        .expect("extensions file");
-        openssl(&[
-            "x509",
-            "-req",
-            "-in",
-            &csr,
-            "-CA",
-            &ca,
-            "-CAkey",
-            &ca_key,
-            "-CAcreateserial",
-            "-days",
-            "2",
-            "-extfile",
-            &ext,
-            "-out",
-            &cert,
-        ]);
-        TestPki {
+        let (ca, ca_key) = (format!("{name}-ca.pem"), format!("{name}-ca.key"));
+        openssl(
+            dir,
+            &[
+                "req",
+                "-x509",
+                "-newkey",
+                "rsa:2048",
+                "-nodes",
+                "-days",
+                "2",
+                "-subj",
+                &format!("/CN={name} test CA"),
+                "-keyout",
+                &ca_key,
+                "-out",
+                &ca,
+            ],
+        );
+        let mut pki = TestPki {
             ca: dir.join(ca),
-            cert: dir.join(cert),
-            key: dir.join(key),
-        }
+            cert: PathBuf::new(),
+            key: PathBuf::new(),
+            ca_key: dir.join(ca_key),
+            dir: dir.to_owned(),
+            name: name.to_owned(),
+        };
+        (pki.cert, pki.key) = pki.issue(
+            "broker",
+            "localhost",
+            "subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n",
+        );
+        pki
+    }
+
+    /// A client certificate and key the CA signs for `common_name` (a broker that takes the
+    /// certificate's identity as the user name sees it as that user).
+    pub fn client(&self, common_name: &str) -> (PathBuf, PathBuf) {
+        self.issue(common_name, common_name, "extendedKeyUsage=clientAuth\n")
+    }
+
+    /// A certificate (and its key) for `common_name` with the `extensions`, files named after
+    /// `what`.
+    fn issue(&self, what: &str, common_name: &str, extensions: &str) -> (PathBuf, PathBuf) {
+        let file = |suffix: &str| format!("{}-{what}.{suffix}", self.name);
+        let (cert, key, csr, ext) = (file("pem"), file("key"), file("csr"), file("ext"));
+        openssl(
+            &self.dir,
+            &[
+                "req",
+                "-newkey",
+                "rsa:2048",
+                "-nodes",
+                "-subj",
+                &format!("/CN={common_name}"),
+                "-keyout",
+                &key,
+                "-out",
+                &csr,
+            ],
+        );
+        std::fs::write(self.dir.join(&ext), extensions).expect("extensions file");
+        openssl(
+            &self.dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                &csr,
+                "-CA",
+                &self.ca.display().to_string(),
+                "-CAkey",
+                &self.ca_key.display().to_string(),
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                &ext,
+                "-out",
+                &cert,
+            ],
+        );
+        (self.dir.join(cert), self.dir.join(key))
     }
 }
 
@@ -182,6 +213,40 @@ impl Mosquitto {
             "-P".to_owned(),
             password.to_owned(),
         ];
+        Self::start_with(Some((settings, dir.to_owned())), client_args)
+    }
+
+    /// Starts mosquitto with TLS that requires a client certificate of `pki`'s CA, the
+    /// certificate's common name as the user name, and the access control list `acl`; its
+    /// clients connect with the certificate of `client` (a common name). Files go in `dir`.
+    pub fn start_with_client_certificates(
+        dir: &Path,
+        pki: &TestPki,
+        acl: &str,
+        client: &str,
+    ) -> Mosquitto {
+        let acl_file = dir.join("acl");
+        std::fs::write(&acl_file, acl).expect("acl written");
+        let settings = format!(
+            "cafile {}\ncertfile {}\nkeyfile {}\nrequire_certificate true\n\
+             use_identity_as_username true\nacl_file {}\n\
+             # Started as root, mosquitto would drop to its own user, who cannot read the key.\n\
+             user root\n",
+            pki.ca.display(),
+            pki.cert.display(),
+            pki.key.display(),
+            acl_file.display()
+        );
+        let (cert, key) = pki.client(client);
+        let client_args = [
+            "--cafile".to_owned(),
+            pki.ca.display().to_string(),
+            "--cert".to_owned(),
+            cert.display().to_string(),
+            "--key".to_owned(),
+            key.display().to_string(),
+        ]
+        .to_vec();
         Self::start_with(Some((settings, dir.to_owned())), client_args)
     }
 

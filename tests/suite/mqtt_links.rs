@@ -10,7 +10,7 @@ use crate::common;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use common::mqtt::{Mosquitto, Subscriber};
+use common::mqtt::{Mosquitto, Subscriber, TestPki};
 use common::process::Proc;
 
 const WAIT: Duration = Duration::from_secs(15);
@@ -282,4 +282,44 @@ fn the_documented_acl_confines_the_vehicle_and_a_refusal_is_logged_and_safe() {
     status
         .next_on("base_status", WAIT)
         .expect("the site's link goes on");
+}
+
+#[test]
+fn a_platform_link_over_tls_with_a_client_certificate_works_beside_the_site_link() {
+    // The platform's broker wants TLS and a client certificate, takes its common name as the
+    // user name, and confines it with the documented ACL; the site's broker is plain.
+    let dir = common::tempdir("links-client-cert");
+    let pki = TestPki::create(&dir, "platform");
+    let platform =
+        Mosquitto::start_with_client_certificates(&dir, &pki, &documented_acl(), "operator");
+    let site = Mosquitto::start();
+    let (cert, key) = pki.client(VEHICLE_ID);
+    let tls = format!(
+        "[mqtt.link.tls]\nca_file = \"{}\"\nclient_cert_file = \"{}\"\nclient_key_file = \"{}\"",
+        pki.ca.display(),
+        cert.display(),
+        key.display()
+    );
+    let mut daemon = run(&two_links(&dir, site.port, platform.port, &tls));
+
+    // A platform command is answered on the platform, a site command on the site.
+    let acks = platform.subscribe(&[&format!("/root/{VEHICLE_ID}/heartbeat/notify")]);
+    platform.publish(
+        &format!("/root/{VEHICLE_ID}/heartbeat/set"),
+        r#"{"messageId": 4, "clientId": "op"}"#,
+    );
+    acks.next(WAIT).expect("answered over TLS, through the ACL");
+    let feedback = site.subscribe(&["feedback"]);
+    site.publish(
+        "mqtt_control",
+        r#"{"cmd": "cancel_task", "cmd_type": "task_control"}"#,
+    );
+    feedback
+        .next_on("feedback", WAIT)
+        .expect("the site's link answers beside it");
+    // The broker delivers the link's own status back: its ACL lets the certificate's user in.
+    std::thread::sleep(Duration::from_secs(6));
+    assert_eq!(daemon.log_count("did not deliver the link's own"), 0);
+    assert_eq!(daemon.log_count("MQTT connect failed"), 0);
+    daemon.stop();
 }
