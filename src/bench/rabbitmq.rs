@@ -53,11 +53,16 @@ impl RabbitCluster {
         super::missing_program("epmd", "-help", "erlang-base")
     }
 
-    /// Starts `count` nodes with their files in `dir`, joins them into one cluster, and
-    /// waits until every node takes MQTT connections.
+    /// Starts `count` nodes with their files in a fresh folder `rabbitmq` of `dir`, joins
+    /// them into one cluster, and waits until every node takes MQTT connections.
     pub fn start(count: usize, dir: &Path) -> Result<Self> {
         if count == 0 {
             return Err(BenchError::Failed("a cluster needs a node".into()));
+        }
+        // A folder left by an earlier run would hold another cluster's data and cookie.
+        let dir = dir.join("rabbitmq");
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(invalid("clearing an old cluster's files"))?;
         }
         let home = dir.join("home");
         std::fs::create_dir_all(&home).map_err(invalid("creating the cluster's home"))?;
@@ -79,7 +84,7 @@ impl RabbitCluster {
             })
             .collect::<Result<Vec<_>>>()?;
         let mut cluster = Self {
-            dir: dir.to_owned(),
+            dir,
             epmd,
             epmd_port,
             ports,

@@ -4,10 +4,15 @@
 //! the end. Three nodes, not two: RabbitMQ before 3.12 takes MQTT connections only while a
 //! majority of its nodes runs. The vehicles subscribe at `command_qos = 0`, as docs/fleet.md
 //! advises for such a cluster. (The full run, and its figures, are the benchmark's.)
+//!
+//! It runs alone, after the suite (tests/run-all): three Erlang nodes and 200 simulated
+//! vehicles take this 2-core machine whole, and beside the suite's other tests the machine,
+//! not the fleet, misses the targets (every vehicle reported only after 11 s there).
 
 use crate::common;
 
 #[test]
+#[ignore = "needs the machine to itself: run alone by tests/run-all"]
 fn a_fleet_on_a_rabbitmq_cluster_fails_over_and_executes_every_command_once() {
     let summary = common::passing_bench(
         &[
