@@ -67,13 +67,6 @@ impl RabbitCluster {
         let home = dir.join("home");
         std::fs::create_dir_all(&home).map_err(invalid("creating the cluster's home"))?;
         write_cookie(&home.join(".erlang.cookie"))?;
-        let epmd_port = super::free_local_port()?;
-        let epmd = Command::new("epmd")
-            .args(["-address", "127.0.0.1", "-port", &epmd_port.to_string()])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .map_err(invalid("starting epmd"))?;
         let ports = (0..count)
             .map(|_| {
                 Ok(Ports {
@@ -83,6 +76,14 @@ impl RabbitCluster {
                 })
             })
             .collect::<Result<Vec<_>>>()?;
+        // Last: nothing after it can fail before the cluster owns it and stops it on drop.
+        let epmd_port = super::free_local_port()?;
+        let epmd = Command::new("epmd")
+            .args(["-address", "127.0.0.1", "-port", &epmd_port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(invalid("starting epmd"))?;
         let mut cluster = Self {
             dir,
             epmd,

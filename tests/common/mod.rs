@@ -297,6 +297,16 @@ pub fn passing_bench<S: AsRef<std::ffi::OsStr>>(args: &[S], what: &str) -> serde
     summary
 }
 
+/// The connects in each second after `bench fleet`'s node kill, from its JSON summary.
+pub fn connects_per_second(summary: &serde_json::Value) -> Vec<u64> {
+    summary["failover"]["connects_per_second"]
+        .as_array()
+        .expect("the curve")
+        .iter()
+        .filter_map(serde_json::Value::as_u64)
+        .collect()
+}
+
 /// How far the simulated vehicle went forward by random wheel slip alone (m), from `chassisd
 /// sim`'s closing log line: motion no odometry sees, so no controller answers for it.
 pub fn unseen_slip(log: &[String]) -> f64 {

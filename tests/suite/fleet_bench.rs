@@ -25,12 +25,7 @@ fn a_fleet_fails_over_when_a_node_dies_and_no_command_is_lost_or_doubled() {
     assert_eq!(failover["vehicles_back"], 30, "{summary}");
     // Returns are spread by the jittered back-off: more than one second holds them, and
     // they all add up to the vehicles that came back.
-    let per_second: Vec<u64> = failover["connects_per_second"]
-        .as_array()
-        .expect("the curve")
-        .iter()
-        .filter_map(serde_json::Value::as_u64)
-        .collect();
+    let per_second = common::connects_per_second(&summary);
     assert!(
         per_second.iter().filter(|n| **n > 0).count() >= 2,
         "{per_second:?}"

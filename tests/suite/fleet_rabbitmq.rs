@@ -35,12 +35,7 @@ fn a_fleet_on_a_rabbitmq_cluster_fails_over_and_executes_every_command_once() {
     assert_eq!(failover["vehicles_back"], down, "{summary}");
     assert_eq!(failover["relapsed"], 0, "{summary}");
     // The returns are spread over several seconds, none holding more than the bench's share.
-    let per_second: Vec<u64> = failover["connects_per_second"]
-        .as_array()
-        .expect("the curve")
-        .iter()
-        .filter_map(serde_json::Value::as_u64)
-        .collect();
+    let per_second = common::connects_per_second(&summary);
     assert!(
         per_second.iter().filter(|n| **n > 0).count() >= 3,
         "{per_second:?}"
